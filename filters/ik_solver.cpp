@@ -1,0 +1,454 @@
+// Levenberg-Marquardt IK with leaf-to-root elimination over the joint tree.
+//
+// Derivation of one elimination step, for joint c with parent p, twist V_c = V_p + S_c dq_c:
+// the joint's subtree contributes 1/2 V_c' Q V_c - b' V_c; a marker blended between c and p
+// moves by  B V_p + C S_c dq_c  with C = w_c A_c, B = w_p A_p + C, A(x) = [-[x]x  I].
+// Minimising over dq_c leaves a quadratic in V_p, added to the parent's (Q, b); the
+// forward sweep recovers dq_c = k - K V_p. The system solved is exactly the damped
+// normal equations of the dense formulation.
+#include "filters/ik_solver.hpp"
+
+#include <Eigen/Cholesky>
+#include <Eigen/SVD>
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include "filters/rotation.hpp"
+
+namespace mocapd {
+namespace {
+
+using JointBlock = IkState::JointBlock;
+
+// Rows of A(x)' A(x) and A(x)' r for a point x (relative to the twist origin).
+void AddPointTerm(const Vec3& x, const Vec3& r, double w, Mat6* Q, Vec6* b) {
+  const Mat3 X = Skew(x);
+  Q->topLeftCorner<3, 3>().noalias() += w * (x.squaredNorm() * Mat3::Identity() - x * x.transpose());
+  Q->topRightCorner<3, 3>() += w * X;
+  Q->bottomLeftCorner<3, 3>() -= w * X;
+  Q->bottomRightCorner<3, 3>().diagonal().array() += w;
+  b->head<3>() += w * x.cross(r);
+  b->tail<3>() += w * r;
+}
+
+Eigen::Matrix<double, 3, 6> PointMap(const Vec3& x) {
+  Eigen::Matrix<double, 3, 6> A;
+  A.leftCols<3>() = -Skew(x);
+  A.rightCols<3>().setIdentity();
+  return A;
+}
+
+double RobustCost(double r_norm, double delta) {
+  if (delta <= 0.0 || r_norm <= delta) return 0.5 * r_norm * r_norm;
+  return delta * (r_norm - 0.5 * delta);
+}
+
+double RobustWeight(double r_norm, double delta) {
+  if (delta <= 0.0 || r_norm <= delta) return 1.0;
+  return delta / r_norm;
+}
+
+bool UsableMarker(const Vec3& y, double weight) { return weight > 0.0 && y.allFinite(); }
+
+// Rotation error of joint j between pose and target, expressed in the joint's DOF.
+Vec3 RotationError(const Quat& target, const Quat& current) { return LogRotation(target.conjugate() * current); }
+
+// Cost of the current pose: markers (with robust loss) plus priors. Also fills predicted.
+double EvaluateCost(const Skeleton& skeleton, const MarkerSet& markers, const IkOptions& options,
+                    std::span<const Vec3> observed, std::span<const double> weights, const Pose& pose,
+                    const Pose& prior, const Pose& rest, const KinematicsWorkspace& ws, std::span<Vec3> predicted) {
+  double cost = 0.0;
+  for (int m = 0; m < markers.num_markers(); ++m) {
+    const auto um = static_cast<size_t>(m);
+    predicted[um] = EvaluateMarker(markers.marker(m), ws);
+    if (!UsableMarker(observed[um], weights[um])) continue;
+    cost += weights[um] * RobustCost((observed[um] - predicted[um]).norm(), options.huber_delta_m);
+  }
+  for (int j = 0; j < skeleton.num_joints(); ++j) {
+    const Joint& joint = skeleton.joint(j);
+    if (joint.type == JointType::kFixed) continue;
+    const auto uj = static_cast<size_t>(j);
+    Vec3 et = RotationError(prior.rotation[uj], pose.rotation[uj]);
+    Vec3 er = RotationError(rest.rotation[uj], pose.rotation[uj]);
+    if (joint.type == JointType::kHinge) {
+      et = joint.hinge_axis * joint.hinge_axis.dot(et);
+      er = joint.hinge_axis * joint.hinge_axis.dot(er);
+    }
+    cost += 0.5 * options.temporal_weight * et.squaredNorm() + 0.5 * options.rest_weight * er.squaredNorm();
+  }
+  return cost;
+}
+
+// Adds each marker's contribution to its joint's block (and the blend blocks).
+void AccumulateMarkers(const MarkerSet& markers, const IkOptions& options, std::span<const Vec3> observed,
+                       std::span<const double> weights, std::span<const Vec3> predicted, const KinematicsWorkspace& ws,
+                       const Vec3& origin, std::vector<JointBlock>* blocks) {
+  for (int m = 0; m < markers.num_markers(); ++m) {
+    const auto um = static_cast<size_t>(m);
+    if (!UsableMarker(observed[um], weights[um])) continue;
+    const Vec3 r = observed[um] - predicted[um];
+    const double w = weights[um] * RobustWeight(r.norm(), options.huber_delta_m);
+    const MarkerDefinition& def = markers.marker(m);
+    const MarkerAttachment& a0 = def.attachments[0];
+    JointBlock& blk = (*blocks)[static_cast<size_t>(a0.joint)];
+    if (def.num_attachments == 1) {
+      AddPointTerm(predicted[um] - origin, r, w, &blk.Q, &blk.b);
+      continue;
+    }
+    const MarkerAttachment& a1 = def.attachments[1];
+    const auto j0 = static_cast<size_t>(a0.joint);
+    const auto j1 = static_cast<size_t>(a1.joint);
+    const Vec3 x0 = ws.R_WJ[j0] * a0.offset + ws.p_WJ[j0] - origin;
+    const Vec3 x1 = ws.R_WJ[j1] * a1.offset + ws.p_WJ[j1] - origin;
+    const Eigen::Matrix<double, 3, 6> C = a0.weight * PointMap(x0);
+    const Eigen::Matrix<double, 3, 6> B = a1.weight * PointMap(x1) + C;
+    blk.BB.noalias() += w * B.transpose() * B;
+    blk.BG.noalias() += w * B.transpose() * C;
+    blk.GG.noalias() += w * C.transpose() * C;
+    blk.Br.noalias() += w * B.transpose() * r;
+    blk.Gr.noalias() += w * C.transpose() * r;
+    blk.has_blend = true;
+  }
+}
+
+// Eliminates joint blk (N DOF) into its parent. prior_h/prior_g are the per-DOF
+// regularisation terms. Returns false if the joint's system is not positive definite.
+template <int N>
+bool EliminateJoint(JointBlock* blk, double damping, const Eigen::Matrix<double, N, 1>& prior_h,
+                    const Eigen::Matrix<double, N, 1>& prior_g, JointBlock* parent) {
+  using MatN = Eigen::Matrix<double, N, N>;
+  const auto S = blk->S.leftCols<N>();
+  Mat6 Qq = blk->Q;
+  Mat6 QV = blk->Q;
+  Vec6 gq = blk->b;
+  if (blk->has_blend) {
+    Qq += blk->GG;
+    QV += blk->BG.transpose();
+    gq += blk->Gr;
+  }
+  MatN H = S.transpose() * Qq * S;
+  const Eigen::Matrix<double, N, 6> HqV = S.transpose() * QV;
+  Eigen::Matrix<double, N, 1> g = S.transpose() * gq + prior_g;
+  H.diagonal() += damping * H.diagonal() + prior_h + Eigen::Matrix<double, N, 1>::Constant(1e-12);
+  const Eigen::LLT<MatN> llt(H);
+  if (llt.info() != Eigen::Success) return false;
+  blk->K.topRows<N>() = llt.solve(HqV);
+  blk->k.head<N>() = llt.solve(g);
+  if (parent != nullptr) {
+    parent->Q.noalias() += blk->Q - HqV.transpose() * blk->K.topRows<N>();
+    parent->b.noalias() += blk->b - HqV.transpose() * blk->k.head<N>();
+    if (blk->has_blend) {
+      parent->Q += blk->BB;
+      parent->b += blk->Br;
+    }
+  }
+  return true;
+}
+
+void EliminateFixedJoint(const JointBlock& blk, JointBlock* parent) {
+  if (parent == nullptr) return;
+  parent->Q += blk.Q;
+  parent->b += blk.b;
+  if (blk.has_blend) {
+    parent->Q += blk.BB;
+    parent->b += blk.Br;
+  }
+}
+
+// Solves the damped system for the step dq. Returns false on a numerical failure.
+bool ComputeStep(const Skeleton& skeleton, const IkOptions& options, double damping, const Pose& pose,
+                 const Pose& prior, const Pose& rest, const KinematicsWorkspace& ws, const Vec3& origin,
+                 std::vector<JointBlock>* blocks, Eigen::VectorXd* dq) {
+  const int n = skeleton.num_joints();
+  for (int j = n - 1; j >= 0; --j) {
+    const Joint& joint = skeleton.joint(j);
+    const auto uj = static_cast<size_t>(j);
+    JointBlock& blk = (*blocks)[uj];
+    JointBlock* parent = joint.parent.is_valid() ? &(*blocks)[static_cast<size_t>(joint.parent.value)] : nullptr;
+    blk.dofs = JointMotionSubspace(skeleton, ws, j, origin, &blk.S);
+    const double at = options.temporal_weight;
+    const double ar = options.rest_weight;
+    bool ok = true;
+    switch (joint.type) {
+      case JointType::kFixed: EliminateFixedJoint(blk, parent); break;
+      case JointType::kHinge: {
+        const double et = joint.hinge_axis.dot(RotationError(prior.rotation[uj], pose.rotation[uj]));
+        const double er = joint.hinge_axis.dot(RotationError(rest.rotation[uj], pose.rotation[uj]));
+        ok = EliminateJoint<1>(&blk, damping, Eigen::Matrix<double, 1, 1>(at + ar),
+                               Eigen::Matrix<double, 1, 1>(-at * et - ar * er), parent);
+        break;
+      }
+      case JointType::kBall: {
+        const Vec3 g = -at * RotationError(prior.rotation[uj], pose.rotation[uj]) -
+                       ar * RotationError(rest.rotation[uj], pose.rotation[uj]);
+        ok = EliminateJoint<3>(&blk, damping, Vec3::Constant(at + ar), g, parent);
+        break;
+      }
+      case JointType::kFree: {
+        Vec6 h = Vec6::Zero();
+        Vec6 g = Vec6::Zero();
+        h.tail<3>().setConstant(at + ar);
+        g.tail<3>() = -at * RotationError(prior.rotation[uj], pose.rotation[uj]) -
+                      ar * RotationError(rest.rotation[uj], pose.rotation[uj]);
+        ok = EliminateJoint<6>(&blk, damping, h, g, parent);
+        break;
+      }
+    }
+    if (!ok) return false;
+  }
+  for (int j = 0; j < n; ++j) {
+    const auto uj = static_cast<size_t>(j);
+    JointBlock& blk = (*blocks)[uj];
+    const int parent = skeleton.joint(j).parent.value;
+    const Vec6 V_parent = parent < 0 ? Vec6::Zero() : Vec6((*blocks)[static_cast<size_t>(parent)].V);
+    blk.V = V_parent;
+    const int k = skeleton.dof_offset(j);
+    for (int c = 0; c < blk.dofs; ++c) {
+      const double step = blk.k[c] - blk.K.row(c).dot(V_parent);
+      (*dq)[k + c] = step;
+      blk.V += blk.S.col(c) * step;
+    }
+  }
+  return dq->allFinite();
+}
+
+void ClearBlocks(std::vector<JointBlock>* blocks) {
+  for (JointBlock& blk : *blocks) {
+    blk.Q.setZero();
+    blk.b.setZero();
+    if (blk.has_blend) {
+      blk.BB.setZero();
+      blk.BG.setZero();
+      blk.GG.setZero();
+      blk.Br.setZero();
+      blk.Gr.setZero();
+      blk.has_blend = false;
+    }
+  }
+}
+
+// Constant-velocity extrapolation: X_pred = X_cur * (X_prev^-1 X_cur) per joint.
+void PredictConstantVelocity(const Skeleton& skeleton, const Pose& previous, const Pose& current, Pose* predicted) {
+  for (int j = 0; j < skeleton.num_joints(); ++j) {
+    const auto uj = static_cast<size_t>(j);
+    predicted->rotation[uj] = (current.rotation[uj] * (previous.rotation[uj].conjugate() * current.rotation[uj])).normalized();
+    predicted->translation[uj] = 2.0 * current.translation[uj] - previous.translation[uj];
+  }
+}
+
+// Cold start: rigidly aligns the rest-pose markers with the observation (Kabsch) and
+// moves the first free joint accordingly, so LM starts facing the right way.
+void AlignRestPose(const Skeleton& skeleton, const MarkerSet& markers, std::span<const Vec3> observed,
+                   std::span<const double> weights, int first_free_joint, std::span<const Vec3> rest_markers,
+                   const Pose& rest, Pose* pose, KinematicsWorkspace* ws) {
+  *pose = rest;
+  if (first_free_joint < 0) return;
+  Vec3 model_mean = Vec3::Zero(), data_mean = Vec3::Zero();
+  double total = 0.0;
+  for (int m = 0; m < markers.num_markers(); ++m) {
+    const auto um = static_cast<size_t>(m);
+    if (!UsableMarker(observed[um], weights[um])) continue;
+    model_mean += weights[um] * rest_markers[um];
+    data_mean += weights[um] * observed[um];
+    total += weights[um];
+  }
+  if (total <= 0.0) return;
+  model_mean /= total;
+  data_mean /= total;
+  Mat3 cov = Mat3::Zero();
+  for (int m = 0; m < markers.num_markers(); ++m) {
+    const auto um = static_cast<size_t>(m);
+    if (!UsableMarker(observed[um], weights[um])) continue;
+    cov.noalias() += weights[um] * (observed[um] - data_mean) * (rest_markers[um] - model_mean).transpose();
+  }
+  const Eigen::JacobiSVD<Mat3> svd(cov, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Mat3 D = Mat3::Identity();
+  if ((svd.matrixU() * svd.matrixV().transpose()).determinant() < 0.0) D(2, 2) = -1.0;
+  const Mat3 R = svd.matrixU() * D * svd.matrixV().transpose();
+  const Vec3 t = data_mean - R * model_mean;
+
+  ForwardKinematics(skeleton, rest, ws);
+  const auto f = static_cast<size_t>(first_free_joint);
+  const Mat3 R_WF = R * ws->R_WJ[f];
+  const Vec3 p_WF = R * ws->p_WJ[f] + t;
+  const int parent = skeleton.joint(first_free_joint).parent.value;
+  const Mat3 R_WP = parent < 0 ? Mat3::Identity() : ws->R_WJ[static_cast<size_t>(parent)];
+  const Vec3 p_WP = parent < 0 ? Vec3::Zero() : ws->p_WJ[static_cast<size_t>(parent)];
+  pose->rotation[f] = Quat(R_WP.transpose() * R_WF).normalized();
+  pose->translation[f] = R_WP.transpose() * (p_WF - p_WP);
+}
+
+}  // namespace
+
+void IkOptions::Validate() const {
+  auto require = [](bool ok, const char* field, const char* expected) {
+    if (!ok) throw std::invalid_argument(std::string("IkOptions.") + field + ": expected " + expected);
+  };
+  require(max_iterations >= 1, "max_iterations", ">= 1");
+  require(cold_start_max_iterations >= 1, "cold_start_max_iterations", ">= 1");
+  require(initial_damping >= 0.0 && std::isfinite(initial_damping), "initial_damping", "a finite value >= 0");
+  require(function_tolerance >= 0.0, "function_tolerance", ">= 0");
+  require(step_tolerance >= 0.0, "step_tolerance", ">= 0");
+  require(huber_delta_m >= 0.0 && std::isfinite(huber_delta_m), "huber_delta_m", "a finite value >= 0");
+  require(temporal_weight >= 0.0 && std::isfinite(temporal_weight), "temporal_weight", "a finite value >= 0");
+  require(rest_weight >= 0.0 && std::isfinite(rest_weight), "rest_weight", "a finite value >= 0");
+  require(min_markers >= 1, "min_markers", ">= 1");
+}
+
+const char* to_string(IkStatus status) {
+  switch (status) {
+    case IkStatus::kConverged: return "converged";
+    case IkStatus::kMaxIterations: return "max_iterations";
+    case IkStatus::kTooFewMarkers: return "too_few_markers";
+    case IkStatus::kNumericalFailure: return "numerical_failure";
+  }
+  return "?";
+}
+
+IkState::IkState(const Skeleton& skeleton, const MarkerSet& markers)
+    : pose_(RestPose(skeleton)),
+      previous_(pose_),
+      trial_(pose_),
+      prior_(pose_),
+      rest_(pose_),
+      ws_(skeleton),
+      trial_ws_(skeleton),
+      predicted_(static_cast<size_t>(markers.num_markers()), Vec3::Zero()),
+      trial_predicted_(predicted_),
+      rest_markers_(predicted_),
+      blocks_(static_cast<size_t>(skeleton.num_joints())),
+      dq_(Eigen::VectorXd::Zero(skeleton.num_dofs())) {
+  for (JointBlock& blk : blocks_) {
+    blk.Q.setZero();
+    blk.BB.setZero();
+    blk.BG.setZero();
+    blk.GG.setZero();
+    blk.S.setZero();
+    blk.K.setZero();
+    blk.b.setZero();
+    blk.Br.setZero();
+    blk.Gr.setZero();
+    blk.k.setZero();
+    blk.V.setZero();
+  }
+  ForwardKinematics(skeleton, rest_, &ws_);
+  EvaluateMarkers(markers, ws_, rest_markers_);
+  predicted_ = rest_markers_;
+  for (int j = 0; j < skeleton.num_joints(); ++j) {
+    if (skeleton.joint(j).type == JointType::kFree) {
+      first_free_joint_ = j;
+      break;
+    }
+  }
+}
+
+void IkState::Reset() { history_ = 0; }
+
+void IkState::Reset(const Pose& pose) {
+  pose_ = pose;
+  history_ = 1;
+}
+
+IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOptions& options,
+                  std::span<const Vec3> observed, std::span<const double> weights, IkState* state) {
+  IkState& s = *state;
+  IkSummary summary;
+  for (int m = 0; m < markers.num_markers(); ++m)
+    if (UsableMarker(observed[static_cast<size_t>(m)], weights[static_cast<size_t>(m)])) ++summary.markers_used;
+  if (summary.markers_used < options.min_markers) {
+    // Hold the last solution; the velocity history is no longer trustworthy.
+    summary.status = IkStatus::kTooFewMarkers;
+    s.history_ = std::min(s.history_, 1);
+    return summary;
+  }
+
+  // Warm start (constant-velocity prediction when two solutions are known) or cold start.
+  int max_iterations = options.max_iterations;
+  if (s.history_ >= 2 && options.predict_constant_velocity) {
+    PredictConstantVelocity(skeleton, s.previous_, s.pose_, &s.trial_);
+    std::swap(s.previous_, s.pose_);
+    std::swap(s.pose_, s.trial_);
+  } else if (s.history_ >= 1) {
+    s.previous_ = s.pose_;
+  } else {
+    summary.cold_start = true;
+    max_iterations = options.cold_start_max_iterations;
+    AlignRestPose(skeleton, markers, observed, weights, s.first_free_joint_, s.rest_markers_, s.rest_, &s.pose_,
+                  &s.ws_);
+    s.previous_ = s.pose_;
+  }
+  s.prior_ = s.pose_;
+
+  ForwardKinematics(skeleton, s.pose_, &s.ws_);
+  // Twists are referred to the markers' centroid so the 6x6 blocks stay well conditioned
+  // however far the subject stands from the world origin.
+  Vec3 origin = Vec3::Zero();
+  for (int m = 0; m < markers.num_markers(); ++m) {
+    const auto um = static_cast<size_t>(m);
+    if (UsableMarker(observed[um], weights[um])) origin += observed[um];
+  }
+  origin /= summary.markers_used;
+
+  double cost =
+      EvaluateCost(skeleton, markers, options, observed, weights, s.pose_, s.prior_, s.rest_, s.ws_, s.predicted_);
+  summary.initial_cost = cost;
+  double damping = options.initial_damping;
+  summary.status = IkStatus::kMaxIterations;
+  for (int iteration = 0; iteration < max_iterations; ++iteration) {
+    summary.iterations = iteration + 1;
+    // Elimination adds children into their parents' blocks in place, so every attempt,
+    // including a retry after a rejected step, starts from freshly accumulated blocks.
+    ClearBlocks(&s.blocks_);
+    AccumulateMarkers(markers, options, observed, weights, s.predicted_, s.ws_, origin, &s.blocks_);
+    if (!ComputeStep(skeleton, options, damping, s.pose_, s.prior_, s.rest_, s.ws_, origin, &s.blocks_, &s.dq_)) {
+      summary.status = IkStatus::kNumericalFailure;
+      break;
+    }
+    s.trial_ = s.pose_;
+    IntegratePose(skeleton, s.dq_, &s.trial_);
+    if (options.apply_joint_limits) ApplyJointLimits(skeleton, &s.trial_);
+    ForwardKinematics(skeleton, s.trial_, &s.trial_ws_);
+    const double trial_cost = EvaluateCost(skeleton, markers, options, observed, weights, s.trial_, s.prior_, s.rest_,
+                                           s.trial_ws_, s.trial_predicted_);
+    const double step_size = s.dq_.cwiseAbs().maxCoeff();
+    if (std::isfinite(trial_cost) && trial_cost <= cost) {
+      std::swap(s.pose_, s.trial_);
+      std::swap(s.ws_, s.trial_ws_);
+      std::swap(s.predicted_, s.trial_predicted_);
+      const double decrease = cost - trial_cost;
+      cost = trial_cost;
+      damping = std::max(damping * 0.3, 1e-9);
+      if (decrease <= options.function_tolerance * (cost + decrease) || step_size <= options.step_tolerance) {
+        summary.status = IkStatus::kConverged;
+        break;
+      }
+    } else {
+      damping = std::max(damping * 10.0, 1e-6);
+      if (damping > 1e8 || step_size <= options.step_tolerance) {
+        // No descent direction left: the current pose is a minimum to working precision.
+        summary.status = IkStatus::kConverged;
+        break;
+      }
+    }
+  }
+  if (summary.status == IkStatus::kNumericalFailure || !std::isfinite(cost)) {
+    summary.status = IkStatus::kNumericalFailure;
+    s.pose_ = s.previous_;
+    ForwardKinematics(skeleton, s.pose_, &s.ws_);
+    EvaluateMarkers(markers, s.ws_, s.predicted_);
+    s.history_ = 0;
+    return summary;
+  }
+  summary.final_cost = cost;
+  double sum_sq = 0.0;
+  for (int m = 0; m < markers.num_markers(); ++m) {
+    const auto um = static_cast<size_t>(m);
+    if (UsableMarker(observed[um], weights[um])) sum_sq += (observed[um] - s.predicted_[um]).squaredNorm();
+  }
+  summary.rms_residual_m = std::sqrt(sum_sq / summary.markers_used);
+  s.history_ = std::min(s.history_ + 1, 2);
+  return summary;
+}
+
+}  // namespace mocapd

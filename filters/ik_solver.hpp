@@ -1,0 +1,101 @@
+// Per-frame, warm-started inverse kinematics: fits a skeleton pose to observed
+// marker positions by Levenberg-Marquardt on the pose step (root translation plus
+// joint rotation vectors, applied with the exponential map).
+//
+// Each iteration solves the damped Gauss-Newton system exactly, but never forms it:
+// joints are eliminated from the leaves to the root, each carrying a 6x6 quadratic in
+// its world twist, so the cost is O(joints * 6^3 + markers) instead of O(dofs^3).
+// This is the least-squares analogue of Featherstone's articulated-body recursion
+// (Featherstone, "Rigid Body Dynamics Algorithms", 2008, ch. 7), exact because the
+// normal matrix couples two joints only through the twist of their common ancestor.
+//
+// Objective, with r_m = y_m - p_WM(q):
+//   sum_m w_m rho(|r_m|)  +  1/2 a_t |q (-) q_prior|^2  +  1/2 a_r |q (-) q_rest|^2
+// rho is 1/2 r^2, or Huber (IRLS re-weighting each iteration) for the robust reference
+// solve; q_prior is the warm start (previous solution, or its constant-velocity
+// extrapolation). Levenberg-Marquardt: Marquardt, SIAM J. Appl. Math. 11(2), 1963.
+#pragma once
+
+#include <span>
+#include <vector>
+
+#include "filters/marker_model.hpp"
+#include "filters/skeleton.hpp"
+
+namespace mocapd {
+
+struct IkOptions {
+  int max_iterations = 6;              ///< Per warm-started frame.
+  int cold_start_max_iterations = 60;  ///< When there is no previous solution.
+  double initial_damping = 1e-4;       ///< LM factor on diag(H).
+  double function_tolerance = 1e-7;    ///< Converged when the cost drops by less than this fraction.
+  double step_tolerance = 1e-7;        ///< Converged when every step component is below this (rad or m).
+  double huber_delta_m = 0.0;          ///< Huber threshold in metres; 0 disables the robust loss.
+  bool predict_constant_velocity = true;
+  double temporal_weight = 2e-5;  ///< a_t, m^2 per rad^2, on rotations, toward the warm start.
+  double rest_weight = 1e-7;      ///< a_r, m^2 per rad^2, toward the rest pose.
+  int min_markers = 3;            ///< Fewer usable markers than this: no solve.
+  bool apply_joint_limits = true;
+  /// Throws std::invalid_argument naming the field if an option is out of range.
+  void Validate() const;
+};
+
+enum class IkStatus { kConverged, kMaxIterations, kTooFewMarkers, kNumericalFailure };
+const char* to_string(IkStatus status);
+
+struct IkSummary {
+  IkStatus status = IkStatus::kConverged;
+  int iterations = 0;
+  double initial_cost = 0.0;
+  double final_cost = 0.0;
+  double rms_residual_m = 0.0;  ///< Over the markers used, unweighted.
+  int markers_used = 0;
+  bool cold_start = false;
+};
+
+/// Everything one subject's solve keeps between frames. Sized once at construction;
+/// SolveIk never allocates afterwards.
+class IkState {
+ public:
+  IkState(const Skeleton& skeleton, const MarkerSet& markers);
+
+  /// The latest solution (the rest pose before the first solve).
+  const Pose& pose() const { return pose_; }
+  /// World joint transforms of pose().
+  const KinematicsWorkspace& kinematics() const { return ws_; }
+  /// Model marker positions for pose(), world frame, metres.
+  std::span<const Vec3> predicted_markers() const { return predicted_; }
+  bool has_solution() const { return history_ > 0; }
+  /// Forgets the history: the next solve starts cold (e.g. after a lost subject).
+  void Reset();
+  /// Seeds the next solve with this pose as if it were the previous solution.
+  void Reset(const Pose& pose);
+
+  /// Per-joint elimination storage: the 6x6 quadratic in the joint's world twist and
+  /// the blocks that blended (joint + parent) markers add.
+  struct JointBlock {
+    Mat6 Q, BB, BG, GG, S, K;
+    Vec6 b, Br, Gr, k, V;
+    int dofs = 0;
+    bool has_blend = false;
+  };
+
+ private:
+  friend IkSummary SolveIk(const Skeleton&, const MarkerSet&, const IkOptions&, std::span<const Vec3>,
+                           std::span<const double>, IkState*);
+  Pose pose_, previous_, trial_, prior_, rest_;
+  int history_ = 0;
+  KinematicsWorkspace ws_, trial_ws_;
+  std::vector<Vec3> predicted_, trial_predicted_, rest_markers_;
+  std::vector<JointBlock> blocks_;
+  Eigen::VectorXd dq_;
+  int first_free_joint_ = -1;
+};
+
+/// Solves one frame. observed holds p_WM per marker (metres); weights per marker, 0 for
+/// missing (a non-finite observation is also skipped). Warm-starts from the state and
+/// leaves the solution in it. Never throws, never allocates; not thread-safe per state.
+IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOptions& options,
+                  std::span<const Vec3> observed, std::span<const double> weights, IkState* state);
+
+}  // namespace mocapd

@@ -1,0 +1,50 @@
+// mocapd: the motion-capture cleanup daemon's command line. Subcommands:
+//   demo       synthesize a take and solve it live (the README's main job)
+//   calibrate  build a subject model from a BVH and the C3D capture of the same take
+#include <CLI/CLI.hpp>
+#include <exception>
+#include <iostream>
+
+#include "runtime/calibrate_command.hpp"
+#include "runtime/demo_command.hpp"
+
+int main(int argc, char** argv) {
+  CLI::App app{"mocapd - real-time motion-capture cleanup daemon"};
+  app.require_subcommand(1);
+
+  mocapd::DemoOptions demo;
+  CLI::App* demo_cmd = app.add_subcommand("demo", "Synthesize a take from the built-in humanoid and solve it frame by frame");
+  demo_cmd->add_option("--seconds", demo.seconds, "Take length")->check(CLI::Range(0.1, 3600.0))->capture_default_str();
+  demo_cmd->add_option("--rate", demo.rate_hz, "Capture rate, Hz")->check(CLI::Range(1.0, 2000.0))->capture_default_str();
+  demo_cmd->add_option("--noise-mm", demo.noise_mm, "Gaussian marker noise (sigma, mm)")->check(CLI::Range(0.0, 100.0))->capture_default_str();
+  demo_cmd->add_option("--motion", demo.motion, "walk | reach | turn | mixed")
+      ->check(CLI::IsMember({"walk", "reach", "turn", "mixed"}))
+      ->capture_default_str();
+  demo_cmd->add_option("--seed", demo.seed, "Noise seed")->capture_default_str();
+
+  mocapd::CalibrateCommandOptions cal;
+  double max_rms_mm = cal.calibration.max_rms_m * 1e3;
+  CLI::App* cal_cmd = app.add_subcommand("calibrate", "Attach a C3D take's markers to a BVH skeleton and write a subject model");
+  cal_cmd->add_option("--skeleton", cal.skeleton_bvh, "BVH with the hierarchy and the motion of the captured take")->required()->check(CLI::ExistingFile);
+  cal_cmd->add_option("--markers", cal.markers_c3d, "C3D marker capture of the same take")->required()->check(CLI::ExistingFile);
+  cal_cmd->add_option("--out", cal.out_subject, "Subject model to write (TOML)")->required();
+  cal_cmd->add_option("--name", cal.subject_name, "Subject name (default: the output file's stem)");
+  cal_cmd->add_option("--bvh-units", cal.bvh_units, "BVH length unit: mm, cm, m or in (default: guess)");
+  cal_cmd->add_option("--max-residual-mm", max_rms_mm, "Reject markers whose best fit leaves more RMS than this")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+
+  CLI11_PARSE(app, argc, argv);
+  try {
+    if (*demo_cmd) return mocapd::RunDemoCommand(demo, std::cout);
+    if (*cal_cmd) {
+      cal.calibration.max_rms_m = max_rms_mm * 1e-3;
+      mocapd::RunCalibrateCommand(cal, std::cout);
+      return 0;
+    }
+  } catch (const std::exception& e) {
+    std::cerr << "mocapd: error: " << e.what() << "\n";
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,412 @@
+// BVH parser and writer.
+#include "sim/bvh.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+
+#include "filters/rotation.hpp"
+#include "sim/c3d.hpp"
+
+namespace mocapd {
+namespace {
+
+constexpr double kDegToRad = M_PI / 180.0;
+
+struct Token {
+  std::string text;
+  int line;
+};
+
+class Tokens {
+ public:
+  Tokens(const std::string& text, std::string source) : source_(std::move(source)) {
+    int line = 1;
+    size_t i = 0;
+    while (i < text.size()) {
+      const char c = text[i];
+      if (c == '\n') {
+        ++line;
+        ++i;
+      } else if (std::isspace(static_cast<unsigned char>(c))) {
+        ++i;
+      } else {
+        const size_t start = i;
+        while (i < text.size() && !std::isspace(static_cast<unsigned char>(text[i]))) ++i;
+        tokens_.push_back({text.substr(start, i - start), line});
+      }
+    }
+  }
+  bool done() const { return pos_ >= tokens_.size(); }
+  int line() const { return done() ? (tokens_.empty() ? 1 : tokens_.back().line) : tokens_[pos_].line; }
+  const std::string& Peek() const {
+    static const std::string kEnd;
+    return done() ? kEnd : tokens_[pos_].text;
+  }
+  std::string Next(const char* what) {
+    if (done()) Fail(std::string("unexpected end of file, expected ") + what);
+    return tokens_[pos_++].text;
+  }
+  void Expect(const std::string& word) {
+    const int at = line();
+    const std::string got = Next(word.c_str());
+    if (got != word) FailAt(at, "expected '" + word + "', found '" + got + "'");
+  }
+  double Number(const char* what) {
+    const int at = line();
+    const std::string t = Next(what);
+    char* end = nullptr;
+    const double v = std::strtod(t.c_str(), &end);
+    if (end == t.c_str() || *end != '\0' || !std::isfinite(v)) FailAt(at, std::string("expected a number for ") + what + ", found '" + t + "'");
+    return v;
+  }
+  [[noreturn]] void Fail(const std::string& what) const { FailAt(line(), what); }
+  [[noreturn]] void FailAt(int at, const std::string& what) const {
+    throw BvhError(source_ + ":" + std::to_string(at) + ": " + what);
+  }
+
+ private:
+  std::vector<Token> tokens_;
+  size_t pos_ = 0;
+  std::string source_;
+};
+
+struct RawJoint {
+  std::string name;
+  int parent;
+  Vec3 offset;  // file units
+  std::vector<BvhChannel> channels;
+};
+
+BvhChannel ParseChannel(Tokens& t) {
+  const int at = t.line();
+  std::string name = t.Next("a channel name");
+  std::transform(name.begin(), name.end(), name.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  if (name == "xposition") return BvhChannel::kXposition;
+  if (name == "yposition") return BvhChannel::kYposition;
+  if (name == "zposition") return BvhChannel::kZposition;
+  if (name == "xrotation") return BvhChannel::kXrotation;
+  if (name == "yrotation") return BvhChannel::kYrotation;
+  if (name == "zrotation") return BvhChannel::kZrotation;
+  t.FailAt(at, "unknown channel '" + name + "'");
+}
+
+bool IsRotation(BvhChannel c) { return c >= BvhChannel::kXrotation; }
+int Axis(BvhChannel c) { return static_cast<int>(c) % 3; }
+
+void ParseJoint(Tokens& t, int parent, std::vector<RawJoint>* joints, std::vector<std::pair<int, Vec3>>* end_sites) {
+  const int at = t.line();
+  RawJoint joint{t.Next("a joint name"), parent, Vec3::Zero(), {}};
+  // Names may contain spaces in some exporters; join tokens up to the brace.
+  while (t.Peek() != "{" && !t.done()) joint.name += " " + t.Next("'{'");
+  t.Expect("{");
+  t.Expect("OFFSET");
+  for (int k = 0; k < 3; ++k) joint.offset[k] = t.Number("OFFSET");
+  if (t.Peek() == "CHANNELS") {
+    t.Next("CHANNELS");
+    const double n = t.Number("the channel count");
+    if (n < 0 || n > 6 || n != std::floor(n)) t.FailAt(at, "joint '" + joint.name + "' has " + std::to_string(n) + " channels, expected 0..6");
+    for (int k = 0; k < static_cast<int>(n); ++k) joint.channels.push_back(ParseChannel(t));
+  }
+  int rot = 0, pos = 0;
+  bool seen[6] = {false, false, false, false, false, false};
+  for (BvhChannel c : joint.channels) {
+    if (seen[static_cast<int>(c)]) t.FailAt(at, "joint '" + joint.name + "' repeats a channel");
+    seen[static_cast<int>(c)] = true;
+    (IsRotation(c) ? rot : pos)++;
+  }
+  if ((rot != 0 && rot != 3) || (pos != 0 && pos != 3) || (rot == 0 && pos == 3))
+    t.FailAt(at, "joint '" + joint.name + "' has an unsupported channel set (" + std::to_string(pos) + " position, " +
+                     std::to_string(rot) + " rotation); supported: 3 rotations, optionally 3 positions");
+  const int index = static_cast<int>(joints->size());
+  joints->push_back(std::move(joint));
+  while (true) {
+    const std::string word = t.Next("JOINT, End Site or '}'");
+    if (word == "}") return;
+    if (word == "JOINT") {
+      ParseJoint(t, index, joints, end_sites);
+    } else if (word == "End") {
+      t.Expect("Site");
+      t.Expect("{");
+      t.Expect("OFFSET");
+      Vec3 offset;
+      for (int k = 0; k < 3; ++k) offset[k] = t.Number("End Site OFFSET");
+      t.Expect("}");
+      end_sites->push_back({index, offset});
+    } else {
+      t.Fail("expected JOINT, End Site or '}', found '" + word + "'");
+    }
+  }
+}
+
+std::string GuessUnits(const std::vector<RawJoint>& joints) {
+  std::vector<Vec3> p(joints.size());
+  Vec3 lo = Vec3::Constant(1e300), hi = Vec3::Constant(-1e300);
+  for (size_t j = 0; j < joints.size(); ++j) {
+    p[j] = joints[j].parent < 0 ? Vec3::Zero() : Vec3(p[static_cast<size_t>(joints[j].parent)] + joints[j].offset);
+    lo = lo.cwiseMin(p[j]);
+    hi = hi.cwiseMax(p[j]);
+  }
+  const double extent = (hi - lo).maxCoeff();
+  if (extent < 5.0) return "m";
+  if (extent < 400.0) return "cm";
+  return "mm";
+}
+
+Quat RotationFromChannels(const std::vector<BvhChannel>& channels, const double* values) {
+  Quat q = Quat::Identity();
+  for (size_t c = 0; c < channels.size(); ++c) {
+    if (!IsRotation(channels[c])) continue;
+    q = q * Quat(Eigen::AngleAxisd(values[c] * kDegToRad, Vec3::Unit(Axis(channels[c]))));
+  }
+  return q.normalized();
+}
+
+}  // namespace
+
+BvhTake ParseBvh(const std::string& text, const std::string& source_name, const BvhReadOptions& options) {
+  Tokens t(text, source_name);
+  t.Expect("HIERARCHY");
+  t.Expect("ROOT");
+  std::vector<RawJoint> raw;
+  std::vector<std::pair<int, Vec3>> raw_end_sites;
+  ParseJoint(t, -1, &raw, &raw_end_sites);
+  if (t.Peek() == "ROOT") t.Fail("more than one ROOT is not supported");
+  t.Expect("MOTION");
+  t.Expect("Frames:");
+  const double frames_d = t.Number("the frame count");
+  if (frames_d < 0 || frames_d != std::floor(frames_d) || frames_d > 1e8) t.Fail("invalid frame count");
+  const auto num_frames = static_cast<size_t>(frames_d);
+  t.Expect("Frame");
+  t.Expect("Time:");
+  const double frame_time = t.Number("the frame time");
+  if (!(frame_time > 0.0)) t.Fail("frame time must be > 0");
+
+  size_t total_channels = 0;
+  for (const RawJoint& j : raw) total_channels += j.channels.size();
+  std::vector<double> values(num_frames * total_channels);
+  for (size_t f = 0; f < num_frames; ++f) {
+    for (size_t c = 0; c < total_channels; ++c) {
+      if (t.done()) t.Fail("frame " + std::to_string(f + 1) + " of " + std::to_string(num_frames) + " is truncated: expected " +
+                           std::to_string(total_channels) + " values");
+      values[f * total_channels + c] = t.Number("a channel value");
+    }
+  }
+  if (!t.done()) t.Fail("unexpected data after frame " + std::to_string(num_frames) + ": '" + t.Peek() + "'");
+
+  BvhTake take;
+  take.units = options.units.empty() ? GuessUnits(raw) : options.units;
+  try {
+    take.metres_per_unit = MetresPerUnit(take.units);
+  } catch (const std::invalid_argument& e) {
+    throw BvhError(source_name + ": " + e.what());
+  }
+  take.frame_time_s = frame_time;
+  const double s = take.metres_per_unit;
+
+  // Decide each joint's type from how its channels move over the take.
+  std::vector<Joint> joints;
+  size_t first_channel = 0;
+  std::vector<size_t> channel_start;
+  for (size_t j = 0; j < raw.size(); ++j) {
+    const RawJoint& r = raw[j];
+    channel_start.push_back(first_channel);
+    Joint joint;
+    joint.name = r.name;
+    joint.parent = JointIndex(r.parent);
+    joint.offset = r.offset * s;
+    bool translation_moves = false, anything_moves = false;
+    Vec3 constant_translation = r.offset;
+    for (size_t c = 0; c < r.channels.size(); ++c) {
+      const double v0 = num_frames > 0 ? values[first_channel + c] : 0.0;
+      bool moves = false;
+      for (size_t f = 1; f < num_frames && !moves; ++f) moves = std::abs(values[f * total_channels + first_channel + c] - v0) > 1e-9 * std::max(1.0, std::abs(v0));
+      anything_moves = anything_moves || moves;
+      if (!IsRotation(r.channels[c])) {
+        translation_moves = translation_moves || moves;
+        if (num_frames > 0) constant_translation[Axis(r.channels[c])] = v0;
+      }
+    }
+    const bool has_translation = std::any_of(r.channels.begin(), r.channels.end(), [](BvhChannel c) { return !IsRotation(c); });
+    if (r.channels.empty()) {
+      joint.type = JointType::kFixed;
+    } else if (r.parent < 0 && !anything_moves) {
+      joint.type = JointType::kFixed;
+      if (num_frames > 0) joint.rest_rotation = RotationFromChannels(r.channels, &values[first_channel]);
+      joint.offset = constant_translation * s;
+    } else if (has_translation && translation_moves) {
+      joint.type = JointType::kFree;
+    } else {
+      joint.type = JointType::kBall;
+      joint.offset = constant_translation * s;
+    }
+    joints.push_back(std::move(joint));
+    take.channels.push_back(r.channels);
+    take.file_offsets.push_back(r.offset * s);
+    first_channel += r.channels.size();
+  }
+  try {
+    take.skeleton = Skeleton(std::move(joints));
+  } catch (const std::invalid_argument& e) {
+    throw BvhError(source_name + ": " + e.what());
+  }
+  for (const auto& [parent, offset] : raw_end_sites) take.end_sites.push_back({parent, offset * s});
+
+  take.frames.reserve(num_frames);
+  const Pose rest = RestPose(take.skeleton);
+  for (size_t f = 0; f < num_frames; ++f) {
+    Pose pose = rest;
+    for (size_t j = 0; j < raw.size(); ++j) {
+      const double* v = &values[f * total_channels + channel_start[j]];
+      const auto& ch = raw[j].channels;
+      if (ch.empty()) continue;
+      pose.rotation[j] = RotationFromChannels(ch, v);
+      for (size_t c = 0; c < ch.size(); ++c)
+        if (!IsRotation(ch[c])) pose.translation[j][Axis(ch[c])] = v[c] * s;
+    }
+    take.frames.push_back(std::move(pose));
+  }
+  return take;
+}
+
+BvhTake ReadBvh(const std::string& path, const BvhReadOptions& options) {
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error(path + ": cannot open for reading");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ParseBvh(ss.str(), path, options);
+}
+
+namespace {
+
+// Euler angles (radians) of q for rotation axes a0, a1, a2 (all distinct), choosing of
+// the two equivalent solutions the one nearest to `near` so written curves stay continuous.
+Vec3 EulerNear(const Quat& q, int a0, int a1, int a2, const Vec3& near) {
+  const Vec3 e = q.toRotationMatrix().eulerAngles(a0, a1, a2);
+  const Vec3 alt(e[0] + M_PI, M_PI - e[1], e[2] + M_PI);
+  auto wrap_near = [&](Vec3 v) {
+    for (int k = 0; k < 3; ++k) v[k] = near[k] + std::remainder(v[k] - near[k], 2.0 * M_PI);
+    return v;
+  };
+  const Vec3 a = wrap_near(e), b = wrap_near(alt);
+  return (a - near).squaredNorm() <= (b - near).squaredNorm() ? a : b;
+}
+
+void AppendNumber(std::string* out, double v) {
+  char buf[32];
+  if (std::abs(v) < 5e-10) v = 0.0;
+  std::snprintf(buf, sizeof(buf), "%.9g", v);
+  out->append(buf);
+}
+
+std::vector<BvhChannel> DefaultChannels(JointType type) {
+  using C = BvhChannel;
+  if (type == JointType::kFree) return {C::kXposition, C::kYposition, C::kZposition, C::kZrotation, C::kXrotation, C::kYrotation};
+  return {C::kZrotation, C::kXrotation, C::kYrotation};
+}
+
+const char* ChannelName(BvhChannel c) {
+  switch (c) {
+    case BvhChannel::kXposition: return "Xposition";
+    case BvhChannel::kYposition: return "Yposition";
+    case BvhChannel::kZposition: return "Zposition";
+    case BvhChannel::kXrotation: return "Xrotation";
+    case BvhChannel::kYrotation: return "Yrotation";
+    case BvhChannel::kZrotation: return "Zrotation";
+  }
+  return "?";
+}
+
+}  // namespace
+
+BvhTake MakeBvhTake(Skeleton skeleton, std::vector<Pose> frames, double frame_time_s, const std::string& units) {
+  BvhTake take;
+  take.units = units;
+  take.metres_per_unit = MetresPerUnit(units);
+  take.frame_time_s = frame_time_s;
+  for (const Joint& j : skeleton.joints()) {
+    take.channels.push_back(DefaultChannels(j.type));
+    take.file_offsets.push_back(j.offset);
+  }
+  take.skeleton = std::move(skeleton);
+  take.frames = std::move(frames);
+  return take;
+}
+
+std::string FormatBvh(const BvhTake& take) {
+  const Skeleton& sk = take.skeleton;
+  const double inv = 1.0 / take.metres_per_unit;
+  auto channels_of = [&](int j) {
+    return static_cast<size_t>(j) < take.channels.size() ? take.channels[static_cast<size_t>(j)] : DefaultChannels(sk.joint(j).type);
+  };
+  std::string out = "HIERARCHY\n";
+  // Recursive emit in child order; joints are stored parents-first.
+  auto emit = [&](auto&& self, int j, int depth) -> void {
+    const std::string indent(static_cast<size_t>(2 * depth), ' ');
+    out += indent + (depth == 0 ? "ROOT " : "JOINT ") + sk.joint(j).name + "\n" + indent + "{\n";
+    const Vec3 offset = static_cast<size_t>(j) < take.file_offsets.size() ? take.file_offsets[static_cast<size_t>(j)] : sk.joint(j).offset;
+    out += indent + "  OFFSET ";
+    for (int k = 0; k < 3; ++k) {
+      AppendNumber(&out, offset[k] * inv);
+      out += k < 2 ? " " : "\n";
+    }
+    const auto ch = channels_of(j);
+    if (!ch.empty()) {
+      out += indent + "  CHANNELS " + std::to_string(ch.size());
+      for (BvhChannel c : ch) out += std::string(" ") + ChannelName(c);
+      out += "\n";
+    }
+    for (int c : sk.children(j)) self(self, c, depth + 1);
+    for (const BvhEndSite& e : take.end_sites) {
+      if (e.parent != j) continue;
+      out += indent + "  End Site\n" + indent + "  {\n" + indent + "    OFFSET ";
+      for (int k = 0; k < 3; ++k) {
+        AppendNumber(&out, e.offset[k] * inv);
+        out += k < 2 ? " " : "\n";
+      }
+      out += indent + "  }\n";
+    }
+    out += indent + "}\n";
+  };
+  emit(emit, 0, 0);
+  out += "MOTION\nFrames: " + std::to_string(take.frames.size()) + "\nFrame Time: ";
+  AppendNumber(&out, take.frame_time_s);
+  out += "\n";
+  std::vector<Vec3> previous(static_cast<size_t>(sk.num_joints()), Vec3::Zero());
+  for (const Pose& pose : take.frames) {
+    bool first_value = true;
+    auto put = [&](double v) {
+      if (!first_value) out += ' ';
+      first_value = false;
+      AppendNumber(&out, v);
+    };
+    for (int j = 0; j < sk.num_joints(); ++j) {
+      const auto uj = static_cast<size_t>(j);
+      const auto ch = channels_of(j);
+      int axes[3], n = 0;
+      for (BvhChannel c : ch)
+        if (IsRotation(c)) axes[n++] = Axis(c);
+      Vec3 euler = Vec3::Zero();
+      if (n == 3) {
+        euler = EulerNear(pose.rotation[uj], axes[0], axes[1], axes[2], previous[uj]);
+        previous[uj] = euler;
+      }
+      const Vec3& translation = LocalTranslation(sk, pose, j);
+      int r = 0;
+      for (BvhChannel c : ch) put(IsRotation(c) ? euler[r++] / kDegToRad : translation[Axis(c)] * inv);
+    }
+    out += "\n";
+  }
+  return out;
+}
+
+void WriteBvh(const std::string& path, const BvhTake& take) {
+  std::ofstream out(path, std::ios::trunc);
+  if (!out) throw std::runtime_error(path + ": cannot open for writing");
+  out << FormatBvh(take);
+  if (!out) throw std::runtime_error(path + ": write failed");
+}
+
+}  // namespace mocapd

@@ -1,0 +1,509 @@
+// C3D reader and writer. The reader trusts nothing: every count and offset in the file
+// is checked against the buffer before use, and errors name the section and byte offset.
+#include "sim/c3d.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <iterator>
+#include <map>
+#include <optional>
+
+#include "protocol/byte_io.hpp"
+
+namespace mocapd {
+namespace {
+
+constexpr size_t kBlock = 512;
+constexpr uint8_t kProcessorIntel = 84, kProcessorDec = 85, kProcessorMips = 86;
+
+std::string Upper(std::string s) {
+  std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return static_cast<char>(std::toupper(c)); });
+  return s;
+}
+
+std::string TrimRight(std::string s) {
+  while (!s.empty() && (s.back() == ' ' || s.back() == '\0')) s.pop_back();
+  return s;
+}
+
+struct Parameter {
+  int8_t type = 0;  // -1 char, 1 byte, 2 int16, 4 float
+  std::vector<int> dims;
+  std::vector<uint8_t> data;
+  size_t offset = 0;  // of the data in the file, for messages
+};
+
+class Parser {
+ public:
+  Parser(std::span<const uint8_t> bytes, const std::string& source) : reader_(bytes), source_(source) {}
+
+  C3dTake Parse() {
+    ReadHeader();
+    ReadParameters();
+    return ReadData();
+  }
+
+ private:
+  [[noreturn]] void Fail(const std::string& section, size_t offset, const std::string& what) const {
+    throw C3dError(source_ + ": " + section + " section, byte " + std::to_string(offset) + ": " + what);
+  }
+  void Require(bool ok, const std::string& section, const std::string& what) {
+    if (!ok) Fail(section, reader_.offset(), what);
+  }
+
+  void ReadHeader() {
+    Require(reader_.size() >= kBlock, "header", "file is " + std::to_string(reader_.size()) + " bytes, shorter than the 512-byte header");
+    uint8_t param_block = 0, key = 0;
+    Require(reader_.ReadU8(&param_block) && reader_.ReadU8(&key), "header", "truncated");
+    if (key != 0x50) Fail("header", 1, "expected key byte 0x50, found " + std::to_string(key));
+    if (param_block < 1) Fail("header", 0, "parameter section block number is 0");
+    param_start_ = (static_cast<size_t>(param_block) - 1) * kBlock;
+    // The processor type (which fixes byte order) lives in the parameter section header.
+    Require(reader_.Seek(param_start_ + 3), "header", "parameter section starts beyond the end of the file");
+    Require(reader_.ReadU8(&processor_), "parameters", "truncated");
+    switch (processor_) {
+      case kProcessorIntel: reader_.set_format(ByteOrder::kLittle, FloatFormat::kIeee); break;
+      case kProcessorDec: reader_.set_format(ByteOrder::kLittle, FloatFormat::kVax); break;
+      case kProcessorMips: reader_.set_format(ByteOrder::kBig, FloatFormat::kIeee); break;
+      default: Fail("parameters", param_start_ + 3, "unknown processor type " + std::to_string(processor_) + " (expected 84, 85 or 86)");
+    }
+    uint16_t points = 0, analog = 0, first = 0, last = 0, gap = 0, data_block = 0, analog_per_frame = 0;
+    float scale = 0.0f, rate = 0.0f;
+    Require(reader_.Seek(2), "header", "truncated");
+    Require(reader_.ReadU16(&points) && reader_.ReadU16(&analog) && reader_.ReadU16(&first) && reader_.ReadU16(&last) &&
+                reader_.ReadU16(&gap) && reader_.ReadF32(&scale) && reader_.ReadU16(&data_block) &&
+                reader_.ReadU16(&analog_per_frame) && reader_.ReadF32(&rate),
+            "header", "truncated");
+    header_points_ = points;
+    header_analog_ = analog;
+    header_first_ = first;
+    header_last_ = last;
+    header_scale_ = scale;
+    header_data_block_ = data_block;
+    header_rate_ = rate;
+  }
+
+  void ReadParameters() {
+    Require(reader_.Seek(param_start_), "parameters", "starts beyond the end of the file");
+    uint8_t reserved1, reserved2, blocks, processor;
+    Require(reader_.ReadU8(&reserved1) && reader_.ReadU8(&reserved2) && reader_.ReadU8(&blocks) && reader_.ReadU8(&processor),
+            "parameters", "truncated section header");
+    const size_t end = std::min(reader_.size(), param_start_ + std::max<size_t>(blocks, 1) * kBlock);
+    std::map<int, std::string> group_names;
+    struct Pending {
+      int group;
+      std::string name;
+      Parameter param;
+    };
+    std::vector<Pending> pending;
+    size_t pos = param_start_ + 4;
+    while (pos + 2 <= end) {
+      Require(reader_.Seek(pos), "parameters", "truncated");
+      int8_t name_len_signed = 0, id = 0;
+      Require(reader_.ReadI8(&name_len_signed) && reader_.ReadI8(&id), "parameters", "truncated entry");
+      if (name_len_signed == 0 || id == 0) break;  // end of the list
+      const size_t name_len = static_cast<size_t>(std::abs(static_cast<int>(name_len_signed)));
+      std::string name;
+      Require(reader_.ReadString(name_len, &name), "parameters", "name runs past the end of the file");
+      const size_t next_field = reader_.offset();
+      int16_t next = 0;
+      Require(reader_.ReadI16(&next), "parameters", "truncated entry");
+      if (id < 0) {
+        uint8_t desc_len = 0;
+        Require(reader_.ReadU8(&desc_len) && reader_.Skip(desc_len), "parameters", "group '" + name + "' description runs past the end");
+        group_names[-id] = Upper(TrimRight(name));
+      } else {
+        Parameter p;
+        uint8_t ndims = 0;
+        Require(reader_.ReadI8(&p.type) && reader_.ReadU8(&ndims), "parameters", "parameter '" + name + "' is truncated");
+        if (p.type != -1 && p.type != 1 && p.type != 2 && p.type != 4)
+          Fail("parameters", reader_.offset() - 2, "parameter '" + name + "' has invalid type " + std::to_string(p.type));
+        size_t count = 1;
+        for (uint8_t d = 0; d < ndims; ++d) {
+          uint8_t dim = 0;
+          Require(reader_.ReadU8(&dim), "parameters", "parameter '" + name + "' dimensions are truncated");
+          p.dims.push_back(dim);
+          count *= dim;
+        }
+        const size_t bytes = count * static_cast<size_t>(std::abs(static_cast<int>(p.type)));
+        p.offset = reader_.offset();
+        Require(reader_.ReadBytes(bytes, &p.data), "parameters",
+                "parameter '" + name + "' data (" + std::to_string(bytes) + " bytes) runs past the end");
+        pending.push_back({id, Upper(TrimRight(name)), std::move(p)});
+      }
+      if (next <= 0) break;  // 0 marks the last entry; a negative link cannot move forward
+      pos = next_field + static_cast<size_t>(next);
+    }
+    for (Pending& p : pending) {
+      auto g = group_names.find(p.group);
+      const std::string group = g == group_names.end() ? "GROUP" + std::to_string(p.group) : g->second;
+      params_[group + ":" + p.name] = std::move(p.param);
+    }
+  }
+
+  const Parameter* Find(const std::string& key) const {
+    auto it = params_.find(key);
+    return it == params_.end() ? nullptr : &it->second;
+  }
+
+  // Reads element i of a numeric parameter as double.
+  std::optional<double> Number(const std::string& key, size_t i = 0) const {
+    const Parameter* p = Find(key);
+    if (p == nullptr || p->type == -1) return std::nullopt;
+    const size_t size = static_cast<size_t>(p->type);
+    if ((i + 1) * size > p->data.size()) return std::nullopt;
+    ByteReader r(p->data, processor_ == kProcessorMips ? ByteOrder::kBig : ByteOrder::kLittle,
+                 processor_ == kProcessorDec ? FloatFormat::kVax : FloatFormat::kIeee);
+    if (!r.Seek(i * size)) return std::nullopt;
+    switch (p->type) {
+      case 1: {
+        uint8_t v;
+        if (!r.ReadU8(&v)) return std::nullopt;
+        return static_cast<double>(static_cast<int8_t>(v));
+      }
+      case 2: {
+        int16_t v;
+        if (!r.ReadI16(&v)) return std::nullopt;
+        return static_cast<double>(v);
+      }
+      case 4: {
+        float v;
+        if (!r.ReadF32(&v)) return std::nullopt;
+        return static_cast<double>(v);
+      }
+      default: return std::nullopt;
+    }
+  }
+
+  std::vector<std::string> Strings(const std::string& key) const {
+    std::vector<std::string> out;
+    const Parameter* p = Find(key);
+    if (p == nullptr || p->type != -1) return out;
+    const std::string all(p->data.begin(), p->data.end());
+    if (p->dims.size() <= 1) {
+      out.push_back(TrimRight(all));
+      return out;
+    }
+    const auto len = static_cast<size_t>(p->dims[0]);
+    if (len == 0) return out;
+    for (size_t k = 0; k * len < all.size(); ++k) out.push_back(TrimRight(all.substr(k * len, len)));
+    return out;
+  }
+
+  // LABELS, LABELS2, LABELS3 ... concatenated.
+  std::vector<std::string> StringsContinued(const std::string& group, const std::string& name) const {
+    std::vector<std::string> out = Strings(group + ":" + name);
+    for (int k = 2; Find(group + ":" + name + std::to_string(k)) != nullptr; ++k) {
+      const auto more = Strings(group + ":" + name + std::to_string(k));
+      out.insert(out.end(), more.begin(), more.end());
+    }
+    return out;
+  }
+
+  C3dTake ReadData() {
+    C3dTake take;
+    take.processor = processor_ == kProcessorIntel ? "Intel" : processor_ == kProcessorDec ? "DEC" : "MIPS";
+    const int points = static_cast<int>(Number("POINT:USED").value_or(header_points_));
+    if (points < 0) Fail("parameters", 0, "POINT:USED is negative");
+    // Integer parameters above 32767 are stored as unsigned 16-bit words.
+    const auto used = static_cast<size_t>(points < 0 ? points + 65536 : points);
+    const double scale = Number("POINT:SCALE").value_or(header_scale_);
+    if (!std::isfinite(scale) || scale == 0.0) Fail("parameters", 0, "POINT:SCALE is " + std::to_string(scale) + ", expected a non-zero number");
+    take.float_storage = scale < 0.0;
+    take.rate_hz = Number("POINT:RATE").value_or(header_rate_);
+    if (!(take.rate_hz > 0.0) || !std::isfinite(take.rate_hz)) Fail("parameters", 0, "POINT:RATE is " + std::to_string(take.rate_hz) + ", expected > 0");
+    const auto units = Strings("POINT:UNITS");
+    take.units = units.empty() || units[0].empty() ? "mm" : units[0];
+    try {
+      take.metres_per_unit = MetresPerUnit(take.units);
+    } catch (const std::invalid_argument& e) {
+      Fail("parameters", Find("POINT:UNITS")->offset, e.what());
+    }
+
+    int64_t frames = static_cast<int64_t>(header_last_) - static_cast<int64_t>(header_first_) + 1;
+    if (auto f = Number("POINT:FRAMES")) {
+      double v = *f;
+      if (Find("POINT:FRAMES")->type == 2 && v < 0) v += 65536;  // unsigned word
+      if (header_last_ == 65535 || frames <= 0 || static_cast<int64_t>(v) > frames) frames = static_cast<int64_t>(v);
+    }
+    if (auto end_lo = Number("TRIAL:ACTUAL_END_FIELD", 0)) {
+      const auto lo = static_cast<int64_t>(static_cast<uint16_t>(static_cast<int16_t>(*end_lo)));
+      const auto hi = static_cast<int64_t>(static_cast<uint16_t>(static_cast<int16_t>(Number("TRIAL:ACTUAL_END_FIELD", 1).value_or(0))));
+      const auto slo = static_cast<int64_t>(static_cast<uint16_t>(static_cast<int16_t>(Number("TRIAL:ACTUAL_START_FIELD", 0).value_or(1))));
+      const int64_t trial_frames = (lo + (hi << 16)) - slo + 1;
+      if (trial_frames > frames) frames = trial_frames;
+    }
+    if (frames < 0) frames = 0;
+    take.first_frame = header_first_;
+
+    take.labels = StringsContinued("POINT", "LABELS");
+    take.descriptions = StringsContinued("POINT", "DESCRIPTIONS");
+    take.labels.resize(used);
+    take.descriptions.resize(used);
+    for (size_t i = 0; i < used; ++i)
+      if (take.labels[i].empty()) take.labels[i] = "unlabeled_" + std::to_string(i + 1);
+    take.model_output_kind.assign(used, "");
+    for (const char* kind : {"ANGLES", "POWERS", "FORCES", "MOMENTS", "SCALARS", "REACTIONS"}) {
+      for (const std::string& label : StringsContinued("POINT", kind)) {
+        for (size_t i = 0; i < used; ++i)
+          if (!label.empty() && take.labels[i] == label) take.model_output_kind[i] = kind;
+      }
+    }
+
+    size_t data_block = header_data_block_;
+    if (auto d = Number("POINT:DATA_START")) {
+      double v = *d;
+      if (v < 0) v += 65536;
+      if (v >= 1) data_block = static_cast<size_t>(v);
+    }
+    if (data_block < 1) Fail("header", 16, "data section block number is 0");
+    const size_t data_start = (data_block - 1) * kBlock;
+    const size_t value_size = take.float_storage ? 4 : 2;
+    const size_t analog_values = header_analog_;
+    const size_t frame_bytes = (used * 4 + analog_values) * value_size;
+    const size_t available = data_start <= reader_.size() ? reader_.size() - data_start : 0;
+    if (frame_bytes > 0 && static_cast<size_t>(frames) > available / frame_bytes) {
+      const size_t whole = available / frame_bytes;
+      Fail("data", data_start + whole * frame_bytes,
+           "file ends inside frame " + std::to_string(whole + 1) + " of " + std::to_string(frames) + " (" + std::to_string(frame_bytes) + " bytes per frame)");
+    }
+    if (frames > 0 && used > 0 && static_cast<uint64_t>(frames) * used > (1ull << 31))
+      Fail("data", data_start, "implausible size: " + std::to_string(frames) + " frames x " + std::to_string(used) + " points");
+    take.Allocate(static_cast<int>(frames));
+    const double unit_scale = std::abs(scale);
+    for (int64_t f = 0; f < frames; ++f) {
+      Require(reader_.Seek(data_start + static_cast<size_t>(f) * frame_bytes), "data", "truncated");
+      for (size_t p = 0; p < used; ++p) {
+        double xyz[3];
+        float residual;
+        bool ok = true;
+        if (take.float_storage) {
+          float v[4];
+          for (float& x : v) ok = ok && reader_.ReadF32(&x);
+          xyz[0] = v[0];
+          xyz[1] = v[1];
+          xyz[2] = v[2];
+          residual = v[3];
+        } else {
+          int16_t v[4];
+          for (int16_t& x : v) ok = ok && reader_.ReadI16(&x);
+          for (int k = 0; k < 3; ++k) xyz[k] = v[k] * unit_scale;
+          // Low byte: residual in units of |scale|; the sign of the word marks invalid.
+          residual = v[3] < 0 ? -1.0f : static_cast<float>((v[3] & 0xff) * unit_scale);
+        }
+        Require(ok, "data", "truncated frame");
+        const size_t idx = static_cast<size_t>(f) * used + p;
+        // A float residual holds an integer word; negative marks an invalid sample.
+        const bool valid = residual >= 0.0f && std::isfinite(xyz[0]) && std::isfinite(xyz[1]) && std::isfinite(xyz[2]);
+        take.residuals[idx] = valid ? residual : -1.0f;
+        if (valid) take.positions[idx] = Vec3(xyz[0], xyz[1], xyz[2]) * take.metres_per_unit;
+      }
+    }
+    return take;
+  }
+
+  ByteReader reader_;
+  std::string source_;
+  size_t param_start_ = 0;
+  uint8_t processor_ = kProcessorIntel;
+  uint16_t header_points_ = 0, header_analog_ = 0, header_first_ = 1, header_last_ = 0, header_data_block_ = 0;
+  float header_scale_ = -1.0f, header_rate_ = 0.0f;
+  std::map<std::string, Parameter> params_;
+};
+
+// Writes one parameter entry; the link to the next entry is patched by the caller.
+void WriteParameter(ByteWriter& w, std::vector<uint8_t>& out, int8_t group, const std::string& name, int8_t type,
+                    const std::vector<int>& dims, const std::vector<uint8_t>& data) {
+  w.WriteI8(static_cast<int8_t>(name.size()));
+  w.WriteI8(group);
+  w.WriteString(name);
+  const size_t link = out.size();
+  w.WriteI16(0);
+  w.WriteI8(type);
+  w.WriteU8(static_cast<uint8_t>(dims.size()));
+  for (int d : dims) w.WriteU8(static_cast<uint8_t>(d));
+  out.insert(out.end(), data.begin(), data.end());
+  w.WriteU8(0);  // empty description
+  const auto next = static_cast<int16_t>(out.size() - link);
+  out[link] = static_cast<uint8_t>(next & 0xff);
+  out[link + 1] = static_cast<uint8_t>((next >> 8) & 0xff);
+}
+
+std::vector<uint8_t> FloatData(std::initializer_list<float> values) {
+  std::vector<uint8_t> out;
+  ByteWriter w(&out);
+  for (float v : values) w.WriteF32(v);
+  return out;
+}
+
+std::vector<uint8_t> Int16Data(std::initializer_list<int16_t> values) {
+  std::vector<uint8_t> out;
+  ByteWriter w(&out);
+  for (int16_t v : values) w.WriteI16(v);
+  return out;
+}
+
+void WriteGroup(ByteWriter& w, int8_t id, const std::string& name) {
+  w.WriteI8(static_cast<int8_t>(name.size()));
+  w.WriteI8(static_cast<int8_t>(-id));
+  w.WriteString(name);
+  w.WriteI16(3);  // link: itself (2 bytes) + description length byte
+  w.WriteU8(0);
+}
+
+void WriteStrings(ByteWriter& w, std::vector<uint8_t>& out, int8_t group, const std::string& name,
+                  const std::vector<std::string>& values) {
+  size_t len = 1;
+  for (const auto& v : values) len = std::max(len, v.size());
+  len = std::min<size_t>(len, 255);
+  std::vector<uint8_t> data;
+  for (const auto& v : values) {
+    std::string padded = v.substr(0, len);
+    padded.resize(len, ' ');
+    data.insert(data.end(), padded.begin(), padded.end());
+  }
+  WriteParameter(w, out, group, name, -1, {static_cast<int>(len), static_cast<int>(values.size())}, data);
+}
+
+}  // namespace
+
+int C3dTake::FindLabel(const std::string& label) const {
+  for (size_t i = 0; i < labels.size(); ++i)
+    if (labels[i] == label) return static_cast<int>(i);
+  return -1;
+}
+
+void C3dTake::Allocate(int frames) {
+  num_frames = frames;
+  const size_t n = static_cast<size_t>(frames) * labels.size();
+  positions.assign(n, Vec3::Constant(kNaN));
+  residuals.assign(n, -1.0f);
+  descriptions.resize(labels.size());
+  model_output_kind.resize(labels.size());
+}
+
+double MetresPerUnit(const std::string& units) {
+  const std::string u = Upper(TrimRight(units));
+  if (u == "MM") return 1e-3;
+  if (u == "CM") return 1e-2;
+  if (u == "M") return 1.0;
+  if (u == "IN" || u == "INCH" || u == "INCHES") return 0.0254;
+  throw std::invalid_argument("unknown length unit '" + units + "' (expected mm, cm, m or in)");
+}
+
+C3dTake ParseC3d(std::span<const uint8_t> bytes, const std::string& source_name) {
+  Parser parser(bytes, source_name);
+  return parser.Parse();
+}
+
+C3dTake ReadC3d(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw std::runtime_error(path + ": cannot open for reading");
+  const std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  return ParseC3d(bytes, path);
+}
+
+std::vector<uint8_t> EncodeC3d(const C3dTake& take) {
+  const size_t points = take.labels.size();
+  if (take.positions.size() != static_cast<size_t>(take.num_frames) * points || take.residuals.size() != take.positions.size())
+    throw std::invalid_argument("C3D writer: positions/residuals do not match frames x points");
+  if (!(take.rate_hz > 0.0)) throw std::invalid_argument("C3D writer: rate must be > 0");
+  if (points > 65535) throw std::invalid_argument("C3D writer: too many points");
+  const double units_per_metre = 1.0 / MetresPerUnit(take.units);
+  const float scale = -0.1f;  // negative: float storage
+
+  std::vector<uint8_t> params;
+  ByteWriter pw(&params);
+  pw.WriteU8(1);
+  pw.WriteU8(0x50);
+  pw.WriteU8(0);  // block count, patched below
+  pw.WriteU8(kProcessorIntel);
+  WriteGroup(pw, 1, "POINT");
+  WriteGroup(pw, 2, "ANALOG");
+  WriteParameter(pw, params, 1, "USED", 2, {}, Int16Data({static_cast<int16_t>(static_cast<uint16_t>(points))}));
+  WriteParameter(pw, params, 1, "SCALE", 4, {}, FloatData({scale}));
+  WriteParameter(pw, params, 1, "RATE", 4, {}, FloatData({static_cast<float>(take.rate_hz)}));
+  const int first = std::clamp(take.first_frame, 1, 65535);
+  const bool long_take = static_cast<int64_t>(first) + take.num_frames - 1 > 65535;
+  if (take.num_frames <= 32767)
+    WriteParameter(pw, params, 1, "FRAMES", 2, {}, Int16Data({static_cast<int16_t>(take.num_frames)}));
+  else
+    WriteParameter(pw, params, 1, "FRAMES", 4, {}, FloatData({static_cast<float>(take.num_frames)}));
+  const size_t data_start_param = params.size();
+  WriteParameter(pw, params, 1, "DATA_START", 2, {}, Int16Data({0}));
+  WriteStrings(pw, params, 1, "UNITS", {take.units});
+  for (size_t begin = 0, k = 1; begin < std::max<size_t>(points, 1); begin += 255, ++k) {
+    const size_t end = std::min(points, begin + 255);
+    const std::vector<std::string> labels(take.labels.begin() + static_cast<std::ptrdiff_t>(begin), take.labels.begin() + static_cast<std::ptrdiff_t>(end));
+    std::vector<std::string> descriptions(labels.size());
+    for (size_t i = begin; i < end && i < take.descriptions.size(); ++i) descriptions[i - begin] = take.descriptions[i];
+    const std::string suffix = k == 1 ? "" : std::to_string(k);
+    WriteStrings(pw, params, 1, "LABELS" + suffix, labels);
+    WriteStrings(pw, params, 1, "DESCRIPTIONS" + suffix, descriptions);
+    if (points == 0) break;
+  }
+  std::map<std::string, std::vector<std::string>> outputs;
+  for (size_t i = 0; i < points && i < take.model_output_kind.size(); ++i)
+    if (!take.model_output_kind[i].empty()) outputs[take.model_output_kind[i]].push_back(take.labels[i]);
+  for (const auto& [kind, labels] : outputs) WriteStrings(pw, params, 1, kind, labels);
+  WriteParameter(pw, params, 2, "USED", 2, {}, Int16Data({0}));
+  WriteParameter(pw, params, 2, "RATE", 4, {}, FloatData({static_cast<float>(take.rate_hz)}));
+  // Terminate the list: an entry whose name length is 0.
+  pw.WriteU8(0);
+  pw.WriteU8(0);
+  const size_t param_blocks = (params.size() + kBlock - 1) / kBlock;
+  if (param_blocks > 255) throw std::invalid_argument("C3D writer: parameter section too large");
+  params.resize(param_blocks * kBlock, 0);
+  params[2] = static_cast<uint8_t>(param_blocks);
+  const size_t data_block = 2 + param_blocks;
+  if (data_block > 65535) throw std::invalid_argument("C3D writer: data section starts too late");
+  // Patch DATA_START's value: it sits 2 bytes before the description length byte.
+  {
+    const size_t name_len = std::string("DATA_START").size();
+    const size_t value = data_start_param + 2 + name_len + 2 + 2;
+    params[value] = static_cast<uint8_t>(data_block & 0xff);
+    params[value + 1] = static_cast<uint8_t>((data_block >> 8) & 0xff);
+  }
+
+  std::vector<uint8_t> out;
+  ByteWriter w(&out);
+  w.WriteU8(2);
+  w.WriteU8(0x50);
+  w.WriteU16(static_cast<uint16_t>(points));
+  w.WriteU16(0);
+  w.WriteU16(static_cast<uint16_t>(first));
+  w.WriteU16(static_cast<uint16_t>(long_take ? 65535 : first + take.num_frames - 1));
+  w.WriteU16(10);
+  w.WriteF32(scale);
+  w.WriteU16(static_cast<uint16_t>(data_block));
+  w.WriteU16(0);
+  w.WriteF32(static_cast<float>(take.rate_hz));
+  w.PadTo(kBlock);
+  out.insert(out.end(), params.begin(), params.end());
+  out.reserve(out.size() + static_cast<size_t>(take.num_frames) * points * 16);
+  for (int f = 0; f < take.num_frames; ++f) {
+    for (size_t p = 0; p < points; ++p) {
+      const size_t idx = static_cast<size_t>(f) * points + p;
+      const bool valid = take.residuals[idx] >= 0.0f && take.positions[idx].allFinite();
+      const Vec3 v = valid ? Vec3(take.positions[idx] * units_per_metre) : Vec3::Zero();
+      w.WriteF32(static_cast<float>(v.x()));
+      w.WriteF32(static_cast<float>(v.y()));
+      w.WriteF32(static_cast<float>(v.z()));
+      w.WriteF32(valid ? take.residuals[idx] : -1.0f);
+    }
+  }
+  w.PadTo((out.size() + kBlock - 1) / kBlock * kBlock);
+  return out;
+}
+
+void WriteC3d(const std::string& path, const C3dTake& take) {
+  const std::vector<uint8_t> bytes = EncodeC3d(take);
+  std::ofstream out(path, std::ios::binary | std::ios::trunc);
+  if (!out) throw std::runtime_error(path + ": cannot open for writing");
+  out.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
+  if (!out) throw std::runtime_error(path + ": write failed");
+}
+
+}  // namespace mocapd

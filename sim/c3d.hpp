@@ -1,0 +1,74 @@
+// C3D marker files (https://www.c3d.org, "The C3D File Format User Guide"): reads the
+// header, the parameter section and the 3D point data of Intel, DEC and MIPS files in
+// integer or float storage; writes float Intel files. Positions are converted to metres
+// on read and back to the take's units on write, so a write->read round trip is exact.
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "filters/types.hpp"
+
+namespace mocapd {
+
+/// Thrown for a malformed or truncated C3D file; the message names the file, the
+/// section (header, parameters, data) and the byte offset.
+class C3dError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+struct C3dTake {
+  std::vector<std::string> labels;        ///< One per point (trimmed); generated if the file has none.
+  std::vector<std::string> descriptions;  ///< One per point, may be empty strings.
+  /// Non-empty for points the file lists as model outputs (POINT:ANGLES, POWERS, FORCES,
+  /// MOMENTS, SCALARS, REACTIONS): the group name, e.g. "ANGLES". Empty = physical marker.
+  std::vector<std::string> model_output_kind;
+  double rate_hz = 0.0;
+  std::string units = "mm";       ///< POINT:UNITS as written in the file.
+  double metres_per_unit = 1e-3;  ///< Scale from file units to metres.
+  int first_frame = 1;
+  int num_frames = 0;
+  std::string processor = "Intel";  ///< Intel, DEC or MIPS (informational).
+  bool float_storage = true;
+  /// positions[frame * num_points() + point], metres, world frame; NaN when missing.
+  std::vector<Vec3> positions;
+  /// residual[frame * num_points() + point] as stored (file units); negative when missing.
+  std::vector<float> residuals;
+
+  int num_points() const { return static_cast<int>(labels.size()); }
+  const Vec3& at(int frame, int point) const { return positions[Index(frame, point)]; }
+  Vec3& at(int frame, int point) { return positions[Index(frame, point)]; }
+  bool valid(int frame, int point) const { return residuals[Index(frame, point)] >= 0.0f; }
+  bool is_marker(int point) const { return model_output_kind[static_cast<size_t>(point)].empty(); }
+  /// Index of the point with this label, or -1.
+  int FindLabel(const std::string& label) const;
+  /// Sizes positions/residuals for num_frames x labels.size(), all missing.
+  void Allocate(int frames);
+
+ private:
+  size_t Index(int frame, int point) const {
+    return static_cast<size_t>(frame) * labels.size() + static_cast<size_t>(point);
+  }
+};
+
+/// Parses a C3D file held in memory. source_name is used in error messages.
+/// Throws C3dError if the file is malformed or truncated.
+C3dTake ParseC3d(std::span<const uint8_t> bytes, const std::string& source_name);
+/// Reads a C3D file. Throws C3dError (or std::runtime_error if it cannot be opened).
+C3dTake ReadC3d(const std::string& path);
+
+/// Encodes a take as a float, Intel-order C3D file. Throws std::invalid_argument if the
+/// take is inconsistent (sizes, non-positive rate).
+std::vector<uint8_t> EncodeC3d(const C3dTake& take);
+/// Writes a take to a file (see EncodeC3d). Throws std::runtime_error if it cannot write.
+void WriteC3d(const std::string& path, const C3dTake& take);
+
+/// Returns metres per unit for a C3D/BVH unit string (mm, cm, m, in); throws
+/// std::invalid_argument for anything else.
+double MetresPerUnit(const std::string& units);
+
+}  // namespace mocapd

@@ -1,0 +1,30 @@
+// Subject model files (TOML, format documented in config/subject.example.toml): a
+// skeleton and the marker set attached to it, as written by `mocapd calibrate` and
+// `mocap-sim synth --subject-out`, and read by everything that solves a subject.
+#pragma once
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "filters/marker_model.hpp"
+
+namespace mocapd {
+
+struct SubjectModel {
+  std::string name;
+  std::shared_ptr<const Skeleton> skeleton;
+  std::shared_ptr<const MarkerSet> markers;
+  /// Per marker, the calibration fit RMS in metres (NaN when unknown).
+  std::vector<double> fit_rms_m;
+};
+
+/// Parses a subject model. Throws std::runtime_error naming the file, line and field.
+SubjectModel ParseSubjectModel(const std::string& text, const std::string& source_name);
+SubjectModel ReadSubjectModel(const std::string& path);
+
+/// Formats / writes a subject model (metres, quaternions w x y z).
+std::string FormatSubjectModel(const SubjectModel& model);
+void WriteSubjectModel(const std::string& path, const SubjectModel& model);
+
+}  // namespace mocapd

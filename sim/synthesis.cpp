@@ -1,0 +1,56 @@
+// Motion resampling and virtual marker synthesis.
+#include "sim/synthesis.hpp"
+
+#include <cmath>
+#include <stdexcept>
+
+namespace mocapd {
+
+std::vector<Pose> ResampleMotion(const Skeleton& skeleton, const std::vector<Pose>& frames, double src_rate_hz,
+                                 double dst_rate_hz) {
+  if (!(src_rate_hz > 0.0) || !(dst_rate_hz > 0.0)) throw std::invalid_argument("resample: rates must be > 0");
+  if (frames.empty()) throw std::invalid_argument("resample: no frames");
+  const double duration = static_cast<double>(frames.size() - 1) / src_rate_hz;
+  const auto count = static_cast<size_t>(std::floor(duration * dst_rate_hz + 1e-9)) + 1;
+  std::vector<Pose> out;
+  out.reserve(count);
+  for (size_t k = 0; k < count; ++k) {
+    const double x = static_cast<double>(k) / dst_rate_hz * src_rate_hz;
+    const auto i = std::min(static_cast<size_t>(std::floor(x)), frames.size() - 1);
+    const size_t i1 = std::min(i + 1, frames.size() - 1);
+    const double a = std::clamp(x - static_cast<double>(i), 0.0, 1.0);
+    Pose p = frames[i];
+    for (int j = 0; j < skeleton.num_joints(); ++j) {
+      const auto uj = static_cast<size_t>(j);
+      p.rotation[uj] = frames[i].rotation[uj].slerp(a, frames[i1].rotation[uj]).normalized();
+      p.translation[uj] = (1.0 - a) * frames[i].translation[uj] + a * frames[i1].translation[uj];
+    }
+    out.push_back(std::move(p));
+  }
+  return out;
+}
+
+C3dTake SynthesizeMarkers(const Skeleton& skeleton, const MarkerSet& markers, const std::vector<Pose>& frames,
+                          double rate_hz, double noise_sigma_m, std::mt19937_64* rng) {
+  C3dTake take;
+  for (const MarkerDefinition& m : markers.markers()) take.labels.push_back(m.name);
+  take.rate_hz = rate_hz;
+  take.units = "mm";
+  take.metres_per_unit = 1e-3;
+  take.Allocate(static_cast<int>(frames.size()));
+  KinematicsWorkspace ws(skeleton);
+  std::normal_distribution<double> noise(0.0, std::max(noise_sigma_m, 1e-12));
+  const bool add_noise = noise_sigma_m > 0.0 && rng != nullptr;
+  for (size_t f = 0; f < frames.size(); ++f) {
+    ForwardKinematics(skeleton, frames[f], &ws);
+    for (int m = 0; m < markers.num_markers(); ++m) {
+      Vec3 p = EvaluateMarker(markers.marker(m), ws);
+      if (add_noise) p += Vec3(noise(*rng), noise(*rng), noise(*rng));
+      take.at(static_cast<int>(f), m) = p;
+      take.residuals[f * static_cast<size_t>(markers.num_markers()) + static_cast<size_t>(m)] = 0.0f;
+    }
+  }
+  return take;
+}
+
+}  // namespace mocapd

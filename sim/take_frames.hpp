@@ -1,0 +1,31 @@
+// Feeding a recorded C3D take to a solver: maps the subject's markers to the take's
+// point labels once, then copies each frame's observations without allocating.
+#pragma once
+
+#include <span>
+#include <string>
+#include <vector>
+
+#include "filters/marker_model.hpp"
+#include "sim/c3d.hpp"
+
+namespace mocapd {
+
+class TakeMarkerMap {
+ public:
+  /// Matches markers to labels by exact name. Throws std::invalid_argument listing the
+  /// subject's markers the take lacks if fewer than min_matched are found.
+  TakeMarkerMap(const MarkerSet& markers, const C3dTake& take, int min_matched = 3);
+
+  /// Fills p_WM and weights (1 observed, 0 missing or absent from the take) for a frame.
+  void Observe(const C3dTake& take, int frame, std::span<Vec3> p_WM, std::span<double> weights) const;
+  int matched() const { return matched_; }
+  const std::vector<std::string>& unmatched() const { return unmatched_; }
+
+ private:
+  std::vector<int> point_of_marker_;
+  std::vector<std::string> unmatched_;
+  int matched_ = 0;
+};
+
+}  // namespace mocapd
