@@ -51,13 +51,9 @@ double RobustWeight(double r_norm, double delta) {
 
 bool UsableMarker(const Vec3& y, double weight) { return weight > 0.0 && y.allFinite(); }
 
-// Rotation error of joint j between pose and target, expressed in the joint's DOF.
-Vec3 RotationError(const Quat& target, const Quat& current) { return LogRotation(target.conjugate() * current); }
-
-// Cost of the current pose: markers (with robust loss) plus priors. Also fills predicted.
-double EvaluateCost(const Skeleton& skeleton, const MarkerSet& markers, const IkOptions& options,
-                    std::span<const Vec3> observed, std::span<const double> weights, const Pose& pose,
-                    const Pose& prior, const Pose& rest, const KinematicsWorkspace& ws, std::span<Vec3> predicted) {
+// Marker cost of the current pose (robust loss), filling predicted.
+double MarkerCost(const MarkerSet& markers, const IkOptions& options, std::span<const Vec3> observed,
+                  std::span<const double> weights, const KinematicsWorkspace& ws, std::span<Vec3> predicted) {
   double cost = 0.0;
   for (int m = 0; m < markers.num_markers(); ++m) {
     const auto um = static_cast<size_t>(m);
@@ -65,19 +61,17 @@ double EvaluateCost(const Skeleton& skeleton, const MarkerSet& markers, const Ik
     if (!UsableMarker(observed[um], weights[um])) continue;
     cost += weights[um] * RobustCost((observed[um] - predicted[um]).norm(), options.huber_delta_m);
   }
-  for (int j = 0; j < skeleton.num_joints(); ++j) {
-    const Joint& joint = skeleton.joint(j);
-    if (joint.type == JointType::kFixed) continue;
-    const auto uj = static_cast<size_t>(j);
-    Vec3 et = RotationError(prior.rotation[uj], pose.rotation[uj]);
-    Vec3 er = RotationError(rest.rotation[uj], pose.rotation[uj]);
-    if (joint.type == JointType::kHinge) {
-      et = joint.hinge_axis * joint.hinge_axis.dot(et);
-      er = joint.hinge_axis * joint.hinge_axis.dot(er);
-    }
-    cost += 0.5 * options.temporal_weight * et.squaredNorm() + 0.5 * options.rest_weight * er.squaredNorm();
-  }
   return cost;
+}
+
+// The priors live in the tangent space of the frame's warm start: x is the total step
+// taken so far this frame, rest_error the rest-pose deviation at the warm start, both
+// per DOF (zero on translations). To first order x = q (-) q_prior and
+// rest_error + x = q (-) q_rest, which saves two logarithms per joint per evaluation.
+double PriorCost(const IkOptions& options, const Eigen::VectorXd& mask, const Eigen::VectorXd& rest_error,
+                 const Eigen::VectorXd& x) {
+  return 0.5 * (options.temporal_weight * (mask.array() * x.array().square()).sum() +
+                options.rest_weight * (mask.array() * (rest_error + x).array().square()).sum());
 }
 
 // Adds each marker's contribution to its joint's block (and the blend blocks).
@@ -114,30 +108,59 @@ void AccumulateMarkers(const MarkerSet& markers, const IkOptions& options, std::
 
 // Eliminates joint blk (N DOF) into its parent. prior_h/prior_g are the per-DOF
 // regularisation terms. Returns false if the joint's system is not positive definite.
+// Writes K = H^-1 HqV and k = H^-1 g for a symmetric positive definite H. Returns false
+// if H is not positive definite. Small systems use the closed-form inverse; the 6x6
+// (free joint) uses a Cholesky factorisation with vector solves, because Eigen's
+// matrix right-hand-side path is a blocked general solver, slow at these sizes.
 template <int N>
-bool EliminateJoint(JointBlock* blk, double damping, const Eigen::Matrix<double, N, 1>& prior_h,
-                    const Eigen::Matrix<double, N, 1>& prior_g, JointBlock* parent) {
-  using MatN = Eigen::Matrix<double, N, N>;
-  const auto S = blk->S.leftCols<N>();
-  Mat6 Qq = blk->Q;
-  Mat6 QV = blk->Q;
-  Vec6 gq = blk->b;
-  if (blk->has_blend) {
-    Qq += blk->GG;
-    QV += blk->BG.transpose();
-    gq += blk->Gr;
+bool SolveSpd(const Eigen::Matrix<double, N, N>& H, const Eigen::Matrix<double, N, 6>& HqV,
+              const Eigen::Matrix<double, N, 1>& g, JointBlock* blk) {
+  if constexpr (N <= 3) {
+    // Sylvester's criterion: all leading principal minors positive.
+    if (!(H(0, 0) > 0.0)) return false;
+    if constexpr (N >= 2) {
+      if (!(H(0, 0) * H(1, 1) - H(0, 1) * H(1, 0) > 0.0)) return false;
+    }
+    if (!(H.determinant() > 0.0)) return false;
+    const Eigen::Matrix<double, N, N> inverse = H.inverse();
+    blk->K.template topRows<N>().noalias() = inverse * HqV;
+    blk->k.template head<N>().noalias() = inverse * g;
+  } else {
+    const Eigen::LLT<Eigen::Matrix<double, N, N>> llt(H);
+    if (llt.info() != Eigen::Success) return false;
+    for (int c = 0; c < 6; ++c) blk->K.template block<N, 1>(0, c) = llt.solve(HqV.col(c));
+    blk->k.template head<N>() = llt.solve(g);
   }
-  MatN H = S.transpose() * Qq * S;
-  const Eigen::Matrix<double, N, 6> HqV = S.transpose() * QV;
-  Eigen::Matrix<double, N, 1> g = S.transpose() * gq + prior_g;
+  return true;
+}
+
+// Eliminates joint blk (N DOF) into its parent: see the derivation at the top of the file.
+template <int N, typename PriorH, typename PriorG>
+bool EliminateJoint(JointBlock* blk, double damping, const PriorH& prior_h, const PriorG& prior_g, JointBlock* parent) {
+  using MatN = Eigen::Matrix<double, N, N>;
+  using MatN6 = Eigen::Matrix<double, N, 6>;
+  const auto S = blk->S.template leftCols<N>();
+  MatN H;
+  MatN6 HqV;
+  Eigen::Matrix<double, N, 1> g;
+  if (!blk->has_blend) {
+    HqV.noalias() = S.transpose() * blk->Q;
+    H.noalias() = HqV * S;
+    g.noalias() = S.transpose() * blk->b;
+  } else {
+    const Mat6 Qq = blk->Q + blk->GG;
+    H.noalias() = S.transpose() * Qq * S;
+    HqV.noalias() = S.transpose() * (blk->Q + blk->BG.transpose());
+    g.noalias() = S.transpose() * (blk->b + blk->Gr);
+  }
+  g += prior_g;
   H.diagonal() += damping * H.diagonal() + prior_h + Eigen::Matrix<double, N, 1>::Constant(1e-12);
-  const Eigen::LLT<MatN> llt(H);
-  if (llt.info() != Eigen::Success) return false;
-  blk->K.topRows<N>() = llt.solve(HqV);
-  blk->k.head<N>() = llt.solve(g);
+  if (!SolveSpd<N>(H, HqV, g, blk)) return false;
   if (parent != nullptr) {
-    parent->Q.noalias() += blk->Q - HqV.transpose() * blk->K.topRows<N>();
-    parent->b.noalias() += blk->b - HqV.transpose() * blk->k.head<N>();
+    parent->Q += blk->Q;
+    parent->Q.noalias() -= HqV.transpose() * blk->K.template topRows<N>();
+    parent->b += blk->b;
+    parent->b.noalias() -= HqV.transpose() * blk->k.template head<N>();
     if (blk->has_blend) {
       parent->Q += blk->BB;
       parent->b += blk->Br;
@@ -156,44 +179,23 @@ void EliminateFixedJoint(const JointBlock& blk, JointBlock* parent) {
   }
 }
 
-// Solves the damped system for the step dq. Returns false on a numerical failure.
-bool ComputeStep(const Skeleton& skeleton, const IkOptions& options, double damping, const Pose& pose,
-                 const Pose& prior, const Pose& rest, const KinematicsWorkspace& ws, const Vec3& origin,
-                 std::vector<JointBlock>* blocks, Eigen::VectorXd* dq) {
+// Solves the damped system for the step dq. prior_h/prior_g (size num_dofs) hold the
+// priors' Hessian diagonal and negative gradient. Returns false on a numerical failure.
+bool ComputeStep(const Skeleton& skeleton, double damping, const Eigen::VectorXd& prior_h, const Eigen::VectorXd& prior_g,
+                 const KinematicsWorkspace& ws, const Vec3& origin, std::vector<JointBlock>* blocks, Eigen::VectorXd* dq) {
   const int n = skeleton.num_joints();
   for (int j = n - 1; j >= 0; --j) {
     const Joint& joint = skeleton.joint(j);
-    const auto uj = static_cast<size_t>(j);
-    JointBlock& blk = (*blocks)[uj];
+    JointBlock& blk = (*blocks)[static_cast<size_t>(j)];
     JointBlock* parent = joint.parent.is_valid() ? &(*blocks)[static_cast<size_t>(joint.parent.value)] : nullptr;
     blk.dofs = JointMotionSubspace(skeleton, ws, j, origin, &blk.S);
-    const double at = options.temporal_weight;
-    const double ar = options.rest_weight;
+    const int k = skeleton.dof_offset(j);
     bool ok = true;
     switch (joint.type) {
       case JointType::kFixed: EliminateFixedJoint(blk, parent); break;
-      case JointType::kHinge: {
-        const double et = joint.hinge_axis.dot(RotationError(prior.rotation[uj], pose.rotation[uj]));
-        const double er = joint.hinge_axis.dot(RotationError(rest.rotation[uj], pose.rotation[uj]));
-        ok = EliminateJoint<1>(&blk, damping, Eigen::Matrix<double, 1, 1>(at + ar),
-                               Eigen::Matrix<double, 1, 1>(-at * et - ar * er), parent);
-        break;
-      }
-      case JointType::kBall: {
-        const Vec3 g = -at * RotationError(prior.rotation[uj], pose.rotation[uj]) -
-                       ar * RotationError(rest.rotation[uj], pose.rotation[uj]);
-        ok = EliminateJoint<3>(&blk, damping, Vec3::Constant(at + ar), g, parent);
-        break;
-      }
-      case JointType::kFree: {
-        Vec6 h = Vec6::Zero();
-        Vec6 g = Vec6::Zero();
-        h.tail<3>().setConstant(at + ar);
-        g.tail<3>() = -at * RotationError(prior.rotation[uj], pose.rotation[uj]) -
-                      ar * RotationError(rest.rotation[uj], pose.rotation[uj]);
-        ok = EliminateJoint<6>(&blk, damping, h, g, parent);
-        break;
-      }
+      case JointType::kHinge: ok = EliminateJoint<1>(&blk, damping, prior_h.segment<1>(k), prior_g.segment<1>(k), parent); break;
+      case JointType::kBall: ok = EliminateJoint<3>(&blk, damping, prior_h.segment<3>(k), prior_g.segment<3>(k), parent); break;
+      case JointType::kFree: ok = EliminateJoint<6>(&blk, damping, prior_h.segment<6>(k), prior_g.segment<6>(k), parent); break;
     }
     if (!ok) return false;
   }
@@ -310,7 +312,6 @@ IkState::IkState(const Skeleton& skeleton, const MarkerSet& markers)
     : pose_(RestPose(skeleton)),
       previous_(pose_),
       trial_(pose_),
-      prior_(pose_),
       rest_(pose_),
       ws_(skeleton),
       trial_ws_(skeleton),
@@ -318,7 +319,21 @@ IkState::IkState(const Skeleton& skeleton, const MarkerSet& markers)
       trial_predicted_(predicted_),
       rest_markers_(predicted_),
       blocks_(static_cast<size_t>(skeleton.num_joints())),
-      dq_(Eigen::VectorXd::Zero(skeleton.num_dofs())) {
+      dq_(Eigen::VectorXd::Zero(skeleton.num_dofs())),
+      step_total_(dq_),
+      trial_total_(dq_),
+      rest_error_(dq_),
+      prior_mask_(dq_),
+      prior_h_(dq_),
+      prior_g_(dq_) {
+  // Priors act on rotations only: translations are always well observed.
+  for (int j = 0; j < skeleton.num_joints(); ++j) {
+    const int k = skeleton.dof_offset(j);
+    const JointType type = skeleton.joint(j).type;
+    if (type == JointType::kHinge) prior_mask_[k] = 1.0;
+    if (type == JointType::kBall) prior_mask_.segment<3>(k).setOnes();
+    if (type == JointType::kFree) prior_mask_.segment<3>(k + 3).setOnes();
+  }
   for (JointBlock& blk : blocks_) {
     blk.Q.setZero();
     blk.BB.setZero();
@@ -378,7 +393,6 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
                   &s.ws_);
     s.previous_ = s.pose_;
   }
-  s.prior_ = s.pose_;
 
   ForwardKinematics(skeleton, s.pose_, &s.ws_);
   // Twists are referred to the markers' centroid so the 6x6 blocks stay well conditioned
@@ -390,8 +404,15 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
   }
   origin /= summary.markers_used;
 
-  double cost =
-      EvaluateCost(skeleton, markers, options, observed, weights, s.pose_, s.prior_, s.rest_, s.ws_, s.predicted_);
+  // Priors in the tangent space of the warm start (see PriorCost).
+  PoseDifference(skeleton, s.rest_, s.pose_, s.rest_error_);
+  s.rest_error_.array() *= s.prior_mask_.array();
+  s.step_total_.setZero();
+  const double at = options.temporal_weight, ar = options.rest_weight;
+  s.prior_h_ = (at + ar) * s.prior_mask_;
+
+  double cost = MarkerCost(markers, options, observed, weights, s.ws_, s.predicted_) +
+                PriorCost(options, s.prior_mask_, s.rest_error_, s.step_total_);
   summary.initial_cost = cost;
   double damping = options.initial_damping;
   summary.status = IkStatus::kMaxIterations;
@@ -401,7 +422,8 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
     // including a retry after a rejected step, starts from freshly accumulated blocks.
     ClearBlocks(&s.blocks_);
     AccumulateMarkers(markers, options, observed, weights, s.predicted_, s.ws_, origin, &s.blocks_);
-    if (!ComputeStep(skeleton, options, damping, s.pose_, s.prior_, s.rest_, s.ws_, origin, &s.blocks_, &s.dq_)) {
+    s.prior_g_ = -(at * s.step_total_ + ar * (s.rest_error_ + s.step_total_)).cwiseProduct(s.prior_mask_);
+    if (!ComputeStep(skeleton, damping, s.prior_h_, s.prior_g_, s.ws_, origin, &s.blocks_, &s.dq_)) {
       summary.status = IkStatus::kNumericalFailure;
       break;
     }
@@ -409,13 +431,15 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
     IntegratePose(skeleton, s.dq_, &s.trial_);
     if (options.apply_joint_limits) ApplyJointLimits(skeleton, &s.trial_);
     ForwardKinematics(skeleton, s.trial_, &s.trial_ws_);
-    const double trial_cost = EvaluateCost(skeleton, markers, options, observed, weights, s.trial_, s.prior_, s.rest_,
-                                           s.trial_ws_, s.trial_predicted_);
+    s.trial_total_ = s.step_total_ + s.dq_;
+    const double trial_cost = MarkerCost(markers, options, observed, weights, s.trial_ws_, s.trial_predicted_) +
+                              PriorCost(options, s.prior_mask_, s.rest_error_, s.trial_total_);
     const double step_size = s.dq_.cwiseAbs().maxCoeff();
     if (std::isfinite(trial_cost) && trial_cost <= cost) {
       std::swap(s.pose_, s.trial_);
       std::swap(s.ws_, s.trial_ws_);
       std::swap(s.predicted_, s.trial_predicted_);
+      std::swap(s.step_total_, s.trial_total_);
       const double decrease = cost - trial_cost;
       cost = trial_cost;
       damping = std::max(damping * 0.3, 1e-9);

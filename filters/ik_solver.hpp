@@ -9,7 +9,7 @@
 // (Featherstone, "Rigid Body Dynamics Algorithms", 2008, ch. 7), exact because the
 // normal matrix couples two joints only through the twist of their common ancestor.
 //
-// Objective, with r_m = y_m - p_WM(q):
+// Objective, with r_m = y_m - p_WM(q), over rotational DOF only for the priors:
 //   sum_m w_m rho(|r_m|)  +  1/2 a_t |q (-) q_prior|^2  +  1/2 a_r |q (-) q_rest|^2
 // rho is 1/2 r^2, or Huber (IRLS re-weighting each iteration) for the robust reference
 // solve; q_prior is the warm start (previous solution, or its constant-velocity
@@ -28,11 +28,11 @@ struct IkOptions {
   int max_iterations = 6;              ///< Per warm-started frame.
   int cold_start_max_iterations = 60;  ///< When there is no previous solution.
   double initial_damping = 1e-4;       ///< LM factor on diag(H).
-  double function_tolerance = 1e-7;    ///< Converged when the cost drops by less than this fraction.
-  double step_tolerance = 1e-7;        ///< Converged when every step component is below this (rad or m).
+  double function_tolerance = 1e-3;    ///< Converged when the cost drops by less than this fraction.
+  double step_tolerance = 1e-5;        ///< Converged when every step component is below this (rad or m).
   double huber_delta_m = 0.0;          ///< Huber threshold in metres; 0 disables the robust loss.
   bool predict_constant_velocity = true;
-  double temporal_weight = 2e-5;  ///< a_t, m^2 per rad^2, on rotations, toward the warm start.
+  double temporal_weight = 3e-4;  ///< a_t, m^2 per rad^2, on rotations, toward the warm start.
   double rest_weight = 1e-7;      ///< a_r, m^2 per rad^2, toward the rest pose.
   int min_markers = 3;            ///< Fewer usable markers than this: no solve.
   bool apply_joint_limits = true;
@@ -83,12 +83,12 @@ class IkState {
  private:
   friend IkSummary SolveIk(const Skeleton&, const MarkerSet&, const IkOptions&, std::span<const Vec3>,
                            std::span<const double>, IkState*);
-  Pose pose_, previous_, trial_, prior_, rest_;
+  Pose pose_, previous_, trial_, rest_;
   int history_ = 0;
   KinematicsWorkspace ws_, trial_ws_;
   std::vector<Vec3> predicted_, trial_predicted_, rest_markers_;
   std::vector<JointBlock> blocks_;
-  Eigen::VectorXd dq_;
+  Eigen::VectorXd dq_, step_total_, trial_total_, rest_error_, prior_mask_, prior_h_, prior_g_;
   int first_free_joint_ = -1;
 };
 
