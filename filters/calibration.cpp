@@ -52,11 +52,13 @@ BlendFit FitBlend(std::span<const KinematicsWorkspace> frames, const std::vector
     g.noalias() += A.transpose() * (y[uf * stride + m] - frames[uf].p_WJ[up]);
   }
   BlendFit fit;
+  // A hinge-like joint leaves the offsets' components along its axis indistinguishable
+  // (R_C u = R_P u for u on the axis); a tiny ridge picks the minimum-norm split, which
+  // gives the same marker positions.
+  H.diagonal().array() += 1e-9 * std::max(H.trace(), 1e-12);
   const Eigen::LDLT<Mat6> ldlt(H);
-  if (ldlt.info() != Eigen::Success) return fit;
   const Vec6 x = ldlt.solve(g);
-  // The two rotations must differ over the take, or a and b are not separable.
-  if (!x.allFinite() || ldlt.rcond() < 1e-9) return fit;
+  if (ldlt.info() != Eigen::Success || !x.allFinite()) return fit;
   fit.a = x.head<3>();
   fit.b = x.tail<3>();
   double sq = 0.0;

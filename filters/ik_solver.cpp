@@ -154,9 +154,14 @@ bool EliminateJoint(JointBlock* blk, double damping, const PriorH& prior_h, cons
     g.noalias() = S.transpose() * (blk->b + blk->Gr);
   }
   g += prior_g;
-  H.diagonal() += damping * H.diagonal() + prior_h + Eigen::Matrix<double, N, 1>::Constant(1e-12);
+  // Marquardt scaling uses the diagonal of the full (not Schur-reduced) normal matrix, so
+  // the step equals the dense formulation's: diag(S' (R + GG) S).
+  const Mat6 raw = blk->has_blend ? Mat6(blk->R + blk->GG) : blk->R;
+  for (int i = 0; i < N; ++i) H(i, i) += damping * S.col(i).dot(raw * S.col(i)) + prior_h[i] + 1e-12;
   if (!SolveSpd<N>(H, HqV, g, blk)) return false;
   if (parent != nullptr) {
+    parent->R += blk->R;
+    if (blk->has_blend) parent->R += blk->BB;
     parent->Q += blk->Q;
     parent->Q.noalias() -= HqV.transpose() * blk->K.template topRows<N>();
     parent->b += blk->b;
@@ -171,6 +176,8 @@ bool EliminateJoint(JointBlock* blk, double damping, const PriorH& prior_h, cons
 
 void EliminateFixedJoint(const JointBlock& blk, JointBlock* parent) {
   if (parent == nullptr) return;
+  parent->R += blk.R;
+  if (blk.has_blend) parent->R += blk.BB;
   parent->Q += blk.Q;
   parent->b += blk.b;
   if (blk.has_blend) {
@@ -184,6 +191,7 @@ void EliminateFixedJoint(const JointBlock& blk, JointBlock* parent) {
 bool ComputeStep(const Skeleton& skeleton, double damping, const Eigen::VectorXd& prior_h, const Eigen::VectorXd& prior_g,
                  const KinematicsWorkspace& ws, const Vec3& origin, std::vector<JointBlock>* blocks, Eigen::VectorXd* dq) {
   const int n = skeleton.num_joints();
+  for (JointBlock& blk : *blocks) blk.R = blk.Q;  // each joint's own markers, before children add in
   for (int j = n - 1; j >= 0; --j) {
     const Joint& joint = skeleton.joint(j);
     JointBlock& blk = (*blocks)[static_cast<size_t>(j)];
@@ -336,6 +344,7 @@ IkState::IkState(const Skeleton& skeleton, const MarkerSet& markers)
   }
   for (JointBlock& blk : blocks_) {
     blk.Q.setZero();
+    blk.R.setZero();
     blk.BB.setZero();
     blk.BG.setZero();
     blk.GG.setZero();
@@ -363,6 +372,37 @@ void IkState::Reset() { history_ = 0; }
 void IkState::Reset(const Pose& pose) {
   pose_ = pose;
   history_ = 1;
+}
+
+namespace {
+Vec3 MarkerCentroid(const MarkerSet& markers, std::span<const Vec3> observed, std::span<const double> weights, int used) {
+  Vec3 origin = Vec3::Zero();
+  for (int m = 0; m < markers.num_markers(); ++m) {
+    const auto um = static_cast<size_t>(m);
+    if (UsableMarker(observed[um], weights[um])) origin += observed[um];
+  }
+  return used > 0 ? Vec3(origin / used) : origin;
+}
+}  // namespace
+
+bool ComputeIkStep(const Skeleton& skeleton, const MarkerSet& markers, const IkOptions& options,
+                   std::span<const Vec3> observed, std::span<const double> weights, const Pose& pose, double damping,
+                   IkState* state, Eigen::VectorXd* dq) {
+  IkState& s = *state;
+  int used = 0;
+  for (int m = 0; m < markers.num_markers(); ++m)
+    if (UsableMarker(observed[static_cast<size_t>(m)], weights[static_cast<size_t>(m)])) ++used;
+  ForwardKinematics(skeleton, pose, &s.ws_);
+  EvaluateMarkers(markers, s.ws_, s.predicted_);
+  PoseDifference(skeleton, s.rest_, pose, s.rest_error_);
+  s.rest_error_.array() *= s.prior_mask_.array();
+  s.prior_h_ = (options.temporal_weight + options.rest_weight) * s.prior_mask_;
+  s.prior_g_ = -options.rest_weight * s.rest_error_;
+  ClearBlocks(&s.blocks_);
+  const Vec3 origin = MarkerCentroid(markers, observed, weights, used);
+  AccumulateMarkers(markers, options, observed, weights, s.predicted_, s.ws_, origin, &s.blocks_);
+  dq->resize(skeleton.num_dofs());
+  return ComputeStep(skeleton, damping, s.prior_h_, s.prior_g_, s.ws_, origin, &s.blocks_, dq);
 }
 
 IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOptions& options,
@@ -397,12 +437,7 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
   ForwardKinematics(skeleton, s.pose_, &s.ws_);
   // Twists are referred to the markers' centroid so the 6x6 blocks stay well conditioned
   // however far the subject stands from the world origin.
-  Vec3 origin = Vec3::Zero();
-  for (int m = 0; m < markers.num_markers(); ++m) {
-    const auto um = static_cast<size_t>(m);
-    if (UsableMarker(observed[um], weights[um])) origin += observed[um];
-  }
-  origin /= summary.markers_used;
+  const Vec3 origin = MarkerCentroid(markers, observed, weights, summary.markers_used);
 
   // Priors in the tangent space of the warm start (see PriorCost).
   PoseDifference(skeleton, s.rest_, s.pose_, s.rest_error_);

@@ -74,7 +74,7 @@ class IkState {
   /// Per-joint elimination storage: the 6x6 quadratic in the joint's world twist and
   /// the blocks that blended (joint + parent) markers add.
   struct JointBlock {
-    Mat6 Q, BB, BG, GG, S, K;
+    Mat6 Q, R, BB, BG, GG, S, K;  // R: the subtree's undamped (not Schur-reduced) quadratic
     Vec6 b, Br, Gr, k, V;
     int dofs = 0;
     bool has_blend = false;
@@ -83,6 +83,8 @@ class IkState {
  private:
   friend IkSummary SolveIk(const Skeleton&, const MarkerSet&, const IkOptions&, std::span<const Vec3>,
                            std::span<const double>, IkState*);
+  friend bool ComputeIkStep(const Skeleton&, const MarkerSet&, const IkOptions&, std::span<const Vec3>,
+                            std::span<const double>, const Pose&, double, IkState*, Eigen::VectorXd*);
   Pose pose_, previous_, trial_, rest_;
   int history_ = 0;
   KinematicsWorkspace ws_, trial_ws_;
@@ -97,5 +99,14 @@ class IkState {
 /// leaves the solution in it. Never throws, never allocates; not thread-safe per state.
 IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOptions& options,
                   std::span<const Vec3> observed, std::span<const double> weights, IkState* state);
+
+/// Computes one damped Gauss-Newton step dq (size num_dofs) from `pose`, with the priors
+/// centred on `pose` itself: the step solves
+///   (J'WJ + damping * diag(J'WJ) + (a_t + a_r) M) dq = J'W r - a_r M (pose (-) rest)
+/// with M the rotational-DOF mask. Uses state only as scratch space. Returns false on a
+/// numerical failure. Exposed for tests and diagnostics; SolveIk iterates it.
+bool ComputeIkStep(const Skeleton& skeleton, const MarkerSet& markers, const IkOptions& options,
+                   std::span<const Vec3> observed, std::span<const double> weights, const Pose& pose, double damping,
+                   IkState* state, Eigen::VectorXd* dq);
 
 }  // namespace mocapd

@@ -131,7 +131,17 @@ void ByteWriter::WriteU64(uint64_t v) {
   }
 }
 
-void ByteWriter::WriteF32(float v) { WriteU32(std::bit_cast<uint32_t>(v)); }
+void ByteWriter::WriteF32(float v) {
+  if (floats_ == FloatFormat::kVax) {
+    // Inverse of the reader: scale by 4 (exponent bias 129), then swap the 16-bit words.
+    const uint32_t bits = v == 0.0f ? 0u : std::bit_cast<uint32_t>(v * 4.0f);
+    const uint8_t b[4] = {static_cast<uint8_t>(bits), static_cast<uint8_t>(bits >> 8), static_cast<uint8_t>(bits >> 16),
+                          static_cast<uint8_t>(bits >> 24)};
+    out_->insert(out_->end(), {b[2], b[3], b[0], b[1]});
+    return;
+  }
+  WriteU32(std::bit_cast<uint32_t>(v));
+}
 void ByteWriter::WriteF64(double v) { WriteU64(std::bit_cast<uint64_t>(v)); }
 
 }  // namespace mocapd

@@ -56,7 +56,8 @@ class ByteReader {
 /// Appends little-endian (or big-endian) values to a caller-owned byte vector.
 class ByteWriter {
  public:
-  explicit ByteWriter(std::vector<uint8_t>* out, ByteOrder order = ByteOrder::kLittle) : out_(out), order_(order) {}
+  explicit ByteWriter(std::vector<uint8_t>* out, ByteOrder order = ByteOrder::kLittle, FloatFormat floats = FloatFormat::kIeee)
+      : out_(out), order_(order), floats_(floats) {}
   void WriteU8(uint8_t v) { out_->push_back(v); }
   void WriteI8(int8_t v) { out_->push_back(static_cast<uint8_t>(v)); }
   void WriteU16(uint16_t v);
@@ -74,6 +75,7 @@ class ByteWriter {
  private:
   std::vector<uint8_t>* out_;
   ByteOrder order_;
+  FloatFormat floats_;
 };
 
 }  // namespace mocapd

@@ -314,8 +314,8 @@ class Parser {
 };
 
 // Writes one parameter entry; the link to the next entry is patched by the caller.
-void WriteParameter(ByteWriter& w, std::vector<uint8_t>& out, int8_t group, const std::string& name, int8_t type,
-                    const std::vector<int>& dims, const std::vector<uint8_t>& data) {
+void WriteParameter(ByteWriter& w, std::vector<uint8_t>& out, ByteOrder order, int8_t group, const std::string& name,
+                    int8_t type, const std::vector<int>& dims, const std::vector<uint8_t>& data) {
   w.WriteI8(static_cast<int8_t>(name.size()));
   w.WriteI8(group);
   w.WriteString(name);
@@ -326,21 +326,29 @@ void WriteParameter(ByteWriter& w, std::vector<uint8_t>& out, int8_t group, cons
   for (int d : dims) w.WriteU8(static_cast<uint8_t>(d));
   out.insert(out.end(), data.begin(), data.end());
   w.WriteU8(0);  // empty description
-  const auto next = static_cast<int16_t>(out.size() - link);
-  out[link] = static_cast<uint8_t>(next & 0xff);
-  out[link + 1] = static_cast<uint8_t>((next >> 8) & 0xff);
+  const auto next = static_cast<uint16_t>(out.size() - link);
+  std::vector<uint8_t> patch;
+  ByteWriter(&patch, order).WriteU16(next);
+  out[link] = patch[0];
+  out[link + 1] = patch[1];
 }
 
-std::vector<uint8_t> FloatData(std::initializer_list<float> values) {
+struct Layout {
+  ByteOrder order = ByteOrder::kLittle;
+  FloatFormat floats = FloatFormat::kIeee;
+  uint8_t processor = kProcessorIntel;
+};
+
+std::vector<uint8_t> FloatData(const Layout& layout, std::initializer_list<float> values) {
   std::vector<uint8_t> out;
-  ByteWriter w(&out);
+  ByteWriter w(&out, layout.order, layout.floats);
   for (float v : values) w.WriteF32(v);
   return out;
 }
 
-std::vector<uint8_t> Int16Data(std::initializer_list<int16_t> values) {
+std::vector<uint8_t> Int16Data(const Layout& layout, std::initializer_list<int16_t> values) {
   std::vector<uint8_t> out;
-  ByteWriter w(&out);
+  ByteWriter w(&out, layout.order, layout.floats);
   for (int16_t v : values) w.WriteI16(v);
   return out;
 }
@@ -353,7 +361,7 @@ void WriteGroup(ByteWriter& w, int8_t id, const std::string& name) {
   w.WriteU8(0);
 }
 
-void WriteStrings(ByteWriter& w, std::vector<uint8_t>& out, int8_t group, const std::string& name,
+void WriteStrings(ByteWriter& w, std::vector<uint8_t>& out, ByteOrder order, int8_t group, const std::string& name,
                   const std::vector<std::string>& values) {
   size_t len = 1;
   for (const auto& v : values) len = std::max(len, v.size());
@@ -364,7 +372,7 @@ void WriteStrings(ByteWriter& w, std::vector<uint8_t>& out, int8_t group, const 
     padded.resize(len, ' ');
     data.insert(data.end(), padded.begin(), padded.end());
   }
-  WriteParameter(w, out, group, name, -1, {static_cast<int>(len), static_cast<int>(values.size())}, data);
+  WriteParameter(w, out, order, group, name, -1, {static_cast<int>(len), static_cast<int>(values.size())}, data);
 }
 
 }  // namespace
@@ -405,51 +413,61 @@ C3dTake ReadC3d(const std::string& path) {
   return ParseC3d(bytes, path);
 }
 
-std::vector<uint8_t> EncodeC3d(const C3dTake& take) {
+std::vector<uint8_t> EncodeC3d(const C3dTake& take, const C3dEncoding& encoding) {
   const size_t points = take.labels.size();
   if (take.positions.size() != static_cast<size_t>(take.num_frames) * points || take.residuals.size() != take.positions.size())
     throw std::invalid_argument("C3D writer: positions/residuals do not match frames x points");
   if (!(take.rate_hz > 0.0)) throw std::invalid_argument("C3D writer: rate must be > 0");
   if (points > 65535) throw std::invalid_argument("C3D writer: too many points");
+  if (encoding.integer_storage && !(encoding.integer_scale > 0.0)) throw std::invalid_argument("C3D writer: integer scale must be > 0");
+  Layout layout;
+  switch (encoding.processor) {
+    case C3dEncoding::Processor::kIntel: break;
+    case C3dEncoding::Processor::kDec: layout = {ByteOrder::kLittle, FloatFormat::kVax, kProcessorDec}; break;
+    case C3dEncoding::Processor::kMips: layout = {ByteOrder::kBig, FloatFormat::kIeee, kProcessorMips}; break;
+  }
+  const ByteOrder order = layout.order;
   const double units_per_metre = 1.0 / MetresPerUnit(take.units);
-  const float scale = -0.1f;  // negative: float storage
+  // Negative scale marks float storage; its magnitude still scales residuals.
+  const auto scale = static_cast<float>(encoding.integer_storage ? encoding.integer_scale : -0.1);
 
   std::vector<uint8_t> params;
-  ByteWriter pw(&params);
+  ByteWriter pw(&params, layout.order, layout.floats);
   pw.WriteU8(1);
   pw.WriteU8(0x50);
   pw.WriteU8(0);  // block count, patched below
-  pw.WriteU8(kProcessorIntel);
+  pw.WriteU8(layout.processor);
   WriteGroup(pw, 1, "POINT");
   WriteGroup(pw, 2, "ANALOG");
-  WriteParameter(pw, params, 1, "USED", 2, {}, Int16Data({static_cast<int16_t>(static_cast<uint16_t>(points))}));
-  WriteParameter(pw, params, 1, "SCALE", 4, {}, FloatData({scale}));
-  WriteParameter(pw, params, 1, "RATE", 4, {}, FloatData({static_cast<float>(take.rate_hz)}));
+  WriteParameter(pw, params, order, 1, "USED", 2, {}, Int16Data(layout, {static_cast<int16_t>(static_cast<uint16_t>(points))}));
+  WriteParameter(pw, params, order, 1, "SCALE", 4, {}, FloatData(layout, {scale}));
+  WriteParameter(pw, params, order, 1, "RATE", 4, {}, FloatData(layout, {static_cast<float>(take.rate_hz)}));
   const int first = std::clamp(take.first_frame, 1, 65535);
   const bool long_take = static_cast<int64_t>(first) + take.num_frames - 1 > 65535;
   if (take.num_frames <= 32767)
-    WriteParameter(pw, params, 1, "FRAMES", 2, {}, Int16Data({static_cast<int16_t>(take.num_frames)}));
+    WriteParameter(pw, params, order, 1, "FRAMES", 2, {}, Int16Data(layout, {static_cast<int16_t>(take.num_frames)}));
   else
-    WriteParameter(pw, params, 1, "FRAMES", 4, {}, FloatData({static_cast<float>(take.num_frames)}));
+    WriteParameter(pw, params, order, 1, "FRAMES", 4, {}, FloatData(layout, {static_cast<float>(take.num_frames)}));
   const size_t data_start_param = params.size();
-  WriteParameter(pw, params, 1, "DATA_START", 2, {}, Int16Data({0}));
-  WriteStrings(pw, params, 1, "UNITS", {take.units});
+  WriteParameter(pw, params, order, 1, "DATA_START", 2, {}, Int16Data(layout, {0}));
+  WriteStrings(pw, params, order, 1, "UNITS", {take.units});
   for (size_t begin = 0, k = 1; begin < std::max<size_t>(points, 1); begin += 255, ++k) {
     const size_t end = std::min(points, begin + 255);
-    const std::vector<std::string> labels(take.labels.begin() + static_cast<std::ptrdiff_t>(begin), take.labels.begin() + static_cast<std::ptrdiff_t>(end));
+    const std::vector<std::string> labels(take.labels.begin() + static_cast<std::ptrdiff_t>(begin),
+                                          take.labels.begin() + static_cast<std::ptrdiff_t>(end));
     std::vector<std::string> descriptions(labels.size());
     for (size_t i = begin; i < end && i < take.descriptions.size(); ++i) descriptions[i - begin] = take.descriptions[i];
     const std::string suffix = k == 1 ? "" : std::to_string(k);
-    WriteStrings(pw, params, 1, "LABELS" + suffix, labels);
-    WriteStrings(pw, params, 1, "DESCRIPTIONS" + suffix, descriptions);
+    WriteStrings(pw, params, order, 1, "LABELS" + suffix, labels);
+    WriteStrings(pw, params, order, 1, "DESCRIPTIONS" + suffix, descriptions);
     if (points == 0) break;
   }
   std::map<std::string, std::vector<std::string>> outputs;
   for (size_t i = 0; i < points && i < take.model_output_kind.size(); ++i)
     if (!take.model_output_kind[i].empty()) outputs[take.model_output_kind[i]].push_back(take.labels[i]);
-  for (const auto& [kind, labels] : outputs) WriteStrings(pw, params, 1, kind, labels);
-  WriteParameter(pw, params, 2, "USED", 2, {}, Int16Data({0}));
-  WriteParameter(pw, params, 2, "RATE", 4, {}, FloatData({static_cast<float>(take.rate_hz)}));
+  for (const auto& [kind, labels] : outputs) WriteStrings(pw, params, order, 1, kind, labels);
+  WriteParameter(pw, params, order, 2, "USED", 2, {}, Int16Data(layout, {0}));
+  WriteParameter(pw, params, order, 2, "RATE", 4, {}, FloatData(layout, {static_cast<float>(take.rate_hz)}));
   // Terminate the list: an entry whose name length is 0.
   pw.WriteU8(0);
   pw.WriteU8(0);
@@ -459,16 +477,17 @@ std::vector<uint8_t> EncodeC3d(const C3dTake& take) {
   params[2] = static_cast<uint8_t>(param_blocks);
   const size_t data_block = 2 + param_blocks;
   if (data_block > 65535) throw std::invalid_argument("C3D writer: data section starts too late");
-  // Patch DATA_START's value: it sits 2 bytes before the description length byte.
   {
-    const size_t name_len = std::string("DATA_START").size();
-    const size_t value = data_start_param + 2 + name_len + 2 + 2;
-    params[value] = static_cast<uint8_t>(data_block & 0xff);
-    params[value + 1] = static_cast<uint8_t>((data_block >> 8) & 0xff);
+    // DATA_START's value follows: name length, group id, name, link (2), type, ndims.
+    const size_t value = data_start_param + 2 + std::string("DATA_START").size() + 2 + 2;
+    std::vector<uint8_t> patch;
+    ByteWriter(&patch, order).WriteU16(static_cast<uint16_t>(data_block));
+    params[value] = patch[0];
+    params[value + 1] = patch[1];
   }
 
   std::vector<uint8_t> out;
-  ByteWriter w(&out);
+  ByteWriter w(&out, layout.order, layout.floats);
   w.WriteU8(2);
   w.WriteU8(0x50);
   w.WriteU16(static_cast<uint16_t>(points));
@@ -482,16 +501,26 @@ std::vector<uint8_t> EncodeC3d(const C3dTake& take) {
   w.WriteF32(static_cast<float>(take.rate_hz));
   w.PadTo(kBlock);
   out.insert(out.end(), params.begin(), params.end());
-  out.reserve(out.size() + static_cast<size_t>(take.num_frames) * points * 16);
+  out.reserve(out.size() + static_cast<size_t>(take.num_frames) * points * (encoding.integer_storage ? 8 : 16));
   for (int f = 0; f < take.num_frames; ++f) {
     for (size_t p = 0; p < points; ++p) {
       const size_t idx = static_cast<size_t>(f) * points + p;
       const bool valid = take.residuals[idx] >= 0.0f && take.positions[idx].allFinite();
       const Vec3 v = valid ? Vec3(take.positions[idx] * units_per_metre) : Vec3::Zero();
-      w.WriteF32(static_cast<float>(v.x()));
-      w.WriteF32(static_cast<float>(v.y()));
-      w.WriteF32(static_cast<float>(v.z()));
-      w.WriteF32(valid ? take.residuals[idx] : -1.0f);
+      if (encoding.integer_storage) {
+        for (int k = 0; k < 3; ++k) {
+          const double steps = std::round(v[k] / encoding.integer_scale);
+          if (std::abs(steps) > 32767) throw std::invalid_argument("C3D writer: coordinate does not fit 16-bit integer storage");
+          w.WriteI16(static_cast<int16_t>(steps));
+        }
+        const double residual_steps = std::clamp(std::round(take.residuals[idx] / encoding.integer_scale), 0.0, 255.0);
+        w.WriteI16(valid ? static_cast<int16_t>(residual_steps) : int16_t{-1});
+      } else {
+        w.WriteF32(static_cast<float>(v.x()));
+        w.WriteF32(static_cast<float>(v.y()));
+        w.WriteF32(static_cast<float>(v.z()));
+        w.WriteF32(valid ? take.residuals[idx] : -1.0f);
+      }
     }
   }
   w.PadTo((out.size() + kBlock - 1) / kBlock * kBlock);

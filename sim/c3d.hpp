@@ -61,9 +61,18 @@ C3dTake ParseC3d(std::span<const uint8_t> bytes, const std::string& source_name)
 /// Reads a C3D file. Throws C3dError (or std::runtime_error if it cannot be opened).
 C3dTake ReadC3d(const std::string& path);
 
-/// Encodes a take as a float, Intel-order C3D file. Throws std::invalid_argument if the
-/// take is inconsistent (sizes, non-positive rate).
-std::vector<uint8_t> EncodeC3d(const C3dTake& take);
+/// How EncodeC3d lays out the file. The default (float, Intel) is what every tool reads;
+/// the others exist to produce the DEC, MIPS and integer files older systems wrote.
+struct C3dEncoding {
+  enum class Processor { kIntel, kDec, kMips };
+  Processor processor = Processor::kIntel;
+  bool integer_storage = false;
+  double integer_scale = 0.1;  ///< File units per integer step, for integer storage.
+};
+
+/// Encodes a take. Throws std::invalid_argument if the take is inconsistent (sizes,
+/// non-positive rate) or, for integer storage, a coordinate does not fit 16 bits.
+std::vector<uint8_t> EncodeC3d(const C3dTake& take, const C3dEncoding& encoding = {});
 /// Writes a take to a file (see EncodeC3d). Throws std::runtime_error if it cannot write.
 void WriteC3d(const std::string& path, const C3dTake& take);
 

@@ -141,8 +141,9 @@ std::vector<LayoutMarker> DefaultMarkerLayout() {
     const std::string sfx = std::string("_") + side;
     const double a = left ? 0.0 : 25.0;   // angular offset of the right side
     const double d = left ? 0.0 : 0.07;   // along offset of the right side
+    const double dr = left ? 0.0 : 0.004;  // radius offset of the right side
     auto add = [&](const std::string& name, const std::string& seg, double along, double angle, double radius, double pw = 0.0) {
-      layout.push_back({S + name, seg + sfx, along, angle + a, radius, pw});
+      layout.push_back({S + name, seg + sfx, along, angle + a, radius + dr, pw});
     };
     add("CLV1", "clavicle", 0.45 + d, 60, 0.045);
     add("CLV2", "clavicle", 0.75, 200, 0.04);

@@ -1,0 +1,237 @@
+// Tests for the warm-started IK: exactness of the tree elimination against a dense
+// solve, recovery of known poses, robustness, status values and zero allocation.
+#include "filters/ik_solver.hpp"
+
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include "filters/pose_error.hpp"
+#include "filters/rotation.hpp"
+#include "sim/take_frames.hpp"
+#include "tests/support/allocation_counter.hpp"
+#include "tests/support/test_takes.hpp"
+
+namespace mocapd {
+namespace {
+
+class IkSolverTest : public ::testing::Test {
+ protected:
+  IkSolverTest() : fixture_(testing::MakeHumanoidFixture("mixed", 6.0, 120.0)) {}
+
+  // Observations of frame f of the fixture's take.
+  void Observe(int f) {
+    observed_.resize(static_cast<size_t>(markers().num_markers()));
+    weights_.resize(observed_.size());
+    const TakeMarkerMap map(markers(), fixture_.take);
+    map.Observe(fixture_.take, f, observed_, weights_);
+  }
+  const Skeleton& skeleton() const { return *fixture_.skeleton; }
+  const MarkerSet& markers() const { return *fixture_.markers; }
+
+  testing::HumanoidFixture fixture_;
+  std::vector<Vec3> observed_;
+  std::vector<double> weights_;
+};
+
+TEST_F(IkSolverTest, TreeEliminationStepEqualsDenseDampedSolve) {
+  IkOptions options;
+  options.rest_weight = 1e-3;  // make the prior terms visible in the comparison
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(-0.3, 0.3);
+  for (int trial = 0; trial < 5; ++trial) {
+    Observe(100 * trial);
+    weights_[3] = 0.0;  // a missing marker
+    weights_[7] = 2.5;  // a trusted one
+    // Linearise away from the truth so the residuals are large.
+    Pose pose = fixture_.motion[static_cast<size_t>(100 * trial)];
+    for (auto& q : pose.rotation) q = q * ExpRotation(Vec3(u(rng), u(rng), u(rng)));
+    const double damping = trial * 0.1;
+    IkState state(skeleton(), markers());
+    Eigen::VectorXd dq;
+    ASSERT_TRUE(ComputeIkStep(skeleton(), markers(), options, observed_, weights_, pose, damping, &state, &dq));
+
+    KinematicsWorkspace ws(skeleton());
+    ForwardKinematics(skeleton(), pose, &ws);
+    const Eigen::MatrixXd J = MarkerJacobian(skeleton(), markers(), ws);
+    Eigen::VectorXd r(J.rows()), w(J.rows());
+    for (int m = 0; m < markers().num_markers(); ++m) {
+      r.segment<3>(3 * m) = observed_[static_cast<size_t>(m)] - EvaluateMarker(markers().marker(m), ws);
+      w.segment<3>(3 * m).setConstant(weights_[static_cast<size_t>(m)]);
+    }
+    const Eigen::MatrixXd JtWJ = J.transpose() * w.asDiagonal() * J;
+    Eigen::VectorXd mask = Eigen::VectorXd::Zero(skeleton().num_dofs()), rest_error(skeleton().num_dofs());
+    for (int j = 0; j < skeleton().num_joints(); ++j) {
+      const int k = skeleton().dof_offset(j);
+      if (skeleton().joint(j).type == JointType::kBall) mask.segment<3>(k).setOnes();
+      if (skeleton().joint(j).type == JointType::kFree) mask.segment<3>(k + 3).setOnes();
+    }
+    PoseDifference(skeleton(), RestPose(skeleton()), pose, rest_error);
+    Eigen::MatrixXd H = JtWJ;
+    H.diagonal() += damping * JtWJ.diagonal() + (options.temporal_weight + options.rest_weight) * mask +
+                    Eigen::VectorXd::Constant(skeleton().num_dofs(), 1e-12);
+    const Eigen::VectorXd g = J.transpose() * w.asDiagonal() * r - options.rest_weight * mask.cwiseProduct(rest_error);
+    const Eigen::VectorXd dense = H.ldlt().solve(g);
+    EXPECT_LT((dq - dense).norm(), 1e-8 * std::max(1.0, dense.norm())) << "trial " << trial;
+  }
+}
+
+TEST_F(IkSolverTest, ColdStartRecoversAPoseFromCleanMarkers) {
+  IkOptions options;
+  options.temporal_weight = 0.0;
+  options.rest_weight = 0.0;
+  options.function_tolerance = 1e-12;
+  for (int f : {0, 150, 400, 650}) {
+    Observe(f);
+    IkState dut(skeleton(), markers());
+    const IkSummary summary = SolveIk(skeleton(), markers(), options, observed_, weights_, &dut);
+    EXPECT_TRUE(summary.cold_start);
+    EXPECT_EQ(summary.status, IkStatus::kConverged) << to_string(summary.status);
+    EXPECT_LT(summary.rms_residual_m, 1e-6);
+    KinematicsWorkspace truth(skeleton());
+    ForwardKinematics(skeleton(), fixture_.motion[static_cast<size_t>(f)], &truth);
+    for (int j = 0; j < skeleton().num_joints(); ++j)
+      EXPECT_LT((truth.p_WJ[static_cast<size_t>(j)] - dut.kinematics().p_WJ[static_cast<size_t>(j)]).norm(), 1e-5)
+          << "frame " << f << " joint " << skeleton().joint(j).name;
+  }
+}
+
+TEST_F(IkSolverTest, WarmStartedTrackingIsAccurateOnCleanMarkers) {
+  IkState dut(skeleton(), markers());
+  PoseErrorAccumulator errors(skeleton());
+  KinematicsWorkspace truth(skeleton());
+  int iterations = 0;
+  const IkOptions options;
+  for (int f = 0; f < fixture_.take.num_frames; ++f) {
+    Observe(f);
+    const IkSummary summary = SolveIk(skeleton(), markers(), options, observed_, weights_, &dut);
+    ASSERT_NE(summary.status, IkStatus::kNumericalFailure);
+    if (f > 0) iterations += summary.iterations;
+    ForwardKinematics(skeleton(), fixture_.motion[static_cast<size_t>(f)], &truth);
+    errors.Add(truth, dut.kinematics());
+  }
+  EXPECT_LT(errors.mean_position_error_m(), 1e-4);
+  EXPECT_LT(errors.max_position_error_m(), 5e-3);
+  EXPECT_LT(errors.mean_rotation_error_rad(), 0.2 * M_PI / 180);
+  EXPECT_LT(static_cast<double>(iterations) / (fixture_.take.num_frames - 1), 4.0);
+}
+
+TEST_F(IkSolverTest, NoiseDoesNotMakeJointsDrift) {
+  fixture_ = testing::MakeHumanoidFixture("mixed", 6.0, 120.0, 1e-3);
+  IkState dut(skeleton(), markers());
+  PoseErrorAccumulator errors(skeleton());
+  KinematicsWorkspace truth(skeleton());
+  for (int f = 0; f < fixture_.take.num_frames; ++f) {
+    Observe(f);
+    SolveIk(skeleton(), markers(), IkOptions{}, observed_, weights_, &dut);
+    ForwardKinematics(skeleton(), fixture_.motion[static_cast<size_t>(f)], &truth);
+    errors.Add(truth, dut.kinematics());
+  }
+  EXPECT_LT(errors.mean_rotation_error_rad(), 2.0 * M_PI / 180);
+  int worst = -1;
+  EXPECT_LT(errors.worst_joint_rotation_quantile_rad(0.99, &worst), 10.0 * M_PI / 180) << skeleton().joint(worst).name;
+}
+
+TEST_F(IkSolverTest, MissingMarkersAreIgnored) {
+  Observe(200);
+  IkState reference(skeleton(), markers());
+  SolveIk(skeleton(), markers(), IkOptions{}, observed_, weights_, &reference);
+  // Corrupt some markers wildly but mark them missing (weight 0 or NaN position).
+  observed_[0] += Vec3(1, 1, 1);
+  weights_[0] = 0.0;
+  observed_[5] = Vec3::Constant(kNaN);
+  IkState dut(skeleton(), markers());
+  const IkSummary summary = SolveIk(skeleton(), markers(), IkOptions{}, observed_, weights_, &dut);
+  EXPECT_EQ(summary.markers_used, markers().num_markers() - 2);
+  for (int j = 0; j < skeleton().num_joints(); ++j)
+    EXPECT_LT((reference.kinematics().p_WJ[static_cast<size_t>(j)] - dut.kinematics().p_WJ[static_cast<size_t>(j)]).norm(), 2e-3);
+}
+
+TEST_F(IkSolverTest, HuberLossResistsAWildMarker) {
+  Observe(300);
+  observed_[10] += Vec3(0.0, 0.4, 0.0);  // a 40 cm pop
+  KinematicsWorkspace truth(skeleton());
+  ForwardKinematics(skeleton(), fixture_.motion[300], &truth);
+  auto worst_joint_error = [&](const IkOptions& options) {
+    IkState state(skeleton(), markers());
+    SolveIk(skeleton(), markers(), options, observed_, weights_, &state);
+    double worst = 0.0;
+    for (int j = 0; j < skeleton().num_joints(); ++j)
+      worst = std::max(worst, (truth.p_WJ[static_cast<size_t>(j)] - state.kinematics().p_WJ[static_cast<size_t>(j)]).norm());
+    return worst;
+  };
+  IkOptions plain;
+  IkOptions robust;
+  robust.huber_delta_m = 0.01;
+  const double plain_error = worst_joint_error(plain);
+  const double robust_error = worst_joint_error(robust);
+  EXPECT_GT(plain_error, 0.02);
+  EXPECT_LT(robust_error, 0.5 * plain_error);
+}
+
+TEST_F(IkSolverTest, TooFewMarkersHoldsTheLastSolution) {
+  IkState dut(skeleton(), markers());
+  Observe(0);
+  SolveIk(skeleton(), markers(), IkOptions{}, observed_, weights_, &dut);
+  const Pose before = dut.pose();
+  std::fill(weights_.begin(), weights_.end(), 0.0);
+  weights_[0] = weights_[1] = 1.0;
+  const IkSummary summary = SolveIk(skeleton(), markers(), IkOptions{}, observed_, weights_, &dut);
+  EXPECT_EQ(summary.status, IkStatus::kTooFewMarkers);
+  EXPECT_EQ(summary.iterations, 0);
+  for (size_t j = 0; j < before.rotation.size(); ++j) EXPECT_TRUE(before.rotation[j].isApprox(dut.pose().rotation[j]));
+}
+
+TEST_F(IkSolverTest, ResetMakesTheNextSolveCold) {
+  IkState dut(skeleton(), markers());
+  Observe(0);
+  EXPECT_TRUE(SolveIk(skeleton(), markers(), IkOptions{}, observed_, weights_, &dut).cold_start);
+  Observe(1);
+  EXPECT_FALSE(SolveIk(skeleton(), markers(), IkOptions{}, observed_, weights_, &dut).cold_start);
+  dut.Reset();
+  EXPECT_FALSE(dut.has_solution());
+  Observe(2);
+  EXPECT_TRUE(SolveIk(skeleton(), markers(), IkOptions{}, observed_, weights_, &dut).cold_start);
+}
+
+TEST_F(IkSolverTest, SolveAllocatesNothingAfterWarmUp) {
+  IkState dut(skeleton(), markers());
+  IkOptions options;
+  options.huber_delta_m = 0.02;  // exercise the robust path too
+  for (int f = 0; f < 5; ++f) {
+    Observe(f);
+    SolveIk(skeleton(), markers(), options, observed_, weights_, &dut);
+  }
+  const TakeMarkerMap map(markers(), fixture_.take);
+  size_t allocations = 0;
+  {
+    testing::ScopedAllocationCounter counter;
+    for (int f = 5; f < 200; ++f) {
+      map.Observe(fixture_.take, f, observed_, weights_);
+      if (f == 50) weights_[4] = 0.0;
+      if (f == 60) {
+        std::fill(weights_.begin(), weights_.end(), 0.0);  // too few markers
+      }
+      SolveIk(skeleton(), markers(), options, observed_, weights_, &dut);
+    }
+    allocations = counter.count();
+  }
+  EXPECT_EQ(allocations, 0u);
+}
+
+TEST(IkOptionsTest, ValidateNamesTheBadField) {
+  IkOptions options;
+  options.max_iterations = 0;
+  try {
+    options.Validate();
+    FAIL();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("max_iterations"), std::string::npos);
+  }
+  options = IkOptions{};
+  options.huber_delta_m = -1.0;
+  EXPECT_THROW(options.Validate(), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace mocapd

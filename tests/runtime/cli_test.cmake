@@ -1,0 +1,36 @@
+# End-to-end check of the command-line tools: synthesize a take, inspect it, calibrate
+# a subject from it. Run by CTest with MOCAP_SIM, MOCAPD and WORK_DIR defined.
+file(REMOVE_RECURSE ${WORK_DIR})
+file(MAKE_DIRECTORY ${WORK_DIR})
+
+function(run)
+  execute_process(COMMAND ${ARGN} RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  if(NOT rc EQUAL 0)
+    message(FATAL_ERROR "command failed (${rc}): ${ARGN}\n${out}\n${err}")
+  endif()
+  set(OUT "${out}" PARENT_SCOPE)
+endfunction()
+
+run(${MOCAP_SIM} synth --humanoid walk --seconds 4 --rate 120 --out ${WORK_DIR}/walk.c3d
+    --subject-out ${WORK_DIR}/synthetic.toml --truth-bvh ${WORK_DIR}/walk.bvh)
+run(${MOCAP_SIM} info ${WORK_DIR}/walk.c3d --json)
+string(JSON frames GET "${OUT}" frames)
+string(JSON rate GET "${OUT}" rate_hz)
+string(JSON first_label GET "${OUT}" points 0 label)
+if(NOT frames EQUAL 480 OR NOT rate EQUAL 120 OR NOT first_label STREQUAL "PEL1")
+  message(FATAL_ERROR "info --json reported frames=${frames} rate=${rate} first label=${first_label}")
+endif()
+run(${MOCAP_SIM} info ${WORK_DIR}/walk.bvh)
+if(NOT OUT MATCHES "Hips \\(free\\)")
+  message(FATAL_ERROR "info on the BVH did not list the free root:\n${OUT}")
+endif()
+run(${MOCAPD} calibrate --skeleton ${WORK_DIR}/walk.bvh --markers ${WORK_DIR}/walk.c3d --out ${WORK_DIR}/calibrated.toml)
+if(NOT OUT MATCHES "markers accepted, 0 rejected")
+  message(FATAL_ERROR "calibrate did not accept every marker:\n${OUT}")
+endif()
+# Bad input gets a clear error and a non-zero exit, not a crash.
+file(WRITE ${WORK_DIR}/broken.c3d "not a c3d file")
+execute_process(COMMAND ${MOCAP_SIM} info ${WORK_DIR}/broken.c3d RESULT_VARIABLE rc ERROR_VARIABLE err)
+if(NOT rc EQUAL 1 OR NOT err MATCHES "header section")
+  message(FATAL_ERROR "broken C3D: rc=${rc} err=${err}")
+endif()

@@ -1,0 +1,135 @@
+// Tests for the BVH reader and writer: channel orders, joint typing, end sites, units,
+// round trips and clear errors for malformed files.
+#include "sim/bvh.hpp"
+
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <sstream>
+
+#include "sim/humanoid.hpp"
+
+namespace mocapd {
+namespace {
+
+const std::string kTinyPath = std::string(MOCAPD_TEST_DATA_DIR) + "/tiny_static_root.bvh";
+
+std::string ReadText(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+Quat Euler(std::initializer_list<std::pair<int, double>> axes_deg) {
+  Quat q = Quat::Identity();
+  for (const auto& [axis, deg] : axes_deg) q = q * Quat(Eigen::AngleAxisd(deg * M_PI / 180.0, Vec3::Unit(axis)));
+  return q;
+}
+
+std::vector<std::vector<Vec3>> GlobalPositions(const BvhTake& take) {
+  std::vector<std::vector<Vec3>> out;
+  KinematicsWorkspace ws(take.skeleton);
+  for (const Pose& pose : take.frames) {
+    ForwardKinematics(take.skeleton, pose, &ws);
+    out.push_back(ws.p_WJ);
+  }
+  return out;
+}
+
+TEST(BvhTest, TypesJointsByHowTheirChannelsMove) {
+  const BvhTake dut = ReadBvh(kTinyPath);
+  ASSERT_EQ(dut.skeleton.num_joints(), 5);
+  EXPECT_EQ(dut.skeleton.joint(0).type, JointType::kFixed);  // static root
+  EXPECT_EQ(dut.skeleton.joint(1).type, JointType::kFree);   // moving translation
+  EXPECT_EQ(dut.skeleton.joint(2).type, JointType::kBall);   // 6 channels, constant translation
+  EXPECT_EQ(dut.skeleton.joint(3).type, JointType::kBall);
+  EXPECT_EQ(dut.units, "cm");
+  EXPECT_DOUBLE_EQ(dut.metres_per_unit, 0.01);
+  EXPECT_EQ(dut.num_frames(), 3);
+  EXPECT_NEAR(dut.rate_hz(), 30.0, 1e-3);
+  ASSERT_EQ(dut.end_sites.size(), 1u);
+  EXPECT_EQ(dut.end_sites[0].parent, 4);
+  EXPECT_LT((dut.end_sites[0].offset - Vec3(0, 0, 0.08)).norm(), 1e-12);
+}
+
+TEST(BvhTest, AppliesRotationChannelsInFileOrder) {
+  const BvhTake dut = ReadBvh(kTinyPath);
+  EXPECT_TRUE(dut.frames[0].rotation[3].isApprox(Euler({{0, 40}, {1, -30}, {2, 20}}), 1e-12));
+  EXPECT_TRUE(dut.frames[0].rotation[4].isApprox(Euler({{1, 10}, {2, 80}, {0, -170}}), 1e-12));
+  EXPECT_TRUE(dut.frames[1].rotation[1].isApprox(Euler({{2, -10}, {0, 25}, {1, 35}}), 1e-12));
+  // Position channels replace the OFFSET; units converted to metres.
+  EXPECT_LT((dut.frames[1].translation[1] - Vec3(0.02, 0.92, -0.03)).norm(), 1e-12);
+  EXPECT_LT((dut.skeleton.joint(2).offset - Vec3(0.15, 0, 0)).norm(), 1e-12);
+}
+
+TEST(BvhTest, WriteThenReadReproducesGlobalPositions) {
+  const BvhTake original = ReadBvh(kTinyPath);
+  const BvhTake again = ParseBvh(FormatBvh(original), "round-trip");
+  EXPECT_EQ(again.channels, original.channels);
+  EXPECT_EQ(again.units, original.units);
+  const auto a = GlobalPositions(original), b = GlobalPositions(again);
+  for (size_t f = 0; f < a.size(); ++f)
+    for (size_t j = 0; j < a[f].size(); ++j) EXPECT_LT((a[f][j] - b[f][j]).norm() / original.metres_per_unit, 1e-6);
+}
+
+TEST(BvhTest, HumanoidMotionRoundTripsThroughBvh) {
+  Skeleton sk = MakeHumanoidSkeleton();
+  auto frames = MakeHumanoidMotion(sk, HumanoidMotion::kMixed, 3.0, 30.0);
+  const BvhTake take = MakeBvhTake(std::move(sk), std::move(frames), 1.0 / 30.0, "cm");
+  const BvhTake again = ParseBvh(FormatBvh(take), "humanoid");
+  EXPECT_EQ(again.skeleton.joint(0).type, JointType::kFree);
+  const auto a = GlobalPositions(take), b = GlobalPositions(again);
+  for (size_t f = 0; f < a.size(); ++f)
+    for (size_t j = 0; j < a[f].size(); ++j) ASSERT_LT((a[f][j] - b[f][j]).norm(), 1e-6) << f << " " << j;
+}
+
+TEST(BvhTest, UnitsCanBeForced) {
+  BvhReadOptions options;
+  options.units = "mm";
+  const BvhTake dut = ReadBvh(kTinyPath, options);
+  EXPECT_LT((dut.skeleton.joint(2).offset - Vec3(0.015, 0, 0)).norm(), 1e-12);
+  options.units = "furlongs";
+  EXPECT_THROW(ReadBvh(kTinyPath, options), BvhError);
+}
+
+void ExpectError(const std::string& text, const std::string& expected) {
+  try {
+    ParseBvh(text, "bad.bvh");
+    FAIL() << "expected an error containing: " << expected;
+  } catch (const BvhError& e) {
+    EXPECT_NE(std::string(e.what()).find(expected), std::string::npos) << e.what();
+  }
+}
+
+TEST(BvhTest, MalformedFilesGetErrorsNamingTheLine) {
+  const std::string good = ReadText(kTinyPath);
+  ExpectError("", "bad.bvh:1: unexpected end of file, expected HIERARCHY");
+  ExpectError("HIERARCHIE", "bad.bvh:1: expected 'HIERARCHY', found 'HIERARCHIE'");
+  ExpectError("HIERARCHY\nROOT a\n{\n  OFFSET 0 0\n", "bad.bvh:");
+  ExpectError("HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\nCHANNELS 3 Xrotation Qrotation Zrotation\n}\n", "bad.bvh:5: unknown channel");
+  ExpectError("HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\nCHANNELS 2 Xrotation Yrotation\n}\nMOTION\nFrames: 0\nFrame Time: 0.1\n",
+              "unsupported channel set");
+  ExpectError("HIERARCHY\nROOT a\n{\nOFFSET 0 x 0\n}\n", "bad.bvh:4: expected a number");
+  std::string truncated = good.substr(0, good.rfind("20 89"));
+  ExpectError(truncated, "frame 3 of 3 is truncated");
+  std::string zero_time = good;
+  zero_time.replace(zero_time.find("0.0333333"), 9, "0");
+  ExpectError(zero_time, "frame time must be > 0");
+  ExpectError(good + " 7", "unexpected data after frame 3");
+  std::string unclosed = good.substr(0, good.find("MOTION"));
+  unclosed.erase(unclosed.rfind('}'));
+  ExpectError(unclosed + "MOTION\n", "expected JOINT, End Site or '}'");
+}
+
+TEST(BvhTest, MissingFileIsAClearError) {
+  try {
+    ReadBvh("/nonexistent/take.bvh");
+    FAIL();
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("/nonexistent/take.bvh: cannot open"), std::string::npos);
+  }
+}
+
+}  // namespace
+}  // namespace mocapd

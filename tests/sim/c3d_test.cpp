@@ -1,0 +1,183 @@
+// Tests for the C3D reader and writer: exact round trips in every processor format and
+// storage, labels beyond 255 points, model outputs, missing samples, and clear errors
+// (never a crash) for truncated or corrupt files.
+#include "sim/c3d.hpp"
+
+#include <gtest/gtest.h>
+
+#include <random>
+
+namespace mocapd {
+namespace {
+
+C3dTake MakeTake(int points, int frames) {
+  C3dTake take;
+  for (int p = 0; p < points; ++p) take.labels.push_back("M" + std::to_string(p));
+  take.rate_hz = 120.0;
+  take.Allocate(frames);
+  std::mt19937_64 rng(9);
+  std::uniform_real_distribution<double> u(-1500.0, 1500.0);
+  for (int f = 0; f < frames; ++f) {
+    for (int p = 0; p < points; ++p) {
+      const size_t i = static_cast<size_t>(f) * static_cast<size_t>(points) + static_cast<size_t>(p);
+      if ((f + p) % 7 == 3) continue;  // missing
+      // Values on a 0.1 mm grid so integer storage is exact too.
+      take.positions[i] = Vec3(std::round(u(rng)), std::round(u(rng)), std::round(u(rng))) * 1e-4;
+      take.residuals[i] = 0.5f;
+    }
+  }
+  return take;
+}
+
+void ExpectSameTake(const C3dTake& a, const C3dTake& b) {
+  EXPECT_EQ(a.labels, b.labels);
+  EXPECT_EQ(a.num_frames, b.num_frames);
+  EXPECT_EQ(a.rate_hz, b.rate_hz);
+  EXPECT_EQ(a.units, b.units);
+  for (int f = 0; f < a.num_frames; ++f) {
+    for (int p = 0; p < a.num_points(); ++p) {
+      ASSERT_EQ(a.valid(f, p), b.valid(f, p)) << f << " " << p;
+      if (a.valid(f, p)) {
+        // Equal to float precision in file units (mm).
+        ASSERT_LT((a.at(f, p) - b.at(f, p)).norm(), 1e-7) << f << " " << p;
+      } else {
+        ASSERT_FALSE(b.at(f, p).allFinite());
+      }
+    }
+  }
+}
+
+TEST(C3dTest, FloatIntelWriteThenReadIsExact) {
+  const C3dTake take = MakeTake(7, 40);
+  const C3dTake dut = ParseC3d(EncodeC3d(take), "mem");
+  ExpectSameTake(take, dut);
+  EXPECT_EQ(dut.processor, "Intel");
+  EXPECT_TRUE(dut.float_storage);
+  // Bit-exact: what was read re-encodes to the same bytes.
+  EXPECT_EQ(EncodeC3d(dut), EncodeC3d(take));
+}
+
+TEST(C3dTest, ReadsDecMipsAndIntegerFiles) {
+  const C3dTake take = MakeTake(5, 12);
+  for (auto processor : {C3dEncoding::Processor::kIntel, C3dEncoding::Processor::kDec, C3dEncoding::Processor::kMips}) {
+    for (bool integer : {false, true}) {
+      C3dEncoding encoding;
+      encoding.processor = processor;
+      encoding.integer_storage = integer;
+      const C3dTake dut = ParseC3d(EncodeC3d(take, encoding), "mem");
+      SCOPED_TRACE(dut.processor + (integer ? " int" : " float"));
+      EXPECT_EQ(dut.float_storage, !integer);
+      ExpectSameTake(take, dut);
+    }
+  }
+}
+
+TEST(C3dTest, LabelsBeyond255PointsUseLabels2) {
+  const C3dTake take = MakeTake(300, 2);
+  const C3dTake dut = ParseC3d(EncodeC3d(take), "mem");
+  ASSERT_EQ(dut.num_points(), 300);
+  EXPECT_EQ(dut.labels[299], "M299");
+}
+
+TEST(C3dTest, TellsModelOutputsFromMarkers) {
+  C3dTake take = MakeTake(4, 3);
+  take.model_output_kind[2] = "ANGLES";
+  take.model_output_kind[3] = "POWERS";
+  const C3dTake dut = ParseC3d(EncodeC3d(take), "mem");
+  EXPECT_TRUE(dut.is_marker(0));
+  EXPECT_TRUE(dut.is_marker(1));
+  EXPECT_EQ(dut.model_output_kind[2], "ANGLES");
+  EXPECT_EQ(dut.model_output_kind[3], "POWERS");
+}
+
+TEST(C3dTest, ConvertsUnitsToMetres) {
+  C3dTake take = MakeTake(2, 2);
+  take.units = "cm";
+  take.metres_per_unit = 0.01;
+  const C3dTake dut = ParseC3d(EncodeC3d(take), "mem");
+  EXPECT_EQ(dut.units, "cm");
+  EXPECT_LT((dut.at(0, 0) - take.at(0, 0)).norm(), 1e-7);  // float precision of 15 cm in cm
+  EXPECT_NEAR(dut.at(0, 0).x(), take.at(0, 0).x(), 1e-7);
+}
+
+TEST(C3dTest, EveryTruncationIsAClearError) {
+  const std::vector<uint8_t> bytes = EncodeC3d(MakeTake(3, 6));
+  for (size_t n = 0; n < bytes.size(); n += (n < 1200 ? 1 : 13)) {
+    const std::span<const uint8_t> prefix(bytes.data(), n);
+    try {
+      ParseC3d(prefix, "cut.c3d");
+      // A cut inside the final padding leaves a complete file; anything else must throw.
+      EXPECT_GE(n, bytes.size() - 512) << n;
+    } catch (const C3dError& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find("cut.c3d: "), std::string::npos);
+      EXPECT_NE(what.find(" section, byte "), std::string::npos) << what;
+    }
+  }
+}
+
+TEST(C3dTest, TruncatedDataNamesTheFrame) {
+  std::vector<uint8_t> bytes = EncodeC3d(MakeTake(3, 60));
+  bytes.resize(bytes.size() - 700);
+  try {
+    ParseC3d(bytes, "short.c3d");
+    FAIL();
+  } catch (const C3dError& e) {
+    EXPECT_NE(std::string(e.what()).find("data section"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("file ends inside frame"), std::string::npos) << e.what();
+  }
+}
+
+TEST(C3dTest, CorruptBytesNeverCrash) {
+  const std::vector<uint8_t> original = EncodeC3d(MakeTake(4, 10));
+  std::mt19937_64 rng(11);
+  std::uniform_int_distribution<size_t> pos(0, original.size() - 1);
+  std::uniform_int_distribution<int> byte(0, 255);
+  int errors = 0;
+  for (int trial = 0; trial < 2000; ++trial) {
+    std::vector<uint8_t> bytes = original;
+    for (int k = 0; k < 1 + trial % 8; ++k) bytes[pos(rng)] = static_cast<uint8_t>(byte(rng));
+    try {
+      ParseC3d(bytes, "fuzz.c3d");
+    } catch (const C3dError&) {
+      ++errors;
+    }
+  }
+  EXPECT_GT(errors, 0);
+}
+
+TEST(C3dTest, BadHeaderKeyIsReported) {
+  std::vector<uint8_t> bytes = EncodeC3d(MakeTake(2, 2));
+  bytes[1] = 0x51;
+  try {
+    ParseC3d(bytes, "x.c3d");
+    FAIL();
+  } catch (const C3dError& e) {
+    EXPECT_NE(std::string(e.what()).find("header section, byte 1: expected key byte 0x50"), std::string::npos) << e.what();
+  }
+}
+
+TEST(C3dTest, UnknownProcessorIsReported) {
+  std::vector<uint8_t> bytes = EncodeC3d(MakeTake(2, 2));
+  bytes[512 + 3] = 99;
+  EXPECT_THROW(ParseC3d(bytes, "x.c3d"), C3dError);
+}
+
+TEST(C3dTest, WriterRejectsInconsistentTakes) {
+  C3dTake take = MakeTake(2, 2);
+  take.positions.pop_back();
+  EXPECT_THROW(EncodeC3d(take), std::invalid_argument);
+  take = MakeTake(2, 2);
+  take.rate_hz = 0;
+  EXPECT_THROW(EncodeC3d(take), std::invalid_argument);
+}
+
+TEST(C3dTest, MetresPerUnitKnowsTheUsualUnits) {
+  EXPECT_DOUBLE_EQ(MetresPerUnit("mm"), 1e-3);
+  EXPECT_DOUBLE_EQ(MetresPerUnit("M "), 1.0);
+  EXPECT_DOUBLE_EQ(MetresPerUnit("in"), 0.0254);
+  EXPECT_THROW(MetresPerUnit("parsec"), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace mocapd

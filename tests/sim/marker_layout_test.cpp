@@ -1,0 +1,143 @@
+// Tests for humanoid segment matching across naming schemes and the default layout's
+// production-like properties.
+#include "sim/marker_layout.hpp"
+
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <map>
+
+#include "sim/humanoid.hpp"
+#include "tests/support/test_takes.hpp"
+
+namespace mocapd {
+namespace {
+
+// The humanoid with its joints renamed by a naming scheme.
+Skeleton Renamed(const std::map<std::string, std::string>& names) {
+  const Skeleton base = MakeHumanoidSkeleton();
+  std::vector<Joint> joints(base.joints().begin(), base.joints().end());
+  for (Joint& j : joints) {
+    auto it = names.find(j.name);
+    if (it != names.end()) j.name = it->second;
+  }
+  return Skeleton(joints);
+}
+
+const std::map<std::string, std::string> kBandai = {
+    {"LeftShoulder", "Shoulder_L"}, {"LeftArm", "UpperArm_L"},   {"LeftForeArm", "LowerArm_L"}, {"LeftHand", "Hand_L"},
+    {"RightShoulder", "Shoulder_R"}, {"RightArm", "UpperArm_R"}, {"RightForeArm", "LowerArm_R"}, {"RightHand", "Hand_R"},
+    {"LeftUpLeg", "UpperLeg_L"},    {"LeftLeg", "LowerLeg_L"},   {"LeftFoot", "Foot_L"},         {"LeftToeBase", "Toes_L"},
+    {"RightUpLeg", "UpperLeg_R"},   {"RightLeg", "LowerLeg_R"},  {"RightFoot", "Foot_R"},        {"RightToeBase", "Toes_R"}};
+const std::map<std::string, std::string> kUnreal = {
+    {"Hips", "pelvis"},          {"Spine", "spine_01"},        {"Chest", "spine_02"},         {"Neck", "neck_01"},
+    {"Head", "head"},            {"LeftShoulder", "clavicle_l"}, {"LeftArm", "upperarm_l"},   {"LeftForeArm", "lowerarm_l"},
+    {"LeftHand", "hand_l"},      {"RightShoulder", "clavicle_r"}, {"RightArm", "upperarm_r"}, {"RightForeArm", "lowerarm_r"},
+    {"RightHand", "hand_r"},     {"LeftUpLeg", "thigh_l"},     {"LeftLeg", "calf_l"},         {"LeftFoot", "foot_l"},
+    {"LeftToeBase", "ball_l"},   {"RightUpLeg", "thigh_r"},    {"RightLeg", "calf_r"},        {"RightFoot", "foot_r"},
+    {"RightToeBase", "ball_r"}};
+
+std::map<std::string, std::string> Mixamo() {
+  std::map<std::string, std::string> names;
+  for (const Joint& j : MakeHumanoidSkeleton().joints()) names[j.name] = "mixamorig:" + j.name;
+  return names;
+}
+
+TEST(MarkerLayoutTest, MatchesRolesAcrossNamingSchemes) {
+  for (const auto& names : {std::map<std::string, std::string>{}, kBandai, kUnreal, Mixamo()}) {
+    const Skeleton sk = Renamed(names);
+    const HumanoidRoles roles = MatchHumanoidRoles(sk);
+    SCOPED_TRACE(roles.Describe(sk));
+    EXPECT_EQ(sk.joint(roles.joint_of_role.at("thigh_l")).name, names.empty() ? "LeftUpLeg" : names.at("LeftUpLeg"));
+    EXPECT_EQ(sk.joint(roles.joint_of_role.at("forearm_r")).name, names.empty() ? "RightForeArm" : names.at("RightForeArm"));
+    EXPECT_EQ(sk.joint(roles.joint_of_role.at("toe_l")).name, names.empty() ? "LeftToeBase" : names.at("LeftToeBase"));
+    EXPECT_EQ(roles.joint_of_role.at("pelvis"), 0);
+    EXPECT_EQ(roles.spine_chain.size(), 2u);
+  }
+}
+
+TEST(MarkerLayoutTest, ExplainsWhatIsMissingOnANonHumanoid) {
+  std::vector<Joint> joints(2);
+  joints[0].name = "base";
+  joints[0].type = JointType::kFree;
+  joints[1].name = "boom";
+  joints[1].parent = JointIndex(0);
+  try {
+    MatchHumanoidRoles(Skeleton(joints));
+    FAIL();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("head"), std::string::npos);
+    EXPECT_NE(std::string(e.what()).find("thigh_l"), std::string::npos);
+  }
+}
+
+TEST(MarkerLayoutTest, DefaultLayoutIsProductionLike) {
+  const Skeleton sk = MakeHumanoidSkeleton();
+  const HumanoidRoles roles = MatchHumanoidRoles(sk);
+  const MarkerSet dut(sk, PlaceMarkers(sk, roles, DefaultMarkerLayout(), {}));
+  EXPECT_GE(dut.num_markers(), 40);
+  EXPECT_LE(dut.num_markers(), 60);
+  // >= 3 markers carried by every major segment (blends count for both joints).
+  std::map<int, int> per_joint;
+  for (const MarkerDefinition& m : dut.markers())
+    for (int k = 0; k < m.num_attachments; ++k) ++per_joint[m.attachments[static_cast<size_t>(k)].joint];
+  for (const char* role : {"pelvis", "chest", "head", "upper_arm_l", "upper_arm_r", "forearm_l", "forearm_r", "hand_l", "hand_r",
+                           "thigh_l", "thigh_r", "shin_l", "shin_r", "foot_l", "foot_r"})
+    EXPECT_GE(per_joint[roles.joint_of_role.at(role)], 3) << role;
+  // 3-8 cm off the bone: measured from the segment's axis in the rest pose.
+  KinematicsWorkspace rest(sk);
+  ForwardKinematics(sk, RestPose(sk), &rest);
+  const auto layout = DefaultMarkerLayout();
+  for (const LayoutMarker& lm : layout) EXPECT_TRUE(lm.radius_m >= 0.03 && lm.radius_m <= 0.08) << lm.name;
+  // Not mirror-symmetric: no left marker sits at the mirror image of its right twin.
+  for (int m = 0; m < dut.num_markers(); ++m) {
+    const std::string& name = dut.marker(m).name;
+    if (name[0] != 'L') continue;
+    const auto twin = dut.FindMarker("R" + name.substr(1));
+    ASSERT_TRUE(twin.has_value()) << name;
+    Vec3 mirrored = EvaluateMarker(dut.marker(m), rest);
+    mirrored.x() = -mirrored.x();
+    EXPECT_GT((mirrored - EvaluateMarker(dut.marker(twin->value), rest)).norm(), 0.005) << name;
+  }
+}
+
+TEST(MarkerLayoutTest, UnknownSegmentIsNamed) {
+  const Skeleton sk = MakeHumanoidSkeleton();
+  const std::vector<LayoutMarker> layout = {{"X1", "tail", 0.5, 0, 0.05}};
+  try {
+    PlaceMarkers(sk, MatchHumanoidRoles(sk), layout, {});
+    FAIL();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("marker 'X1': unknown segment 'tail'"), std::string::npos);
+  }
+}
+
+TEST(MarkerLayoutTest, ReadsLayoutFilesAndReportsBadFields) {
+  const std::string dir = testing::TempDir("layout");
+  {
+    std::ofstream(dir + "/good.toml") << "[[marker]]\nname = \"A\"\nsegment = \"thigh_l\"\nalong = 0.3\nangle_deg = 45\nradius_m = 0.06\n"
+                                         "[[marker]]\nname = \"B\"\nsegment = \"Head\"\n";
+    std::ofstream(dir + "/bad.toml") << "[[marker]]\nname = \"A\"\nsegment = \"thigh_l\"\nradius_m = 3.0\n";
+    std::ofstream(dir + "/syntax.toml") << "[[marker]\nname = \n";
+  }
+  const auto layout = ReadMarkerLayout(dir + "/good.toml");
+  ASSERT_EQ(layout.size(), 2u);
+  EXPECT_EQ(layout[0].segment, "thigh_l");
+  EXPECT_DOUBLE_EQ(layout[0].radius_m, 0.06);
+  EXPECT_DOUBLE_EQ(layout[1].along, 0.5);
+  try {
+    ReadMarkerLayout(dir + "/bad.toml");
+    FAIL();
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("bad.toml:1: marker field 'radius_m'"), std::string::npos) << e.what();
+  }
+  try {
+    ReadMarkerLayout(dir + "/syntax.toml");
+    FAIL();
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("syntax.toml:1"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace mocapd

@@ -1,0 +1,70 @@
+// Tests for motion resampling and marker synthesis.
+#include "sim/synthesis.hpp"
+
+#include <gtest/gtest.h>
+
+#include "filters/rotation.hpp"
+#include "sim/humanoid.hpp"
+#include "tests/support/test_takes.hpp"
+
+namespace mocapd {
+namespace {
+
+TEST(SynthesisTest, ResampleKeepsDurationAndSlerpsBetweenFrames) {
+  const Skeleton sk = MakeHumanoidSkeleton();
+  std::vector<Pose> frames(3, RestPose(sk));
+  frames[1].rotation[1] = ExpRotation(Vec3(0, 0, 0.4));
+  frames[2].rotation[1] = ExpRotation(Vec3(0, 0, 0.8));
+  frames[2].translation[0] += Vec3(0.3, 0, 0);
+  const auto dut = ResampleMotion(sk, frames, 30.0, 120.0);
+  ASSERT_EQ(dut.size(), 9u);  // 2 intervals of 1/30 s at 120 Hz, plus the last frame
+  EXPECT_NEAR(LogRotation(dut[2].rotation[1]).z(), 0.2, 1e-12);
+  EXPECT_NEAR(LogRotation(dut[6].rotation[1]).z(), 0.6, 1e-12);
+  EXPECT_NEAR(dut[6].translation[0].x() - frames[0].translation[0].x(), 0.15, 1e-12);
+  EXPECT_TRUE(dut[8].rotation[1].isApprox(frames[2].rotation[1]));
+  EXPECT_THROW(ResampleMotion(sk, {}, 30, 120), std::invalid_argument);
+  EXPECT_THROW(ResampleMotion(sk, frames, 0, 120), std::invalid_argument);
+}
+
+TEST(SynthesisTest, MarkersFollowTheModel) {
+  const auto f = testing::MakeHumanoidFixture("walk", 1.0, 60.0);
+  ASSERT_EQ(f.take.num_frames, 60);
+  ASSERT_EQ(f.take.num_points(), f.markers->num_markers());
+  KinematicsWorkspace ws(*f.skeleton);
+  for (int frame : {0, 31, 59}) {
+    ForwardKinematics(*f.skeleton, f.motion[static_cast<size_t>(frame)], &ws);
+    for (int m = 0; m < f.markers->num_markers(); ++m) {
+      EXPECT_TRUE(f.take.valid(frame, m));
+      EXPECT_LT((f.take.at(frame, m) - EvaluateMarker(f.markers->marker(m), ws)).norm(), 1e-12);
+    }
+  }
+}
+
+TEST(SynthesisTest, NoiseHasTheRequestedSpread) {
+  const auto clean = testing::MakeHumanoidFixture("walk", 2.0, 120.0, 0.0);
+  const auto noisy = testing::MakeHumanoidFixture("walk", 2.0, 120.0, 2e-3);
+  double sum_sq = 0.0;
+  for (size_t i = 0; i < clean.take.positions.size(); ++i) sum_sq += (clean.take.positions[i] - noisy.take.positions[i]).squaredNorm();
+  const double sigma = std::sqrt(sum_sq / (3.0 * static_cast<double>(clean.take.positions.size())));
+  EXPECT_NEAR(sigma, 2e-3, 1e-4);
+}
+
+TEST(SynthesisTest, HumanoidMotionIsFiniteAndMoves) {
+  const Skeleton sk = MakeHumanoidSkeleton();
+  for (auto motion : {HumanoidMotion::kWalk, HumanoidMotion::kReach, HumanoidMotion::kTurn, HumanoidMotion::kMixed}) {
+    const auto frames = MakeHumanoidMotion(sk, motion, 3.0, 60.0);
+    ASSERT_EQ(frames.size(), 180u);
+    double travelled = 0.0;
+    for (size_t f = 1; f < frames.size(); ++f) {
+      travelled += (frames[f].translation[0] - frames[f - 1].translation[0]).norm();
+      for (const Quat& q : frames[f].rotation) ASSERT_TRUE(q.coeffs().allFinite());
+    }
+    if (motion != HumanoidMotion::kReach) {
+      EXPECT_GT(travelled, 0.5);
+    }
+  }
+  EXPECT_THROW(ParseHumanoidMotion("moonwalk"), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace mocapd
