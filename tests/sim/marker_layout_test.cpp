@@ -39,7 +39,8 @@ const std::map<std::string, std::string> kUnreal = {
 
 std::map<std::string, std::string> Mixamo() {
   std::map<std::string, std::string> names;
-  for (const Joint& j : MakeHumanoidSkeleton().joints()) names[j.name] = "mixamorig:" + j.name;
+  const Skeleton base = MakeHumanoidSkeleton();
+  for (const Joint& j : base.joints()) names[j.name] = "mixamorig:" + j.name;
   return names;
 }
 
