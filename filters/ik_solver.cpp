@@ -68,10 +68,10 @@ double MarkerCost(const MarkerSet& markers, const IkOptions& options, std::span<
 // taken so far this frame, rest_error the rest-pose deviation at the warm start, both
 // per DOF (zero on translations). To first order x = q (-) q_prior and
 // rest_error + x = q (-) q_rest, which saves two logarithms per joint per evaluation.
-double PriorCost(const IkOptions& options, const Eigen::VectorXd& mask, const Eigen::VectorXd& rest_error,
+double PriorCost(double temporal_weight, double rest_weight, const Eigen::VectorXd& mask, const Eigen::VectorXd& rest_error,
                  const Eigen::VectorXd& x) {
-  return 0.5 * (options.temporal_weight * (mask.array() * x.array().square()).sum() +
-                options.rest_weight * (mask.array() * (rest_error + x).array().square()).sum());
+  return 0.5 * (temporal_weight * (mask.array() * x.array().square()).sum() +
+                rest_weight * (mask.array() * (rest_error + x).array().square()).sum());
 }
 
 // Adds each marker's contribution to its joint's block (and the blend blocks).
@@ -443,13 +443,17 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
   PoseDifference(skeleton, s.rest_, s.pose_, s.rest_error_);
   s.rest_error_.array() *= s.prior_mask_.array();
   s.step_total_.setZero();
-  const double at = options.temporal_weight, ar = options.rest_weight;
+  // The warm start of a cold solve is only the aligned rest pose: nothing to stay near.
+  const double at = summary.cold_start ? 0.0 : options.temporal_weight, ar = options.rest_weight;
   s.prior_h_ = (at + ar) * s.prior_mask_;
 
   double cost = MarkerCost(markers, options, observed, weights, s.ws_, s.predicted_) +
-                PriorCost(options, s.prior_mask_, s.rest_error_, s.step_total_);
+                PriorCost(at, ar, s.prior_mask_, s.rest_error_, s.step_total_);
   summary.initial_cost = cost;
   double damping = options.initial_damping;
+  // A cold start is far from the answer: the warm-start tolerance would stop it early,
+  // in the basin of whatever local minimum it is crossing.
+  const double function_tolerance = summary.cold_start ? std::min(options.function_tolerance, 1e-10) : options.function_tolerance;
   summary.status = IkStatus::kMaxIterations;
   for (int iteration = 0; iteration < max_iterations; ++iteration) {
     summary.iterations = iteration + 1;
@@ -468,7 +472,7 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
     ForwardKinematics(skeleton, s.trial_, &s.trial_ws_);
     s.trial_total_ = s.step_total_ + s.dq_;
     const double trial_cost = MarkerCost(markers, options, observed, weights, s.trial_ws_, s.trial_predicted_) +
-                              PriorCost(options, s.prior_mask_, s.rest_error_, s.trial_total_);
+                              PriorCost(at, ar, s.prior_mask_, s.rest_error_, s.trial_total_);
     const double step_size = s.dq_.cwiseAbs().maxCoeff();
     if (std::isfinite(trial_cost) && trial_cost <= cost) {
       std::swap(s.pose_, s.trial_);
@@ -478,7 +482,7 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
       const double decrease = cost - trial_cost;
       cost = trial_cost;
       damping = std::max(damping * 0.3, 1e-9);
-      if (decrease <= options.function_tolerance * (cost + decrease) || step_size <= options.step_tolerance) {
+      if (decrease <= function_tolerance * (cost + decrease) || step_size <= options.step_tolerance) {
         summary.status = IkStatus::kConverged;
         break;
       }

@@ -165,8 +165,8 @@ std::vector<LayoutMarker> DefaultMarkerLayout() {
     add("FOT1", "foot", 0.1, 60, 0.05);
     add("FOT2", "foot", 0.5 + d, 180, 0.045);
     add("FOT3", "foot", 0.85, 300, 0.04);
-    add("TOE1", "toe", 0.5, 45, 0.035);
-    add("TOE2", "toe", 0.8 - d, 200, 0.03);
+    add("TOE1", "toe", 0.6, 45, 0.05);
+    add("TOE2", "toe", 1.2 - d, 200, 0.045);
   }
   return layout;
 }

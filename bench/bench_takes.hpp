@@ -1,0 +1,29 @@
+// Motion for benchmarks: a real BVH take from ../shared when present (never required),
+// else the built-in humanoid's procedural motion, with the default marker layout.
+#pragma once
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "filters/marker_model.hpp"
+#include "sim/bvh.hpp"
+
+namespace mocapd::bench {
+
+struct BenchTake {
+  std::string name;
+  BvhTake bvh;                              ///< As read (or generated).
+  std::vector<Pose> motion;                 ///< Resampled to the benchmark rate.
+  std::shared_ptr<const MarkerSet> markers;  ///< Default layout on the take's skeleton.
+};
+
+/// The shared data folder's Bandai takes (sorted), or empty if ../shared is absent.
+/// MOCAPD_SHARED_DATA overrides the location of shared/data.
+std::vector<std::string> SharedBvhTakes();
+
+/// Loads a BVH take (or, for an empty path, 20 s of the humanoid's mixed motion) and
+/// prepares it at rate_hz.
+BenchTake LoadBenchTake(const std::string& bvh_path, double rate_hz);
+
+}  // namespace mocapd::bench
