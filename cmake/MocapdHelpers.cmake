@@ -20,6 +20,10 @@ function(mocapd_configure_target target)
     # inside Eigen's expression templates; the plain build keeps the warning.
     target_compile_options(${target} PRIVATE -Wno-maybe-uninitialized)
   endif()
+  if(MOCAPD_BUILD_FUZZERS)
+    # Coverage instrumentation for libFuzzer in everything the harnesses call.
+    target_compile_options(${target} PRIVATE -fsanitize=fuzzer-no-link,address,undefined)
+  endif()
   if(MOCAPD_CHECK_EIGEN_MALLOC)
     target_compile_definitions(${target} PUBLIC EIGEN_RUNTIME_NO_MALLOC)
   endif()

@@ -1,11 +1,17 @@
 // Levenberg-Marquardt IK with leaf-to-root elimination over the joint tree.
 //
-// Derivation of one elimination step, for joint c with parent p, twist V_c = V_p + S_c dq_c:
-// the joint's subtree contributes 1/2 V_c' Q V_c - b' V_c; a marker blended between c and p
-// moves by  B V_p + C S_c dq_c  with C = w_c A_c, B = w_p A_p + C, A(x) = [-[x]x  I].
-// Minimising over dq_c leaves a quadratic in V_p, added to the parent's (Q, b); the
-// forward sweep recovers dq_c = k - K V_p. The system solved is exactly the damped
-// normal equations of the dense formulation.
+// Each joint J keeps a quadratic 1/2 V' Q V - b' V in its body's twist V = (w, v), where
+// v is the velocity of the world point at J's pivot c_J, so a point x on the body moves
+// at A(x - c_J) V with A(y) = [-[y]x  I]. Steps are taken about world axes at the pivot,
+// which makes each joint's motion subspace S a selection of unit columns.
+//
+// Eliminating joint c (parent p, d = c_c - c_p): its twist is V_c = X V_p + S dq_c with
+// X = [I 0; -[d]x I] (the parent's twist seen at c's pivot). A marker blended between c
+// and p moves by  B V_p + C S dq_c  with C = w_c A(x_c - c_c) and
+// B = w_p A(x_p - c_p) + w_c A(x_c - c_p). Minimising over dq_c leaves a quadratic in V_p
+// that is added to the parent's (Q, b); the forward sweep recovers dq_c = k - K V_p.
+// With zero damping this is exactly the dense Gauss-Newton step (J'WJ + P) dq = J'Wr - g_P;
+// the Marquardt damping scales each joint's own (Schur-reduced) diagonal.
 #include "filters/ik_solver.hpp"
 
 #include <Eigen/Cholesky>
@@ -74,10 +80,11 @@ double PriorCost(double temporal_weight, double rest_weight, const Eigen::Vector
                 rest_weight * (mask.array() * (rest_error + x).array().square()).sum());
 }
 
-// Adds each marker's contribution to its joint's block (and the blend blocks).
+// Adds each marker's contribution to its joint's block (and the blend blocks), with
+// twists referred to each joint's pivot.
 void AccumulateMarkers(const MarkerSet& markers, const IkOptions& options, std::span<const Vec3> observed,
                        std::span<const double> weights, std::span<const Vec3> predicted, const KinematicsWorkspace& ws,
-                       const Vec3& origin, std::vector<JointBlock>* blocks) {
+                       std::vector<JointBlock>* blocks) {
   for (int m = 0; m < markers.num_markers(); ++m) {
     const auto um = static_cast<size_t>(m);
     if (!UsableMarker(observed[um], weights[um])) continue;
@@ -85,18 +92,18 @@ void AccumulateMarkers(const MarkerSet& markers, const IkOptions& options, std::
     const double w = weights[um] * RobustWeight(r.norm(), options.huber_delta_m);
     const MarkerDefinition& def = markers.marker(m);
     const MarkerAttachment& a0 = def.attachments[0];
-    JointBlock& blk = (*blocks)[static_cast<size_t>(a0.joint)];
+    const auto j0 = static_cast<size_t>(a0.joint);
+    JointBlock& blk = (*blocks)[j0];
     if (def.num_attachments == 1) {
-      AddPointTerm(predicted[um] - origin, r, w, &blk.Q, &blk.b);
+      AddPointTerm(predicted[um] - ws.p_WJ[j0], r, w, &blk.Q, &blk.b);
       continue;
     }
     const MarkerAttachment& a1 = def.attachments[1];
-    const auto j0 = static_cast<size_t>(a0.joint);
     const auto j1 = static_cast<size_t>(a1.joint);
-    const Vec3 x0 = ws.R_WJ[j0] * a0.offset + ws.p_WJ[j0] - origin;
-    const Vec3 x1 = ws.R_WJ[j1] * a1.offset + ws.p_WJ[j1] - origin;
-    const Eigen::Matrix<double, 3, 6> C = a0.weight * PointMap(x0);
-    const Eigen::Matrix<double, 3, 6> B = a1.weight * PointMap(x1) + C;
+    const Vec3 x0 = ws.R_WJ[j0] * a0.offset + ws.p_WJ[j0];
+    const Vec3 x1 = ws.R_WJ[j1] * a1.offset + ws.p_WJ[j1];
+    const Eigen::Matrix<double, 3, 6> C = a0.weight * PointMap(x0 - ws.p_WJ[j0]);
+    const Eigen::Matrix<double, 3, 6> B = a1.weight * PointMap(x1 - ws.p_WJ[j1]) + a0.weight * PointMap(x0 - ws.p_WJ[j1]);
     blk.BB.noalias() += w * B.transpose() * B;
     blk.BG.noalias() += w * B.transpose() * C;
     blk.GG.noalias() += w * C.transpose() * C;
@@ -106,8 +113,21 @@ void AccumulateMarkers(const MarkerSet& markers, const IkOptions& options, std::
   }
 }
 
-// Eliminates joint blk (N DOF) into its parent. prior_h/prior_g are the per-DOF
-// regularisation terms. Returns false if the joint's system is not positive definite.
+// Shifts a quadratic in the twist at pivot c to one in the twist at pivot p: with
+// X = [I 0; D I], D = -[d]x, d = c - p, returns Q X (needed for the cross terms) and
+// writes X' Q X, X' b. Exploits the block structure instead of 6x6 products.
+void ShiftQuadratic(const Mat6& Q, const Vec6& b, const Vec3& d, Mat6* QX, Mat6* XtQX, Vec6* Xtb) {
+  const Mat3 D = -Skew(d);
+  QX->leftCols<3>().noalias() = Q.leftCols<3>() + Q.rightCols<3>() * D;
+  QX->rightCols<3>() = Q.rightCols<3>();
+  XtQX->bottomRows<3>() = QX->bottomRows<3>();
+  XtQX->topRows<3>() = QX->topRows<3>();
+  XtQX->topRows<3>().noalias() += D.transpose() * QX->bottomRows<3>();
+  Xtb->head<3>() = b.head<3>();
+  Xtb->head<3>().noalias() += D.transpose() * b.tail<3>();
+  Xtb->tail<3>() = b.tail<3>();
+}
+
 // Writes K = H^-1 HqV and k = H^-1 g for a symmetric positive definite H. Returns false
 // if H is not positive definite. Small systems use the closed-form inverse; the 6x6
 // (free joint) uses a Cholesky factorisation with vector solves, because Eigen's
@@ -134,93 +154,175 @@ bool SolveSpd(const Eigen::Matrix<double, N, N>& H, const Eigen::Matrix<double, 
   return true;
 }
 
-// Eliminates joint blk (N DOF) into its parent: see the derivation at the top of the file.
-template <int N, typename PriorH, typename PriorG>
-bool EliminateJoint(JointBlock* blk, double damping, const PriorH& prior_h, const PriorG& prior_g, JointBlock* parent) {
-  using MatN = Eigen::Matrix<double, N, N>;
-  using MatN6 = Eigen::Matrix<double, N, 6>;
-  const auto S = blk->S.template leftCols<N>();
-  MatN H;
-  MatN6 HqV;
-  Eigen::Matrix<double, N, 1> g;
-  if (!blk->has_blend) {
-    HqV.noalias() = S.transpose() * blk->Q;
-    H.noalias() = HqV * S;
-    g.noalias() = S.transpose() * blk->b;
+// The motion subspace at the joint's own pivot, world axes: rotation DOF are (e_i; 0)
+// (or (a_W; 0) for a hinge), translation DOF (0; e_i).
+template <int N>
+Eigen::Matrix<double, 6, N> MotionSubspace(const Joint& joint, const Mat3& R_WJ) {
+  Eigen::Matrix<double, 6, N> S = Eigen::Matrix<double, 6, N>::Zero();
+  if constexpr (N == 1) {
+    S.template block<3, 1>(0, 0) = R_WJ * joint.hinge_axis;
+  } else if constexpr (N == 3) {
+    S.template topRows<3>().setIdentity();
   } else {
-    const Mat6 Qq = blk->Q + blk->GG;
-    H.noalias() = S.transpose() * Qq * S;
-    HqV.noalias() = S.transpose() * (blk->Q + blk->BG.transpose());
-    g.noalias() = S.transpose() * (blk->b + blk->Gr);
+    S.template block<3, 3>(3, 0).setIdentity();  // translation first, as in the DOF layout
+    S.template block<3, 3>(0, 3).setIdentity();
   }
-  g += prior_g;
-  // Marquardt scaling uses the diagonal of the full (not Schur-reduced) normal matrix, so
-  // the step equals the dense formulation's: diag(S' (R + GG) S).
-  const Mat6 raw = blk->has_blend ? Mat6(blk->R + blk->GG) : blk->R;
-  for (int i = 0; i < N; ++i) H(i, i) += damping * S.col(i).dot(raw * S.col(i)) + prior_h[i] + 1e-12;
-  if (!SolveSpd<N>(H, HqV, g, blk)) return false;
-  if (parent != nullptr) {
-    parent->R += blk->R;
-    if (blk->has_blend) parent->R += blk->BB;
-    parent->Q += blk->Q;
-    parent->Q.noalias() -= HqV.transpose() * blk->K.template topRows<N>();
-    parent->b += blk->b;
-    parent->b.noalias() -= HqV.transpose() * blk->k.template head<N>();
+  return S;
+}
+
+// Eliminates joint blk (N DOF; N = 0 for a fixed joint) into its parent, whose pivot is
+// at -d from this joint's; for the root (parent == nullptr) the parent twist is zero.
+template <int N, typename PriorH, typename PriorG>
+bool EliminateJoint(const Joint& joint, const Mat3& R_WJ, const Vec3& d, JointBlock* blk, double damping,
+                    const PriorH& prior_h, const PriorG& prior_g, JointBlock* parent) {
+  Mat6 QX, XtQX;
+  Vec6 Xtb;
+  if (parent != nullptr) ShiftQuadratic(blk->Q, blk->b, d, &QX, &XtQX, &Xtb);
+  if constexpr (N > 0) {
+    const Eigen::Matrix<double, 6, N> S = MotionSubspace<N>(joint, R_WJ);
+    Eigen::Matrix<double, N, N> H;
+    Eigen::Matrix<double, N, 6> HqV;
+    Eigen::Matrix<double, N, 1> g;
     if (blk->has_blend) {
-      parent->Q += blk->BB;
-      parent->b += blk->Br;
+      H.noalias() = S.transpose() * (blk->Q + blk->GG) * S;
+      g.noalias() = S.transpose() * (blk->b + blk->Gr);
+    } else {
+      H.noalias() = S.transpose() * blk->Q * S;
+      g.noalias() = S.transpose() * blk->b;
     }
+    if (parent != nullptr) {
+      HqV.noalias() = S.transpose() * QX;
+      if (blk->has_blend) HqV.noalias() += S.transpose() * blk->BG.transpose();
+    } else {
+      HqV.setZero();
+    }
+    g += prior_g;
+    for (int i = 0; i < N; ++i) H(i, i) += damping * H(i, i) + prior_h[i] + 1e-12;
+    blk->dofs = N;
+    blk->S.template leftCols<N>() = S;
+    if (!SolveSpd<N>(H, HqV, g, blk)) return false;
+    if (parent != nullptr) {
+      parent->Q += XtQX;
+      parent->Q.noalias() -= HqV.transpose() * blk->K.template topRows<N>();
+      parent->b += Xtb;
+      parent->b.noalias() -= HqV.transpose() * blk->k.template head<N>();
+    }
+  } else {
+    blk->dofs = 0;
+    if (parent != nullptr) {
+      parent->Q += XtQX;
+      parent->b += Xtb;
+    }
+  }
+  if (parent != nullptr && blk->has_blend) {
+    parent->Q += blk->BB;
+    parent->b += blk->Br;
   }
   return true;
 }
 
-void EliminateFixedJoint(const JointBlock& blk, JointBlock* parent) {
-  if (parent == nullptr) return;
-  parent->R += blk.R;
-  if (blk.has_blend) parent->R += blk.BB;
-  parent->Q += blk.Q;
-  parent->b += blk.b;
-  if (blk.has_blend) {
-    parent->Q += blk.BB;
-    parent->b += blk.Br;
-  }
-}
-
-// Solves the damped system for the step dq. prior_h/prior_g (size num_dofs) hold the
-// priors' Hessian diagonal and negative gradient. Returns false on a numerical failure.
+// Solves the damped system for the step dq (world axes at each pivot; free-joint
+// translations in world axes). prior_h/prior_g (size num_dofs) hold the priors' Hessian
+// diagonal and negative gradient. Returns false on a numerical failure.
 bool ComputeStep(const Skeleton& skeleton, double damping, const Eigen::VectorXd& prior_h, const Eigen::VectorXd& prior_g,
-                 const KinematicsWorkspace& ws, const Vec3& origin, std::vector<JointBlock>* blocks, Eigen::VectorXd* dq) {
+                 const KinematicsWorkspace& ws, std::vector<JointBlock>* blocks, Eigen::VectorXd* dq) {
   const int n = skeleton.num_joints();
-  for (JointBlock& blk : *blocks) blk.R = blk.Q;  // each joint's own markers, before children add in
   for (int j = n - 1; j >= 0; --j) {
     const Joint& joint = skeleton.joint(j);
-    JointBlock& blk = (*blocks)[static_cast<size_t>(j)];
-    JointBlock* parent = joint.parent.is_valid() ? &(*blocks)[static_cast<size_t>(joint.parent.value)] : nullptr;
-    blk.dofs = JointMotionSubspace(skeleton, ws, j, origin, &blk.S);
+    const auto uj = static_cast<size_t>(j);
+    JointBlock& blk = (*blocks)[uj];
+    const int p = joint.parent.value;
+    JointBlock* parent = p >= 0 ? &(*blocks)[static_cast<size_t>(p)] : nullptr;
+    const Vec3 d = p >= 0 ? Vec3(ws.p_WJ[uj] - ws.p_WJ[static_cast<size_t>(p)]) : Vec3::Zero();
     const int k = skeleton.dof_offset(j);
     bool ok = true;
     switch (joint.type) {
-      case JointType::kFixed: EliminateFixedJoint(blk, parent); break;
-      case JointType::kHinge: ok = EliminateJoint<1>(&blk, damping, prior_h.segment<1>(k), prior_g.segment<1>(k), parent); break;
-      case JointType::kBall: ok = EliminateJoint<3>(&blk, damping, prior_h.segment<3>(k), prior_g.segment<3>(k), parent); break;
-      case JointType::kFree: ok = EliminateJoint<6>(&blk, damping, prior_h.segment<6>(k), prior_g.segment<6>(k), parent); break;
+      case JointType::kFixed:
+        ok = EliminateJoint<0>(joint, ws.R_WJ[uj], d, &blk, damping, prior_h.segment<0>(k), prior_g.segment<0>(k), parent);
+        break;
+      case JointType::kHinge:
+        ok = EliminateJoint<1>(joint, ws.R_WJ[uj], d, &blk, damping, prior_h.segment<1>(k), prior_g.segment<1>(k), parent);
+        break;
+      case JointType::kBall:
+        ok = EliminateJoint<3>(joint, ws.R_WJ[uj], d, &blk, damping, prior_h.segment<3>(k), prior_g.segment<3>(k), parent);
+        break;
+      case JointType::kFree:
+        ok = EliminateJoint<6>(joint, ws.R_WJ[uj], d, &blk, damping, prior_h.segment<6>(k), prior_g.segment<6>(k), parent);
+        break;
     }
     if (!ok) return false;
   }
   for (int j = 0; j < n; ++j) {
     const auto uj = static_cast<size_t>(j);
     JointBlock& blk = (*blocks)[uj];
-    const int parent = skeleton.joint(j).parent.value;
-    const Vec6 V_parent = parent < 0 ? Vec6::Zero() : Vec6((*blocks)[static_cast<size_t>(parent)].V);
-    blk.V = V_parent;
+    const int p = skeleton.joint(j).parent.value;
     const int k = skeleton.dof_offset(j);
-    for (int c = 0; c < blk.dofs; ++c) {
-      const double step = blk.k[c] - blk.K.row(c).dot(V_parent);
-      (*dq)[k + c] = step;
-      blk.V += blk.S.col(c) * step;
+    if (p < 0) {
+      blk.V.setZero();
+      for (int c = 0; c < blk.dofs; ++c) (*dq)[k + c] = blk.k[c];
+    } else {
+      // K acts on the parent's twist at the parent's pivot; this joint's twist is that
+      // twist seen at this pivot (same w, v + w x d) plus its own DOF.
+      const Vec6& Vp = (*blocks)[static_cast<size_t>(p)].V;
+      const Vec3 d = ws.p_WJ[uj] - ws.p_WJ[static_cast<size_t>(p)];
+      blk.V.head<3>() = Vp.head<3>();
+      blk.V.tail<3>() = Vp.tail<3>() + Vp.head<3>().cross(d);
+      for (int c = 0; c < blk.dofs; ++c) (*dq)[k + c] = blk.k[c] - blk.K.row(c).dot(Vp);
     }
+    for (int c = 0; c < blk.dofs; ++c) blk.V += blk.S.col(c) * (*dq)[k + c];
   }
   return dq->allFinite();
+}
+
+// Applies a world-axis step (as ComputeStep returns it) to a pose linearised at ws.
+void IntegrateWorldStep(const Skeleton& skeleton, const KinematicsWorkspace& ws, const Eigen::VectorXd& dq, Pose* pose) {
+  for (int j = 0; j < skeleton.num_joints(); ++j) {
+    const Joint& joint = skeleton.joint(j);
+    const auto uj = static_cast<size_t>(j);
+    const int k = skeleton.dof_offset(j);
+    switch (joint.type) {
+      case JointType::kFixed: break;
+      case JointType::kHinge:
+        pose->rotation[uj] = (pose->rotation[uj] * ExpRotation(joint.hinge_axis * dq[k])).normalized();
+        break;
+      case JointType::kBall:
+        pose->rotation[uj] = (pose->rotation[uj] * ExpRotation(ws.R_WJ[uj].transpose() * dq.segment<3>(k))).normalized();
+        break;
+      case JointType::kFree: {
+        const int p = joint.parent.value;
+        const Vec3 dt = dq.segment<3>(k);
+        pose->translation[uj] += p < 0 ? dt : Vec3(ws.R_WJ[static_cast<size_t>(p)].transpose() * dt);
+        pose->rotation[uj] = (pose->rotation[uj] * ExpRotation(ws.R_WJ[uj].transpose() * dq.segment<3>(k + 3))).normalized();
+        break;
+      }
+    }
+  }
+}
+
+// Converts a world-axis step to the local-axis step IntegratePose takes.
+void WorldStepToLocal(const Skeleton& skeleton, const KinematicsWorkspace& ws, Eigen::VectorXd* dq) {
+  for (int j = 0; j < skeleton.num_joints(); ++j) {
+    const Joint& joint = skeleton.joint(j);
+    const auto uj = static_cast<size_t>(j);
+    const int k = skeleton.dof_offset(j);
+    if (joint.type == JointType::kBall) dq->segment<3>(k) = ws.R_WJ[uj].transpose() * dq->segment<3>(k);
+    if (joint.type == JointType::kFree) {
+      const int p = joint.parent.value;
+      if (p >= 0) dq->segment<3>(k) = ws.R_WJ[static_cast<size_t>(p)].transpose() * dq->segment<3>(k);
+      dq->segment<3>(k + 3) = ws.R_WJ[uj].transpose() * dq->segment<3>(k + 3);
+    }
+  }
+}
+
+// Expresses a local-axis tangent vector (as PoseDifference writes it) in world axes.
+void LocalTangentToWorld(const Skeleton& skeleton, const KinematicsWorkspace& ws, Eigen::VectorXd* v) {
+  for (int j = 0; j < skeleton.num_joints(); ++j) {
+    const JointType type = skeleton.joint(j).type;
+    const auto uj = static_cast<size_t>(j);
+    const int k = skeleton.dof_offset(j);
+    if (type == JointType::kBall) v->segment<3>(k) = ws.R_WJ[uj] * v->segment<3>(k);
+    if (type == JointType::kFree) v->segment<3>(k + 3) = ws.R_WJ[uj] * v->segment<3>(k + 3);
+  }
 }
 
 void ClearBlocks(std::vector<JointBlock>* blocks) {
@@ -344,7 +446,6 @@ IkState::IkState(const Skeleton& skeleton, const MarkerSet& markers)
   }
   for (JointBlock& blk : blocks_) {
     blk.Q.setZero();
-    blk.R.setZero();
     blk.BB.setZero();
     blk.BG.setZero();
     blk.GG.setZero();
@@ -374,35 +475,23 @@ void IkState::Reset(const Pose& pose) {
   history_ = 1;
 }
 
-namespace {
-Vec3 MarkerCentroid(const MarkerSet& markers, std::span<const Vec3> observed, std::span<const double> weights, int used) {
-  Vec3 origin = Vec3::Zero();
-  for (int m = 0; m < markers.num_markers(); ++m) {
-    const auto um = static_cast<size_t>(m);
-    if (UsableMarker(observed[um], weights[um])) origin += observed[um];
-  }
-  return used > 0 ? Vec3(origin / used) : origin;
-}
-}  // namespace
-
 bool ComputeIkStep(const Skeleton& skeleton, const MarkerSet& markers, const IkOptions& options,
                    std::span<const Vec3> observed, std::span<const double> weights, const Pose& pose, double damping,
                    IkState* state, Eigen::VectorXd* dq) {
   IkState& s = *state;
-  int used = 0;
-  for (int m = 0; m < markers.num_markers(); ++m)
-    if (UsableMarker(observed[static_cast<size_t>(m)], weights[static_cast<size_t>(m)])) ++used;
   ForwardKinematics(skeleton, pose, &s.ws_);
   EvaluateMarkers(markers, s.ws_, s.predicted_);
   PoseDifference(skeleton, s.rest_, pose, s.rest_error_);
   s.rest_error_.array() *= s.prior_mask_.array();
+  LocalTangentToWorld(skeleton, s.ws_, &s.rest_error_);
   s.prior_h_ = (options.temporal_weight + options.rest_weight) * s.prior_mask_;
   s.prior_g_ = -options.rest_weight * s.rest_error_;
   ClearBlocks(&s.blocks_);
-  const Vec3 origin = MarkerCentroid(markers, observed, weights, used);
-  AccumulateMarkers(markers, options, observed, weights, s.predicted_, s.ws_, origin, &s.blocks_);
+  AccumulateMarkers(markers, options, observed, weights, s.predicted_, s.ws_, &s.blocks_);
   dq->resize(skeleton.num_dofs());
-  return ComputeStep(skeleton, damping, s.prior_h_, s.prior_g_, s.ws_, origin, &s.blocks_, dq);
+  if (!ComputeStep(skeleton, damping, s.prior_h_, s.prior_g_, s.ws_, &s.blocks_, dq)) return false;
+  WorldStepToLocal(skeleton, s.ws_, dq);
+  return true;
 }
 
 IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOptions& options,
@@ -435,13 +524,12 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
   }
 
   ForwardKinematics(skeleton, s.pose_, &s.ws_);
-  // Twists are referred to the markers' centroid so the 6x6 blocks stay well conditioned
-  // however far the subject stands from the world origin.
-  const Vec3 origin = MarkerCentroid(markers, observed, weights, summary.markers_used);
 
-  // Priors in the tangent space of the warm start (see PriorCost).
+  // Priors in the tangent space of the warm start (see PriorCost), in the world axes
+  // the steps are taken about.
   PoseDifference(skeleton, s.rest_, s.pose_, s.rest_error_);
   s.rest_error_.array() *= s.prior_mask_.array();
+  LocalTangentToWorld(skeleton, s.ws_, &s.rest_error_);
   s.step_total_.setZero();
   // The warm start of a cold solve is only the aligned rest pose: nothing to stay near.
   const double at = summary.cold_start ? 0.0 : options.temporal_weight, ar = options.rest_weight;
@@ -460,14 +548,14 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
     // Elimination adds children into their parents' blocks in place, so every attempt,
     // including a retry after a rejected step, starts from freshly accumulated blocks.
     ClearBlocks(&s.blocks_);
-    AccumulateMarkers(markers, options, observed, weights, s.predicted_, s.ws_, origin, &s.blocks_);
+    AccumulateMarkers(markers, options, observed, weights, s.predicted_, s.ws_, &s.blocks_);
     s.prior_g_ = -(at * s.step_total_ + ar * (s.rest_error_ + s.step_total_)).cwiseProduct(s.prior_mask_);
-    if (!ComputeStep(skeleton, damping, s.prior_h_, s.prior_g_, s.ws_, origin, &s.blocks_, &s.dq_)) {
+    if (!ComputeStep(skeleton, damping, s.prior_h_, s.prior_g_, s.ws_, &s.blocks_, &s.dq_)) {
       summary.status = IkStatus::kNumericalFailure;
       break;
     }
     s.trial_ = s.pose_;
-    IntegratePose(skeleton, s.dq_, &s.trial_);
+    IntegrateWorldStep(skeleton, s.ws_, s.dq_, &s.trial_);
     if (options.apply_joint_limits) ApplyJointLimits(skeleton, &s.trial_);
     ForwardKinematics(skeleton, s.trial_, &s.trial_ws_);
     s.trial_total_ = s.step_total_ + s.dq_;

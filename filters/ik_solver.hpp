@@ -74,7 +74,7 @@ class IkState {
   /// Per-joint elimination storage: the 6x6 quadratic in the joint's world twist and
   /// the blocks that blended (joint + parent) markers add.
   struct JointBlock {
-    Mat6 Q, R, BB, BG, GG, S, K;  // R: the subtree's undamped (not Schur-reduced) quadratic
+    Mat6 Q, BB, BG, GG, S, K;
     Vec6 b, Br, Gr, k, V;
     int dofs = 0;
     bool has_blend = false;
@@ -100,11 +100,13 @@ class IkState {
 IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOptions& options,
                   std::span<const Vec3> observed, std::span<const double> weights, IkState* state);
 
-/// Computes one damped Gauss-Newton step dq (size num_dofs) from `pose`, with the priors
-/// centred on `pose` itself: the step solves
-///   (J'WJ + damping * diag(J'WJ) + (a_t + a_r) M) dq = J'W r - a_r M (pose (-) rest)
-/// with M the rotational-DOF mask. Uses state only as scratch space. Returns false on a
-/// numerical failure. Exposed for tests and diagnostics; SolveIk iterates it.
+/// Computes one damped Gauss-Newton step dq (size num_dofs, local axes as IntegratePose
+/// takes it) from `pose`, with the priors centred on `pose` itself. With damping = 0 the
+/// step solves  (J'WJ + (a_t + a_r) M) dq = J'W r - a_r M (pose (-) rest)  exactly, M the
+/// rotational-DOF mask (rotations about world axes at each joint, which leaves the
+/// isotropic priors unchanged); damping > 0 adds Marquardt damping on each joint's
+/// reduced diagonal. Uses state only as scratch space. Returns false on a numerical
+/// failure. Exposed for tests and diagnostics; SolveIk iterates it.
 bool ComputeIkStep(const Skeleton& skeleton, const MarkerSet& markers, const IkOptions& options,
                    std::span<const Vec3> observed, std::span<const double> weights, const Pose& pose, double damping,
                    IkState* state, Eigen::VectorXd* dq);

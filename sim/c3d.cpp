@@ -87,7 +87,7 @@ class Parser {
 
   void ReadParameters() {
     Require(reader_.Seek(param_start_), "parameters", "starts beyond the end of the file");
-    uint8_t reserved1, reserved2, blocks, processor;
+    uint8_t reserved1 = 0, reserved2 = 0, blocks = 0, processor = 0;
     Require(reader_.ReadU8(&reserved1) && reader_.ReadU8(&reserved2) && reader_.ReadU8(&blocks) && reader_.ReadU8(&processor),
             "parameters", "truncated section header");
     const size_t end = std::min(reader_.size(), param_start_ + std::max<size_t>(blocks, 1) * kBlock);

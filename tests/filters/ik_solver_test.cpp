@@ -26,6 +26,27 @@ class IkSolverTest : public ::testing::Test {
     const TakeMarkerMap map(markers(), fixture_.take);
     map.Observe(fixture_.take, f, observed_, weights_);
   }
+  // The dense Gauss-Newton system (J'WJ + P) dq = J'Wr - g_P in IntegratePose's axes.
+  void DenseNormalEquations(const IkOptions& options, const Pose& pose, Eigen::MatrixXd* H, Eigen::VectorXd* g) const {
+    KinematicsWorkspace ws(skeleton());
+    ForwardKinematics(skeleton(), pose, &ws);
+    const Eigen::MatrixXd J = MarkerJacobian(skeleton(), markers(), ws);
+    Eigen::VectorXd r(J.rows()), w(J.rows());
+    for (int m = 0; m < markers().num_markers(); ++m) {
+      r.segment<3>(3 * m) = observed_[static_cast<size_t>(m)] - EvaluateMarker(markers().marker(m), ws);
+      w.segment<3>(3 * m).setConstant(weights_[static_cast<size_t>(m)]);
+    }
+    Eigen::VectorXd mask = Eigen::VectorXd::Zero(skeleton().num_dofs()), rest_error(skeleton().num_dofs());
+    for (int j = 0; j < skeleton().num_joints(); ++j) {
+      const int k = skeleton().dof_offset(j);
+      if (skeleton().joint(j).type == JointType::kBall) mask.segment<3>(k).setOnes();
+      if (skeleton().joint(j).type == JointType::kFree) mask.segment<3>(k + 3).setOnes();
+    }
+    PoseDifference(skeleton(), RestPose(skeleton()), pose, rest_error);
+    *H = J.transpose() * w.asDiagonal() * J;
+    H->diagonal() += (options.temporal_weight + options.rest_weight) * mask + Eigen::VectorXd::Constant(skeleton().num_dofs(), 1e-12);
+    *g = J.transpose() * w.asDiagonal() * r - options.rest_weight * mask.cwiseProduct(rest_error);
+  }
   const Skeleton& skeleton() const { return *fixture_.skeleton; }
   const MarkerSet& markers() const { return *fixture_.markers; }
 
@@ -34,7 +55,7 @@ class IkSolverTest : public ::testing::Test {
   std::vector<double> weights_;
 };
 
-TEST_F(IkSolverTest, TreeEliminationStepEqualsDenseDampedSolve) {
+TEST_F(IkSolverTest, TreeEliminationStepEqualsDenseGaussNewtonSolve) {
   IkOptions options;
   options.rest_weight = 1e-3;  // make the prior terms visible in the comparison
   std::mt19937_64 rng(5);
@@ -46,34 +67,34 @@ TEST_F(IkSolverTest, TreeEliminationStepEqualsDenseDampedSolve) {
     // Linearise away from the truth so the residuals are large.
     Pose pose = fixture_.motion[static_cast<size_t>(100 * trial)];
     for (auto& q : pose.rotation) q = q * ExpRotation(Vec3(u(rng), u(rng), u(rng)));
-    const double damping = trial * 0.1;
+    const double damping = 0.0;
     IkState state(skeleton(), markers());
     Eigen::VectorXd dq;
     ASSERT_TRUE(ComputeIkStep(skeleton(), markers(), options, observed_, weights_, pose, damping, &state, &dq));
 
-    KinematicsWorkspace ws(skeleton());
-    ForwardKinematics(skeleton(), pose, &ws);
-    const Eigen::MatrixXd J = MarkerJacobian(skeleton(), markers(), ws);
-    Eigen::VectorXd r(J.rows()), w(J.rows());
-    for (int m = 0; m < markers().num_markers(); ++m) {
-      r.segment<3>(3 * m) = observed_[static_cast<size_t>(m)] - EvaluateMarker(markers().marker(m), ws);
-      w.segment<3>(3 * m).setConstant(weights_[static_cast<size_t>(m)]);
-    }
-    const Eigen::MatrixXd JtWJ = J.transpose() * w.asDiagonal() * J;
-    Eigen::VectorXd mask = Eigen::VectorXd::Zero(skeleton().num_dofs()), rest_error(skeleton().num_dofs());
-    for (int j = 0; j < skeleton().num_joints(); ++j) {
-      const int k = skeleton().dof_offset(j);
-      if (skeleton().joint(j).type == JointType::kBall) mask.segment<3>(k).setOnes();
-      if (skeleton().joint(j).type == JointType::kFree) mask.segment<3>(k + 3).setOnes();
-    }
-    PoseDifference(skeleton(), RestPose(skeleton()), pose, rest_error);
-    Eigen::MatrixXd H = JtWJ;
-    H.diagonal() += damping * JtWJ.diagonal() + (options.temporal_weight + options.rest_weight) * mask +
-                    Eigen::VectorXd::Constant(skeleton().num_dofs(), 1e-12);
-    const Eigen::VectorXd g = J.transpose() * w.asDiagonal() * r - options.rest_weight * mask.cwiseProduct(rest_error);
+    Eigen::MatrixXd H;
+    Eigen::VectorXd g;
+    DenseNormalEquations(options, pose, &H, &g);
     const Eigen::VectorXd dense = H.ldlt().solve(g);
     EXPECT_LT((dq - dense).norm(), 1e-8 * std::max(1.0, dense.norm())) << "trial " << trial;
   }
+}
+
+TEST_F(IkSolverTest, DampedStepStillDecreasesTheLinearisedCost) {
+  Observe(250);
+  Pose pose = fixture_.motion[250];
+  for (auto& q : pose.rotation) q = q * ExpRotation(Vec3(0.1, -0.05, 0.08));
+  IkState state(skeleton(), markers());
+  Eigen::MatrixXd H;
+  Eigen::VectorXd g;
+  DenseNormalEquations(IkOptions{}, pose, &H, &g);
+  auto model = [&](const Eigen::VectorXd& dq) { return 0.5 * dq.dot(H * dq) - g.dot(dq); };
+  Eigen::VectorXd gauss_newton, damped;
+  ASSERT_TRUE(ComputeIkStep(skeleton(), markers(), IkOptions{}, observed_, weights_, pose, 0.0, &state, &gauss_newton));
+  ASSERT_TRUE(ComputeIkStep(skeleton(), markers(), IkOptions{}, observed_, weights_, pose, 10.0, &state, &damped));
+  EXPECT_LT(model(damped), 0.0);                    // downhill
+  EXPECT_LE(model(gauss_newton), model(damped));    // the undamped step is the model's minimum
+  EXPECT_LT(damped.norm(), 2.0 * gauss_newton.norm());
 }
 
 TEST_F(IkSolverTest, ColdStartRecoversAPoseFromCleanMarkers) {
