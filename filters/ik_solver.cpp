@@ -183,18 +183,34 @@ bool EliminateJoint(const Joint& joint, const Mat3& R_WJ, const Vec3& d, JointBl
     Eigen::Matrix<double, N, N> H;
     Eigen::Matrix<double, N, 6> HqV;
     Eigen::Matrix<double, N, 1> g;
-    if (blk->has_blend) {
-      H.noalias() = S.transpose() * (blk->Q + blk->GG) * S;
-      g.noalias() = S.transpose() * (blk->b + blk->Gr);
+    if constexpr (N == 3) {
+      // Ball joints dominate; their subspace [I; 0] just selects the rotational rows.
+      H = blk->Q.template topLeftCorner<3, 3>();
+      g = blk->b.template head<3>();
+      if (blk->has_blend) {
+        H += blk->GG.template topLeftCorner<3, 3>();
+        g += blk->Gr.template head<3>();
+      }
+      if (parent != nullptr) {
+        HqV = QX.template topRows<3>();
+        if (blk->has_blend) HqV += blk->BG.template leftCols<3>().transpose();
+      } else {
+        HqV.setZero();
+      }
     } else {
-      H.noalias() = S.transpose() * blk->Q * S;
-      g.noalias() = S.transpose() * blk->b;
-    }
-    if (parent != nullptr) {
-      HqV.noalias() = S.transpose() * QX;
-      if (blk->has_blend) HqV.noalias() += S.transpose() * blk->BG.transpose();
-    } else {
-      HqV.setZero();
+      if (blk->has_blend) {
+        H.noalias() = S.transpose() * (blk->Q + blk->GG) * S;
+        g.noalias() = S.transpose() * (blk->b + blk->Gr);
+      } else {
+        H.noalias() = S.transpose() * blk->Q * S;
+        g.noalias() = S.transpose() * blk->b;
+      }
+      if (parent != nullptr) {
+        HqV.noalias() = S.transpose() * QX;
+        if (blk->has_blend) HqV.noalias() += S.transpose() * blk->BG.transpose();
+      } else {
+        HqV.setZero();
+      }
     }
     g += prior_g;
     for (int i = 0; i < N; ++i) H(i, i) += damping * H(i, i) + prior_h[i] + 1e-12;

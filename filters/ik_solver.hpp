@@ -28,7 +28,7 @@ struct IkOptions {
   int max_iterations = 6;              ///< Per warm-started frame.
   int cold_start_max_iterations = 60;  ///< When there is no previous solution.
   double initial_damping = 1e-4;       ///< LM factor on diag(H).
-  double function_tolerance = 1e-3;    ///< Converged when the cost drops by less than this fraction.
+  double function_tolerance = 1e-2;    ///< Converged when the cost drops by less than this fraction.
   double step_tolerance = 1e-5;        ///< Converged when every step component is below this (rad or m).
   double huber_delta_m = 0.0;          ///< Huber threshold in metres; 0 disables the robust loss.
   bool predict_constant_velocity = true;

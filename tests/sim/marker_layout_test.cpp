@@ -113,6 +113,14 @@ TEST(MarkerLayoutTest, UnknownSegmentIsNamed) {
   }
 }
 
+TEST(MarkerLayoutTest, DocumentedExampleLayoutPlacesOnTheHumanoid) {
+  const auto layout = ReadMarkerLayout(std::string(MOCAPD_CONFIG_DIR) + "/layout.example.toml");
+  const Skeleton sk = MakeHumanoidSkeleton();
+  const auto markers = PlaceMarkers(sk, MatchHumanoidRoles(sk), layout, {});
+  ASSERT_EQ(markers.size(), 2u);
+  EXPECT_EQ(markers[1].num_attachments, 2);
+}
+
 TEST(MarkerLayoutTest, ReadsLayoutFilesAndReportsBadFields) {
   const std::string dir = testing::TempDir("layout");
   {

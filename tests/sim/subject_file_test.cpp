@@ -59,6 +59,15 @@ TEST(SubjectFileTest, BadFilesNameTheLineAndField) {
   ExpectError("format_version = 1\n[[joint]\n", "s.toml:2");
 }
 
+TEST(SubjectFileTest, DocumentedExampleParses) {
+  const SubjectModel dut = ReadSubjectModel(std::string(MOCAPD_CONFIG_DIR) + "/subject.example.toml");
+  EXPECT_EQ(dut.name, "example");
+  EXPECT_EQ(dut.skeleton->num_joints(), 3);
+  ASSERT_EQ(dut.markers->num_markers(), 3);
+  EXPECT_EQ(dut.markers->marker(2).num_attachments, 2);
+  EXPECT_NEAR(dut.fit_rms_m[0], 0.21e-3, 1e-12);
+}
+
 TEST(SubjectFileTest, MissingFileIsAClearError) { EXPECT_THROW(ReadSubjectModel("/nonexistent/s.toml"), std::runtime_error); }
 
 }  // namespace
