@@ -128,6 +128,40 @@ void ShiftQuadratic(const Mat6& Q, const Vec6& b, const Vec3& d, Mat6* QX, Mat6*
   Xtb->tail<3>() = b.tail<3>();
 }
 
+// Cholesky factorisation H = L L' of a 3x3 matrix in place (lower triangle). Returns
+// false unless H is positive definite.
+bool CholeskyInPlace3(Mat3* H) {
+  Mat3& A = *H;
+  if (!(A(0, 0) > 0.0)) return false;
+  const double l00 = std::sqrt(A(0, 0));
+  const double l10 = A(1, 0) / l00, l20 = A(2, 0) / l00;
+  const double d1 = A(1, 1) - l10 * l10;
+  if (!(d1 > 0.0)) return false;
+  const double l11 = std::sqrt(d1);
+  const double l21 = (A(2, 1) - l20 * l10) / l11;
+  const double d2 = A(2, 2) - l20 * l20 - l21 * l21;
+  if (!(d2 > 0.0)) return false;
+  A << l00, 0.0, 0.0, l10, l11, 0.0, l20, l21, std::sqrt(d2);
+  return true;
+}
+
+// Solves L X = M and L y = v in place for lower-triangular L.
+void ForwardSubstitute3(const Mat3& L, Eigen::Matrix<double, 3, 6>* M, Vec3* v) {
+  M->row(0) /= L(0, 0);
+  M->row(1) = (M->row(1) - L(1, 0) * M->row(0)) / L(1, 1);
+  M->row(2) = (M->row(2) - L(2, 0) * M->row(0) - L(2, 1) * M->row(1)) / L(2, 2);
+  (*v)[0] /= L(0, 0);
+  (*v)[1] = ((*v)[1] - L(1, 0) * (*v)[0]) / L(1, 1);
+  (*v)[2] = ((*v)[2] - L(2, 0) * (*v)[0] - L(2, 1) * (*v)[1]) / L(2, 2);
+}
+
+// Solves L' x = v in place for lower-triangular L.
+void BackSubstitute3(const Mat3& L, Vec3* v) {
+  (*v)[2] /= L(2, 2);
+  (*v)[1] = ((*v)[1] - L(2, 1) * (*v)[2]) / L(1, 1);
+  (*v)[0] = ((*v)[0] - L(1, 0) * (*v)[1] - L(2, 0) * (*v)[2]) / L(0, 0);
+}
+
 // Writes K = H^-1 HqV and k = H^-1 g for a symmetric positive definite H. Returns false
 // if H is not positive definite. Small systems use the closed-form inverse; the 6x6
 // (free joint) uses a Cholesky factorisation with vector solves, because Eigen's
@@ -216,12 +250,29 @@ bool EliminateJoint(const Joint& joint, const Mat3& R_WJ, const Vec3& d, JointBl
     for (int i = 0; i < N; ++i) H(i, i) += damping * H(i, i) + prior_h[i] + 1e-12;
     blk->dofs = N;
     blk->S.template leftCols<N>() = S;
-    if (!SolveSpd<N>(H, HqV, g, blk)) return false;
-    if (parent != nullptr) {
-      parent->Q += XtQX;
-      parent->Q.noalias() -= HqV.transpose() * blk->K.template topRows<N>();
-      parent->b += Xtb;
-      parent->b.noalias() -= HqV.transpose() * blk->k.template head<N>();
+    if constexpr (N == 3) {
+      // Symmetric form: with H = L L', W = L^-1 HqV and w = L^-1 g, the parent receives
+      // -W'W and -W'w, and the forward sweep solves L' dq = w - W V_p. About half the
+      // work of forming K = H^-1 HqV, on the joints that dominate the cost.
+      if (!CholeskyInPlace3(&H)) return false;
+      blk->L = H;
+      ForwardSubstitute3(H, &HqV, &g);
+      blk->K.template topRows<3>() = HqV;
+      blk->k.template head<3>() = g;
+      if (parent != nullptr) {
+        parent->Q += XtQX;
+        parent->Q.noalias() -= HqV.transpose() * HqV;
+        parent->b += Xtb;
+        parent->b.noalias() -= HqV.transpose() * g;
+      }
+    } else {
+      if (!SolveSpd<N>(H, HqV, g, blk)) return false;
+      if (parent != nullptr) {
+        parent->Q += XtQX;
+        parent->Q.noalias() -= HqV.transpose() * blk->K.template topRows<N>();
+        parent->b += Xtb;
+        parent->b.noalias() -= HqV.transpose() * blk->k.template head<N>();
+      }
     }
   } else {
     blk->dofs = 0;
@@ -275,7 +326,13 @@ bool ComputeStep(const Skeleton& skeleton, double damping, const Eigen::VectorXd
     const int k = skeleton.dof_offset(j);
     if (p < 0) {
       blk.V.setZero();
-      for (int c = 0; c < blk.dofs; ++c) (*dq)[k + c] = blk.k[c];
+      if (skeleton.joint(j).type == JointType::kBall) {
+        Vec3 x = blk.k.head<3>();
+        BackSubstitute3(blk.L, &x);
+        dq->segment<3>(k) = x;
+      } else {
+        for (int c = 0; c < blk.dofs; ++c) (*dq)[k + c] = blk.k[c];
+      }
     } else {
       // K acts on the parent's twist at the parent's pivot; this joint's twist is that
       // twist seen at this pivot (same w, v + w x d) plus its own DOF.
@@ -283,7 +340,13 @@ bool ComputeStep(const Skeleton& skeleton, double damping, const Eigen::VectorXd
       const Vec3 d = ws.p_WJ[uj] - ws.p_WJ[static_cast<size_t>(p)];
       blk.V.head<3>() = Vp.head<3>();
       blk.V.tail<3>() = Vp.tail<3>() + Vp.head<3>().cross(d);
-      for (int c = 0; c < blk.dofs; ++c) (*dq)[k + c] = blk.k[c] - blk.K.row(c).dot(Vp);
+      if (skeleton.joint(j).type == JointType::kBall) {
+        Vec3 x = blk.k.head<3>() - blk.K.topRows<3>() * Vp;
+        BackSubstitute3(blk.L, &x);
+        dq->segment<3>(k) = x;
+      } else {
+        for (int c = 0; c < blk.dofs; ++c) (*dq)[k + c] = blk.k[c] - blk.K.row(c).dot(Vp);
+      }
     }
     for (int c = 0; c < blk.dofs; ++c) blk.V += blk.S.col(c) * (*dq)[k + c];
   }

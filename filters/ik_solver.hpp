@@ -76,6 +76,7 @@ class IkState {
   struct JointBlock {
     Mat6 Q, BB, BG, GG, S, K;
     Vec6 b, Br, Gr, k, V;
+    Mat3 L = Mat3::Identity();  // ball joints: Cholesky factor of the joint's system
     int dofs = 0;
     bool has_blend = false;
   };

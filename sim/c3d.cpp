@@ -49,7 +49,11 @@ class Parser {
   [[noreturn]] void Fail(const std::string& section, size_t offset, const std::string& what) const {
     throw C3dError(source_ + ": " + section + " section, byte " + std::to_string(offset) + ": " + what);
   }
-  void Require(bool ok, const std::string& section, const std::string& what) {
+  // Takes C strings so the common (successful) case builds no std::string.
+  void Require(bool ok, const char* section, const char* what) {
+    if (!ok) Fail(section, reader_.offset(), what);
+  }
+  void Require(bool ok, const char* section, const std::string& what) {
     if (!ok) Fail(section, reader_.offset(), what);
   }
 
@@ -271,6 +275,11 @@ class Parser {
     }
     if (frames > 0 && used > 0 && static_cast<uint64_t>(frames) * used > (1ull << 31))
       Fail("data", data_start, "implausible size: " + std::to_string(frames) + " frames x " + std::to_string(used) + " points");
+    if (frame_bytes == 0 && frames > 0) {
+      // Nothing is stored per frame (no points, no analog): a frame count alone, however
+      // large, carries no samples -- keep it out of loops that would walk it.
+      Fail("parameters", param_start_, std::to_string(frames) + " frames declared but no points or analog channels to store");
+    }
     take.Allocate(static_cast<int>(frames));
     const double unit_scale = std::abs(scale);
     for (int64_t f = 0; f < frames; ++f) {

@@ -146,6 +146,20 @@ TEST(C3dTest, CorruptBytesNeverCrash) {
   EXPECT_GT(errors, 0);
 }
 
+TEST(C3dTest, FramesWithNothingToStoreAreRejectedNotWalked) {
+  // Found by fuzzing: a huge frame count with zero bytes per frame used to loop for
+  // minutes. Such a file carries no samples at all and is now refused at once.
+  C3dTake empty;
+  empty.rate_hz = 100.0;
+  empty.Allocate(40000);
+  try {
+    ParseC3d(EncodeC3d(empty), "empty.c3d");
+    FAIL();
+  } catch (const C3dError& e) {
+    EXPECT_NE(std::string(e.what()).find("40000 frames declared but no points or analog channels"), std::string::npos) << e.what();
+  }
+}
+
 TEST(C3dTest, BadHeaderKeyIsReported) {
   std::vector<uint8_t> bytes = EncodeC3d(MakeTake(2, 2));
   bytes[1] = 0x51;
