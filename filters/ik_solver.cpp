@@ -27,15 +27,17 @@ namespace {
 
 using JointBlock = IkState::JointBlock;
 
-// Rows of A(x)' A(x) and A(x)' r for a point x (relative to the twist origin).
-void AddPointTerm(const Vec3& x, const Vec3& r, double w, Mat6* Q, Vec6* b) {
-  const Mat3 X = Skew(x);
-  Q->topLeftCorner<3, 3>().noalias() += w * (x.squaredNorm() * Mat3::Identity() - x * x.transpose());
-  Q->topRightCorner<3, 3>() += w * X;
-  Q->bottomLeftCorner<3, 3>() -= w * X;
-  Q->bottomRightCorner<3, 3>().diagonal().array() += w;
-  b->head<3>() += w * x.cross(r);
-  b->tail<3>() += w * r;
+// Adds the rigid markers' moments (sum over markers of A(x)' A(x) and A(x)' r, with
+// A(x) = [-[x]x I]) to the joint's quadratic.
+void AddMoments(JointBlock* blk) {
+  if (blk->m0 == 0.0) return;
+  const Mat3 X = Skew(blk->m1);
+  blk->Q.topLeftCorner<3, 3>() += blk->M2.trace() * Mat3::Identity() - blk->M2;
+  blk->Q.topRightCorner<3, 3>() += X;
+  blk->Q.bottomLeftCorner<3, 3>() -= X;
+  blk->Q.bottomRightCorner<3, 3>().diagonal().array() += blk->m0;
+  blk->b.head<3>() += blk->xr;
+  blk->b.tail<3>() += blk->wr;
 }
 
 Eigen::Matrix<double, 3, 6> PointMap(const Vec3& x) {
@@ -95,7 +97,14 @@ void AccumulateMarkers(const MarkerSet& markers, const IkOptions& options, std::
     const auto j0 = static_cast<size_t>(a0.joint);
     JointBlock& blk = (*blocks)[j0];
     if (def.num_attachments == 1) {
-      AddPointTerm(predicted[um] - ws.p_WJ[j0], r, w, &blk.Q, &blk.b);
+      // Moments only: the 6x6 block is built once per joint (see AddMoments).
+      const Vec3 x = predicted[um] - ws.p_WJ[j0];
+      const Vec3 wx = w * x;
+      blk.m0 += w;
+      blk.m1 += wx;
+      blk.M2.noalias() += wx * x.transpose();
+      blk.xr += wx.cross(r);
+      blk.wr += w * r;
       continue;
     }
     const MarkerAttachment& a1 = def.attachments[1];
@@ -117,14 +126,20 @@ void AccumulateMarkers(const MarkerSet& markers, const IkOptions& options, std::
 // X = [I 0; D I], D = -[d]x, d = c - p, returns Q X (needed for the cross terms) and
 // writes X' Q X, X' b. Exploits the block structure instead of 6x6 products.
 void ShiftQuadratic(const Mat6& Q, const Vec6& b, const Vec3& d, Mat6* QX, Mat6* XtQX, Vec6* Xtb) {
-  const Mat3 D = -Skew(d);
-  QX->leftCols<3>().noalias() = Q.leftCols<3>() + Q.rightCols<3>() * D;
-  QX->rightCols<3>() = Q.rightCols<3>();
-  XtQX->bottomRows<3>() = QX->bottomRows<3>();
-  XtQX->topRows<3>() = QX->topRows<3>();
-  XtQX->topRows<3>().noalias() += D.transpose() * QX->bottomRows<3>();
-  Xtb->head<3>() = b.head<3>();
-  Xtb->head<3>().noalias() += D.transpose() * b.tail<3>();
+  // Q X: left columns gain Q_right * D = -Q_right [d]x, built column by column from
+  // (d x e_k) so the skew structure costs 6 column updates instead of a 6x3x3 product.
+  const auto R = Q.rightCols<3>();
+  QX->col(0) = Q.col(0) - (d.z() * R.col(1) - d.y() * R.col(2));
+  QX->col(1) = Q.col(1) - (d.x() * R.col(2) - d.z() * R.col(0));
+  QX->col(2) = Q.col(2) - (d.y() * R.col(0) - d.x() * R.col(1));
+  QX->rightCols<3>() = R;
+  // X' (Q X): top rows gain D' * bottom = [d]x * bottom, row by row likewise.
+  const auto B = QX->bottomRows<3>();
+  XtQX->bottomRows<3>() = B;
+  XtQX->row(0) = QX->row(0) + (d.y() * B.row(2) - d.z() * B.row(1));
+  XtQX->row(1) = QX->row(1) + (d.z() * B.row(0) - d.x() * B.row(2));
+  XtQX->row(2) = QX->row(2) + (d.x() * B.row(1) - d.y() * B.row(0));
+  Xtb->head<3>() = b.head<3>() + d.cross(b.tail<3>());
   Xtb->tail<3>() = b.tail<3>();
 }
 
@@ -209,6 +224,7 @@ Eigen::Matrix<double, 6, N> MotionSubspace(const Joint& joint, const Mat3& R_WJ)
 template <int N, typename PriorH, typename PriorG>
 bool EliminateJoint(const Joint& joint, const Mat3& R_WJ, const Vec3& d, JointBlock* blk, double damping,
                     const PriorH& prior_h, const PriorG& prior_g, JointBlock* parent) {
+  AddMoments(blk);
   Mat6 QX, XtQX;
   Vec6 Xtb;
   if (parent != nullptr) ShiftQuadratic(blk->Q, blk->b, d, &QX, &XtQX, &Xtb);
@@ -260,8 +276,11 @@ bool EliminateJoint(const Joint& joint, const Mat3& R_WJ, const Vec3& d, JointBl
       blk->K.template topRows<3>() = HqV;
       blk->k.template head<3>() = g;
       if (parent != nullptr) {
+        // -W'W as three rank-one updates: Eigen's 6x3x6 lazy product is slower here.
+        XtQX.noalias() -= HqV.row(0).transpose() * HqV.row(0);
+        XtQX.noalias() -= HqV.row(1).transpose() * HqV.row(1);
+        XtQX.noalias() -= HqV.row(2).transpose() * HqV.row(2);
         parent->Q += XtQX;
-        parent->Q.noalias() -= HqV.transpose() * HqV;
         parent->b += Xtb;
         parent->b.noalias() -= HqV.transpose() * g;
       }
@@ -408,6 +427,11 @@ void ClearBlocks(std::vector<JointBlock>* blocks) {
   for (JointBlock& blk : *blocks) {
     blk.Q.setZero();
     blk.b.setZero();
+    blk.m0 = 0.0;
+    blk.m1.setZero();
+    blk.M2.setZero();
+    blk.xr.setZero();
+    blk.wr.setZero();
     if (blk.has_blend) {
       blk.BB.setZero();
       blk.BG.setZero();

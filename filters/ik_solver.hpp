@@ -77,6 +77,11 @@ class IkState {
     Mat6 Q, BB, BG, GG, S, K;
     Vec6 b, Br, Gr, k, V;
     Mat3 L = Mat3::Identity();  // ball joints: Cholesky factor of the joint's system
+    // Rigidly attached markers, as weighted moments about the pivot: their quadratic is
+    // [tr(M2) I - M2, [m1]x; -[m1]x, m0 I] with gradient (sum w x cross r, sum w r).
+    Mat3 M2 = Mat3::Zero();
+    Vec3 m1 = Vec3::Zero(), xr = Vec3::Zero(), wr = Vec3::Zero();
+    double m0 = 0.0;
     int dofs = 0;
     bool has_blend = false;
   };
