@@ -5,10 +5,12 @@
 #include <exception>
 #include <iostream>
 #include <nlohmann/json.hpp>
+#include <fstream>
 #include <random>
 
 #include "sim/bvh.hpp"
 #include "sim/c3d.hpp"
+#include "sim/corruption.hpp"
 #include "sim/humanoid.hpp"
 #include "sim/marker_layout.hpp"
 #include "sim/subject_file.hpp"
@@ -29,6 +31,8 @@ struct SynthOptions {
   std::string bvh_units;
   double noise_mm = 0.0;
   uint64_t seed = 1;
+  std::string corrupt;
+  std::string truth_mask;
 };
 
 int RunSynth(const SynthOptions& o) {
@@ -50,7 +54,20 @@ int RunSynth(const SynthOptions& o) {
   auto markers = std::make_shared<const mocapd::MarkerSet>(
       source.skeleton, mocapd::PlaceMarkers(source.skeleton, roles, layout, source.end_sites));
   std::mt19937_64 rng(o.seed);
-  const mocapd::C3dTake take = mocapd::SynthesizeMarkers(source.skeleton, *markers, motion, rate, o.noise_mm * 1e-3, &rng);
+  mocapd::C3dTake take = mocapd::SynthesizeMarkers(source.skeleton, *markers, motion, rate, o.noise_mm * 1e-3, &rng);
+  if (!o.corrupt.empty()) {
+    mocapd::CorruptionOptions corruption;
+    corruption.severity = mocapd::ParseCorruptionSeverity(o.corrupt);
+    corruption.seed = o.seed;
+    mocapd::CorruptedTake corrupted = mocapd::CorruptTake(take, markers.get(), corruption);
+    std::cout << "corrupted " << 100.0 * corrupted.corrupted_fraction << " % of marker-samples (" << corrupted.events.size()
+              << " events, " << o.corrupt << ", seed " << o.seed << ")\n";
+    if (!o.truth_mask.empty()) {
+      std::ofstream(o.truth_mask) << mocapd::CorruptionTruthJson(corrupted, corruption).dump(1) << "\n";
+      std::cout << "wrote " << o.truth_mask << "\n";
+    }
+    take = std::move(corrupted.take);
+  }
   mocapd::WriteC3d(o.out, take);
   std::cout << "wrote " << o.out << ": " << take.num_frames << " frames at " << rate << " Hz, " << markers->num_markers()
             << " markers\n";
@@ -99,7 +116,10 @@ int main(int argc, char** argv) {
   synth_cmd->add_option("--truth-bvh", synth.truth_bvh, "Also write the resampled ground-truth motion");
   synth_cmd->add_option("--bvh-units", synth.bvh_units, "BVH length unit: mm, cm, m or in (default: guess)");
   synth_cmd->add_option("--noise-mm", synth.noise_mm, "Gaussian marker noise (sigma, mm)")->check(CLI::Range(0.0, 100.0));
-  synth_cmd->add_option("--seed", synth.seed, "Noise seed")->capture_default_str();
+  synth_cmd->add_option("--seed", synth.seed, "Noise and corruption seed")->capture_default_str();
+  synth_cmd->add_option("--corrupt", synth.corrupt, "Corrupt the take: light | medium | heavy (about 5 / 15 / 30 % of samples)")
+      ->check(CLI::IsMember({"light", "medium", "heavy"}));
+  synth_cmd->add_option("--truth", synth.truth_mask, "With --corrupt: write the ground-truth corruption mask (JSON)");
 
   CLI11_PARSE(app, argc, argv);
   try {
