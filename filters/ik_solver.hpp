@@ -25,7 +25,7 @@
 namespace mocapd {
 
 struct IkOptions {
-  int max_iterations = 6;              ///< Per warm-started frame.
+  int max_iterations = 3;              ///< Per warm-started frame.
   int cold_start_max_iterations = 60;  ///< When there is no previous solution.
   double initial_damping = 1e-4;       ///< LM factor on diag(H).
   double function_tolerance = 1e-2;    ///< Converged when the cost drops by less than this fraction.

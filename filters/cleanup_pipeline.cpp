@@ -1,0 +1,427 @@
+// Streaming outlier detection, Hermite repair and final solve (see the header).
+#include "filters/cleanup_pipeline.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include "filters/hermite.hpp"
+
+namespace mocapd {
+
+struct CleanupPipeline::Slot {
+  int64_t frame = -1;
+  std::vector<Vec3> raw;  // as captured, after swap relabelling
+  std::vector<uint8_t> valid;
+  std::vector<uint8_t> relabelled;
+  std::vector<MaskReason> mask;
+  std::vector<Vec3> reference;  // X^ = LBS(Y^)
+};
+
+struct CleanupPipeline::MarkerTrack {
+  double residual_scale = 0.0;  // running robust residual scale, metres
+  int residual_run = 0;         // consecutive residual outliers
+  int frozen_run = 0;
+  bool fallen = false;  // excluded from the robust solve until it fits again
+  bool has_published = false;
+  int64_t last_observed = -1;  // frame of the last published observed sample
+  Vec3 offset = Vec3::Zero();  // last published X- - X^ ...
+  Vec3 offset_velocity = Vec3::Zero();  // ... and its per-frame change
+  Vec3 output = Vec3::Zero();           // last published X- ...
+  Vec3 output_velocity = Vec3::Zero();  // ... and its per-frame change
+};
+
+const char* to_string(MaskReason reason) {
+  switch (reason) {
+    case MaskReason::kNone: return "none";
+    case MaskReason::kMissing: return "missing";
+    case MaskReason::kDisagreement: return "disagreement";
+    case MaskReason::kResidual: return "residual";
+    case MaskReason::kSpike: return "spike";
+    case MaskReason::kRigidDistance: return "rigid_distance";
+    case MaskReason::kSwap: return "swap";
+    case MaskReason::kFrozen: return "frozen";
+    case MaskReason::kFallenOff: return "fallen_off";
+    case MaskReason::kSmallTrack: return "small_track";
+    case MaskReason::kTrimmed: return "trimmed";
+  }
+  return "?";
+}
+
+const char* to_string(MarkerStatus status) {
+  switch (status) {
+    case MarkerStatus::kObserved: return "observed";
+    case MarkerStatus::kRepaired: return "repaired";
+    case MarkerStatus::kUnrecoverable: return "unrecoverable";
+  }
+  return "?";
+}
+
+CleanupOptions::CleanupOptions() { robust_ik.huber_delta_m = 0.02; }
+
+void CleanupOptions::Validate() const {
+  auto require = [](bool ok, const char* field, const char* expected) {
+    if (!ok) throw std::invalid_argument(std::string("CleanupOptions.") + field + ": expected " + expected);
+  };
+  require(rate_hz > 0.0 && std::isfinite(rate_hz), "rate_hz", "> 0");
+  require(lookahead >= 0 && lookahead <= 1000, "lookahead", "0..1000 frames");
+  require(window >= 1, "window", ">= 1 frame");
+  require(disagreement_position_m > 0.0, "disagreement_position_m", "> 0");
+  require(disagreement_rotation_rad > 0.0, "disagreement_rotation_rad", "> 0");
+  require(residual_floor_m > 0.0, "residual_floor_m", "> 0");
+  require(residual_scale_factor > 0.0, "residual_scale_factor", "> 0");
+  require(spike_m > 0.0, "spike_m", "> 0");
+  require(rigid_tolerance_m > 0.0, "rigid_tolerance_m", "> 0");
+  require(swap_margin_m >= 0.0, "swap_margin_m", ">= 0");
+  require(frozen_motion_m >= 0.0 && frozen_reference_motion_m > frozen_motion_m, "frozen_reference_motion_m",
+          "> frozen_motion_m >= 0");
+  require(frozen_frames >= 1, "frozen_frames", ">= 1");
+  require(fallen_frames >= 1, "fallen_frames", ">= 1");
+  require(small_gap_frames >= 0, "small_gap_frames", ">= 0");
+  require(small_track_frames >= 0, "small_track_frames", ">= 0");
+  require(trim_slope_m > 0.0, "trim_slope_m", "> 0");
+  require(max_trim_frames >= 0, "max_trim_frames", ">= 0");
+  require(max_offset_velocity_m > 0.0, "max_offset_velocity_m", "> 0");
+  naive_ik.Validate();
+  robust_ik.Validate();
+  final_ik.Validate();
+}
+
+namespace {
+Vec3 ClampNorm(const Vec3& v, double max_norm) {
+  const double n = v.norm();
+  return n > max_norm ? Vec3(v * (max_norm / n)) : v;
+}
+}  // namespace
+
+CleanupPipeline::CleanupPipeline(std::shared_ptr<const Skeleton> skeleton, std::shared_ptr<const MarkerSet> markers,
+                                 const CleanupOptions& options)
+    : skeleton_(std::move(skeleton)),
+      markers_(std::move(markers)),
+      options_(options),
+      naive_(*skeleton_, *markers_),
+      robust_(*skeleton_, *markers_),
+      final_(*skeleton_, *markers_) {
+  options_.Validate();
+  const auto m = static_cast<size_t>(markers_->num_markers());
+  // The frames being published (t - K), the lookahead up to t, and t - K - 1 for slopes.
+  ring_.resize(static_cast<size_t>(options_.lookahead) + 2);
+  for (Slot& s : ring_) {
+    s.raw.assign(m, Vec3::Constant(kNaN));
+    s.valid.assign(m, 0);
+    s.relabelled.assign(m, 0);
+    s.mask.assign(m, MaskReason::kMissing);
+    s.reference.assign(m, Vec3::Zero());
+  }
+  tracks_.assign(m, MarkerTrack{});
+  for (MarkerTrack& t : tracks_) t.residual_scale = options_.residual_floor_m / options_.residual_scale_factor;
+  markers_of_joint_.assign(static_cast<size_t>(skeleton_->num_joints()), {});
+  for (int i = 0; i < markers_->num_markers(); ++i) {
+    const MarkerDefinition& d = markers_->marker(i);
+    for (int k = 0; k < d.num_attachments; ++k)
+      markers_of_joint_[static_cast<size_t>(d.attachments[static_cast<size_t>(k)].joint)].push_back(i);
+  }
+  // Markers rigidly on the same joint keep their distance.
+  for (int i = 0; i < markers_->num_markers(); ++i) {
+    for (int j = i + 1; j < markers_->num_markers(); ++j) {
+      const MarkerDefinition& a = markers_->marker(i);
+      const MarkerDefinition& b = markers_->marker(j);
+      if (a.num_attachments != 1 || b.num_attachments != 1 || a.attachments[0].joint != b.attachments[0].joint) continue;
+      rigid_pairs_.emplace_back(i, j);
+      rigid_distance_.push_back((a.attachments[0].offset - b.attachments[0].offset).norm());
+    }
+  }
+  weights_.assign(m, 0.0);
+  scratch_.assign(2 * m, Vec3::Zero());
+  out_.markers.assign(m, Vec3::Constant(kNaN));
+  out_.status.assign(m, MarkerStatus::kUnrecoverable);
+  out_.reason.assign(m, MaskReason::kNone);
+  out_.pose = RestPose(*skeleton_);
+}
+
+CleanupPipeline::~CleanupPipeline() = default;
+
+CleanupPipeline::Slot& CleanupPipeline::slot(int64_t frame) {
+  return ring_[static_cast<size_t>(frame % static_cast<int64_t>(ring_.size()))];
+}
+
+void CleanupPipeline::Reset() {
+  for (Slot& s : ring_) s.frame = -1;
+  for (MarkerTrack& t : tracks_) {
+    t = MarkerTrack{};
+    t.residual_scale = options_.residual_floor_m / options_.residual_scale_factor;
+  }
+  naive_.Reset();
+  robust_.Reset();
+  final_.Reset();
+  next_in_ = next_out_ = 0;
+}
+
+bool CleanupPipeline::Push(std::span<const Vec3> p_WM) {
+  const int64_t t = next_in_++;
+  ++counters_.frames_in;
+  Slot& s = slot(t);
+  s.frame = t;
+  const auto m_count = static_cast<size_t>(markers_->num_markers());
+  for (size_t m = 0; m < m_count; ++m) {
+    const bool valid = m < p_WM.size() && p_WM[m].allFinite();
+    s.raw[m] = valid ? p_WM[m] : Vec3::Constant(kNaN);
+    s.valid[m] = valid;
+    s.relabelled[m] = 0;
+    s.mask[m] = valid ? MaskReason::kNone : MaskReason::kMissing;
+  }
+  // Y^: robust, without markers known to have come off.
+  for (size_t m = 0; m < m_count; ++m) weights_[m] = s.valid[m] && !tracks_[m].fallen && tracks_[m].frozen_run == 0 ? 1.0 : 0.0;
+  SolveIk(*skeleton_, *markers_, options_.robust_ik, s.raw, weights_, &robust_);
+  const auto predicted = robust_.predicted_markers();
+  std::copy(predicted.begin(), predicted.end(), s.reference.begin());
+  // Y: the markers as they are.
+  for (size_t m = 0; m < m_count; ++m) weights_[m] = s.valid[m] ? 1.0 : 0.0;
+  SolveIk(*skeleton_, *markers_, options_.naive_ik, s.raw, weights_, &naive_);
+  Detect(t);
+  CleanMask(t);
+  if (t - options_.lookahead < next_out_) return false;
+  Publish(next_out_, t);
+  return true;
+}
+
+bool CleanupPipeline::Flush() {
+  if (next_out_ >= next_in_) return false;
+  Publish(next_out_, next_in_ - 1);
+  return true;
+}
+
+void CleanupPipeline::Detect(int64_t t) {
+  Slot& s = slot(t);
+  const bool has_previous = t > 0 && slot(t - 1).frame == t - 1;
+  const Slot& prev = slot(t - 1 >= 0 ? t - 1 : 0);
+  const auto m_count = static_cast<size_t>(markers_->num_markers());
+  const double alpha = 2.0 / (options_.window + 1.0);
+
+  // Residuals against X^ and each marker's adaptive threshold.
+  auto threshold = [&](size_t m) {
+    return std::max(options_.residual_floor_m, options_.residual_scale_factor * tracks_[m].residual_scale);
+  };
+  std::span<Vec3> residual(scratch_.data(), m_count);
+  for (size_t m = 0; m < m_count; ++m) residual[m] = s.valid[m] ? Vec3(s.raw[m] - s.reference[m]) : Vec3::Zero();
+
+  // Swaps first: a relabelled pair is fine for every other detector.
+  for (size_t i = 0; i < m_count; ++i) {
+    if (!s.valid[i] || residual[i].norm() <= threshold(i)) continue;
+    for (size_t j = i + 1; j < m_count; ++j) {
+      if (!s.valid[j] || residual[j].norm() <= threshold(j)) continue;
+      const double crossed_i = (s.raw[i] - s.reference[j]).norm();  // i's sample fits j
+      const double crossed_j = (s.raw[j] - s.reference[i]).norm();
+      if (crossed_i > threshold(j) || crossed_j > threshold(i)) continue;
+      if (crossed_i + crossed_j + options_.swap_margin_m >= residual[i].norm() + residual[j].norm()) continue;
+      if (options_.relabel_swaps) {
+        std::swap(s.raw[i], s.raw[j]);
+        s.relabelled[i] = s.relabelled[j] = 1;
+        residual[i] = s.raw[i] - s.reference[i];
+        residual[j] = s.raw[j] - s.reference[j];
+        ++counters_.swaps_relabelled;
+      } else {
+        s.mask[i] = s.mask[j] = MaskReason::kSwap;
+      }
+      break;
+    }
+  }
+
+  // Kinematic disagreement: a joint whose naive and robust solutions differ too much
+  // marks every marker skinned to it.
+  const KinematicsWorkspace& naive = naive_.kinematics();
+  const KinematicsWorkspace& robust = robust_.kinematics();
+  for (int j = 0; j < skeleton_->num_joints(); ++j) {
+    if (skeleton_->joint(j).type == JointType::kFixed) continue;
+    const auto uj = static_cast<size_t>(j);
+    const double dp = (naive.p_WJ[uj] - robust.p_WJ[uj]).norm();
+    const double cos_angle = std::clamp(0.5 * ((naive.R_WJ[uj].transpose() * robust.R_WJ[uj]).trace() - 1.0), -1.0, 1.0);
+    if (dp <= options_.disagreement_position_m && std::acos(cos_angle) <= options_.disagreement_rotation_rad) continue;
+    for (int m : markers_of_joint_[uj]) {
+      const auto um = static_cast<size_t>(m);
+      // Only markers that do not fit the reference: the naive solve is pulled by a few
+      // bad markers, and their neighbours on the same joint are innocent.
+      if (s.valid[um] && s.mask[um] == MaskReason::kNone && !s.relabelled[um] && residual[um].norm() > options_.residual_floor_m)
+        s.mask[um] = MaskReason::kDisagreement;
+    }
+  }
+
+  for (size_t m = 0; m < m_count; ++m) {
+    MarkerTrack& track = tracks_[m];
+    if (!s.valid[m]) {
+      track.frozen_run = 0;
+      continue;
+    }
+    const double r = residual[m].norm();
+    const double thr = threshold(m);
+    if (r > thr) {
+      ++track.residual_run;
+      if (s.mask[m] == MaskReason::kNone || s.mask[m] == MaskReason::kDisagreement) s.mask[m] = MaskReason::kResidual;
+      if (track.residual_run >= options_.fallen_frames) {
+        track.fallen = true;
+        s.mask[m] = MaskReason::kFallenOff;
+      }
+    } else {
+      track.residual_run = 0;
+      track.fallen = false;
+      // The running scale learns from good samples only (clipped at the threshold).
+      track.residual_scale += alpha * (r - track.residual_scale);
+    }
+    if (!has_previous || !prev.valid[m]) {
+      track.frozen_run = 0;
+      continue;
+    }
+    // Spikes: this frame's displacement disagrees with the reference's, from a sample
+    // that was itself fine (so the return from a pop is not a spike).
+    const Vec3 moved = s.raw[m] - prev.raw[m];
+    const Vec3 reference_moved = s.reference[m] - prev.reference[m];
+    if (prev.mask[m] == MaskReason::kNone && s.mask[m] == MaskReason::kNone && (moved - reference_moved).norm() > options_.spike_m)
+      s.mask[m] = MaskReason::kSpike;
+    // Frozen: still while the body moves.
+    if (moved.norm() < options_.frozen_motion_m && reference_moved.norm() > options_.frozen_reference_motion_m) {
+      ++track.frozen_run;
+    } else if (moved.norm() >= options_.frozen_motion_m) {
+      track.frozen_run = 0;
+    }
+    if (track.frozen_run >= options_.frozen_frames) {
+      const int64_t first = std::max(next_out_, t - track.frozen_run + 1);
+      for (int64_t f = first; f <= t; ++f)
+        if (slot(f).valid[m]) slot(f).mask[m] = MaskReason::kFrozen;
+    }
+  }
+
+  // Rigid segments: two markers on one joint that changed their distance; blame the one
+  // that fits the reference worse.
+  for (size_t k = 0; k < rigid_pairs_.size(); ++k) {
+    const auto i = static_cast<size_t>(rigid_pairs_[k].first);
+    const auto j = static_cast<size_t>(rigid_pairs_[k].second);
+    if (!s.valid[i] || !s.valid[j] || s.mask[i] != MaskReason::kNone || s.mask[j] != MaskReason::kNone) continue;
+    if (std::abs((s.raw[i] - s.raw[j]).norm() - rigid_distance_[k]) <= options_.rigid_tolerance_m) continue;
+    s.mask[residual[i].norm() >= residual[j].norm() ? i : j] = MaskReason::kRigidDistance;
+  }
+}
+
+void CleanupPipeline::CleanMask(int64_t t) {
+  const auto m_count = static_cast<size_t>(markers_->num_markers());
+  const int64_t first = std::max<int64_t>(next_out_, 0);
+  auto good = [&](int64_t f, size_t m) { return slot(f).mask[m] == MaskReason::kNone; };
+  for (size_t m = 0; m < m_count; ++m) {
+    // Trim returning tracks whose slope disagrees with the reference's, frame by frame.
+    for (int64_t g = first; g + 1 <= t; ++g) {
+      if (g == 0 || good(g - 1, m) || !good(g, m)) continue;
+      if (g - 1 < first - 1) continue;
+      for (int n = 0; n < options_.max_trim_frames && g + 1 <= t && good(g, m) && good(g + 1, m); ++n, ++g) {
+        const Slot& a = slot(g);
+        const Slot& b = slot(g + 1);
+        const Vec3 slope = (b.raw[m] - a.raw[m]) - (b.reference[m] - a.reference[m]);
+        if (slope.norm() <= options_.trim_slope_m) break;
+        slot(g).mask[m] = MaskReason::kTrimmed;
+      }
+    }
+    // Small tracks: a short observed run with a gap on both sides, all still unpublished.
+    int64_t run_start = -1;
+    for (int64_t f = first; f <= t; ++f) {
+      if (good(f, m)) {
+        if (run_start < 0) run_start = f;
+        continue;
+      }
+      if (run_start > first && !good(run_start - 1, m) && f - run_start <= options_.small_track_frames)
+        for (int64_t g = run_start; g < f; ++g) slot(g).mask[m] = MaskReason::kSmallTrack;
+      run_start = -1;
+    }
+  }
+}
+
+void CleanupPipeline::Publish(int64_t tau, int64_t newest) {
+  Slot& s = slot(tau);
+  const auto m_count = static_cast<size_t>(markers_->num_markers());
+  const double max_v = options_.max_offset_velocity_m;
+  out_.frame = tau;
+  for (size_t m = 0; m < m_count; ++m) {
+    MarkerTrack& track = tracks_[m];
+    const Vec3& ref = s.reference[m];
+    Vec3 x = Vec3::Constant(kNaN);
+    MarkerStatus status = MarkerStatus::kRepaired;
+    MaskReason reason = s.mask[m];
+    // Each branch leaves x and the track's offset / velocities for the next frame.
+    if (reason == MaskReason::kNone) {
+      // Observed (or relabelled): published exactly as it is.
+      x = s.raw[m];
+      if (s.relabelled[m]) reason = MaskReason::kSwap;
+      status = s.relabelled[m] ? MarkerStatus::kRepaired : MarkerStatus::kObserved;
+      const Vec3 offset = x - ref;
+      track.offset_velocity = track.has_published ? Vec3(offset - track.offset) : Vec3::Zero();
+      track.offset = offset;
+      track.output_velocity = track.has_published ? Vec3(x - track.output) : Vec3::Zero();
+      track.last_observed = tau;
+    } else {
+      int64_t end = -1;  // the returning track, if the lookahead shows it
+      for (int64_t f = tau + 1; f <= newest; ++f) {
+        if (slot(f).mask[m] == MaskReason::kNone) {
+          end = f;
+          break;
+        }
+      }
+      const bool end_slope_known = end >= 0 && end + 1 <= newest && slot(end + 1).mask[m] == MaskReason::kNone;
+      if (!track.has_published) {
+        if (end < 0) {
+          status = MarkerStatus::kUnrecoverable;  // never seen: nothing to repair from
+        } else {
+          // Nothing before the gap: ride the reference at the returning track's offset.
+          track.offset = slot(end).raw[m] - slot(end).reference[m];
+          track.offset_velocity = Vec3::Zero();
+          x = ref + track.offset;
+          track.output_velocity = Vec3::Zero();
+        }
+      } else if (end >= 0 && track.last_observed == tau - 1 && end - tau <= options_.small_gap_frames) {
+        // A short gap right after an observed sample: a plain Hermite on the raw path.
+        const HermiteSegment h{track.output, track.output_velocity, slot(end).raw[m],
+                               end_slope_known ? Vec3(slot(end + 1).raw[m] - slot(end).raw[m]) : track.output_velocity,
+                               static_cast<double>(end - tau + 1)};
+        x = h.Value(1.0);
+        track.output_velocity = h.Derivative(1.0);
+        const Vec3 offset = x - ref;
+        track.offset_velocity = offset - track.offset;
+        track.offset = offset;
+      } else {
+        // Offset onto the reference path, from the last published offset and velocity
+        // to the returning track's (two-sided), or easing to a constant (one-sided).
+        HermiteSegment h;
+        h.p0 = track.offset;
+        h.m0 = ClampNorm(track.offset_velocity, max_v);
+        if (end >= 0) {
+          const Slot& e = slot(end);
+          h.p1 = e.raw[m] - e.reference[m];
+          h.m1 = end_slope_known ? ClampNorm((slot(end + 1).raw[m] - slot(end + 1).reference[m]) - h.p1, max_v) : Vec3::Zero();
+          h.length = static_cast<double>(end - tau + 1);
+        } else {
+          h.p1 = h.p0;
+          h.m1 = Vec3::Zero();
+          h.length = static_cast<double>(options_.lookahead + 1);
+        }
+        track.offset = h.Value(1.0);
+        track.offset_velocity = h.Derivative(1.0);
+        x = ref + track.offset;
+        track.output_velocity = x - track.output;
+      }
+    }
+    if (status != MarkerStatus::kUnrecoverable) {
+      track.output = x;
+      track.has_published = true;
+    }
+    out_.markers[m] = x;
+    out_.status[m] = status;
+    out_.reason[m] = status == MarkerStatus::kObserved ? MaskReason::kNone : reason;
+    weights_[m] = status == MarkerStatus::kUnrecoverable ? 0.0 : 1.0;
+    ++counters_.samples_out;
+    if (status == MarkerStatus::kRepaired) ++counters_.repaired_by[static_cast<size_t>(reason)];
+    if (status == MarkerStatus::kUnrecoverable) ++counters_.unrecoverable;
+  }
+  out_.final_solve = SolveIk(*skeleton_, *markers_, options_.final_ik, out_.markers, weights_, &final_);
+  out_.pose = final_.pose();
+  ++counters_.frames_out;
+  next_out_ = tau + 1;
+}
+
+}  // namespace mocapd

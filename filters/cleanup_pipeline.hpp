@@ -1,0 +1,157 @@
+// The per-subject streaming cleanup pipeline: push marker frame t, get frame t-K out once
+// it is final. Follows Perepichka 2020, ch. 3 ("Robust marker trajectory repair using
+// kinematic reference"), turned from a batch method into a streaming one:
+//  - two solutions per frame: the naive Y (plain IK on the markers as they are) and the
+//    robust reference Y^ (Huber IRLS, temporal prior, persistent outliers excluded), with
+//    X^ = LBS(Y^) the reference marker positions;
+//  - detectors that each write a reason into one per-marker mask (missing, kinematic
+//    disagreement of Y and Y^ per joint mapped to markers through skin weights, residual
+//    against X^ beyond an adaptive threshold, velocity spikes against the reference,
+//    rigid-segment distance violations, swaps, frozen and fallen-off markers);
+//  - mask clean-up within the lookahead (small tracks removed, returning tracks trimmed
+//    until their slope agrees with the reference);
+//  - repair of each bad sample by a cubic Hermite offset onto the reference path, from
+//    the last published state (position and velocity) to the returning track when it is
+//    within the lookahead (two-sided; this is also the no-pop re-entry blend), or easing
+//    to a constant offset while the gap is still open (one-sided); short gaps between
+//    observed samples get a plain Hermite on the raw path;
+//  - the final solve Y- on the repaired markers, warm-started.
+// Samples that were fine are published exactly as they came in. Memory is fixed at
+// construction (a ring of K + 2 frames and per-marker running statistics over an
+// exponential window of W frames); Push and Flush never allocate.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <vector>
+
+#include "filters/ik_solver.hpp"
+
+namespace mocapd {
+
+/// Why a sample was masked. kNone: fine.
+enum class MaskReason : uint8_t {
+  kNone,
+  kMissing,
+  kDisagreement,
+  kResidual,
+  kSpike,
+  kRigidDistance,
+  kSwap,
+  kFrozen,
+  kFallenOff,
+  kSmallTrack,
+  kTrimmed,
+};
+inline constexpr int kMaskReasonCount = 11;
+const char* to_string(MaskReason reason);
+
+enum class MarkerStatus : uint8_t {
+  kObserved,       ///< Published exactly as captured.
+  kRepaired,       ///< Filled or relabelled; the reason says which detector.
+  kUnrecoverable,  ///< No data to repair from (never seen yet): not published.
+};
+const char* to_string(MarkerStatus status);
+
+struct CleanupOptions {
+  double rate_hz = 120.0;
+  int lookahead = 12;  ///< K: frames of delay; 0 allowed.
+  int window = 120;    ///< W: time constant, in frames, of the running statistics.
+  // Detection.
+  double disagreement_position_m = 0.10;          ///< Delta P max (thesis: 10 cm).
+  double disagreement_rotation_rad = 30.0 * M_PI / 180.0;  ///< Delta R max (thesis: 30 deg).
+  double residual_floor_m = 0.02;   ///< Residuals below this are never outliers.
+  double residual_scale_factor = 6.0;  ///< Threshold = max(floor, factor x running residual scale).
+  double spike_m = 0.03;            ///< Per-frame displacement differing from the reference's by more.
+  double rigid_tolerance_m = 0.03;  ///< Distance change between two markers on one rigid segment.
+  double swap_margin_m = 0.01;      ///< A swap must explain the data better by at least this.
+  bool relabel_swaps = true;        ///< Swap the labels back instead of filling both.
+  double frozen_motion_m = 0.0003;  ///< A marker moving less than this per frame...
+  double frozen_reference_motion_m = 0.002;  ///< ...while its reference moves more...
+  int frozen_frames = 6;                     ///< ...for this many frames is frozen.
+  int fallen_frames = 60;  ///< Residual outliers this long in a row: fallen off (excluded from Y^).
+  // Mask clean-up, bounded by the lookahead.
+  int small_gap_frames = 5;     ///< Gaps up to this long between observed samples: plain Hermite.
+  int small_track_frames = 10;  ///< Observed runs up to this long between gaps are dropped.
+  double trim_slope_m = 0.01;   ///< A returning track is trimmed while its per-frame slope differs more.
+  int max_trim_frames = 6;
+  // Repair.
+  double max_offset_velocity_m = 0.01;  ///< Clamp on boundary offset velocities, m per frame.
+  // Solves.
+  IkOptions naive_ik;   ///< Y: plain least squares.
+  IkOptions robust_ik;  ///< Y^: Huber (huber_delta_m set by default).
+  IkOptions final_ik;   ///< Y-.
+  CleanupOptions();
+  /// Throws std::invalid_argument naming the field if an option is out of range.
+  void Validate() const;
+};
+
+/// One published frame. Owned by the pipeline; valid until the next Push/Flush.
+struct CleanFrame {
+  int64_t frame = -1;
+  std::vector<Vec3> markers;  ///< X-: repaired positions (NaN where unrecoverable), metres.
+  std::vector<MarkerStatus> status;
+  std::vector<MaskReason> reason;  ///< Why a repaired sample was repaired (kNone if observed).
+  Pose pose;                       ///< Y-: the final solve.
+  IkSummary final_solve;
+};
+
+struct CleanupCounters {
+  int64_t frames_in = 0;
+  int64_t frames_out = 0;
+  int64_t samples_out = 0;
+  std::array<int64_t, kMaskReasonCount> repaired_by{};  ///< Published repaired samples, per reason.
+  int64_t unrecoverable = 0;
+  int64_t swaps_relabelled = 0;
+};
+
+class CleanupPipeline {
+ public:
+  /// Throws std::invalid_argument if the options are invalid.
+  CleanupPipeline(std::shared_ptr<const Skeleton> skeleton, std::shared_ptr<const MarkerSet> markers, const CleanupOptions& options);
+  ~CleanupPipeline();
+  CleanupPipeline(const CleanupPipeline&) = delete;
+  CleanupPipeline& operator=(const CleanupPipeline&) = delete;
+
+  /// Pushes the next frame: p_WM per marker in the subject's marker order, metres; a
+  /// non-finite position is a missing sample. Returns true if a frame became final
+  /// (read it with output()). Never allocates or throws.
+  bool Push(std::span<const Vec3> p_WM);
+  /// At the end of a take: publishes the next pending frame with no more future to see.
+  /// Returns false when nothing is pending.
+  bool Flush();
+  const CleanFrame& output() const { return out_; }
+  const CleanupCounters& counters() const { return counters_; }
+  const CleanupOptions& options() const { return options_; }
+  /// Forgets all state (a capture restart); counters are kept.
+  void Reset();
+
+  struct Slot;  // one buffered frame, defined in the .cpp
+  struct MarkerTrack;
+
+ private:
+  void Detect(int64_t t);
+  void CleanMask(int64_t t);
+  void Publish(int64_t tau, int64_t newest);
+  Slot& slot(int64_t frame);
+
+  std::shared_ptr<const Skeleton> skeleton_;
+  std::shared_ptr<const MarkerSet> markers_;
+  CleanupOptions options_;
+  std::vector<Slot> ring_;
+  std::vector<MarkerTrack> tracks_;
+  std::vector<std::pair<int, int>> rigid_pairs_;
+  std::vector<double> rigid_distance_;
+  std::vector<std::vector<int>> markers_of_joint_;
+  IkState naive_, robust_, final_;
+  std::vector<double> weights_;
+  std::vector<Vec3> scratch_;
+  CleanFrame out_;
+  CleanupCounters counters_;
+  int64_t next_in_ = 0;   ///< Frame number of the next Push.
+  int64_t next_out_ = 0;  ///< Frame number of the next publication.
+};
+
+}  // namespace mocapd
