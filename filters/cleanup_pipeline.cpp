@@ -58,7 +58,11 @@ const char* to_string(MarkerStatus status) {
   return "?";
 }
 
-CleanupOptions::CleanupOptions() { robust_ik.huber_delta_m = 0.02; }
+CleanupOptions::CleanupOptions() {
+  robust_ik.huber_delta_m = 0.004;
+  robust_ik.prediction_velocity_gain = 0.5;
+  final_ik.prediction_velocity_gain = 0.5;
+}
 
 void CleanupOptions::Validate() const {
   auto require = [](bool ok, const char* field, const char* expected) {
@@ -83,6 +87,7 @@ void CleanupOptions::Validate() const {
   require(trim_slope_m > 0.0, "trim_slope_m", "> 0");
   require(max_trim_frames >= 0, "max_trim_frames", ">= 0");
   require(max_offset_velocity_m > 0.0, "max_offset_velocity_m", "> 0");
+  require(repaired_weight >= 0.0 && repaired_weight <= 1.0, "repaired_weight", "0..1");
   naive_ik.Validate();
   robust_ik.Validate();
   final_ik.Validate();
@@ -105,8 +110,9 @@ CleanupPipeline::CleanupPipeline(std::shared_ptr<const Skeleton> skeleton, std::
       final_(*skeleton_, *markers_) {
   options_.Validate();
   const auto m = static_cast<size_t>(markers_->num_markers());
-  // The frames being published (t - K), the lookahead up to t, and t - K - 1 for slopes.
-  ring_.resize(static_cast<size_t>(options_.lookahead) + 2);
+  // The frames being published (t - K), the lookahead up to t, and two frames before for
+  // slopes and trajectory continuity.
+  ring_.resize(static_cast<size_t>(options_.lookahead) + 3);
   for (Slot& s : ring_) {
     s.raw.assign(m, Vec3::Constant(kNaN));
     s.valid.assign(m, 0);
@@ -194,6 +200,10 @@ bool CleanupPipeline::Flush() {
 
 void CleanupPipeline::Detect(int64_t t) {
   Slot& s = slot(t);
+  // Model distance between two markers rigidly on the same joint.
+  auto RigidDistance = [&](size_t a, size_t b) {
+    return (markers_->marker(static_cast<int>(a)).attachments[0].offset - markers_->marker(static_cast<int>(b)).attachments[0].offset).norm();
+  };
   const bool has_previous = t > 0 && slot(t - 1).frame == t - 1;
   const Slot& prev = slot(t - 1 >= 0 ? t - 1 : 0);
   const auto m_count = static_cast<size_t>(markers_->num_markers());
@@ -206,7 +216,65 @@ void CleanupPipeline::Detect(int64_t t) {
   std::span<Vec3> residual(scratch_.data(), m_count);
   for (size_t m = 0; m < m_count; ++m) residual[m] = s.valid[m] ? Vec3(s.raw[m] - s.reference[m]) : Vec3::Zero();
 
-  // Swaps first: a relabelled pair is fine for every other detector.
+  // Swaps first: a relabelled pair is fine for every other detector. Within one rigid
+  // segment the layout's distances identify each marker: a pair whose exchanged labels
+  // fit the distances to the segment's other markers clearly better is relabelled.
+  for (size_t k = 0; k < rigid_pairs_.size(); ++k) {
+    const auto i = static_cast<size_t>(rigid_pairs_[k].first);
+    const auto j = static_cast<size_t>(rigid_pairs_[k].second);
+    if (!s.valid[i] || !s.valid[j] || s.relabelled[i] || s.relabelled[j]) continue;
+    double straight = 0.0, crossed = 0.0;
+    int witnesses = 0;
+    for (int other : markers_of_joint_[static_cast<size_t>(markers_->primary_joint(static_cast<int>(i)))]) {
+      const auto o = static_cast<size_t>(other);
+      if (o == i || o == j || !s.valid[o] || markers_->marker(other).num_attachments != 1) continue;
+      const double di = (s.raw[i] - s.raw[o]).norm(), dj = (s.raw[j] - s.raw[o]).norm();
+      const double mi = RigidDistance(i, o), mj = RigidDistance(j, o);
+      straight += std::abs(di - mi) + std::abs(dj - mj);
+      crossed += std::abs(dj - mi) + std::abs(di - mj);
+      ++witnesses;
+    }
+    if (witnesses == 0 || crossed + options_.swap_margin_m * witnesses >= straight) continue;
+    std::swap(s.raw[i], s.raw[j]);
+    s.relabelled[i] = s.relabelled[j] = 1;
+    residual[i] = s.raw[i] - s.reference[i];
+    residual[j] = s.raw[j] - s.reference[j];
+    ++counters_.swaps_relabelled;
+  }
+  // Across segments, trajectory
+  // continuity decides most of them: each marker's sample is compared with its own
+  // constant-velocity prediction, and a pair whose crossed assignment fits clearly better
+  // is relabelled. A swap the reference can absorb (two of three markers on a segment)
+  // is still a jump in both trajectories.
+  const bool has_two_before = t > 1 && slot(t - 2).frame == t - 2;
+  if (has_previous && has_two_before) {
+    const Slot& prev2 = slot(t - 2);
+    for (size_t i = 0; i < m_count; ++i) {
+      // Predictions only from samples that were themselves fine.
+      if (!s.valid[i] || prev.mask[i] != MaskReason::kNone || prev2.mask[i] != MaskReason::kNone || s.relabelled[i]) continue;
+      const Vec3 predicted_i = 2.0 * prev.raw[i] - prev2.raw[i];
+      for (size_t j = i + 1; j < m_count; ++j) {
+        if (!s.valid[j] || prev.mask[j] != MaskReason::kNone || prev2.mask[j] != MaskReason::kNone || s.relabelled[j]) continue;
+        if ((prev.raw[i] - prev.raw[j]).squaredNorm() > options_.swap_search_m * options_.swap_search_m) continue;
+        const Vec3 predicted_j = 2.0 * prev.raw[j] - prev2.raw[j];
+        const double straight = (s.raw[i] - predicted_i).norm() + (s.raw[j] - predicted_j).norm();
+        const double crossed = (s.raw[j] - predicted_i).norm() + (s.raw[i] - predicted_j).norm();
+        if (crossed + options_.swap_margin_m >= straight) continue;
+        // The reference must not disagree: a wrong relabel would otherwise persist, since
+        // the next frame is predicted from the relabelled one.
+        if ((s.raw[j] - s.reference[i]).norm() + (s.raw[i] - s.reference[j]).norm() >
+            residual[i].norm() + residual[j].norm())
+          continue;
+        std::swap(s.raw[i], s.raw[j]);
+        s.relabelled[i] = s.relabelled[j] = 1;
+        residual[i] = s.raw[i] - s.reference[i];
+        residual[j] = s.raw[j] - s.reference[j];
+        ++counters_.swaps_relabelled;
+        break;
+      }
+    }
+  }
+  // The rest: a pair that each fit the other's reference position.
   for (size_t i = 0; i < m_count; ++i) {
     if (!s.valid[i] || residual[i].norm() <= threshold(i)) continue;
     for (size_t j = i + 1; j < m_count; ++j) {
@@ -413,7 +481,8 @@ void CleanupPipeline::Publish(int64_t tau, int64_t newest) {
     out_.markers[m] = x;
     out_.status[m] = status;
     out_.reason[m] = status == MarkerStatus::kObserved ? MaskReason::kNone : reason;
-    weights_[m] = status == MarkerStatus::kUnrecoverable ? 0.0 : 1.0;
+    weights_[m] = status == MarkerStatus::kObserved ? 1.0 : status == MarkerStatus::kRepaired ? options_.repaired_weight : 0.0;
+    if (s.relabelled[m] && reason == MaskReason::kSwap) weights_[m] = 1.0;
     ++counters_.samples_out;
     if (status == MarkerStatus::kRepaired) ++counters_.repaired_by[static_cast<size_t>(reason)];
     if (status == MarkerStatus::kUnrecoverable) ++counters_.unrecoverable;

@@ -17,7 +17,7 @@
 //    observed samples get a plain Hermite on the raw path;
 //  - the final solve Y- on the repaired markers, warm-started.
 // Samples that were fine are published exactly as they came in. Memory is fixed at
-// construction (a ring of K + 2 frames and per-marker running statistics over an
+// construction (a ring of K + 3 frames and per-marker running statistics over an
 // exponential window of W frames); Push and Flush never allocate.
 #pragma once
 
@@ -62,11 +62,12 @@ struct CleanupOptions {
   // Detection.
   double disagreement_position_m = 0.10;          ///< Delta P max (thesis: 10 cm).
   double disagreement_rotation_rad = 30.0 * M_PI / 180.0;  ///< Delta R max (thesis: 30 deg).
-  double residual_floor_m = 0.02;   ///< Residuals below this are never outliers.
-  double residual_scale_factor = 6.0;  ///< Threshold = max(floor, factor x running residual scale).
+  double residual_floor_m = 0.012;  ///< Residuals below this are never outliers.
+  double residual_scale_factor = 5.0;  ///< Threshold = max(floor, factor x running residual scale).
   double spike_m = 0.03;            ///< Per-frame displacement differing from the reference's by more.
   double rigid_tolerance_m = 0.03;  ///< Distance change between two markers on one rigid segment.
   double swap_margin_m = 0.01;      ///< A swap must explain the data better by at least this.
+  double swap_search_m = 0.15;      ///< Only markers this close in the previous frame can swap.
   bool relabel_swaps = true;        ///< Swap the labels back instead of filling both.
   double frozen_motion_m = 0.0003;  ///< A marker moving less than this per frame...
   double frozen_reference_motion_m = 0.002;  ///< ...while its reference moves more...
@@ -79,10 +80,14 @@ struct CleanupOptions {
   int max_trim_frames = 6;
   // Repair.
   double max_offset_velocity_m = 0.01;  ///< Clamp on boundary offset velocities, m per frame.
+  /// Weight of a repaired sample in the final solve (observed samples weigh 1). Small:
+  /// a filled sample carries the reference's guess, which the final solve's own priors
+  /// already hold; measured best at 0.01 on the Bandai takes.
+  double repaired_weight = 0.01;
   // Solves.
   IkOptions naive_ik;   ///< Y: plain least squares.
-  IkOptions robust_ik;  ///< Y^: Huber (huber_delta_m set by default).
-  IkOptions final_ik;   ///< Y-.
+  IkOptions robust_ik;  ///< Y^: Huber (huber_delta_m = 4 mm, decaying velocity prediction by default).
+  IkOptions final_ik;   ///< Y-: decaying velocity prediction, so joints without data come to rest.
   CleanupOptions();
   /// Throws std::invalid_argument naming the field if an option is out of range.
   void Validate() const;

@@ -443,12 +443,14 @@ void ClearBlocks(std::vector<JointBlock>* blocks) {
   }
 }
 
-// Constant-velocity extrapolation: X_pred = X_cur * (X_prev^-1 X_cur) per joint.
-void PredictConstantVelocity(const Skeleton& skeleton, const Pose& previous, const Pose& current, Pose* predicted) {
+// Constant-velocity extrapolation, scaled by gain: X_pred = X_cur * (X_prev^-1 X_cur)^gain.
+void PredictConstantVelocity(const Skeleton& skeleton, const Pose& previous, const Pose& current, double gain, Pose* predicted) {
   for (int j = 0; j < skeleton.num_joints(); ++j) {
     const auto uj = static_cast<size_t>(j);
-    predicted->rotation[uj] = (current.rotation[uj] * (previous.rotation[uj].conjugate() * current.rotation[uj])).normalized();
-    predicted->translation[uj] = 2.0 * current.translation[uj] - previous.translation[uj];
+    const Quat delta = previous.rotation[uj].conjugate() * current.rotation[uj];
+    const Quat step = gain == 1.0 ? delta : ExpRotation(gain * LogRotation(delta));
+    predicted->rotation[uj] = (current.rotation[uj] * step).normalized();
+    predicted->translation[uj] = current.translation[uj] + gain * (current.translation[uj] - previous.translation[uj]);
   }
 }
 
@@ -509,6 +511,7 @@ void IkOptions::Validate() const {
   require(temporal_weight >= 0.0 && std::isfinite(temporal_weight), "temporal_weight", "a finite value >= 0");
   require(rest_weight >= 0.0 && std::isfinite(rest_weight), "rest_weight", "a finite value >= 0");
   require(min_markers >= 1, "min_markers", ">= 1");
+  require(prediction_velocity_gain >= 0.0 && prediction_velocity_gain <= 1.0, "prediction_velocity_gain", "0..1");
 }
 
 const char* to_string(IkStatus status) {
@@ -613,7 +616,7 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
   // Warm start (constant-velocity prediction when two solutions are known) or cold start.
   int max_iterations = options.max_iterations;
   if (s.history_ >= 2 && options.predict_constant_velocity) {
-    PredictConstantVelocity(skeleton, s.previous_, s.pose_, &s.trial_);
+    PredictConstantVelocity(skeleton, s.previous_, s.pose_, options.prediction_velocity_gain, &s.trial_);
     std::swap(s.previous_, s.pose_);
     std::swap(s.pose_, s.trial_);
   } else if (s.history_ >= 1) {

@@ -32,6 +32,10 @@ struct IkOptions {
   double step_tolerance = 1e-5;        ///< Converged when every step component is below this (rad or m).
   double huber_delta_m = 0.0;          ///< Huber threshold in metres; 0 disables the robust loss.
   bool predict_constant_velocity = true;
+  /// Fraction of the last frame-to-frame motion carried into the prediction (0..1). Below
+  /// 1 the velocity decays, so a joint whose markers have all vanished comes to rest
+  /// instead of turning at its last speed for the whole gap.
+  double prediction_velocity_gain = 1.0;
   double temporal_weight = 3e-4;  ///< a_t, m^2 per rad^2, on rotations, toward the warm start.
   double rest_weight = 1e-7;      ///< a_r, m^2 per rad^2, toward the rest pose.
   int min_markers = 3;            ///< Fewer usable markers than this: no solve.
