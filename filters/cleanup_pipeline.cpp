@@ -73,6 +73,7 @@ void CleanupOptions::Validate() const {
   require(window >= 1, "window", ">= 1 frame");
   require(disagreement_position_m > 0.0, "disagreement_position_m", "> 0");
   require(disagreement_rotation_rad > 0.0, "disagreement_rotation_rad", "> 0");
+  require(disagreement_residual_m >= 0.0, "disagreement_residual_m", ">= 0");
   require(residual_floor_m > 0.0, "residual_floor_m", "> 0");
   require(residual_scale_factor > 0.0, "residual_scale_factor", "> 0");
   require(spike_m > 0.0, "spike_m", "> 0");
@@ -177,6 +178,7 @@ bool CleanupPipeline::Push(std::span<const Vec3> p_WM) {
     s.relabelled[m] = 0;
     s.mask[m] = valid ? MaskReason::kNone : MaskReason::kMissing;
   }
+  RelabelSwaps(t);
   // Y^: robust, without markers known to have come off.
   for (size_t m = 0; m < m_count; ++m) weights_[m] = s.valid[m] && !tracks_[m].fallen && tracks_[m].frozen_run == 0 ? 1.0 : 0.0;
   SolveIk(*skeleton_, *markers_, options_.robust_ik, s.raw, weights_, &robust_);
@@ -198,24 +200,17 @@ bool CleanupPipeline::Flush() {
   return true;
 }
 
-void CleanupPipeline::Detect(int64_t t) {
+// Relabels swapped pairs before the frame is solved, so the reference is computed from
+// the corrected labels.
+void CleanupPipeline::RelabelSwaps(int64_t t) {
   Slot& s = slot(t);
+  const bool has_previous = t > 0 && slot(t - 1).frame == t - 1;
+  const Slot& prev = slot(t - 1 >= 0 ? t - 1 : 0);
+  const auto m_count = static_cast<size_t>(markers_->num_markers());
   // Model distance between two markers rigidly on the same joint.
   auto RigidDistance = [&](size_t a, size_t b) {
     return (markers_->marker(static_cast<int>(a)).attachments[0].offset - markers_->marker(static_cast<int>(b)).attachments[0].offset).norm();
   };
-  const bool has_previous = t > 0 && slot(t - 1).frame == t - 1;
-  const Slot& prev = slot(t - 1 >= 0 ? t - 1 : 0);
-  const auto m_count = static_cast<size_t>(markers_->num_markers());
-  const double alpha = 2.0 / (options_.window + 1.0);
-
-  // Residuals against X^ and each marker's adaptive threshold.
-  auto threshold = [&](size_t m) {
-    return std::max(options_.residual_floor_m, options_.residual_scale_factor * tracks_[m].residual_scale);
-  };
-  std::span<Vec3> residual(scratch_.data(), m_count);
-  for (size_t m = 0; m < m_count; ++m) residual[m] = s.valid[m] ? Vec3(s.raw[m] - s.reference[m]) : Vec3::Zero();
-
   // Swaps first: a relabelled pair is fine for every other detector. Within one rigid
   // segment the layout's distances identify each marker: a pair whose exchanged labels
   // fit the distances to the segment's other markers clearly better is relabelled.
@@ -237,8 +232,6 @@ void CleanupPipeline::Detect(int64_t t) {
     if (witnesses == 0 || crossed + options_.swap_margin_m * witnesses >= straight) continue;
     std::swap(s.raw[i], s.raw[j]);
     s.relabelled[i] = s.relabelled[j] = 1;
-    residual[i] = s.raw[i] - s.reference[i];
-    residual[j] = s.raw[j] - s.reference[j];
     ++counters_.swaps_relabelled;
   }
   // Across segments, trajectory
@@ -260,20 +253,35 @@ void CleanupPipeline::Detect(int64_t t) {
         const double straight = (s.raw[i] - predicted_i).norm() + (s.raw[j] - predicted_j).norm();
         const double crossed = (s.raw[j] - predicted_i).norm() + (s.raw[i] - predicted_j).norm();
         if (crossed + options_.swap_margin_m >= straight) continue;
-        // The reference must not disagree: a wrong relabel would otherwise persist, since
-        // the next frame is predicted from the relabelled one.
-        if ((s.raw[j] - s.reference[i]).norm() + (s.raw[i] - s.reference[j]).norm() >
-            residual[i].norm() + residual[j].norm())
+        // The reference (last frame's, this frame's is not solved yet) must not disagree:
+        // a wrong relabel would otherwise persist, since the next frame is predicted from
+        // the relabelled one.
+        if ((s.raw[j] - prev.reference[i]).norm() + (s.raw[i] - prev.reference[j]).norm() >
+            (s.raw[i] - prev.reference[i]).norm() + (s.raw[j] - prev.reference[j]).norm())
           continue;
         std::swap(s.raw[i], s.raw[j]);
         s.relabelled[i] = s.relabelled[j] = 1;
-        residual[i] = s.raw[i] - s.reference[i];
-        residual[j] = s.raw[j] - s.reference[j];
         ++counters_.swaps_relabelled;
         break;
       }
     }
   }
+}
+
+void CleanupPipeline::Detect(int64_t t) {
+  Slot& s = slot(t);
+  const bool has_previous = t > 0 && slot(t - 1).frame == t - 1;
+  const Slot& prev = slot(t - 1 >= 0 ? t - 1 : 0);
+  const auto m_count = static_cast<size_t>(markers_->num_markers());
+  const double alpha = 2.0 / (options_.window + 1.0);
+
+  // Residuals against X^ and each marker's adaptive threshold.
+  auto threshold = [&](size_t m) {
+    return std::max(options_.residual_floor_m, options_.residual_scale_factor * tracks_[m].residual_scale);
+  };
+  std::span<Vec3> residual(scratch_.data(), m_count);
+  for (size_t m = 0; m < m_count; ++m) residual[m] = s.valid[m] ? Vec3(s.raw[m] - s.reference[m]) : Vec3::Zero();
+
   // The rest: a pair that each fit the other's reference position.
   for (size_t i = 0; i < m_count; ++i) {
     if (!s.valid[i] || residual[i].norm() <= threshold(i)) continue;
@@ -308,9 +316,7 @@ void CleanupPipeline::Detect(int64_t t) {
     if (dp <= options_.disagreement_position_m && std::acos(cos_angle) <= options_.disagreement_rotation_rad) continue;
     for (int m : markers_of_joint_[uj]) {
       const auto um = static_cast<size_t>(m);
-      // Only markers that do not fit the reference: the naive solve is pulled by a few
-      // bad markers, and their neighbours on the same joint are innocent.
-      if (s.valid[um] && s.mask[um] == MaskReason::kNone && !s.relabelled[um] && residual[um].norm() > options_.residual_floor_m)
+      if (s.valid[um] && s.mask[um] == MaskReason::kNone && !s.relabelled[um] && residual[um].norm() > options_.disagreement_residual_m)
         s.mask[um] = MaskReason::kDisagreement;
     }
   }
@@ -353,9 +359,10 @@ void CleanupPipeline::Detect(int64_t t) {
       track.frozen_run = 0;
     }
     if (track.frozen_run >= options_.frozen_frames) {
+      // Still and far from its reference for long is the more specific diagnosis.
       const int64_t first = std::max(next_out_, t - track.frozen_run + 1);
       for (int64_t f = first; f <= t; ++f)
-        if (slot(f).valid[m]) slot(f).mask[m] = MaskReason::kFrozen;
+        if (slot(f).valid[m] && slot(f).mask[m] != MaskReason::kFallenOff) slot(f).mask[m] = MaskReason::kFrozen;
     }
   }
 

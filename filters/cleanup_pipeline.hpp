@@ -62,6 +62,9 @@ struct CleanupOptions {
   // Detection.
   double disagreement_position_m = 0.10;          ///< Delta P max (thesis: 10 cm).
   double disagreement_rotation_rad = 30.0 * M_PI / 180.0;  ///< Delta R max (thesis: 30 deg).
+  /// Of the markers on a disagreeing joint, those further than this from X^ are marked
+  /// (the naive solve is pulled by a few bad markers; their neighbours are innocent).
+  double disagreement_residual_m = 0.01;
   double residual_floor_m = 0.012;  ///< Residuals below this are never outliers.
   double residual_scale_factor = 5.0;  ///< Threshold = max(floor, factor x running residual scale).
   double spike_m = 0.03;            ///< Per-frame displacement differing from the reference's by more.
@@ -137,6 +140,7 @@ class CleanupPipeline {
   struct MarkerTrack;
 
  private:
+  void RelabelSwaps(int64_t t);
   void Detect(int64_t t);
   void CleanMask(int64_t t);
   void Publish(int64_t tau, int64_t newest);

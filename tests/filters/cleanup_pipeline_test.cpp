@@ -1,0 +1,275 @@
+// Tests for the streaming cleanup pipeline: delay and accounting, untouched samples kept
+// bit for bit, each detector on a hand-made case (with the others made blind where they
+// would catch it first), the Hermite repairs, the no-pop re-entry blend, and zero
+// allocation per frame.
+#include "filters/cleanup_pipeline.hpp"
+
+#include <gtest/gtest.h>
+
+#include "filters/pose_error.hpp"
+#include "tests/support/allocation_counter.hpp"
+#include "tests/support/test_takes.hpp"
+
+namespace mocapd {
+namespace {
+
+class CleanupPipelineTest : public ::testing::Test {
+ protected:
+  CleanupPipelineTest() : fixture_(testing::MakeHumanoidFixture("mixed", 8.0, 120.0)) {
+    frames_.resize(static_cast<size_t>(fixture_.take.num_frames));
+    for (int f = 0; f < fixture_.take.num_frames; ++f)
+      for (int m = 0; m < fixture_.take.num_points(); ++m) frames_[static_cast<size_t>(f)].push_back(fixture_.take.at(f, m));
+  }
+  int Marker(const char* name) const { return fixture_.markers->FindMarker(name)->value; }
+  Vec3& Sample(int frame, int marker) { return frames_[static_cast<size_t>(frame)][static_cast<size_t>(marker)]; }
+  Vec3 Truth(int frame, int marker) const { return fixture_.take.at(frame, marker); }
+
+  // Runs every frame through a pipeline and keeps every published frame.
+  std::vector<CleanFrame> Run(const CleanupOptions& options) {
+    CleanupPipeline dut(fixture_.skeleton, fixture_.markers, options);
+    std::vector<CleanFrame> out;
+    for (const auto& frame : frames_)
+      if (dut.Push(frame)) out.push_back(dut.output());
+    while (dut.Flush()) out.push_back(dut.output());
+    counters_ = dut.counters();
+    return out;
+  }
+  // Options with every outlier detector made blind, to test one at a time.
+  static CleanupOptions Blind() {
+    CleanupOptions o;
+    o.residual_floor_m = 10.0;
+    o.disagreement_position_m = 10.0;
+    o.disagreement_rotation_rad = 10.0;
+    o.spike_m = 10.0;
+    o.rigid_tolerance_m = 10.0;
+    o.swap_margin_m = 10.0;
+    o.frozen_frames = 100000;
+    return o;
+  }
+
+  testing::HumanoidFixture fixture_;
+  std::vector<std::vector<Vec3>> frames_;
+  CleanupCounters counters_;
+};
+
+TEST_F(CleanupPipelineTest, PublishesEveryFrameKFramesLateWithUntouchedSamplesBitForBit) {
+  CleanupOptions options;
+  options.lookahead = 12;
+  CleanupPipeline dut(fixture_.skeleton, fixture_.markers, options);
+  for (int f = 0; f < 12; ++f) EXPECT_FALSE(dut.Push(frames_[static_cast<size_t>(f)]));
+  ASSERT_TRUE(dut.Push(frames_[12]));
+  EXPECT_EQ(dut.output().frame, 0);
+  const auto out = Run(options);
+  ASSERT_EQ(out.size(), frames_.size());
+  EXPECT_EQ(counters_.frames_in, counters_.frames_out);
+  for (size_t f = 0; f < out.size(); ++f) {
+    ASSERT_EQ(out[f].frame, static_cast<int64_t>(f));
+    for (size_t m = 0; m < frames_[f].size(); ++m) {
+      ASSERT_EQ(out[f].status[m], MarkerStatus::kObserved) << f << " " << m << " " << to_string(out[f].reason[m]);
+      ASSERT_EQ(out[f].markers[m], frames_[f][m]);  // bit for bit
+    }
+  }
+}
+
+TEST_F(CleanupPipelineTest, LongGapIsFilledAlongTheReferenceWithoutJumps) {
+  const int m = Marker("LFRM1");
+  for (int f = 200; f < 400; ++f) Sample(f, m) = Vec3::Constant(kNaN);
+  const auto out = Run(CleanupOptions{});
+  for (int f = 200; f < 400; ++f) {
+    ASSERT_EQ(out[static_cast<size_t>(f)].status[static_cast<size_t>(m)], MarkerStatus::kRepaired);
+    EXPECT_EQ(out[static_cast<size_t>(f)].reason[static_cast<size_t>(m)], MaskReason::kMissing);
+    EXPECT_LT((out[static_cast<size_t>(f)].markers[static_cast<size_t>(m)] - Truth(f, m)).norm(), 0.01) << f;
+  }
+  // C0 at both ends: no step bigger than the marker's own motion allows.
+  for (int f = 195; f < 405; ++f) {
+    const double step = (out[static_cast<size_t>(f)].markers[static_cast<size_t>(m)] - out[static_cast<size_t>(f - 1)].markers[static_cast<size_t>(m)]).norm();
+    EXPECT_LT(step, (Truth(f, m) - Truth(f - 1, m)).norm() + 0.003) << f;
+  }
+  EXPECT_EQ(counters_.repaired_by[static_cast<size_t>(MaskReason::kMissing)], 200);
+}
+
+TEST_F(CleanupPipelineTest, ShortGapGetsAPlainHermiteOnTheRawPath) {
+  const int m = Marker("RTHI2");
+  for (int f = 300; f < 303; ++f) Sample(f, m) = Vec3::Constant(kNaN);
+  const auto out = Run(CleanupOptions{});
+  for (int f = 300; f < 303; ++f) EXPECT_LT((out[static_cast<size_t>(f)].markers[static_cast<size_t>(m)] - Truth(f, m)).norm(), 0.001);
+}
+
+TEST_F(CleanupPipelineTest, ResidualDetectorCatchesAPop) {
+  const int m = Marker("HED2");
+  for (int f = 500; f < 502; ++f) Sample(f, m) += Vec3(0.0, 0.25, 0.0);
+  CleanupOptions options = Blind();
+  options.residual_floor_m = 0.012;
+  const auto out = Run(options);
+  for (int f = 500; f < 502; ++f) {
+    EXPECT_EQ(out[static_cast<size_t>(f)].reason[static_cast<size_t>(m)], MaskReason::kResidual);
+    EXPECT_LT((out[static_cast<size_t>(f)].markers[static_cast<size_t>(m)] - Truth(f, m)).norm(), 0.005);
+  }
+  EXPECT_EQ(out[499].status[static_cast<size_t>(m)], MarkerStatus::kObserved);
+  EXPECT_EQ(out[502].status[static_cast<size_t>(m)], MarkerStatus::kObserved);
+}
+
+TEST_F(CleanupPipelineTest, SpikeDetectorCatchesAOneFrameJump) {
+  const int m = Marker("LSHN1");
+  Sample(600, m) += Vec3(0.06, 0.0, 0.0);
+  CleanupOptions options = Blind();
+  options.spike_m = 0.03;
+  const auto out = Run(options);
+  EXPECT_EQ(out[600].reason[static_cast<size_t>(m)], MaskReason::kSpike);
+  EXPECT_EQ(out[601].status[static_cast<size_t>(m)], MarkerStatus::kObserved);  // the return is not a spike
+}
+
+TEST_F(CleanupPipelineTest, RigidDistanceDetectorBlamesTheMarkerThatMoved) {
+  const int m = Marker("PEL2");
+  for (int f = 400; f < 410; ++f) Sample(f, m) += Vec3(0.0, 0.0, 0.05);
+  CleanupOptions options = Blind();
+  options.rigid_tolerance_m = 0.03;
+  const auto out = Run(options);
+  for (int f = 400; f < 410; ++f) EXPECT_EQ(out[static_cast<size_t>(f)].reason[static_cast<size_t>(m)], MaskReason::kRigidDistance) << f;
+  for (int f = 400; f < 410; ++f)
+    EXPECT_EQ(out[static_cast<size_t>(f)].status[static_cast<size_t>(Marker("PEL1"))], MarkerStatus::kObserved);
+}
+
+TEST_F(CleanupPipelineTest, DisagreementDetectorMarksTheJointsMarkers) {
+  // Two of the head's four markers displaced: the naive solve turns the head toward them,
+  // the robust one does not; the displaced markers, skinned to the head, are marked.
+  const int a = Marker("HED1"), b = Marker("HED3");
+  for (int f = 300; f < 320; ++f) {
+    Sample(f, a) += Vec3(0.0, 0.3, 0.0);
+    Sample(f, b) += Vec3(0.0, 0.3, 0.0);
+  }
+  CleanupOptions options = Blind();
+  options.disagreement_position_m = 0.05;
+  options.disagreement_rotation_rad = 10.0 * M_PI / 180.0;
+  const auto out = Run(options);
+  int marked = 0;
+  for (int f = 300; f < 320; ++f)
+    marked += out[static_cast<size_t>(f)].reason[static_cast<size_t>(a)] == MaskReason::kDisagreement;
+  EXPECT_GT(marked, 10);
+  EXPECT_EQ(out[310].status[static_cast<size_t>(Marker("HED2"))], MarkerStatus::kObserved);
+  EXPECT_EQ(out[290].status[static_cast<size_t>(a)], MarkerStatus::kObserved);
+}
+
+TEST_F(CleanupPipelineTest, SwapOnOneSegmentIsRelabelledExactly) {
+  const int a = Marker("LHND1"), b = Marker("LHND2");
+  for (int f = 300; f < 360; ++f) std::swap(Sample(f, a), Sample(f, b));
+  const auto out = Run(CleanupOptions{});
+  for (int f = 300; f < 360; ++f) {
+    EXPECT_EQ(out[static_cast<size_t>(f)].reason[static_cast<size_t>(a)], MaskReason::kSwap) << f;
+    EXPECT_EQ(out[static_cast<size_t>(f)].markers[static_cast<size_t>(a)], Truth(f, a)) << f;
+    EXPECT_EQ(out[static_cast<size_t>(f)].markers[static_cast<size_t>(b)], Truth(f, b)) << f;
+  }
+  EXPECT_EQ(out[360].status[static_cast<size_t>(a)], MarkerStatus::kObserved);
+}
+
+TEST_F(CleanupPipelineTest, SwapAcrossSegmentsIsCaughtByContinuity) {
+  // Two markers on different segments, swapped from a frame where they pass close.
+  const int a = Marker("LELB"), b = Marker("LUPA3");
+  int start = -1;
+  for (int f = 50; f < 900 && start < 0; ++f)
+    if ((Truth(f, a) - Truth(f, b)).norm() < 0.12) start = f;
+  ASSERT_GE(start, 0);
+  for (int f = start; f < start + 40; ++f) std::swap(Sample(f, a), Sample(f, b));
+  const auto out = Run(CleanupOptions{});
+  int right = 0;
+  for (int f = start; f < start + 40; ++f) right += (out[static_cast<size_t>(f)].markers[static_cast<size_t>(a)] - Truth(f, a)).norm() < 0.01;
+  EXPECT_GE(right, 36);
+}
+
+TEST_F(CleanupPipelineTest, FrozenMarkerIsDetected) {
+  const int m = Marker("RFOT2");
+  for (int f = 700; f < 760; ++f) Sample(f, m) = Truth(699, m);
+  CleanupOptions options = Blind();
+  options.frozen_frames = 6;
+  const auto out = Run(options);
+  int frozen = 0;
+  for (int f = 700; f < 760; ++f) frozen += out[static_cast<size_t>(f)].reason[static_cast<size_t>(m)] == MaskReason::kFrozen;
+  EXPECT_GT(frozen, 40);
+}
+
+TEST_F(CleanupPipelineTest, FallenOffMarkerIsClassifiedAndExcluded) {
+  const int m = Marker("RUPA2");
+  for (int f = 300; f < static_cast<int>(frames_.size()); ++f) Sample(f, m) = Vec3(Truth(299, m).x(), 0.0, Truth(299, m).z());
+  const auto out = Run(CleanupOptions{});
+  EXPECT_EQ(out[300].reason[static_cast<size_t>(m)], MaskReason::kResidual);
+  EXPECT_EQ(out[500].reason[static_cast<size_t>(m)], MaskReason::kFallenOff);
+  EXPECT_LT((out[800].markers[static_cast<size_t>(m)] - Truth(800, m)).norm(), 0.02);
+}
+
+TEST_F(CleanupPipelineTest, ReturningMarkerBlendsInWithoutAPop) {
+  // A gap longer than the lookahead: its first frames go out one-sided, holding the
+  // offset the marker had (+9 mm). It returns with another offset (-9 mm, both within
+  // the detectors' tolerance): the output must ease over instead of jumping 18 mm.
+  const int m = Marker("RFRM1");
+  CleanupOptions options;
+  options.lookahead = 4;
+  for (int f = 0; f < 400; ++f) Sample(f, m) += Vec3(0.009, 0.0, 0.0);
+  for (int f = 400; f < 460; ++f) Sample(f, m) = Vec3::Constant(kNaN);
+  for (int f = 460; f < static_cast<int>(frames_.size()); ++f) Sample(f, m) -= Vec3(0.009, 0.0, 0.0);
+  const auto out = Run(options);
+  double worst_extra_step = 0.0;
+  for (int f = 440; f < 470; ++f) {
+    const double step = (out[static_cast<size_t>(f)].markers[static_cast<size_t>(m)] - out[static_cast<size_t>(f - 1)].markers[static_cast<size_t>(m)]).norm();
+    worst_extra_step = std::max(worst_extra_step, step - (Truth(f, m) - Truth(f - 1, m)).norm());
+  }
+  EXPECT_LT(worst_extra_step, 0.008);
+  EXPECT_EQ(out[460].status[static_cast<size_t>(m)], MarkerStatus::kObserved);
+  EXPECT_EQ(out[460].markers[static_cast<size_t>(m)], Sample(460, m));  // the returning sample itself is untouched
+}
+
+TEST_F(CleanupPipelineTest, MarkerNeverSeenIsUnrecoverableNotInvented) {
+  const int m = Marker("LTOE1");
+  for (auto& frame : frames_) frame[static_cast<size_t>(m)] = Vec3::Constant(kNaN);
+  const auto out = Run(CleanupOptions{});
+  EXPECT_EQ(out[100].status[static_cast<size_t>(m)], MarkerStatus::kUnrecoverable);
+  EXPECT_FALSE(out[100].markers[static_cast<size_t>(m)].allFinite());
+  EXPECT_EQ(counters_.unrecoverable, static_cast<int64_t>(frames_.size()));
+}
+
+TEST_F(CleanupPipelineTest, SolvedSkeletonStaysAccurateThroughRepairs) {
+  for (int f = 200; f < 320; ++f) Sample(f, Marker("LHND1")) = Vec3::Constant(kNaN);
+  for (int f = 500; f < 503; ++f) Sample(f, Marker("RSHN2")) += Vec3(0.3, 0.0, 0.0);
+  const auto out = Run(CleanupOptions{});
+  PoseErrorAccumulator errors(*fixture_.skeleton);
+  KinematicsWorkspace truth(*fixture_.skeleton), est(*fixture_.skeleton);
+  for (const CleanFrame& frame : out) {
+    ForwardKinematics(*fixture_.skeleton, fixture_.motion[static_cast<size_t>(frame.frame)], &truth);
+    ForwardKinematics(*fixture_.skeleton, frame.pose, &est);
+    errors.Add(truth, est);
+  }
+  EXPECT_LT(errors.mean_position_error_m(), 0.003);
+  EXPECT_LT(errors.max_position_error_m(), 0.03);
+}
+
+TEST_F(CleanupPipelineTest, PushAndFlushAllocateNothingAfterWarmUp) {
+  for (int f = 100; f < 160; ++f) Sample(f, Marker("HED1")) = Vec3::Constant(kNaN);
+  for (int f = 120; f < 122; ++f) Sample(f, Marker("PEL1")) += Vec3(0.2, 0, 0);
+  CleanupPipeline dut(fixture_.skeleton, fixture_.markers, CleanupOptions{});
+  for (int f = 0; f < 60; ++f) dut.Push(frames_[static_cast<size_t>(f)]);
+  size_t allocations = 0;
+  {
+    testing::ScopedAllocationCounter counter;
+    for (int f = 60; f < 400; ++f) dut.Push(frames_[static_cast<size_t>(f)]);
+    while (dut.Flush()) {
+    }
+    allocations = counter.count();
+  }
+  EXPECT_EQ(allocations, 0u);
+}
+
+TEST(CleanupOptionsTest, ValidateNamesTheBadField) {
+  CleanupOptions options;
+  options.lookahead = -1;
+  try {
+    options.Validate();
+    FAIL();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("lookahead"), std::string::npos);
+  }
+  options = CleanupOptions{};
+  options.repaired_weight = 2.0;
+  EXPECT_THROW(options.Validate(), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace mocapd
