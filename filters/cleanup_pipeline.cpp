@@ -83,12 +83,14 @@ void CleanupOptions::Validate() const {
           "> frozen_motion_m >= 0");
   require(frozen_frames >= 1, "frozen_frames", ">= 1");
   require(fallen_frames >= 1, "fallen_frames", ">= 1");
+  require(fallen_residual_m > 0.0, "fallen_residual_m", "> 0");
   require(small_gap_frames >= 0, "small_gap_frames", ">= 0");
   require(small_track_frames >= 0, "small_track_frames", ">= 0");
   require(trim_slope_m > 0.0, "trim_slope_m", "> 0");
   require(max_trim_frames >= 0, "max_trim_frames", ">= 0");
   require(max_offset_velocity_m > 0.0, "max_offset_velocity_m", "> 0");
   require(repaired_weight >= 0.0 && repaired_weight <= 1.0, "repaired_weight", "0..1");
+  require(interpolated_weight >= 0.0 && interpolated_weight <= 1.0, "interpolated_weight", "0..1");
   naive_ik.Validate();
   robust_ik.Validate();
   final_ik.Validate();
@@ -179,8 +181,10 @@ bool CleanupPipeline::Push(std::span<const Vec3> p_WM) {
     s.mask[m] = valid ? MaskReason::kNone : MaskReason::kMissing;
   }
   RelabelSwaps(t);
-  // Y^: robust, without markers known to have come off.
-  for (size_t m = 0; m < m_count; ++m) weights_[m] = s.valid[m] && !tracks_[m].fallen && tracks_[m].frozen_run == 0 ? 1.0 : 0.0;
+  // Y^: robust, without markers that are standing still while the body moves or have
+  // come off. Markers flagged only by a modest residual stay in (the Huber loss bounds
+  // their pull): excluding them would let the reference drift away and keep them out.
+  for (size_t m = 0; m < m_count; ++m) weights_[m] = s.valid[m] && tracks_[m].frozen_run == 0 && !tracks_[m].fallen ? 1.0 : 0.0;
   SolveIk(*skeleton_, *markers_, options_.robust_ik, s.raw, weights_, &robust_);
   const auto predicted = robust_.predicted_markers();
   std::copy(predicted.begin(), predicted.end(), s.reference.begin());
@@ -332,7 +336,8 @@ void CleanupPipeline::Detect(int64_t t) {
     if (r > thr) {
       ++track.residual_run;
       if (s.mask[m] == MaskReason::kNone || s.mask[m] == MaskReason::kDisagreement) s.mask[m] = MaskReason::kResidual;
-      if (track.residual_run >= options_.fallen_frames) {
+      // Fallen off: far from where it belongs (not a reference a few cm off) for long.
+      if (track.residual_run >= options_.fallen_frames && r > options_.fallen_residual_m) {
         track.fallen = true;
         s.mask[m] = MaskReason::kFallenOff;
       }
@@ -419,6 +424,7 @@ void CleanupPipeline::Publish(int64_t tau, int64_t newest) {
     Vec3 x = Vec3::Constant(kNaN);
     MarkerStatus status = MarkerStatus::kRepaired;
     MaskReason reason = s.mask[m];
+    bool interpolated = false;  // filled between two known ends
     // Each branch leaves x and the track's offset / velocities for the next frame.
     if (reason == MaskReason::kNone) {
       // Observed (or relabelled): published exactly as it is.
@@ -450,6 +456,7 @@ void CleanupPipeline::Publish(int64_t tau, int64_t newest) {
           track.output_velocity = Vec3::Zero();
         }
       } else if (end >= 0 && track.last_observed == tau - 1 && end - tau <= options_.small_gap_frames) {
+        interpolated = true;
         // A short gap right after an observed sample: a plain Hermite on the raw path.
         const HermiteSegment h{track.output, track.output_velocity, slot(end).raw[m],
                                end_slope_known ? Vec3(slot(end + 1).raw[m] - slot(end).raw[m]) : track.output_velocity,
@@ -466,6 +473,7 @@ void CleanupPipeline::Publish(int64_t tau, int64_t newest) {
         h.p0 = track.offset;
         h.m0 = ClampNorm(track.offset_velocity, max_v);
         if (end >= 0) {
+          interpolated = true;
           const Slot& e = slot(end);
           h.p1 = e.raw[m] - e.reference[m];
           h.m1 = end_slope_known ? ClampNorm((slot(end + 1).raw[m] - slot(end + 1).reference[m]) - h.p1, max_v) : Vec3::Zero();
@@ -488,8 +496,10 @@ void CleanupPipeline::Publish(int64_t tau, int64_t newest) {
     out_.markers[m] = x;
     out_.status[m] = status;
     out_.reason[m] = status == MarkerStatus::kObserved ? MaskReason::kNone : reason;
-    weights_[m] = status == MarkerStatus::kObserved ? 1.0 : status == MarkerStatus::kRepaired ? options_.repaired_weight : 0.0;
-    if (s.relabelled[m] && reason == MaskReason::kSwap) weights_[m] = 1.0;
+    weights_[m] = status == MarkerStatus::kObserved || s.relabelled[m] ? 1.0
+                  : status == MarkerStatus::kUnrecoverable   ? 0.0
+                  : interpolated                             ? options_.interpolated_weight
+                                                             : options_.repaired_weight;
     ++counters_.samples_out;
     if (status == MarkerStatus::kRepaired) ++counters_.repaired_by[static_cast<size_t>(reason)];
     if (status == MarkerStatus::kUnrecoverable) ++counters_.unrecoverable;

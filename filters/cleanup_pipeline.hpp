@@ -75,7 +75,8 @@ struct CleanupOptions {
   double frozen_motion_m = 0.0003;  ///< A marker moving less than this per frame...
   double frozen_reference_motion_m = 0.002;  ///< ...while its reference moves more...
   int frozen_frames = 6;                     ///< ...for this many frames is frozen.
-  int fallen_frames = 60;  ///< Residual outliers this long in a row: fallen off (excluded from Y^).
+  int fallen_frames = 60;  ///< Residual outliers this long in a row...
+  double fallen_residual_m = 0.10;  ///< ...and this far off: fallen off (excluded from Y^).
   // Mask clean-up, bounded by the lookahead.
   int small_gap_frames = 5;     ///< Gaps up to this long between observed samples: plain Hermite.
   int small_track_frames = 10;  ///< Observed runs up to this long between gaps are dropped.
@@ -87,6 +88,10 @@ struct CleanupOptions {
   /// a filled sample carries the reference's guess, which the final solve's own priors
   /// already hold; measured best at 0.01 on the Bandai takes.
   double repaired_weight = 0.01;
+  /// Weight of a sample filled between two known ends (short gaps, gaps whose end is in
+  /// the lookahead, re-entry blends): an interpolation of real data, and what keeps the
+  /// skeleton from jumping when a segment's markers come back.
+  double interpolated_weight = 1.0;
   // Solves.
   IkOptions naive_ik;   ///< Y: plain least squares.
   IkOptions robust_ik;  ///< Y^: Huber (huber_delta_m = 4 mm, decaying velocity prediction by default).

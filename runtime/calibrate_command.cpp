@@ -70,6 +70,7 @@ int RunCalibrateCommand(const CalibrateCommandOptions& options, std::ostream& ou
   model.skeleton = std::make_shared<const Skeleton>(bvh.skeleton);
   model.markers = std::make_shared<const MarkerSet>(bvh.skeleton, std::move(accepted));
   model.fit_rms_m = rms;
+  model.bvh_units = bvh.units;
   WriteSubjectModel(options.out_subject, model);
   out << "wrote " << options.out_subject << ": " << model.markers->num_markers() << " markers accepted, "
       << results.size() - static_cast<size_t>(model.markers->num_markers()) << " rejected, " << frames << " frames used\n";

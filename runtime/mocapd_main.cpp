@@ -1,12 +1,16 @@
 // mocapd: the motion-capture cleanup daemon's command line. Subcommands:
 //   demo       synthesize a take and solve it live (the README's main job)
 //   calibrate  build a subject model from a BVH and the C3D capture of the same take
+//   process    clean a recorded C3D through the streaming pipeline; write BVH (+ C3D)
 #include <CLI/CLI.hpp>
 #include <exception>
 #include <iostream>
 
 #include "runtime/calibrate_command.hpp"
 #include "runtime/demo_command.hpp"
+#include "runtime/process_command.hpp"
+
+#include <unistd.h>
 
 int main(int argc, char** argv) {
   CLI::App app{"mocapd - real-time motion-capture cleanup daemon"};
@@ -34,12 +38,26 @@ int main(int argc, char** argv) {
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
 
+  mocapd::ProcessCommandOptions proc;
+  CLI::App* proc_cmd = app.add_subcommand("process", "Clean a recorded take frame by frame and solve the skeleton");
+  proc_cmd->add_option("--subject", proc.subject, "Subject model (TOML)")->required()->check(CLI::ExistingFile);
+  proc_cmd->add_option("--in", proc.input_c3d, "Marker take (C3D)")->required()->check(CLI::ExistingFile);
+  proc_cmd->add_option("--out-bvh", proc.output_bvh, "Solved skeleton to write (BVH)")->required();
+  proc_cmd->add_option("--out-c3d", proc.output_c3d, "Cleaned markers to write (C3D; untouched samples are kept bit for bit)");
+  proc_cmd->add_option("--lookahead", proc.lookahead, "Frames of lookahead K (delay)")->check(CLI::Range(0, 1000))->capture_default_str();
+  proc_cmd->add_option("--report", proc.report_json, "Write the summary as JSON");
+
   CLI11_PARSE(app, argc, argv);
   try {
     if (*demo_cmd) return mocapd::RunDemoCommand(demo, std::cout);
     if (*cal_cmd) {
       cal.calibration.max_rms_m = max_rms_mm * 1e-3;
       mocapd::RunCalibrateCommand(cal, std::cout);
+      return 0;
+    }
+    if (*proc_cmd) {
+      proc.progress = ::isatty(STDOUT_FILENO) != 0;
+      mocapd::RunProcessCommand(proc, std::cout);
       return 0;
     }
   } catch (const std::exception& e) {

@@ -74,6 +74,7 @@ int RunSynth(const SynthOptions& o) {
   if (!o.subject_out.empty()) {
     mocapd::SubjectModel model;
     model.name = "synthetic";
+    model.bvh_units = source.units;
     model.skeleton = std::make_shared<const mocapd::Skeleton>(source.skeleton);
     model.markers = markers;
     mocapd::WriteSubjectModel(o.subject_out, model);

@@ -1,6 +1,8 @@
 // TOML subject model reader and writer.
 #include "sim/subject_file.hpp"
 
+#include "sim/c3d.hpp"
+
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -83,6 +85,12 @@ SubjectModel ParseSubjectModel(const std::string& text, const std::string& sourc
   const int version = root["format_version"].value_or(0);
   if (version != 1) err.Fail(root.get("format_version"), "format_version", "expected 1, found " + std::to_string(version));
   model.name = root["subject"]["name"].value_or(std::string("subject"));
+  model.bvh_units = root["subject"]["bvh_units"].value_or(std::string("cm"));
+  try {
+    (void)MetresPerUnit(model.bvh_units);
+  } catch (const std::invalid_argument& e) {
+    err.Fail(root["subject"]["bvh_units"].node(), "subject.bvh_units", e.what());
+  }
 
   const toml::array* joints = root["joint"].as_array();
   if (joints == nullptr || joints->empty()) err.Fail(&root, "joint", "expected one or more [[joint]] tables");
@@ -193,7 +201,7 @@ std::string FormatSubjectModel(const SubjectModel& model) {
   std::string out =
       "# mocapd subject model: a skeleton and the markers attached to it.\n"
       "# Units: metres; rotations: quaternions [w, x, y, z]. Format: config/subject.example.toml.\n"
-      "format_version = 1\n\n[subject]\nname = " + Quoted(model.name) + "\n";
+      "format_version = 1\n\n[subject]\nname = " + Quoted(model.name) + "\nbvh_units = " + Quoted(model.bvh_units) + "\n";
   for (const Joint& j : sk.joints()) {
     out += "\n[[joint]]\nname = " + Quoted(j.name) + "\n";
     out += "parent = " + Quoted(j.parent.is_valid() ? sk.joint(j.parent.value).name : std::string()) + "\n";

@@ -17,6 +17,8 @@ struct SubjectModel {
   std::shared_ptr<const MarkerSet> markers;
   /// Per marker, the calibration fit RMS in metres (NaN when unknown).
   std::vector<double> fit_rms_m;
+  /// Length unit of the BVH files this subject's motion is written to (as its source).
+  std::string bvh_units = "cm";
 };
 
 /// Parses a subject model. Throws std::runtime_error naming the file, line and field.

@@ -1,0 +1,223 @@
+// Cleanup accuracy benchmark (issue "Marker cleanup", item 10): BVH takes (the ../shared
+// Bandai takes when present, else the built-in humanoid) at 120 Hz with the default
+// virtual marker set, corrupted at each severity with several seeds, processed by the
+// streaming pipeline at K = 0, 4, 12, beside three baselines run on the same corrupted
+// markers: IK on the raw markers, linear gap fill + IK, cubic (Catmull-Rom) gap fill + IK.
+// Reports the solved skeleton's mean global joint position (cm) and rotation (deg) error,
+// the cleaned-marker RMSE on corrupted samples (mm), the jerk ratio against the truth and
+// the number of pops (a joint moving > 2 cm per frame beyond the truth's own motion).
+// Usage: cleanup_accuracy [--seeds N] [--severity light|medium|heavy]... [TAKE.bvh ...]
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <map>
+#include <string>
+
+#include "bench/bench_takes.hpp"
+#include "filters/cleanup_pipeline.hpp"
+#include "filters/pose_error.hpp"
+#include "sim/corruption.hpp"
+#include "sim/synthesis.hpp"
+
+using namespace mocapd;
+
+namespace {
+
+struct Scores {
+  double pos_cm = 0, rot_deg = 0, marker_rmse_mm = 0, jerk_ratio = 0;
+  int pops = 0;
+  double p50_us = 0, p99_us = 0;
+};
+
+// Accumulates a solved take against the truth.
+class Scorer {
+ public:
+  Scorer(const Skeleton& sk, const std::vector<Pose>& truth) : sk_(sk), truth_(truth), errors_(sk) {}
+  void Add(int frame, const Pose& pose) { estimates_[frame] = pose; }
+  Scores Finish() {
+    Scores s;
+    KinematicsWorkspace t(sk_), e(sk_), tp(sk_), ep(sk_);
+    std::vector<std::vector<Vec3>> est_p, tru_p;
+    for (const auto& [f, pose] : estimates_) {
+      ForwardKinematics(sk_, truth_[static_cast<size_t>(f)], &t);
+      ForwardKinematics(sk_, pose, &e);
+      errors_.Add(t, e);
+      est_p.push_back(e.p_WJ);
+      tru_p.push_back(t.p_WJ);
+    }
+    s.pos_cm = errors_.mean_position_error_m() * 100;
+    s.rot_deg = errors_.mean_rotation_error_rad() * 180 / M_PI;
+    double jerk_e = 0, jerk_t = 0;
+    for (size_t f = 3; f < est_p.size(); ++f) {
+      for (size_t j = 0; j < est_p[f].size(); ++j) {
+        jerk_e += (est_p[f][j] - 3 * est_p[f - 1][j] + 3 * est_p[f - 2][j] - est_p[f - 3][j]).norm();
+        jerk_t += (tru_p[f][j] - 3 * tru_p[f - 1][j] + 3 * tru_p[f - 2][j] - tru_p[f - 3][j]).norm();
+      }
+    }
+    s.jerk_ratio = jerk_t > 0 ? jerk_e / jerk_t : 0;
+    for (size_t f = 1; f < est_p.size(); ++f) {
+      bool pop = false;
+      for (size_t j = 0; j < est_p[f].size(); ++j)
+        pop = pop || (est_p[f][j] - est_p[f - 1][j]).norm() - (tru_p[f][j] - tru_p[f - 1][j]).norm() > 0.02;
+      s.pops += pop;
+    }
+    return s;
+  }
+
+ private:
+  const Skeleton& sk_;
+  const std::vector<Pose>& truth_;
+  PoseErrorAccumulator errors_;
+  std::map<int, Pose> estimates_;
+};
+
+// Offline gap fill of every missing sample, linear or Catmull-Rom between the valid
+// samples around the gap (held at the take's ends).
+C3dTake FillGaps(const C3dTake& in, bool cubic) {
+  C3dTake out = in;
+  for (int p = 0; p < in.num_points(); ++p) {
+    int f = 0;
+    while (f < in.num_frames) {
+      if (in.valid(f, p)) {
+        ++f;
+        continue;
+      }
+      const int s = f - 1;
+      int e = f;
+      while (e < in.num_frames && !in.valid(e, p)) ++e;
+      for (int g = f; g < e; ++g) {
+        Vec3 v;
+        if (s < 0 && e >= in.num_frames) break;
+        if (s < 0) v = in.at(e, p);
+        else if (e >= in.num_frames) v = in.at(s, p);
+        else {
+          const double u = static_cast<double>(g - s) / (e - s);
+          const Vec3 a = in.at(s, p), b = in.at(e, p);
+          if (!cubic) {
+            v = (1 - u) * a + u * b;
+          } else {
+            const Vec3 ma = (s > 0 && in.valid(s - 1, p)) ? Vec3((b - in.at(s - 1, p)) * 0.5 * (e - s) / (e - s + 1.0)) : Vec3(b - a);
+            const Vec3 mb = (e + 1 < in.num_frames && in.valid(e + 1, p)) ? Vec3((in.at(e + 1, p) - a) * 0.5 * (e - s) / (e - s + 1.0)) : Vec3(b - a);
+            const double u2 = u * u, u3 = u2 * u;
+            v = (2 * u3 - 3 * u2 + 1) * a + (u3 - 2 * u2 + u) * ma + (-2 * u3 + 3 * u2) * b + (u3 - u2) * mb;
+          }
+        }
+        out.at(g, p) = v;
+        out.residuals[static_cast<size_t>(g) * static_cast<size_t>(in.num_points()) + static_cast<size_t>(p)] = 0.0f;
+      }
+      f = e;
+    }
+  }
+  return out;
+}
+
+Scores SolveBaseline(const bench::BenchTake& take, const C3dTake& markers) {
+  const Skeleton& sk = take.bvh.skeleton;
+  IkState ik(sk, *take.markers);
+  std::vector<Vec3> obs(static_cast<size_t>(take.markers->num_markers()));
+  std::vector<double> w(obs.size());
+  Scorer scorer(sk, take.motion);
+  for (int f = 0; f < markers.num_frames; ++f) {
+    for (size_t m = 0; m < obs.size(); ++m) {
+      obs[m] = markers.at(f, static_cast<int>(m));
+      w[m] = markers.valid(f, static_cast<int>(m)) ? 1.0 : 0.0;
+    }
+    SolveIk(sk, *take.markers, IkOptions{}, obs, w, &ik);
+    scorer.Add(f, ik.pose());
+  }
+  return scorer.Finish();
+}
+
+Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const C3dTake& clean, int lookahead) {
+  const auto skeleton = std::make_shared<const Skeleton>(take.bvh.skeleton);
+  CleanupOptions options;
+  options.lookahead = lookahead;
+  CleanupPipeline pipeline(skeleton, take.markers, options);
+  Scorer scorer(*skeleton, take.motion);
+  std::vector<Vec3> obs(static_cast<size_t>(take.markers->num_markers()));
+  std::vector<double> times;
+  double sq = 0;
+  long n = 0;
+  auto collect = [&]() {
+    const CleanFrame& o = pipeline.output();
+    scorer.Add(static_cast<int>(o.frame), o.pose);
+    for (size_t m = 0; m < obs.size(); ++m) {
+      if (bad.at(static_cast<int>(o.frame), static_cast<int>(m)) == CorruptionKind::kNone || !o.markers[m].allFinite()) continue;
+      sq += (o.markers[m] - clean.at(static_cast<int>(o.frame), static_cast<int>(m))).squaredNorm();
+      ++n;
+    }
+  };
+  for (int f = 0; f < bad.take.num_frames; ++f) {
+    for (size_t m = 0; m < obs.size(); ++m) obs[m] = bad.take.at(f, static_cast<int>(m));
+    const auto t0 = std::chrono::steady_clock::now();
+    const bool ready = pipeline.Push(obs);
+    times.push_back(std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - t0).count());
+    if (ready) collect();
+  }
+  while (pipeline.Flush()) collect();
+  Scores s = scorer.Finish();
+  s.marker_rmse_mm = n > 0 ? std::sqrt(sq / static_cast<double>(n)) * 1e3 : 0;
+  s.p50_us = Quantile(times, 0.5);
+  s.p99_us = Quantile(times, 0.99);
+  return s;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  int seeds = 2;
+  std::vector<std::string> severities, paths;
+  for (int i = 1; i < argc; ++i) {
+    if (std::strcmp(argv[i], "--seeds") == 0 && i + 1 < argc) seeds = std::atoi(argv[++i]);
+    else if (std::strcmp(argv[i], "--severity") == 0 && i + 1 < argc) severities.emplace_back(argv[++i]);
+    else paths.emplace_back(argv[i]);
+  }
+  if (severities.empty()) severities = {"light", "medium", "heavy"};
+  if (paths.empty()) paths = bench::SharedBvhTakes();
+  if (paths.empty()) paths.emplace_back("");
+  std::printf("| severity | method | Δpos (cm) | Δrot (deg) | marker RMSE on corrupted samples (mm) | jerk ratio | pops | per-frame p50 / p99 (us) |\n");
+  std::printf("|---|---|---|---|---|---|---|---|\n");
+  std::vector<bench::BenchTake> takes;
+  for (const auto& p : paths) takes.push_back(bench::LoadBenchTake(p, 120.0));
+  for (const std::string& severity_name : severities) {
+    std::map<std::string, std::vector<Scores>> results;
+    for (const bench::BenchTake& take : takes) {
+      const C3dTake clean = SynthesizeMarkers(take.bvh.skeleton, *take.markers, take.motion, 120.0);
+      for (int seed = 1; seed <= seeds; ++seed) {
+        CorruptionOptions co;
+        co.severity = ParseCorruptionSeverity(severity_name);
+        co.seed = static_cast<uint64_t>(seed);
+        const CorruptedTake bad = CorruptTake(clean, take.markers.get(), co);
+        results["raw IK"].push_back(SolveBaseline(take, bad.take));
+        results["linear fill + IK"].push_back(SolveBaseline(take, FillGaps(bad.take, false)));
+        results["cubic fill + IK"].push_back(SolveBaseline(take, FillGaps(bad.take, true)));
+        for (int k : {0, 4, 12}) results["mocapd K=" + std::to_string(k)].push_back(RunPipeline(take, bad, clean, k));
+      }
+    }
+    for (const char* method : {"raw IK", "linear fill + IK", "cubic fill + IK", "mocapd K=0", "mocapd K=4", "mocapd K=12"}) {
+      const auto& v = results[method];
+      Scores mean;
+      for (const Scores& s : v) {
+        mean.pos_cm += s.pos_cm / v.size();
+        mean.rot_deg += s.rot_deg / v.size();
+        mean.marker_rmse_mm += s.marker_rmse_mm / v.size();
+        mean.jerk_ratio += s.jerk_ratio / v.size();
+        mean.pops += s.pops;
+        mean.p50_us += s.p50_us / v.size();
+        mean.p99_us = std::max(mean.p99_us, s.p99_us);
+      }
+      const bool ours = std::string(method).rfind("mocapd", 0) == 0;
+      char rmse[32] = "-", timing[48] = "-";
+      if (ours) {
+        std::snprintf(rmse, sizeof(rmse), "%.1f", mean.marker_rmse_mm);
+        std::snprintf(timing, sizeof(timing), "%.0f / %.0f", mean.p50_us, mean.p99_us);
+      }
+      std::printf("| %s | %s | %.2f | %.2f | %s | %.2f | %d | %s |\n", severity_name.c_str(), method, mean.pos_cm, mean.rot_deg, rmse,
+                  mean.jerk_ratio, mean.pops, timing);
+      std::fflush(stdout);
+    }
+  }
+  std::printf("\n%zu takes x %d seeds per severity; pops summed over all runs; p99 is the worst run's.\n", takes.size(), seeds);
+  return 0;
+}

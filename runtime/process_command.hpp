@@ -1,0 +1,40 @@
+// `mocapd process`: batch-cleans a recorded C3D through exactly the streaming pipeline
+// the daemon runs (frame by frame, never looking further than the lookahead), writes the
+// solved skeleton as BVH and optionally the cleaned markers as C3D, and reports what
+// was repaired.
+#pragma once
+
+#include <nlohmann/json_fwd.hpp>
+#include <ostream>
+#include <string>
+
+#include "filters/cleanup_pipeline.hpp"
+
+namespace mocapd {
+
+struct ProcessCommandOptions {
+  std::string subject;
+  std::string input_c3d;
+  std::string output_bvh;
+  std::string output_c3d;  ///< Empty: not written.
+  std::string report_json;  ///< Empty: not written.
+  int lookahead = 12;
+  bool progress = false;  ///< Draw a progress bar (on a terminal).
+};
+
+struct ProcessSummary {
+  int frames = 0;
+  int markers = 0;
+  int matched_markers = 0;
+  CleanupCounters counters;
+  double mean_us = 0.0, p50_us = 0.0, p99_us = 0.0, max_us = 0.0;  ///< Per-frame pipeline time.
+};
+
+/// Runs the command, printing progress and the summary to out. Throws std::runtime_error
+/// (or the readers' errors) for unreadable inputs or a subject the take does not match.
+ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostream& out);
+
+/// The summary as JSON (what --report writes).
+nlohmann::json ProcessSummaryJson(const ProcessSummary& summary, const ProcessCommandOptions& options);
+
+}  // namespace mocapd
