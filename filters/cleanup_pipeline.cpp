@@ -162,6 +162,7 @@ void CleanupPipeline::Reset() {
     t.residual_scale = options_.residual_floor_m / options_.residual_scale_factor;
   }
   naive_.Reset();
+  naive_fresh_ = false;
   robust_.Reset();
   final_.Reset();
   next_in_ = next_out_ = 0;
@@ -185,17 +186,32 @@ bool CleanupPipeline::Push(std::span<const Vec3> p_WM) {
   // come off. Markers flagged only by a modest residual stay in (the Huber loss bounds
   // their pull): excluding them would let the reference drift away and keep them out.
   for (size_t m = 0; m < m_count; ++m) weights_[m] = s.valid[m] && tracks_[m].frozen_run == 0 && !tracks_[m].fallen ? 1.0 : 0.0;
-  SolveIk(*skeleton_, *markers_, options_.robust_ik, s.raw, weights_, &robust_);
+  CountSolve(SolveIk(*skeleton_, *markers_, options_.robust_ik, s.raw, weights_, &robust_));
   const auto predicted = robust_.predicted_markers();
   std::copy(predicted.begin(), predicted.end(), s.reference.begin());
-  // Y: the markers as they are.
-  for (size_t m = 0; m < m_count; ++m) weights_[m] = s.valid[m] ? 1.0 : 0.0;
-  SolveIk(*skeleton_, *markers_, options_.naive_ik, s.raw, weights_, &naive_);
+  // Y: the markers as they are. Disagreement can only mark markers further than
+  // disagreement_residual_m from X^, so on frames with none the naive solve is skipped
+  // (and re-seeded from Y^ when next needed): about a third of the per-frame work.
+  naive_solved_ = false;
+  for (size_t m = 0; m < m_count && !naive_solved_; ++m)
+    naive_solved_ = s.valid[m] && (s.raw[m] - s.reference[m]).norm() > options_.disagreement_residual_m;
+  if (naive_solved_) {
+    if (!naive_fresh_) naive_.Reset(robust_.pose());
+    for (size_t m = 0; m < m_count; ++m) weights_[m] = s.valid[m] ? 1.0 : 0.0;
+    CountSolve(SolveIk(*skeleton_, *markers_, options_.naive_ik, s.raw, weights_, &naive_));
+  }
+  naive_fresh_ = naive_solved_;
   Detect(t);
   CleanMask(t);
   if (t - options_.lookahead < next_out_) return false;
   Publish(next_out_, t);
   return true;
+}
+
+void CleanupPipeline::CountSolve(const IkSummary& summary) {
+  counters_.cold_starts += summary.cold_start;
+  counters_.solve_failures += summary.status == IkStatus::kNumericalFailure;
+  counters_.solve_iterations += summary.iterations;
 }
 
 bool CleanupPipeline::Flush() {
@@ -312,7 +328,7 @@ void CleanupPipeline::Detect(int64_t t) {
   // marks every marker skinned to it.
   const KinematicsWorkspace& naive = naive_.kinematics();
   const KinematicsWorkspace& robust = robust_.kinematics();
-  for (int j = 0; j < skeleton_->num_joints(); ++j) {
+  for (int j = 0; naive_solved_ && j < skeleton_->num_joints(); ++j) {
     if (skeleton_->joint(j).type == JointType::kFixed) continue;
     const auto uj = static_cast<size_t>(j);
     const double dp = (naive.p_WJ[uj] - robust.p_WJ[uj]).norm();
@@ -505,6 +521,7 @@ void CleanupPipeline::Publish(int64_t tau, int64_t newest) {
     if (status == MarkerStatus::kUnrecoverable) ++counters_.unrecoverable;
   }
   out_.final_solve = SolveIk(*skeleton_, *markers_, options_.final_ik, out_.markers, weights_, &final_);
+  CountSolve(out_.final_solve);
   out_.pose = final_.pose();
   ++counters_.frames_out;
   next_out_ = tau + 1;

@@ -118,6 +118,9 @@ struct CleanupCounters {
   std::array<int64_t, kMaskReasonCount> repaired_by{};  ///< Published repaired samples, per reason.
   int64_t unrecoverable = 0;
   int64_t swaps_relabelled = 0;
+  int64_t cold_starts = 0;         ///< IK solves (of the three per frame) that started cold.
+  int64_t solve_failures = 0;      ///< IK solves that reported a numerical failure.
+  int64_t solve_iterations = 0;    ///< LM iterations over all solves.
 };
 
 class CleanupPipeline {
@@ -146,6 +149,7 @@ class CleanupPipeline {
 
  private:
   void RelabelSwaps(int64_t t);
+  void CountSolve(const IkSummary& summary);
   void Detect(int64_t t);
   void CleanMask(int64_t t);
   void Publish(int64_t tau, int64_t newest);
@@ -164,6 +168,8 @@ class CleanupPipeline {
   std::vector<Vec3> scratch_;
   CleanFrame out_;
   CleanupCounters counters_;
+  bool naive_solved_ = false;  ///< Y was solved for the newest frame.
+  bool naive_fresh_ = false;   ///< Y's warm start is the previous frame's solution.
   int64_t next_in_ = 0;   ///< Frame number of the next Push.
   int64_t next_out_ = 0;  ///< Frame number of the next publication.
 };
