@@ -40,12 +40,6 @@ void AddMoments(JointBlock* blk) {
   blk->b.tail<3>() += blk->wr;
 }
 
-Eigen::Matrix<double, 3, 6> PointMap(const Vec3& x) {
-  Eigen::Matrix<double, 3, 6> A;
-  A.leftCols<3>() = -Skew(x);
-  A.rightCols<3>().setIdentity();
-  return A;
-}
 
 double RobustCost(double r_norm, double delta) {
   if (delta <= 0.0 || r_norm <= delta) return 0.5 * r_norm * r_norm;
@@ -111,13 +105,32 @@ void AccumulateMarkers(const MarkerSet& markers, const IkOptions& options, std::
     const auto j1 = static_cast<size_t>(a1.joint);
     const Vec3 x0 = ws.R_WJ[j0] * a0.offset + ws.p_WJ[j0];
     const Vec3 x1 = ws.R_WJ[j1] * a1.offset + ws.p_WJ[j1];
-    const Eigen::Matrix<double, 3, 6> C = a0.weight * PointMap(x0 - ws.p_WJ[j0]);
-    const Eigen::Matrix<double, 3, 6> B = a1.weight * PointMap(x1 - ws.p_WJ[j1]) + a0.weight * PointMap(x0 - ws.p_WJ[j1]);
-    blk.BB.noalias() += w * B.transpose() * B;
-    blk.BG.noalias() += w * B.transpose() * C;
-    blk.GG.noalias() += w * C.transpose() * C;
-    blk.Br.noalias() += w * B.transpose() * r;
-    blk.Gr.noalias() += w * C.transpose() * r;
+    // C = w_c A(gamma) with gamma = x0 - c_c, and since the weights sum to one,
+    // B = w_p A(x1 - c_p) + w_c A(x0 - c_p) = A(beta) with beta the blended point about c_p.
+    // Then B'B = P(beta), C'C = w_c^2 P(gamma), B'C = w_c M(beta, gamma) with
+    // P(y) = [|y|^2 I - yy', [y]x; -[y]x, I] and M(b, g) = [(b.g) I - g b', [b]x; -[g]x, I].
+    const double wc = a0.weight;
+    const Vec3 gamma = x0 - ws.p_WJ[j0];
+    const Vec3 beta = a1.weight * (x1 - ws.p_WJ[j1]) + wc * (x0 - ws.p_WJ[j1]);
+    const Mat3 Sb = Skew(beta), Sg = Skew(gamma);
+    blk.BB.topLeftCorner<3, 3>().noalias() += w * (beta.squaredNorm() * Mat3::Identity() - beta * beta.transpose());
+    blk.BB.topRightCorner<3, 3>() += w * Sb;
+    blk.BB.bottomLeftCorner<3, 3>() -= w * Sb;
+    blk.BB.bottomRightCorner<3, 3>().diagonal().array() += w;
+    const double wg = w * wc * wc;
+    blk.GG.topLeftCorner<3, 3>().noalias() += wg * (gamma.squaredNorm() * Mat3::Identity() - gamma * gamma.transpose());
+    blk.GG.topRightCorner<3, 3>() += wg * Sg;
+    blk.GG.bottomLeftCorner<3, 3>() -= wg * Sg;
+    blk.GG.bottomRightCorner<3, 3>().diagonal().array() += wg;
+    const double wbg = w * wc;
+    blk.BG.topLeftCorner<3, 3>().noalias() += wbg * (beta.dot(gamma) * Mat3::Identity() - gamma * beta.transpose());
+    blk.BG.topRightCorner<3, 3>() += wbg * Sb;
+    blk.BG.bottomLeftCorner<3, 3>() -= wbg * Sg;
+    blk.BG.bottomRightCorner<3, 3>().diagonal().array() += wbg;
+    blk.Br.head<3>() += w * beta.cross(r);
+    blk.Br.tail<3>() += w * r;
+    blk.Gr.head<3>() += wbg * gamma.cross(r);
+    blk.Gr.tail<3>() += wbg * r;
     blk.has_blend = true;
   }
 }

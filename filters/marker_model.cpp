@@ -45,16 +45,6 @@ std::optional<MarkerIndex> MarkerSet::FindMarker(std::string_view name) const {
   return std::nullopt;
 }
 
-Vec3 EvaluateMarker(const MarkerDefinition& marker, const KinematicsWorkspace& ws) {
-  Vec3 p = Vec3::Zero();
-  for (int k = 0; k < marker.num_attachments; ++k) {
-    const MarkerAttachment& a = marker.attachments[static_cast<size_t>(k)];
-    const auto j = static_cast<size_t>(a.joint);
-    p += a.weight * (ws.R_WJ[j] * a.offset + ws.p_WJ[j]);
-  }
-  return p;
-}
-
 void EvaluateMarkers(const MarkerSet& markers, const KinematicsWorkspace& ws, std::span<Vec3> p_WM) {
   for (int m = 0; m < markers.num_markers(); ++m) p_WM[static_cast<size_t>(m)] = EvaluateMarker(markers.marker(m), ws);
 }

@@ -53,8 +53,17 @@ class MarkerSet {
 /// Writes p_WM for every marker (out.size() == num_markers). Does not allocate.
 void EvaluateMarkers(const MarkerSet& markers, const KinematicsWorkspace& ws, std::span<Vec3> p_WM);
 
-/// Returns p_WM for one marker. Does not allocate.
-Vec3 EvaluateMarker(const MarkerDefinition& marker, const KinematicsWorkspace& ws);
+/// Returns p_WM for one marker. Does not allocate. Inline: it is the innermost loop of
+/// every IK iteration.
+inline Vec3 EvaluateMarker(const MarkerDefinition& marker, const KinematicsWorkspace& ws) {
+  const MarkerAttachment& a = marker.attachments[0];
+  const auto j = static_cast<size_t>(a.joint);
+  Vec3 p = ws.R_WJ[j] * a.offset + ws.p_WJ[j];
+  if (marker.num_attachments == 1) return p;
+  const MarkerAttachment& b = marker.attachments[1];
+  const auto k = static_cast<size_t>(b.joint);
+  return a.weight * p + b.weight * (ws.R_WJ[k] * b.offset + ws.p_WJ[k]);
+}
 
 /// Writes the world-frame twists of joint j's DOF into the first DofCount columns of S.
 /// A twist is (angular velocity; velocity of the world point `origin`), so a point x
