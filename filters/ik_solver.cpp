@@ -278,7 +278,7 @@ bool EliminateJoint(const Joint& joint, const Mat3& R_WJ, const Vec3& d, JointBl
     g += prior_g;
     for (int i = 0; i < N; ++i) H(i, i) += damping * H(i, i) + prior_h[i] + 1e-12;
     blk->dofs = N;
-    blk->S.template leftCols<N>() = S;
+    if constexpr (N != 3) blk->S.template leftCols<N>() = S;  // ball joints: S = [I; 0], used implicitly
     if constexpr (N == 3) {
       // Symmetric form: with H = L L', W = L^-1 HqV and w = L^-1 g, the parent receives
       // -W'W and -W'w, and the forward sweep solves L' dq = w - W V_p. About half the
@@ -380,7 +380,11 @@ bool ComputeStep(const Skeleton& skeleton, double damping, const Eigen::VectorXd
         for (int c = 0; c < blk.dofs; ++c) (*dq)[k + c] = blk.k[c] - blk.K.row(c).dot(Vp);
       }
     }
-    for (int c = 0; c < blk.dofs; ++c) blk.V += blk.S.col(c) * (*dq)[k + c];
+    if (skeleton.joint(j).type == JointType::kBall) {
+      blk.V.head<3>() += dq->segment<3>(k);
+    } else {
+      for (int c = 0; c < blk.dofs; ++c) blk.V += blk.S.col(c) * (*dq)[k + c];
+    }
   }
   return dq->allFinite();
 }
