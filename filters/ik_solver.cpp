@@ -389,31 +389,6 @@ bool ComputeStep(const Skeleton& skeleton, double damping, const Eigen::VectorXd
   return dq->allFinite();
 }
 
-// Applies a world-axis step (as ComputeStep returns it) to a pose linearised at ws.
-void IntegrateWorldStep(const Skeleton& skeleton, const KinematicsWorkspace& ws, const Eigen::VectorXd& dq, Pose* pose) {
-  for (int j = 0; j < skeleton.num_joints(); ++j) {
-    const Joint& joint = skeleton.joint(j);
-    const auto uj = static_cast<size_t>(j);
-    const int k = skeleton.dof_offset(j);
-    switch (joint.type) {
-      case JointType::kFixed: break;
-      case JointType::kHinge:
-        pose->rotation[uj] = (pose->rotation[uj] * ExpRotation(joint.hinge_axis * dq[k])).normalized();
-        break;
-      case JointType::kBall:
-        pose->rotation[uj] = (pose->rotation[uj] * ExpRotation(ws.R_WJ[uj].transpose() * dq.segment<3>(k))).normalized();
-        break;
-      case JointType::kFree: {
-        const int p = joint.parent.value;
-        const Vec3 dt = dq.segment<3>(k);
-        pose->translation[uj] += p < 0 ? dt : Vec3(ws.R_WJ[static_cast<size_t>(p)].transpose() * dt);
-        pose->rotation[uj] = (pose->rotation[uj] * ExpRotation(ws.R_WJ[uj].transpose() * dq.segment<3>(k + 3))).normalized();
-        break;
-      }
-    }
-  }
-}
-
 // Converts a world-axis step to the local-axis step IntegratePose takes.
 void WorldStepToLocal(const Skeleton& skeleton, const KinematicsWorkspace& ws, Eigen::VectorXd* dq) {
   for (int j = 0; j < skeleton.num_joints(); ++j) {
@@ -558,7 +533,8 @@ IkState::IkState(const Skeleton& skeleton, const MarkerSet& markers)
       rest_error_(dq_),
       prior_mask_(dq_),
       prior_h_(dq_),
-      prior_g_(dq_) {
+      prior_g_(dq_),
+      local_step_(dq_) {
   // Priors act on rotations only: translations are always well observed.
   for (int j = 0; j < skeleton.num_joints(); ++j) {
     const int k = skeleton.dof_offset(j);
@@ -678,7 +654,9 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
       break;
     }
     s.trial_ = s.pose_;
-    IntegrateWorldStep(skeleton, s.ws_, s.dq_, &s.trial_);
+    s.local_step_ = s.dq_;
+    WorldStepToLocal(skeleton, s.ws_, &s.local_step_);
+    IntegratePose(skeleton, s.local_step_, &s.trial_);
     if (options.apply_joint_limits) ApplyJointLimits(skeleton, &s.trial_);
     ForwardKinematics(skeleton, s.trial_, &s.trial_ws_);
     s.trial_total_ = s.step_total_ + s.dq_;

@@ -100,7 +100,7 @@ class IkState {
   KinematicsWorkspace ws_, trial_ws_;
   std::vector<Vec3> predicted_, trial_predicted_, rest_markers_;
   std::vector<JointBlock> blocks_;
-  Eigen::VectorXd dq_, step_total_, trial_total_, rest_error_, prior_mask_, prior_h_, prior_g_;
+  Eigen::VectorXd dq_, step_total_, trial_total_, rest_error_, prior_mask_, prior_h_, prior_g_, local_step_;
   int first_free_joint_ = -1;
 };
 
