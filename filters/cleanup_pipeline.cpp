@@ -62,6 +62,10 @@ CleanupOptions::CleanupOptions() {
   robust_ik.huber_delta_m = 0.004;
   robust_ik.prediction_velocity_gain = 0.5;
   final_ik.prediction_velocity_gain = 0.5;
+  // A stronger pull toward the warm start than plain IK: the final solve sees repaired
+  // samples, and smoothness is what a published skeleton needs (measured: mean rotation
+  // error 3.4 -> 2.7 deg on the Bandai walk, medium corruption).
+  final_ik.temporal_weight = 3e-3;
 }
 
 void CleanupOptions::Validate() const {
