@@ -61,7 +61,9 @@ double MarkerCost(const MarkerSet& markers, const IkOptions& options, std::span<
     const auto um = static_cast<size_t>(m);
     predicted[um] = EvaluateMarker(markers.marker(m), ws);
     if (!UsableMarker(observed[um], weights[um])) continue;
-    cost += weights[um] * RobustCost((observed[um] - predicted[um]).norm(), options.huber_delta_m);
+    const Vec3 r = observed[um] - predicted[um];
+    // Plain least squares needs no square root.
+    cost += weights[um] * (options.huber_delta_m > 0.0 ? RobustCost(r.norm(), options.huber_delta_m) : 0.5 * r.squaredNorm());
   }
   return cost;
 }
@@ -85,7 +87,7 @@ void AccumulateMarkers(const MarkerSet& markers, const IkOptions& options, std::
     const auto um = static_cast<size_t>(m);
     if (!UsableMarker(observed[um], weights[um])) continue;
     const Vec3 r = observed[um] - predicted[um];
-    const double w = weights[um] * RobustWeight(r.norm(), options.huber_delta_m);
+    const double w = options.huber_delta_m > 0.0 ? weights[um] * RobustWeight(r.norm(), options.huber_delta_m) : weights[um];
     const MarkerDefinition& def = markers.marker(m);
     const MarkerAttachment& a0 = def.attachments[0];
     const auto j0 = static_cast<size_t>(a0.joint);
@@ -499,6 +501,7 @@ void IkOptions::Validate() const {
   require(initial_damping >= 0.0 && std::isfinite(initial_damping), "initial_damping", "a finite value >= 0");
   require(function_tolerance >= 0.0, "function_tolerance", ">= 0");
   require(step_tolerance >= 0.0, "step_tolerance", ">= 0");
+  require(residual_tolerance_m >= 0.0, "residual_tolerance_m", ">= 0");
   require(huber_delta_m >= 0.0 && std::isfinite(huber_delta_m), "huber_delta_m", "a finite value >= 0");
   require(temporal_weight >= 0.0 && std::isfinite(temporal_weight), "temporal_weight", "a finite value >= 0");
   require(rest_weight >= 0.0 && std::isfinite(rest_weight), "rest_weight", "a finite value >= 0");
@@ -641,6 +644,10 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
   // A cold start is far from the answer: the warm-start tolerance would stop it early,
   // in the basin of whatever local minimum it is crossing.
   const double function_tolerance = summary.cold_start ? std::min(options.function_tolerance, 1e-10) : options.function_tolerance;
+  double weight_sum = 0.0;
+  for (int m = 0; m < markers.num_markers(); ++m)
+    if (UsableMarker(observed[static_cast<size_t>(m)], weights[static_cast<size_t>(m)])) weight_sum += weights[static_cast<size_t>(m)];
+  const double cost_floor = summary.cold_start ? 0.0 : 0.5 * weight_sum * options.residual_tolerance_m * options.residual_tolerance_m;
   summary.status = IkStatus::kMaxIterations;
   for (int iteration = 0; iteration < max_iterations; ++iteration) {
     summary.iterations = iteration + 1;
@@ -671,7 +678,7 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
       const double decrease = cost - trial_cost;
       cost = trial_cost;
       damping = std::max(damping * 0.3, 1e-9);
-      if (decrease <= function_tolerance * (cost + decrease) || step_size <= options.step_tolerance) {
+      if (decrease <= function_tolerance * (cost + decrease) || step_size <= options.step_tolerance || cost <= cost_floor) {
         summary.status = IkStatus::kConverged;
         break;
       }

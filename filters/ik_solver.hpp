@@ -30,6 +30,9 @@ struct IkOptions {
   double initial_damping = 1e-4;       ///< LM factor on diag(H).
   double function_tolerance = 1e-2;    ///< Converged when the cost drops by less than this fraction.
   double step_tolerance = 1e-5;        ///< Converged when every step component is below this (rad or m).
+  /// Converged when the weighted RMS marker residual (priors included) is below this, m:
+  /// refining a fit far inside the capture's own precision buys nothing.
+  double residual_tolerance_m = 5e-5;
   double huber_delta_m = 0.0;          ///< Huber threshold in metres; 0 disables the robust loss.
   bool predict_constant_velocity = true;
   /// Fraction of the last frame-to-frame motion carried into the prediction (0..1). Below
