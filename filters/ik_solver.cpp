@@ -158,38 +158,42 @@ void ShiftQuadratic(const Mat6& Q, const Vec6& b, const Vec3& d, Mat6* QX, Mat6*
   Xtb->tail<3>() = b.tail<3>();
 }
 
-// Cholesky factorisation H = L L' of a 3x3 matrix in place (lower triangle). Returns
-// false unless H is positive definite.
-bool CholeskyInPlace3(Mat3* H) {
+// Cholesky factorisation H = L L' of a 3x3 matrix in place (lower triangle), with the
+// reciprocals of L's diagonal in inv_diag so the triangular solves below multiply
+// instead of divide (a division costs several multiplies' latency, and these run for
+// every joint of every iteration). Returns false unless H is positive definite.
+bool CholeskyInPlace3(Mat3* H, Vec3* inv_diag) {
   Mat3& A = *H;
   if (!(A(0, 0) > 0.0)) return false;
-  const double l00 = std::sqrt(A(0, 0));
-  const double l10 = A(1, 0) / l00, l20 = A(2, 0) / l00;
+  const double l00 = std::sqrt(A(0, 0)), i0 = 1.0 / l00;
+  const double l10 = A(1, 0) * i0, l20 = A(2, 0) * i0;
   const double d1 = A(1, 1) - l10 * l10;
   if (!(d1 > 0.0)) return false;
-  const double l11 = std::sqrt(d1);
-  const double l21 = (A(2, 1) - l20 * l10) / l11;
+  const double l11 = std::sqrt(d1), i1 = 1.0 / l11;
+  const double l21 = (A(2, 1) - l20 * l10) * i1;
   const double d2 = A(2, 2) - l20 * l20 - l21 * l21;
   if (!(d2 > 0.0)) return false;
-  A << l00, 0.0, 0.0, l10, l11, 0.0, l20, l21, std::sqrt(d2);
+  const double l22 = std::sqrt(d2);
+  A << l00, 0.0, 0.0, l10, l11, 0.0, l20, l21, l22;
+  *inv_diag = Vec3(i0, i1, 1.0 / l22);
   return true;
 }
 
 // Solves L X = M and L y = v in place for lower-triangular L.
-void ForwardSubstitute3(const Mat3& L, Eigen::Matrix<double, 3, 6>* M, Vec3* v) {
-  M->row(0) /= L(0, 0);
-  M->row(1) = (M->row(1) - L(1, 0) * M->row(0)) / L(1, 1);
-  M->row(2) = (M->row(2) - L(2, 0) * M->row(0) - L(2, 1) * M->row(1)) / L(2, 2);
-  (*v)[0] /= L(0, 0);
-  (*v)[1] = ((*v)[1] - L(1, 0) * (*v)[0]) / L(1, 1);
-  (*v)[2] = ((*v)[2] - L(2, 0) * (*v)[0] - L(2, 1) * (*v)[1]) / L(2, 2);
+void ForwardSubstitute3(const Mat3& L, const Vec3& inv_diag, Eigen::Matrix<double, 3, 6>* M, Vec3* v) {
+  M->row(0) *= inv_diag[0];
+  M->row(1) = (M->row(1) - L(1, 0) * M->row(0)) * inv_diag[1];
+  M->row(2) = (M->row(2) - L(2, 0) * M->row(0) - L(2, 1) * M->row(1)) * inv_diag[2];
+  (*v)[0] *= inv_diag[0];
+  (*v)[1] = ((*v)[1] - L(1, 0) * (*v)[0]) * inv_diag[1];
+  (*v)[2] = ((*v)[2] - L(2, 0) * (*v)[0] - L(2, 1) * (*v)[1]) * inv_diag[2];
 }
 
 // Solves L' x = v in place for lower-triangular L.
-void BackSubstitute3(const Mat3& L, Vec3* v) {
-  (*v)[2] /= L(2, 2);
-  (*v)[1] = ((*v)[1] - L(2, 1) * (*v)[2]) / L(1, 1);
-  (*v)[0] = ((*v)[0] - L(1, 0) * (*v)[1] - L(2, 0) * (*v)[2]) / L(0, 0);
+void BackSubstitute3(const Mat3& L, const Vec3& inv_diag, Vec3* v) {
+  (*v)[2] *= inv_diag[2];
+  (*v)[1] = ((*v)[1] - L(2, 1) * (*v)[2]) * inv_diag[1];
+  (*v)[0] = ((*v)[0] - L(1, 0) * (*v)[1] - L(2, 0) * (*v)[2]) * inv_diag[0];
 }
 
 // Writes K = H^-1 HqV and k = H^-1 g for a symmetric positive definite H. Returns false
@@ -285,9 +289,9 @@ bool EliminateJoint(const Joint& joint, const Mat3& R_WJ, const Vec3& d, JointBl
       // Symmetric form: with H = L L', W = L^-1 HqV and w = L^-1 g, the parent receives
       // -W'W and -W'w, and the forward sweep solves L' dq = w - W V_p. About half the
       // work of forming K = H^-1 HqV, on the joints that dominate the cost.
-      if (!CholeskyInPlace3(&H)) return false;
+      if (!CholeskyInPlace3(&H, &blk->L_inv_diag)) return false;
       blk->L = H;
-      ForwardSubstitute3(H, &HqV, &g);
+      ForwardSubstitute3(H, blk->L_inv_diag, &HqV, &g);
       blk->K.template topRows<3>() = HqV;
       blk->k.template head<3>() = g;
       if (parent != nullptr) {
@@ -362,7 +366,7 @@ bool ComputeStep(const Skeleton& skeleton, double damping, const Eigen::VectorXd
       blk.V.setZero();
       if (skeleton.joint(j).type == JointType::kBall) {
         Vec3 x = blk.k.head<3>();
-        BackSubstitute3(blk.L, &x);
+        BackSubstitute3(blk.L, blk.L_inv_diag, &x);
         dq->segment<3>(k) = x;
       } else {
         for (int c = 0; c < blk.dofs; ++c) (*dq)[k + c] = blk.k[c];
@@ -376,7 +380,7 @@ bool ComputeStep(const Skeleton& skeleton, double damping, const Eigen::VectorXd
       blk.V.tail<3>() = Vp.tail<3>() + Vp.head<3>().cross(d);
       if (skeleton.joint(j).type == JointType::kBall) {
         Vec3 x = blk.k.head<3>() - blk.K.topRows<3>() * Vp;
-        BackSubstitute3(blk.L, &x);
+        BackSubstitute3(blk.L, blk.L_inv_diag, &x);
         dq->segment<3>(k) = x;
       } else {
         for (int c = 0; c < blk.dofs; ++c) (*dq)[k + c] = blk.k[c] - blk.K.row(c).dot(Vp);

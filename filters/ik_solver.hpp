@@ -83,7 +83,8 @@ class IkState {
   struct JointBlock {
     Mat6 Q, BB, BG, GG, S, K;
     Vec6 b, Br, Gr, k, V;
-    Mat3 L = Mat3::Identity();  // ball joints: Cholesky factor of the joint's system
+    Mat3 L = Mat3::Identity();  // ball joints: Cholesky factor of the joint's system...
+    Vec3 L_inv_diag = Vec3::Ones();  // ...and the reciprocals of its diagonal
     // Rigidly attached markers, as weighted moments about the pivot: their quadratic is
     // [tr(M2) I - M2, [m1]x; -[m1]x, m0 I] with gradient (sum w x cross r, sum w r).
     Mat3 M2 = Mat3::Zero();
