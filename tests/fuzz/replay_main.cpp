@@ -13,6 +13,7 @@
 
 #include "sim/bvh.hpp"
 #include "sim/c3d.hpp"
+#include "protocol/messages.hpp"
 #include "sim/humanoid.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size);
@@ -33,7 +34,19 @@ std::vector<std::vector<uint8_t>> Seeds() {
   mocapd::C3dEncoding dec;
   dec.processor = mocapd::C3dEncoding::Processor::kDec;
   dec.integer_storage = true;
-  return {std::vector<uint8_t>(bvh.begin(), bvh.end()), mocapd::EncodeC3d(take), mocapd::EncodeC3d(take, dec)};
+  mocapd::protocol::MarkerFrameMessage markers;
+  markers.subject = "actor";
+  markers.rate_hz = 120.0f;
+  markers.positions = {mocapd::Vec3(0.1, 0.2, 0.3), mocapd::Vec3(0.4, 0.5, 0.6)};
+  markers.valid = {1, 0};
+  std::vector<uint8_t> marker_bytes, skeleton_bytes;
+  mocapd::protocol::EncodeMarkerFrame(markers, &marker_bytes);
+  mocapd::protocol::SkeletonFrameMessage skeleton;
+  skeleton.subject = "actor";
+  skeleton.rotations.assign(3, mocapd::Quat::Identity());
+  mocapd::protocol::EncodeSkeletonFrame(skeleton, &skeleton_bytes);
+  return {std::vector<uint8_t>(bvh.begin(), bvh.end()), mocapd::EncodeC3d(take), mocapd::EncodeC3d(take, dec), marker_bytes,
+          skeleton_bytes};
 }
 }  // namespace
 
