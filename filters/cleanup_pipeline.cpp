@@ -146,7 +146,7 @@ CleanupPipeline::CleanupPipeline(std::shared_ptr<const Skeleton> skeleton, std::
     }
   }
   weights_.assign(m, 0.0);
-  scratch_.assign(2 * m, Vec3::Zero());
+  scratch_.assign(m, Vec3::Zero());  // per-marker residuals of the newest frame
   out_.markers.assign(m, Vec3::Constant(kNaN));
   out_.status.assign(m, MarkerStatus::kUnrecoverable);
   out_.reason.assign(m, MaskReason::kNone);

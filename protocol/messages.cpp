@@ -12,12 +12,19 @@ namespace {
 constexpr size_t kMarkerBytes = 13;  // x, y, z (f32) + flags (u8)
 constexpr size_t kJointBytes = 16;   // quaternion w, x, y, z (f32)
 
-void WriteHeader(ByteWriter& w, MessageType type, size_t payload_bytes) {
+// The payload size is patched in by FinishMessage once the payload is written, so it
+// can never disagree with what was written.
+void WriteHeader(ByteWriter& w, MessageType type) {
   w.WriteU32(kMagic);
   w.WriteU16(kVersion);
   w.WriteU16(static_cast<uint16_t>(type));
-  w.WriteU32(static_cast<uint32_t>(payload_bytes));
+  w.WriteU32(0);  // payload size, patched
   w.WriteU32(0);  // reserved
+}
+
+void FinishMessage(std::vector<uint8_t>* out) {
+  const auto payload = static_cast<uint32_t>(out->size() - kHeaderBytes);
+  for (size_t i = 0; i < 4; ++i) (*out)[8 + i] = static_cast<uint8_t>(payload >> (8 * i));
 }
 
 void WriteSubject(ByteWriter& w, const std::string& subject) {
@@ -96,9 +103,8 @@ void EncodeMarkerFrame(const MarkerFrameMessage& m, std::vector<uint8_t>* out) {
   if (m.positions.size() > kMaxMarkers || m.valid.size() != m.positions.size())
     throw std::invalid_argument("protocol: marker frame with inconsistent or too many markers");
   out->clear();
-  const size_t payload = 1 + m.subject.size() + 8 + 8 + 8 + 4 + 2 + 2 + kMarkerBytes * m.positions.size();
   ByteWriter w(out);
-  WriteHeader(w, MessageType::kMarkerFrame, payload);
+  WriteHeader(w, MessageType::kMarkerFrame);
   WriteSubject(w, m.subject);
   w.WriteU64(m.model_hash);
   w.WriteU64(m.frame_number);
@@ -111,6 +117,7 @@ void EncodeMarkerFrame(const MarkerFrameMessage& m, std::vector<uint8_t>* out) {
     for (int k = 0; k < 3; ++k) w.WriteF32(valid ? static_cast<float>(m.positions[i][k]) : 0.0f);
     w.WriteU8(valid ? 1 : 0);
   }
+  FinishMessage(out);
 }
 
 DecodeStatus DecodeMarkerFrame(std::span<const uint8_t> bytes, MarkerFrameMessage* m) {
@@ -141,9 +148,8 @@ DecodeStatus DecodeMarkerFrame(std::span<const uint8_t> bytes, MarkerFrameMessag
 void EncodeSkeletonFrame(const SkeletonFrameMessage& m, std::vector<uint8_t>* out) {
   if (m.rotations.size() > kMaxJoints) throw std::invalid_argument("protocol: skeleton frame with too many joints");
   out->clear();
-  const size_t payload = 1 + m.subject.size() + 8 * 4 + 1 + 1 + 2 + 4 + 12 + kJointBytes * m.rotations.size();
   ByteWriter w(out);
-  WriteHeader(w, MessageType::kSkeletonFrame, payload);
+  WriteHeader(w, MessageType::kSkeletonFrame);
   WriteSubject(w, m.subject);
   w.WriteU64(m.model_hash);
   w.WriteU64(m.frame_number);
@@ -160,6 +166,7 @@ void EncodeSkeletonFrame(const SkeletonFrameMessage& m, std::vector<uint8_t>* ou
     w.WriteF32(static_cast<float>(q.y()));
     w.WriteF32(static_cast<float>(q.z()));
   }
+  FinishMessage(out);
 }
 
 DecodeStatus DecodeSkeletonFrame(std::span<const uint8_t> bytes, SkeletonFrameMessage* m) {
