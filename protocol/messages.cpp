@@ -11,6 +11,10 @@ namespace {
 
 constexpr size_t kMarkerBytes = 13;  // x, y, z (f32) + flags (u8)
 constexpr size_t kJointBytes = 16;   // quaternion w, x, y, z (f32)
+constexpr size_t kGlobalJointBytes = 28;  // quaternion (4 x f32) + position (3 x f32)
+constexpr size_t kCleanedMarkerBytes = 14;  // x, y, z (f32) + status (u8) + reason (u8)
+constexpr uint16_t kFlagGlobalTransforms = 1;
+constexpr uint8_t kMaxMaskReason = 10;  // MaskReason::kTrimmed
 
 // The payload size is patched in by FinishMessage once the payload is written, so it
 // can never disagree with what was written.
@@ -58,6 +62,53 @@ DecodeStatus ReadSubject(ByteReader& r, std::string* subject) {
 
 bool Finite(float v) { return std::isfinite(v); }
 
+void WriteQuat(ByteWriter& w, const Quat& q) {
+  w.WriteF32(static_cast<float>(q.w()));
+  w.WriteF32(static_cast<float>(q.x()));
+  w.WriteF32(static_cast<float>(q.y()));
+  w.WriteF32(static_cast<float>(q.z()));
+}
+
+void WriteVec3(ByteWriter& w, const Vec3& v) {
+  for (int k = 0; k < 3; ++k) w.WriteF32(static_cast<float>(v[k]));
+}
+
+// Reads n finite floats; kTooShort or kNonFinite otherwise.
+DecodeStatus ReadFinite(ByteReader& r, float* values, int n) {
+  for (int i = 0; i < n; ++i) {
+    if (!r.ReadF32(&values[i])) return DecodeStatus::kTooShort;
+    if (!Finite(values[i])) return DecodeStatus::kNonFinite;
+  }
+  return DecodeStatus::kOk;
+}
+
+DecodeStatus ReadQuat(ByteReader& r, Quat* q) {
+  float c[4];
+  if (const DecodeStatus s = ReadFinite(r, c, 4); s != DecodeStatus::kOk) return s;
+  *q = Quat(c[0], c[1], c[2], c[3]);
+  return DecodeStatus::kOk;
+}
+
+DecodeStatus ReadVec3(ByteReader& r, Vec3* v) {
+  float c[3];
+  if (const DecodeStatus s = ReadFinite(r, c, 3); s != DecodeStatus::kOk) return s;
+  *v = Vec3(c[0], c[1], c[2]);
+  return DecodeStatus::kOk;
+}
+
+// Marker and joint names follow the subject-name rule: 1..63 bytes after a u8 length.
+DecodeStatus ReadName(ByteReader& r, std::string* name) {
+  const DecodeStatus s = ReadSubject(r, name);
+  return s == DecodeStatus::kBadSubjectName ? DecodeStatus::kBadField : s;
+}
+
+void WriteName(ByteWriter& w, const std::string& name) {
+  if (name.empty() || name.size() > kMaxSubjectName)
+    throw std::invalid_argument("protocol: marker and joint names must be 1.." + std::to_string(kMaxSubjectName) + " bytes: '" + name + "'");
+  w.WriteU8(static_cast<uint8_t>(name.size()));
+  w.WriteString(name);
+}
+
 }  // namespace
 
 const char* to_string(DecodeStatus status) {
@@ -71,6 +122,18 @@ const char* to_string(DecodeStatus status) {
     case DecodeStatus::kBadSubjectName: return "bad_subject_name";
     case DecodeStatus::kTooManyItems: return "too_many_items";
     case DecodeStatus::kNonFinite: return "non_finite";
+    case DecodeStatus::kBadField: return "bad_field";
+  }
+  return "?";
+}
+
+const char* to_string(SubjectState state) {
+  switch (state) {
+    case SubjectState::kTracking: return "tracking";
+    case SubjectState::kRepairing: return "repairing";
+    case SubjectState::kLost: return "lost";
+    case SubjectState::kStalled: return "stalled";
+    case SubjectState::kWaiting: return "waiting";
   }
   return "?";
 }
@@ -146,7 +209,10 @@ DecodeStatus DecodeMarkerFrame(std::span<const uint8_t> bytes, MarkerFrameMessag
 }
 
 void EncodeSkeletonFrame(const SkeletonFrameMessage& m, std::vector<uint8_t>* out) {
+  const bool globals = !m.global_rotations.empty();
   if (m.rotations.size() > kMaxJoints) throw std::invalid_argument("protocol: skeleton frame with too many joints");
+  if (globals && (m.global_rotations.size() != m.rotations.size() || m.global_positions.size() != m.rotations.size()))
+    throw std::invalid_argument("protocol: skeleton frame with global transforms for some joints only");
   out->clear();
   ByteWriter w(out);
   WriteHeader(w, MessageType::kSkeletonFrame);
@@ -156,15 +222,18 @@ void EncodeSkeletonFrame(const SkeletonFrameMessage& m, std::vector<uint8_t>* ou
   w.WriteU64(m.capture_time_ns);
   w.WriteU64(m.publish_time_ns);
   w.WriteU8(m.status);
-  w.WriteU8(0);  // flags, reserved
+  w.WriteU8(static_cast<uint8_t>(m.subject_state));
+  w.WriteU16(globals ? kFlagGlobalTransforms : 0);
   w.WriteU16(static_cast<uint16_t>(m.rotations.size()));
+  w.WriteU16(0);  // reserved
   w.WriteF32(m.residual_m);
-  for (int k = 0; k < 3; ++k) w.WriteF32(static_cast<float>(m.root_translation[k]));
-  for (const Quat& q : m.rotations) {
-    w.WriteF32(static_cast<float>(q.w()));
-    w.WriteF32(static_cast<float>(q.x()));
-    w.WriteF32(static_cast<float>(q.y()));
-    w.WriteF32(static_cast<float>(q.z()));
+  WriteVec3(w, m.root_translation);
+  for (const Quat& q : m.rotations) WriteQuat(w, q);
+  if (globals) {
+    for (size_t j = 0; j < m.rotations.size(); ++j) {
+      WriteQuat(w, m.global_rotations[j]);
+      WriteVec3(w, m.global_positions[j]);
+    }
   }
   FinishMessage(out);
 }
@@ -173,25 +242,182 @@ DecodeStatus DecodeSkeletonFrame(std::span<const uint8_t> bytes, SkeletonFrameMe
   ByteReader r(bytes);
   if (const DecodeStatus s = ReadHeader(r, MessageType::kSkeletonFrame); s != DecodeStatus::kOk) return s;
   if (const DecodeStatus s = ReadSubject(r, &m->subject); s != DecodeStatus::kOk) return s;
-  uint8_t flags = 0;
-  uint16_t count = 0;
-  float root[3];
+  uint8_t state = 0;
+  uint16_t flags = 0, count = 0, reserved = 0;
   if (!r.ReadU64(&m->model_hash) || !r.ReadU64(&m->frame_number) || !r.ReadU64(&m->capture_time_ns) || !r.ReadU64(&m->publish_time_ns) ||
-      !r.ReadU8(&m->status) || !r.ReadU8(&flags) || !r.ReadU16(&count) || !r.ReadF32(&m->residual_m) || !r.ReadF32(&root[0]) ||
-      !r.ReadF32(&root[1]) || !r.ReadF32(&root[2]))
+      !r.ReadU8(&m->status) || !r.ReadU8(&state) || !r.ReadU16(&flags) || !r.ReadU16(&count) || !r.ReadU16(&reserved))
     return DecodeStatus::kTooShort;
+  if (state > static_cast<uint8_t>(SubjectState::kWaiting) || (flags & ~kFlagGlobalTransforms) != 0) return DecodeStatus::kBadField;
+  m->subject_state = static_cast<SubjectState>(state);
   if (count > kMaxJoints) return DecodeStatus::kTooManyItems;
-  if (r.remaining() != kJointBytes * count) return DecodeStatus::kSizeMismatch;
-  if (!(Finite(root[0]) && Finite(root[1]) && Finite(root[2]) && Finite(m->residual_m))) return DecodeStatus::kNonFinite;
-  m->root_translation = Vec3(root[0], root[1], root[2]);
+  const bool globals = (flags & kFlagGlobalTransforms) != 0;
+  if (r.remaining() != 16 + (kJointBytes + (globals ? kGlobalJointBytes : 0)) * count) return DecodeStatus::kSizeMismatch;
+  if (!r.ReadF32(&m->residual_m)) return DecodeStatus::kTooShort;
+  if (!Finite(m->residual_m)) return DecodeStatus::kNonFinite;
+  if (const DecodeStatus s = ReadVec3(r, &m->root_translation); s != DecodeStatus::kOk) return s;
   m->rotations.resize(count);
-  for (size_t i = 0; i < count; ++i) {
-    float q[4];
-    for (float& c : q)
-      if (!r.ReadF32(&c)) return DecodeStatus::kTooShort;
-    if (!(Finite(q[0]) && Finite(q[1]) && Finite(q[2]) && Finite(q[3]))) return DecodeStatus::kNonFinite;
-    m->rotations[i] = Quat(q[0], q[1], q[2], q[3]);
+  for (Quat& q : m->rotations)
+    if (const DecodeStatus s = ReadQuat(r, &q); s != DecodeStatus::kOk) return s;
+  m->global_rotations.resize(globals ? count : 0);
+  m->global_positions.resize(globals ? count : 0);
+  for (size_t j = 0; j < m->global_rotations.size(); ++j) {
+    if (const DecodeStatus s = ReadQuat(r, &m->global_rotations[j]); s != DecodeStatus::kOk) return s;
+    if (const DecodeStatus s = ReadVec3(r, &m->global_positions[j]); s != DecodeStatus::kOk) return s;
   }
+  return DecodeStatus::kOk;
+}
+
+SubjectDescriptionMessage DescribeSubject(const std::string& subject, const Skeleton& skeleton, const MarkerSet& markers, float rate_hz,
+                                          int lookahead_frames) {
+  SubjectDescriptionMessage d;
+  d.subject = subject;
+  d.marker_set_hash = MarkerSetHash(markers);
+  d.skeleton_hash = SkeletonHash(skeleton);
+  d.rate_hz = rate_hz;
+  d.lookahead_frames = static_cast<uint16_t>(lookahead_frames);
+  for (const MarkerDefinition& m : markers.markers()) d.marker_names.push_back(m.name);
+  for (const Joint& j : skeleton.joints()) {
+    d.joint_names.push_back(j.name);
+    d.joint_parents.push_back(static_cast<int16_t>(j.parent.is_valid() ? j.parent.value : -1));
+    d.rest_offsets.push_back(j.offset);
+    d.rest_rotations.push_back(j.rest_rotation);
+  }
+  return d;
+}
+
+void EncodeSubjectDescription(const SubjectDescriptionMessage& m, std::vector<uint8_t>* out) {
+  const size_t joints = m.joint_names.size();
+  if (m.marker_names.size() > kMaxMarkers || joints > kMaxJoints || m.joint_parents.size() != joints || m.rest_offsets.size() != joints ||
+      m.rest_rotations.size() != joints)
+    throw std::invalid_argument("protocol: subject description with inconsistent or too many markers/joints");
+  out->clear();
+  ByteWriter w(out);
+  WriteHeader(w, MessageType::kSubjectDescription);
+  WriteSubject(w, m.subject);
+  w.WriteU64(m.marker_set_hash);
+  w.WriteU64(m.skeleton_hash);
+  w.WriteF32(m.rate_hz);
+  w.WriteU16(m.lookahead_frames);
+  w.WriteU16(static_cast<uint16_t>(m.marker_names.size()));
+  w.WriteU16(static_cast<uint16_t>(joints));
+  w.WriteU16(0);  // reserved
+  for (const std::string& name : m.marker_names) WriteName(w, name);
+  for (size_t j = 0; j < joints; ++j) {
+    WriteName(w, m.joint_names[j]);
+    w.WriteI16(m.joint_parents[j]);
+    WriteVec3(w, m.rest_offsets[j]);
+    WriteQuat(w, m.rest_rotations[j]);
+  }
+  FinishMessage(out);
+}
+
+DecodeStatus DecodeSubjectDescription(std::span<const uint8_t> bytes, SubjectDescriptionMessage* m) {
+  ByteReader r(bytes);
+  if (const DecodeStatus s = ReadHeader(r, MessageType::kSubjectDescription); s != DecodeStatus::kOk) return s;
+  if (const DecodeStatus s = ReadSubject(r, &m->subject); s != DecodeStatus::kOk) return s;
+  uint16_t markers = 0, joints = 0, reserved = 0;
+  if (!r.ReadU64(&m->marker_set_hash) || !r.ReadU64(&m->skeleton_hash) || !r.ReadF32(&m->rate_hz) || !r.ReadU16(&m->lookahead_frames) ||
+      !r.ReadU16(&markers) || !r.ReadU16(&joints) || !r.ReadU16(&reserved))
+    return DecodeStatus::kTooShort;
+  if (!Finite(m->rate_hz) || !(m->rate_hz > 0.0f)) return DecodeStatus::kNonFinite;
+  if (markers > kMaxMarkers || joints > kMaxJoints) return DecodeStatus::kTooManyItems;
+  // Each name takes at least 2 bytes and each joint 30 more: refuse counts the bytes cannot
+  // hold before sizing anything by them.
+  if (r.remaining() < 2u * markers + 32u * joints) return DecodeStatus::kSizeMismatch;
+  m->marker_names.resize(markers);
+  for (std::string& name : m->marker_names)
+    if (const DecodeStatus s = ReadName(r, &name); s != DecodeStatus::kOk) return s;
+  m->joint_names.resize(joints);
+  m->joint_parents.resize(joints);
+  m->rest_offsets.resize(joints);
+  m->rest_rotations.resize(joints);
+  for (size_t j = 0; j < joints; ++j) {
+    if (const DecodeStatus s = ReadName(r, &m->joint_names[j]); s != DecodeStatus::kOk) return s;
+    if (!r.ReadI16(&m->joint_parents[j])) return DecodeStatus::kTooShort;
+    const int parent = m->joint_parents[j];
+    // Parents first, exactly one root (joint 0).
+    if ((j == 0) != (parent == -1) || parent >= static_cast<int>(j) || parent < -1) return DecodeStatus::kBadField;
+    if (const DecodeStatus s = ReadVec3(r, &m->rest_offsets[j]); s != DecodeStatus::kOk) return s;
+    if (const DecodeStatus s = ReadQuat(r, &m->rest_rotations[j]); s != DecodeStatus::kOk) return s;
+  }
+  if (r.remaining() != 0) return DecodeStatus::kSizeMismatch;
+  return DecodeStatus::kOk;
+}
+
+void EncodeCleanedMarkers(const CleanedMarkersMessage& m, std::vector<uint8_t>* out) {
+  if (m.positions.size() > kMaxMarkers || m.status.size() != m.positions.size() || m.reason.size() != m.positions.size())
+    throw std::invalid_argument("protocol: cleaned markers with inconsistent or too many markers");
+  out->clear();
+  ByteWriter w(out);
+  WriteHeader(w, MessageType::kCleanedMarkers);
+  WriteSubject(w, m.subject);
+  w.WriteU64(m.model_hash);
+  w.WriteU64(m.frame_number);
+  w.WriteU64(m.capture_time_ns);
+  w.WriteU64(m.publish_time_ns);
+  w.WriteU16(static_cast<uint16_t>(m.positions.size()));
+  w.WriteU16(0);  // reserved
+  for (size_t i = 0; i < m.positions.size(); ++i) {
+    // An unrecoverable sample has no position: zeros on the wire, NaN once decoded.
+    const bool known = m.status[i] != 2 && m.positions[i].allFinite();
+    WriteVec3(w, known ? m.positions[i] : Vec3::Zero());
+    w.WriteU8(known ? m.status[i] : 2);
+    w.WriteU8(known ? m.reason[i] : 0);
+  }
+  FinishMessage(out);
+}
+
+DecodeStatus DecodeCleanedMarkers(std::span<const uint8_t> bytes, CleanedMarkersMessage* m) {
+  ByteReader r(bytes);
+  if (const DecodeStatus s = ReadHeader(r, MessageType::kCleanedMarkers); s != DecodeStatus::kOk) return s;
+  if (const DecodeStatus s = ReadSubject(r, &m->subject); s != DecodeStatus::kOk) return s;
+  uint16_t count = 0, reserved = 0;
+  if (!r.ReadU64(&m->model_hash) || !r.ReadU64(&m->frame_number) || !r.ReadU64(&m->capture_time_ns) || !r.ReadU64(&m->publish_time_ns) ||
+      !r.ReadU16(&count) || !r.ReadU16(&reserved))
+    return DecodeStatus::kTooShort;
+  if (count > kMaxMarkers) return DecodeStatus::kTooManyItems;
+  if (r.remaining() != kCleanedMarkerBytes * count) return DecodeStatus::kSizeMismatch;
+  m->positions.resize(count);
+  m->status.resize(count);
+  m->reason.resize(count);
+  for (size_t i = 0; i < count; ++i) {
+    Vec3 p;
+    if (const DecodeStatus s = ReadVec3(r, &p); s != DecodeStatus::kOk) return s;
+    if (!r.ReadU8(&m->status[i]) || !r.ReadU8(&m->reason[i])) return DecodeStatus::kTooShort;
+    if (m->status[i] > 2 || m->reason[i] > kMaxMaskReason) return DecodeStatus::kBadField;
+    m->positions[i] = m->status[i] == 2 ? Vec3::Constant(kNaN) : p;
+  }
+  return DecodeStatus::kOk;
+}
+
+void EncodeSubjectStatus(const SubjectStatusMessage& m, std::vector<uint8_t>* out) {
+  out->clear();
+  ByteWriter w(out);
+  WriteHeader(w, MessageType::kSubjectStatus);
+  WriteSubject(w, m.subject);
+  w.WriteU8(static_cast<uint8_t>(m.state));
+  w.WriteU8(0);
+  w.WriteU16(0);  // reserved
+  w.WriteU64(m.last_frame_number);
+  w.WriteU64(m.since_last_input_ns);
+  w.WriteU64(m.frames_in);
+  w.WriteU64(m.frames_out);
+  w.WriteU64(m.frames_dropped);
+  FinishMessage(out);
+}
+
+DecodeStatus DecodeSubjectStatus(std::span<const uint8_t> bytes, SubjectStatusMessage* m) {
+  ByteReader r(bytes);
+  if (const DecodeStatus s = ReadHeader(r, MessageType::kSubjectStatus); s != DecodeStatus::kOk) return s;
+  if (const DecodeStatus s = ReadSubject(r, &m->subject); s != DecodeStatus::kOk) return s;
+  uint8_t state = 0, reserved8 = 0;
+  uint16_t reserved16 = 0;
+  if (!r.ReadU8(&state) || !r.ReadU8(&reserved8) || !r.ReadU16(&reserved16) || !r.ReadU64(&m->last_frame_number) ||
+      !r.ReadU64(&m->since_last_input_ns) || !r.ReadU64(&m->frames_in) || !r.ReadU64(&m->frames_out) || !r.ReadU64(&m->frames_dropped))
+    return DecodeStatus::kTooShort;
+  if (r.remaining() != 0) return DecodeStatus::kSizeMismatch;
+  if (state > static_cast<uint8_t>(SubjectState::kWaiting)) return DecodeStatus::kBadField;
+  m->state = static_cast<SubjectState>(state);
   return DecodeStatus::kOk;
 }
 
@@ -202,7 +428,7 @@ DecodeStatus PeekType(std::span<const uint8_t> bytes, MessageType* type) {
   if (!r.ReadU32(&magic) || !r.ReadU16(&version) || !r.ReadU16(&raw)) return DecodeStatus::kTooShort;
   if (magic != kMagic) return DecodeStatus::kBadMagic;
   if (version != kVersion) return DecodeStatus::kUnsupportedVersion;
-  if (raw != static_cast<uint16_t>(MessageType::kMarkerFrame) && raw != static_cast<uint16_t>(MessageType::kSkeletonFrame))
+  if (raw < static_cast<uint16_t>(MessageType::kSubjectDescription) || raw > static_cast<uint16_t>(MessageType::kSubjectStatus))
     return DecodeStatus::kWrongType;
   *type = static_cast<MessageType>(raw);
   return DecodeStatus::kOk;

@@ -1,6 +1,6 @@
 // The mocapd wire format (documented byte by byte in protocol/README.md): a 16-byte
-// versioned header and little-endian payloads for marker frames in and skeleton frames
-// out. Encoding writes into a caller-owned buffer; decoding is bounds-checked, never
+// versioned header and little-endian payloads for marker frames in; skeleton frames,
+// cleaned markers, subject descriptions and subject status out. Encoding writes into a caller-owned buffer; decoding is bounds-checked, never
 // throws and never allocates beyond the caller's message storage (sized once), and
 // reports a status for every way a message can be malformed.
 #pragma once
@@ -22,7 +22,23 @@ inline constexpr size_t kMaxSubjectName = 63;
 inline constexpr size_t kMaxMarkers = 1024;
 inline constexpr size_t kMaxJoints = 512;
 
-enum class MessageType : uint16_t { kMarkerFrame = 2, kSkeletonFrame = 3 };
+enum class MessageType : uint16_t {
+  kSubjectDescription = 1,
+  kMarkerFrame = 2,
+  kSkeletonFrame = 3,
+  kCleanedMarkers = 4,
+  kSubjectStatus = 5,
+};
+
+/// How a subject is doing, carried by skeleton frames and status messages.
+enum class SubjectState : uint8_t {
+  kTracking = 0,   ///< Solved from markers as captured.
+  kRepairing = 1,  ///< Some of this frame's markers were repaired.
+  kLost = 2,       ///< Too few markers to solve; the pose is held.
+  kStalled = 3,    ///< No input for longer than the watchdog timeout.
+  kWaiting = 4,    ///< No frame received yet.
+};
+const char* to_string(SubjectState state);
 
 enum class DecodeStatus {
   kOk,
@@ -34,6 +50,7 @@ enum class DecodeStatus {
   kBadSubjectName,   ///< Empty or longer than kMaxSubjectName.
   kTooManyItems,     ///< More markers or joints than the limits.
   kNonFinite,        ///< NaN or Inf where a number must be finite.
+  kBadField,         ///< A field outside its allowed values (flags, names, parent indices, enums).
 };
 const char* to_string(DecodeStatus status);
 
@@ -60,15 +77,65 @@ struct SkeletonFrameMessage {
   uint64_t capture_time_ns = 0;
   uint64_t publish_time_ns = 0;
   uint8_t status = 0;  ///< IkStatus of the final solve.
+  SubjectState subject_state = SubjectState::kTracking;
   float residual_m = 0.0f;
   Vec3 root_translation = Vec3::Zero();
   std::vector<Quat> rotations;  ///< Local joint rotations (R_PJ).
+  /// Optional (empty, or one per joint): global joint transforms in the world frame.
+  std::vector<Quat> global_rotations;
+  std::vector<Vec3> global_positions;
+};
+
+/// The model a subject's frames are made for: published so a consumer can interpret
+/// skeleton frames (names, hierarchy, rest pose) and check their model hashes.
+struct SubjectDescriptionMessage {
+  std::string subject;
+  uint64_t marker_set_hash = 0;
+  uint64_t skeleton_hash = 0;
+  float rate_hz = 0.0f;
+  uint16_t lookahead_frames = 0;
+  std::vector<std::string> marker_names;
+  std::vector<std::string> joint_names;
+  std::vector<int16_t> joint_parents;  ///< -1 for the root; otherwise an earlier joint.
+  std::vector<Vec3> rest_offsets;      ///< Metres, in the parent's frame.
+  std::vector<Quat> rest_rotations;
+};
+
+/// Per-marker status on the wire (MarkerStatus in filters/cleanup_pipeline.hpp).
+struct CleanedMarkersMessage {
+  std::string subject;
+  uint64_t model_hash = 0;  ///< Marker-set hash.
+  uint64_t frame_number = 0;
+  uint64_t capture_time_ns = 0;
+  uint64_t publish_time_ns = 0;
+  std::vector<Vec3> positions;  ///< Metres; NaN where unrecoverable.
+  std::vector<uint8_t> status;  ///< 0 observed, 1 repaired, 2 unrecoverable.
+  std::vector<uint8_t> reason;  ///< MaskReason of a repaired sample, else 0.
+};
+
+/// Published by the daemon for each subject on every stats tick and when the watchdog
+/// sees its input stall, so a consumer learns a subject is stalled even with no frames.
+struct SubjectStatusMessage {
+  std::string subject;
+  SubjectState state = SubjectState::kWaiting;
+  uint64_t last_frame_number = 0;  ///< Last frame received (0 before any).
+  uint64_t since_last_input_ns = 0;
+  uint64_t frames_in = 0;
+  uint64_t frames_out = 0;
+  uint64_t frames_dropped = 0;
 };
 
 /// Appends the encoded message to out (cleared first). Never fails for messages within
 /// the limits; throws std::invalid_argument otherwise (a programming error upstream).
 void EncodeMarkerFrame(const MarkerFrameMessage& message, std::vector<uint8_t>* out);
 void EncodeSkeletonFrame(const SkeletonFrameMessage& message, std::vector<uint8_t>* out);
+void EncodeSubjectDescription(const SubjectDescriptionMessage& message, std::vector<uint8_t>* out);
+void EncodeCleanedMarkers(const CleanedMarkersMessage& message, std::vector<uint8_t>* out);
+void EncodeSubjectStatus(const SubjectStatusMessage& message, std::vector<uint8_t>* out);
+
+/// The description of a solved subject, from its model.
+SubjectDescriptionMessage DescribeSubject(const std::string& subject, const Skeleton& skeleton, const MarkerSet& markers,
+                                          float rate_hz, int lookahead_frames);
 
 /// Reads the message type after validating the header. Returns kOk and sets type.
 DecodeStatus PeekType(std::span<const uint8_t> bytes, MessageType* type);
@@ -76,5 +143,8 @@ DecodeStatus PeekType(std::span<const uint8_t> bytes, MessageType* type);
 /// of this size). On any status but kOk, message is unspecified.
 DecodeStatus DecodeMarkerFrame(std::span<const uint8_t> bytes, MarkerFrameMessage* message);
 DecodeStatus DecodeSkeletonFrame(std::span<const uint8_t> bytes, SkeletonFrameMessage* message);
+DecodeStatus DecodeSubjectDescription(std::span<const uint8_t> bytes, SubjectDescriptionMessage* message);
+DecodeStatus DecodeCleanedMarkers(std::span<const uint8_t> bytes, CleanedMarkersMessage* message);
+DecodeStatus DecodeSubjectStatus(std::span<const uint8_t> bytes, SubjectStatusMessage* message);
 
 }  // namespace mocapd::protocol

@@ -1,4 +1,5 @@
-"""Reference decoder for the mocapd wire protocol, version 1 (see protocol/README.md).
+"""Reference decoder for the mocapd wire protocol, version 1 (see protocol/README.md): every
+message type the daemon sends or receives.
 
 Standard library only. Every decode function raises ValueError naming the problem
 (the same status names as the C++ decoder) for a malformed message.
@@ -9,8 +10,15 @@ import struct
 MAGIC = 0x4450434D
 VERSION = 1
 HEADER = struct.Struct("<IHHII")
+SUBJECT_DESCRIPTION = 1
 MARKER_FRAME = 2
 SKELETON_FRAME = 3
+CLEANED_MARKERS = 4
+SUBJECT_STATUS = 5
+SUBJECT_STATES = ("tracking", "repairing", "lost", "stalled", "waiting")
+MARKER_STATUS = ("observed", "repaired", "unrecoverable")
+MASK_REASONS = ("none", "missing", "disagreement", "residual", "spike", "rigid_distance", "swap", "frozen",
+                "fallen_off", "small_track", "trimmed")
 MAX_MARKERS = 1024
 MAX_JOINTS = 512
 
@@ -28,10 +36,10 @@ class Reader:
         self.offset += size
         return values
 
-    def subject(self):
+    def subject(self, error="bad_subject_name"):
         (length,) = self.take("<B")
         if length == 0 or length > 63:
-            raise ValueError("bad_subject_name")
+            raise ValueError(error)
         if self.offset + length > len(self.data):
             raise ValueError("too_short")
         name = self.data[self.offset:self.offset + length].decode("utf-8")
@@ -79,35 +87,112 @@ def decode_marker_frame(data):
             "rate_hz": rate, "markers": markers}
 
 
-def decode_skeleton_frame(data):
+def _finite(values):
+    if not all(math.isfinite(v) for v in values):
+        raise ValueError("non_finite")
+    return values
+
+
+def _check_type(data, expected):
     msg_type, _ = decode_header(data)
-    if msg_type != SKELETON_FRAME:
+    if msg_type != expected:
         raise ValueError("wrong_type")
-    r = Reader(data, HEADER.size)
+    return Reader(data, HEADER.size)
+
+
+def decode_skeleton_frame(data):
+    r = _check_type(data, SKELETON_FRAME)
     subject = r.subject()
-    model_hash, frame, capture_ns, publish_ns, status, _flags, count, residual, tx, ty, tz = r.take("<QQQQBBHffff")
+    model_hash, frame, capture_ns, publish_ns, status, state, flags, count, _reserved = r.take("<QQQQBBHHH")
+    if state >= len(SUBJECT_STATES) or flags & ~1:
+        raise ValueError("bad_field")
     if count > MAX_JOINTS:
         raise ValueError("too_many_items")
-    if len(data) - r.offset != 16 * count:
+    globals_present = bool(flags & 1)
+    if len(data) - r.offset != 16 + (16 + (28 if globals_present else 0)) * count:
         raise ValueError("size_mismatch")
-    if not all(math.isfinite(v) for v in (residual, tx, ty, tz)):
-        raise ValueError("non_finite")
-    rotations = []
-    for _ in range(count):
-        q = r.take("<ffff")
-        if not all(math.isfinite(v) for v in q):
-            raise ValueError("non_finite")
-        rotations.append(q)
+    (residual,) = _finite(r.take("<f"))
+    root = _finite(r.take("<fff"))
+    rotations = [_finite(r.take("<ffff")) for _ in range(count)]
+    global_transforms = [(_finite(r.take("<ffff")), _finite(r.take("<fff"))) for _ in range(count)] if globals_present else None
     return {"subject": subject, "model_hash": model_hash, "frame": frame, "capture_time_ns": capture_ns,
-            "publish_time_ns": publish_ns, "status": status, "residual_m": residual,
-            "root_translation": (tx, ty, tz), "rotations": rotations}
+            "publish_time_ns": publish_ns, "status": status, "subject_state": SUBJECT_STATES[state],
+            "residual_m": residual, "root_translation": root, "rotations": rotations,
+            "global_transforms": global_transforms}
+
+
+def decode_subject_description(data):
+    r = _check_type(data, SUBJECT_DESCRIPTION)
+    subject = r.subject()
+    marker_hash, skeleton_hash, rate, lookahead, markers, joints, _reserved = r.take("<QQfHHHH")
+    if not math.isfinite(rate) or rate <= 0:
+        raise ValueError("non_finite")
+    if markers > MAX_MARKERS or joints > MAX_JOINTS:
+        raise ValueError("too_many_items")
+    if len(data) - r.offset < 2 * markers + 32 * joints:
+        raise ValueError("size_mismatch")
+    marker_names = [r.subject("bad_field") for _ in range(markers)]
+    joint_list = []
+    for j in range(joints):
+        name = r.subject("bad_field")
+        (parent,) = r.take("<h")
+        if (j == 0) != (parent == -1) or parent >= j or parent < -1:
+            raise ValueError("bad_field")
+        offset = _finite(r.take("<fff"))
+        rotation = _finite(r.take("<ffff"))
+        joint_list.append({"name": name, "parent": parent, "offset": offset, "rest_rotation": rotation})
+    if r.offset != len(data):
+        raise ValueError("size_mismatch")
+    return {"subject": subject, "marker_set_hash": marker_hash, "skeleton_hash": skeleton_hash, "rate_hz": rate,
+            "lookahead_frames": lookahead, "markers": marker_names, "joints": joint_list}
+
+
+def decode_cleaned_markers(data):
+    r = _check_type(data, CLEANED_MARKERS)
+    subject = r.subject()
+    model_hash, frame, capture_ns, publish_ns, count, _reserved = r.take("<QQQQHH")
+    if count > MAX_MARKERS:
+        raise ValueError("too_many_items")
+    if len(data) - r.offset != 14 * count:
+        raise ValueError("size_mismatch")
+    markers = []
+    for _ in range(count):
+        position = _finite(r.take("<fff"))
+        status, reason = r.take("<BB")
+        if status >= len(MARKER_STATUS) or reason >= len(MASK_REASONS):
+            raise ValueError("bad_field")
+        markers.append({"position": None if status == 2 else position, "status": MARKER_STATUS[status],
+                        "reason": MASK_REASONS[reason]})
+    return {"subject": subject, "model_hash": model_hash, "frame": frame, "capture_time_ns": capture_ns,
+            "publish_time_ns": publish_ns, "markers": markers}
+
+
+def decode_subject_status(data):
+    r = _check_type(data, SUBJECT_STATUS)
+    subject = r.subject()
+    state, _r8, _r16, last_frame, since_ns, frames_in, frames_out, dropped = r.take("<BBHQQQQQ")
+    if r.offset != len(data):
+        raise ValueError("size_mismatch")
+    if state >= len(SUBJECT_STATES):
+        raise ValueError("bad_field")
+    return {"subject": subject, "state": SUBJECT_STATES[state], "last_frame": last_frame,
+            "since_last_input_ns": since_ns, "frames_in": frames_in, "frames_out": frames_out,
+            "frames_dropped": dropped}
+
+
+DECODERS = {
+    SUBJECT_DESCRIPTION: ("subject_description", decode_subject_description),
+    MARKER_FRAME: ("marker_frame", decode_marker_frame),
+    SKELETON_FRAME: ("skeleton_frame", decode_skeleton_frame),
+    CLEANED_MARKERS: ("cleaned_markers", decode_cleaned_markers),
+    SUBJECT_STATUS: ("subject_status", decode_subject_status),
+}
 
 
 def decode(data):
-    """Decodes any message by its header's type."""
+    """Decodes any message by its header's type; returns (kind, fields)."""
     msg_type, _ = decode_header(data)
-    if msg_type == MARKER_FRAME:
-        return "marker_frame", decode_marker_frame(data)
-    if msg_type == SKELETON_FRAME:
-        return "skeleton_frame", decode_skeleton_frame(data)
-    raise ValueError("wrong_type")
+    if msg_type not in DECODERS:
+        raise ValueError("wrong_type")
+    kind, decoder = DECODERS[msg_type]
+    return kind, decoder(data)

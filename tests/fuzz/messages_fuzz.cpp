@@ -8,10 +8,16 @@
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   static mocapd::protocol::MarkerFrameMessage markers;
   static mocapd::protocol::SkeletonFrameMessage skeleton;
+  static mocapd::protocol::SubjectDescriptionMessage description;
+  static mocapd::protocol::CleanedMarkersMessage cleaned;
+  static mocapd::protocol::SubjectStatusMessage status;
   const std::span<const uint8_t> bytes(data, size);
   mocapd::protocol::MessageType type;
   (void)mocapd::protocol::PeekType(bytes, &type);
   (void)mocapd::protocol::DecodeMarkerFrame(bytes, &markers);
   (void)mocapd::protocol::DecodeSkeletonFrame(bytes, &skeleton);
+  (void)mocapd::protocol::DecodeSubjectDescription(bytes, &description);
+  (void)mocapd::protocol::DecodeCleanedMarkers(bytes, &cleaned);
+  (void)mocapd::protocol::DecodeSubjectStatus(bytes, &status);
   return 0;
 }

@@ -39,6 +39,47 @@ SkeletonFrameMessage SampleSkeleton() {
   return m;
 }
 
+SubjectDescriptionMessage SampleDescription() {
+  SubjectDescriptionMessage d;
+  d.subject = "actor1";
+  d.marker_set_hash = 11;
+  d.skeleton_hash = 22;
+  d.rate_hz = 240.0f;
+  d.lookahead_frames = 12;
+  d.marker_names = {"LASI", "RASI", "LKNE"};
+  d.joint_names = {"Hips", "LeftUpLeg", "LeftLeg"};
+  d.joint_parents = {-1, 0, 1};
+  d.rest_offsets = {Vec3(0, 0.9, 0), Vec3(0.1, -0.05, 0), Vec3(0, -0.42, 0)};
+  d.rest_rotations = {Quat::Identity(), Quat(0.5, 0.5, 0.5, 0.5), Quat::Identity()};
+  return d;
+}
+
+CleanedMarkersMessage SampleCleaned() {
+  CleanedMarkersMessage c;
+  c.subject = "actor1";
+  c.model_hash = 11;
+  c.frame_number = 7;
+  c.capture_time_ns = 100;
+  c.publish_time_ns = 200;
+  c.positions = {Vec3(0.5, 1.0, 1.5), Vec3(0.25, 0.5, 0.75), Vec3::Constant(kNaN)};
+  c.status = {0, 1, 2};
+  c.reason = {0, 3, 0};
+  return c;
+}
+
+// Every prefix of a valid message is rejected as short or inconsistent, and so is one
+// extra byte: no decoder reads past what it was given or accepts trailing bytes.
+template <typename Message, typename Decode>
+void ExpectEveryTruncationRejected(std::vector<uint8_t> bytes, Decode decode) {
+  Message dut;
+  for (size_t n = 0; n < bytes.size(); ++n) {
+    const DecodeStatus s = decode(std::span<const uint8_t>(bytes.data(), n), &dut);
+    EXPECT_TRUE(s == DecodeStatus::kTooShort || s == DecodeStatus::kSizeMismatch) << n << " " << to_string(s);
+  }
+  bytes.push_back(0);
+  EXPECT_EQ(decode(bytes, &dut), DecodeStatus::kSizeMismatch);
+}
+
 TEST(MessagesTest, MarkerFrameRoundTripsExactlyForFloatValues) {
   std::vector<uint8_t> bytes;
   EncodeMarkerFrame(SampleMarkers(), &bytes);
@@ -78,8 +119,133 @@ TEST(MessagesTest, SkeletonFrameRoundTrips) {
   EXPECT_EQ(dut.root_translation, Vec3(0.25, 0.875, -3.5));
   ASSERT_EQ(dut.rotations.size(), 2u);
   EXPECT_TRUE(dut.rotations[1].isApprox(Quat(0.5, 0.5, 0.5, 0.5)));
+  EXPECT_EQ(dut.subject_state, SubjectState::kTracking);
+  EXPECT_TRUE(dut.global_rotations.empty());
   MarkerFrameMessage wrong;
   EXPECT_EQ(DecodeMarkerFrame(bytes, &wrong), DecodeStatus::kWrongType);
+}
+
+TEST(MessagesTest, SkeletonFrameCarriesOptionalGlobalTransformsAndSubjectState) {
+  SkeletonFrameMessage m = SampleSkeleton();
+  m.subject_state = SubjectState::kRepairing;
+  m.global_rotations = {Quat(0.5, -0.5, 0.5, -0.5), Quat::Identity()};
+  m.global_positions = {Vec3(1, 2, 3), Vec3(-1, -2, -3)};
+  std::vector<uint8_t> bytes;
+  EncodeSkeletonFrame(m, &bytes);
+  SkeletonFrameMessage dut;
+  ASSERT_EQ(DecodeSkeletonFrame(bytes, &dut), DecodeStatus::kOk);
+  EXPECT_EQ(dut.subject_state, SubjectState::kRepairing);
+  ASSERT_EQ(dut.global_positions.size(), 2u);
+  EXPECT_EQ(dut.global_positions[1], Vec3(-1, -2, -3));
+  EXPECT_TRUE(dut.global_rotations[0].isApprox(Quat(0.5, -0.5, 0.5, -0.5)));
+  ExpectEveryTruncationRejected<SkeletonFrameMessage>(bytes, DecodeSkeletonFrame);
+  // Globals for only some joints is a programming error upstream.
+  m.global_positions.pop_back();
+  EXPECT_THROW(EncodeSkeletonFrame(m, &bytes), std::invalid_argument);
+}
+
+TEST(MessagesTest, SkeletonFrameRejectsUnknownFlagsAndStates) {
+  std::vector<uint8_t> good;
+  EncodeSkeletonFrame(SampleSkeleton(), &good);
+  const size_t state_offset = kHeaderBytes + 1 + 6 + 32 + 1;
+  SkeletonFrameMessage dut;
+  std::vector<uint8_t> b = good;
+  b[state_offset] = 9;
+  EXPECT_EQ(DecodeSkeletonFrame(b, &dut), DecodeStatus::kBadField);
+  b = good;
+  b[state_offset + 1] = 0x02;  // an undefined flag bit
+  EXPECT_EQ(DecodeSkeletonFrame(b, &dut), DecodeStatus::kBadField);
+  b = good;
+  b[state_offset + 1] = 0x01;  // globals claimed but not sent
+  EXPECT_EQ(DecodeSkeletonFrame(b, &dut), DecodeStatus::kSizeMismatch);
+}
+
+TEST(MessagesTest, SubjectDescriptionRoundTripsNamesHierarchyAndRestPose) {
+  std::vector<uint8_t> bytes;
+  EncodeSubjectDescription(SampleDescription(), &bytes);
+  SubjectDescriptionMessage dut;
+  ASSERT_EQ(DecodeSubjectDescription(bytes, &dut), DecodeStatus::kOk);
+  EXPECT_EQ(dut.subject, "actor1");
+  EXPECT_EQ(dut.marker_set_hash, 11u);
+  EXPECT_EQ(dut.skeleton_hash, 22u);
+  EXPECT_EQ(dut.rate_hz, 240.0f);
+  EXPECT_EQ(dut.lookahead_frames, 12);
+  EXPECT_EQ(dut.marker_names, (std::vector<std::string>{"LASI", "RASI", "LKNE"}));
+  EXPECT_EQ(dut.joint_names, (std::vector<std::string>{"Hips", "LeftUpLeg", "LeftLeg"}));
+  EXPECT_EQ(dut.joint_parents, (std::vector<int16_t>{-1, 0, 1}));
+  EXPECT_LT((dut.rest_offsets[2] - Vec3(0, -0.42, 0)).norm(), 1e-7);
+  EXPECT_TRUE(dut.rest_rotations[1].isApprox(Quat(0.5, 0.5, 0.5, 0.5)));
+  ExpectEveryTruncationRejected<SubjectDescriptionMessage>(bytes, DecodeSubjectDescription);
+}
+
+TEST(MessagesTest, SubjectDescriptionRejectsBrokenHierarchiesAndNames) {
+  SubjectDescriptionMessage d = SampleDescription();
+  std::vector<uint8_t> bytes;
+  SubjectDescriptionMessage dut;
+  d.joint_parents = {-1, 2, 1};  // a parent after its child
+  EncodeSubjectDescription(d, &bytes);
+  EXPECT_EQ(DecodeSubjectDescription(bytes, &dut), DecodeStatus::kBadField);
+  d.joint_parents = {-1, -1, 1};  // two roots
+  EncodeSubjectDescription(d, &bytes);
+  EXPECT_EQ(DecodeSubjectDescription(bytes, &dut), DecodeStatus::kBadField);
+  d = SampleDescription();
+  EncodeSubjectDescription(d, &bytes);
+  const size_t first_name = kHeaderBytes + 1 + 6 + 8 + 8 + 4 + 2 + 2 + 2 + 2;
+  bytes[first_name] = 0;  // an empty marker name
+  EXPECT_EQ(DecodeSubjectDescription(bytes, &dut), DecodeStatus::kBadField);
+  d.marker_names[0] = "";
+  EXPECT_THROW(EncodeSubjectDescription(d, &bytes), std::invalid_argument);
+  // A count far beyond the bytes is refused before anything is sized by it.
+  d = SampleDescription();
+  EncodeSubjectDescription(d, &bytes);
+  bytes[first_name - 4] = 0xff;
+  bytes[first_name - 3] = 0x01;  // joints = 511
+  EXPECT_EQ(DecodeSubjectDescription(bytes, &dut), DecodeStatus::kSizeMismatch);
+}
+
+TEST(MessagesTest, CleanedMarkersRoundTripWithStatusAndReason) {
+  std::vector<uint8_t> bytes;
+  EncodeCleanedMarkers(SampleCleaned(), &bytes);
+  CleanedMarkersMessage dut;
+  ASSERT_EQ(DecodeCleanedMarkers(bytes, &dut), DecodeStatus::kOk);
+  EXPECT_EQ(dut.frame_number, 7u);
+  EXPECT_EQ(dut.publish_time_ns, 200u);
+  EXPECT_EQ(dut.positions[1], Vec3(0.25, 0.5, 0.75));
+  EXPECT_EQ(dut.status, (std::vector<uint8_t>{0, 1, 2}));
+  EXPECT_EQ(dut.reason, (std::vector<uint8_t>{0, 3, 0}));
+  EXPECT_FALSE(dut.positions[2].allFinite());
+  ExpectEveryTruncationRejected<CleanedMarkersMessage>(bytes, DecodeCleanedMarkers);
+  const size_t first_status = kHeaderBytes + 1 + 6 + 32 + 4 + 12;
+  bytes[first_status] = 3;
+  EXPECT_EQ(DecodeCleanedMarkers(bytes, &dut), DecodeStatus::kBadField);
+  bytes[first_status] = 1;
+  bytes[first_status + 1] = 40;
+  EXPECT_EQ(DecodeCleanedMarkers(bytes, &dut), DecodeStatus::kBadField);
+}
+
+TEST(MessagesTest, SubjectStatusRoundTrips) {
+  SubjectStatusMessage m;
+  m.subject = "actor2";
+  m.state = SubjectState::kStalled;
+  m.last_frame_number = 1000;
+  m.since_last_input_ns = 2'000'000'000;
+  m.frames_in = 1001;
+  m.frames_out = 990;
+  m.frames_dropped = 3;
+  std::vector<uint8_t> bytes;
+  EncodeSubjectStatus(m, &bytes);
+  SubjectStatusMessage dut;
+  ASSERT_EQ(DecodeSubjectStatus(bytes, &dut), DecodeStatus::kOk);
+  EXPECT_EQ(dut.subject, "actor2");
+  EXPECT_EQ(dut.state, SubjectState::kStalled);
+  EXPECT_EQ(dut.since_last_input_ns, 2'000'000'000u);
+  EXPECT_EQ(dut.frames_out, 990u);
+  ExpectEveryTruncationRejected<SubjectStatusMessage>(bytes, DecodeSubjectStatus);
+  bytes[kHeaderBytes + 1 + 6] = 7;
+  EXPECT_EQ(DecodeSubjectStatus(bytes, &dut), DecodeStatus::kBadField);
+  MessageType type;
+  EXPECT_EQ(PeekType(bytes, &type), DecodeStatus::kOk);
+  EXPECT_EQ(type, MessageType::kSubjectStatus);
 }
 
 TEST(MessagesTest, EveryTruncationAndExtensionIsRejected) {

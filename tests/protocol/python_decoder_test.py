@@ -30,6 +30,31 @@ def main(directory):
     assert kind == "skeleton_frame"
     assert s["publish_time_ns"] == 987754321 and s["root_translation"] == (0.25, 0.875, -3.5)
     assert s["rotations"][1] == (0.5, 0.5, 0.5, 0.5)
+    assert s["subject_state"] == "repairing" and s["global_transforms"] is None
+    kind, g = mocapd_protocol.decode(read(directory, "skeleton_frame_globals.bin"))
+    assert g["global_transforms"][1] == ((0.5, -0.5, 0.5, -0.5), (0.5, 1.0, -3.0))
+    kind, d = mocapd_protocol.decode(read(directory, "subject_description.bin"))
+    assert kind == "subject_description" and d["markers"] == ["LASI", "RASI", "LKNE"]
+    assert d["marker_set_hash"] == m["model_hash"] and d["lookahead_frames"] == 12
+    assert [j["name"] for j in d["joints"]] == ["Hips", "Spine"] and d["joints"][1]["parent"] == 0
+    assert d["joints"][0]["offset"] == (0.0, 0.875, 0.0)
+    kind, c = mocapd_protocol.decode(read(directory, "cleaned_markers.bin"))
+    assert kind == "cleaned_markers"
+    assert [x["status"] for x in c["markers"]] == ["observed", "repaired", "unrecoverable"]
+    assert c["markers"][1] == {"position": (0.25, 1.0, -0.5), "status": "repaired", "reason": "missing"}
+    assert c["markers"][2]["position"] is None
+    kind, st = mocapd_protocol.decode(read(directory, "subject_status.bin"))
+    assert kind == "subject_status" and st["state"] == "stalled" and st["since_last_input_ns"] == 1500000000
+    assert st["frames_in"] == 1235 and st["frames_out"] == 1223
+    for name in ("skeleton_frame_globals.bin", "subject_description.bin", "cleaned_markers.bin", "subject_status.bin"):
+        data = read(directory, name)
+        for n in range(len(data)):
+            try:
+                mocapd_protocol.decode(data[:n])
+            except ValueError as e:
+                assert str(e) in ("too_short", "size_mismatch"), (name, n, str(e))
+            else:
+                raise AssertionError(f"{name} truncated to {n} bytes decoded")
     expect_error(read(directory, "marker_frame_truncated.bin"), "too_short")
     expect_error(read(directory, "bad_magic.bin"), "bad_magic")
     expect_error(b"", "too_short")
