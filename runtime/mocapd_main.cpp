@@ -2,11 +2,15 @@
 //   demo       synthesize a take and solve it live (the README's main job)
 //   calibrate  build a subject model from a BVH and the C3D capture of the same take
 //   process    clean a recorded C3D through the streaming pipeline; write BVH (+ C3D)
+//   run        the daemon: marker frames in over ZeroMQ, cleaned skeletons out
 #include <CLI/CLI.hpp>
 #include <exception>
 #include <iostream>
 
+#include <spdlog/spdlog.h>
+
 #include "runtime/calibrate_command.hpp"
+#include "runtime/daemon.hpp"
 #include "runtime/demo_command.hpp"
 #include "runtime/process_command.hpp"
 
@@ -47,6 +51,14 @@ int main(int argc, char** argv) {
   proc_cmd->add_option("--lookahead", proc.lookahead, "Frames of lookahead K (delay)")->check(CLI::Range(0, 1000))->capture_default_str();
   proc_cmd->add_option("--report", proc.report_json, "Write the summary as JSON");
 
+  std::string run_config = "config/mocapd.toml";
+  std::string log_level = "info";
+  CLI::App* run_cmd = app.add_subcommand("run", "Run the daemon: clean and solve live marker frames from ZeroMQ");
+  run_cmd->add_option("--config", run_config, "Daemon config (TOML)")->check(CLI::ExistingFile)->capture_default_str();
+  run_cmd->add_option("--log-level", log_level, "trace | debug | info | warn | error")
+      ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error"}))
+      ->capture_default_str();
+
   CLI11_PARSE(app, argc, argv);
   try {
     if (*demo_cmd) return mocapd::RunDemoCommand(demo, std::cout);
@@ -54,6 +66,12 @@ int main(int argc, char** argv) {
       cal.calibration.max_rms_m = max_rms_mm * 1e-3;
       mocapd::RunCalibrateCommand(cal, std::cout);
       return 0;
+    }
+    if (*run_cmd) {
+      spdlog::set_level(spdlog::level::from_str(log_level));
+      mocapd::Daemon daemon(mocapd::LoadDaemonConfig(run_config), run_config);
+      daemon.Run(/*handle_signals=*/true);
+      return daemon.Stats().Balanced() ? 0 : 3;
     }
     if (*proc_cmd) {
       proc.progress = ::isatty(STDOUT_FILENO) != 0;

@@ -5,10 +5,10 @@ set -euo pipefail
 packages=(
   build-essential cmake ninja-build g++ pkg-config
   libeigen3-dev libzmq3-dev cppzmq-dev libboost-dev
-  libspdlog-dev libfmt-dev libcli11-dev libtomlplusplus-dev nlohmann-json3-dev
+  libspdlog-dev libfmt-dev libcli11-dev libtomlplusplus-dev nlohmann-json3-dev prometheus-cpp-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   clang libclang-rt-14-dev
-  python3 python3-zmq
+  python3 python3-zmq python3-prometheus-client
 )
 missing=()
 for p in "${packages[@]}"; do

@@ -1,0 +1,518 @@
+// The daemon's data plane (ZeroMQ ingest, per-subject pipelines, publish) and control
+// plane (Asio signals, timers, reload, HTTP).
+#include "runtime/daemon.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <boost/asio/io_context.hpp>
+#include <boost/asio/signal_set.hpp>
+#include <boost/asio/steady_timer.hpp>
+#include <csignal>
+#include <optional>
+#include <zmq.hpp>
+
+#include "runtime/http_server.hpp"
+
+namespace mocapd {
+namespace {
+
+int64_t SteadyNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+int64_t Seconds(double s) { return static_cast<int64_t>(s * 1e9); }
+
+}  // namespace
+
+uint64_t DaemonStats::published_total() const {
+  uint64_t n = retired_published;
+  for (const SubjectStats& s : subjects) n += s.counters.frames_published;
+  return n;
+}
+
+uint64_t DaemonStats::dropped_total() const {
+  uint64_t n = retired_dropped;
+  for (uint64_t d : unattributed_dropped) n += d;
+  for (const SubjectStats& s : subjects) n += s.counters.dropped_total();
+  return n;
+}
+
+uint64_t DaemonStats::pending_total() const {
+  uint64_t n = 0;
+  for (const SubjectStats& s : subjects) n += s.pending;
+  return n;
+}
+
+// ---------------------------------------------------------------------------------------
+// Data plane: one thread, owns the sockets and the runners.
+
+struct Daemon::DataPlane final : OutputSink {
+  DataPlane(DaemonConfig cfg, zmq::context_t* shared_context)
+      : owned_context(shared_context == nullptr ? std::make_unique<zmq::context_t>(1) : nullptr),
+        context(shared_context != nullptr ? *shared_context : *owned_context),
+        config(std::move(cfg)) {
+    for (const SubjectConfig& s : config.subjects) runners.push_back(std::make_unique<SubjectRunner>(s, config));
+    frame.positions.reserve(protocol::kMaxMarkers);
+    frame.valid.reserve(protocol::kMaxMarkers);
+    frame.subject.reserve(protocol::kMaxSubjectName);
+  }
+
+  // Binds and connects; throws std::runtime_error naming the endpoint.
+  void Open() {
+    try {
+      input = zmq::socket_t(context, config.input_pattern == InputPattern::kSub ? zmq::socket_type::sub : zmq::socket_type::pull);
+      input.set(zmq::sockopt::rcvhwm, config.receive_high_water_mark);
+      input.set(zmq::sockopt::linger, 0);
+      if (config.input_pattern == InputPattern::kSub) {
+        if (config.subscribe_all) {
+          input.set(zmq::sockopt::subscribe, "");
+        } else {
+          for (const auto& r : runners) input.set(zmq::sockopt::subscribe, Topic("markers", r->name()));
+        }
+        input.connect(config.input_endpoint);
+      } else {
+        input.bind(config.input_endpoint);
+      }
+    } catch (const zmq::error_t& e) {
+      throw std::runtime_error("input endpoint '" + config.input_endpoint + "': " + e.what());
+    }
+    try {
+      output = zmq::socket_t(context, zmq::socket_type::pub);
+      output.set(zmq::sockopt::sndhwm, config.send_high_water_mark);
+      // Give subscribers a moment to receive the last frames at shutdown, never forever.
+      output.set(zmq::sockopt::linger, 2000);
+      output.bind(config.output_endpoint);
+    } catch (const zmq::error_t& e) {
+      throw std::runtime_error("output endpoint '" + config.output_endpoint + "': " + e.what());
+    }
+  }
+
+  void Send(std::string_view topic, std::span<const uint8_t> message) override {
+    // PUB never blocks: a slow subscriber loses messages at its high-water mark instead.
+    const auto a = output.send(zmq::const_buffer(topic.data(), topic.size()), zmq::send_flags::sndmore | zmq::send_flags::dontwait);
+    const auto b = a ? output.send(zmq::const_buffer(message.data(), message.size()), zmq::send_flags::dontwait) : std::nullopt;
+    if (!b) ++stats.output_send_failures;
+  }
+
+  SubjectRunner* FindRunner(std::string_view name) {
+    for (auto& r : runners)
+      if (r->name() == name) return r.get();
+    return nullptr;
+  }
+
+  void Drop(DropReason reason) { ++stats.unattributed_dropped[static_cast<size_t>(reason)]; }
+
+  // One message from the input socket, all of its parts already received into parts.
+  void Handle(size_t part_count, const zmq::message_t& message, int64_t receive_ns) {
+    ++stats.messages_in;
+    // One part (the message), or two (a topic, then the message).
+    if (part_count > 2) return Drop(DropReason::kMalformed);
+    if (message.size() > config.max_message_bytes) return Drop(DropReason::kOversized);
+    const std::span<const uint8_t> bytes(static_cast<const uint8_t*>(message.data()), message.size());
+    protocol::MessageType type;
+    if (protocol::PeekType(bytes, &type) != protocol::DecodeStatus::kOk) return Drop(DropReason::kMalformed);
+    if (type != protocol::MessageType::kMarkerFrame) return Drop(DropReason::kNotMarkerFrame);
+    const protocol::DecodeStatus status = protocol::DecodeMarkerFrame(bytes, &frame);
+    if (status != protocol::DecodeStatus::kOk) {
+      // A non-finite value is found after the subject name, so it can be charged to it.
+      SubjectRunner* runner = status == protocol::DecodeStatus::kNonFinite ? FindRunner(frame.subject) : nullptr;
+      if (runner != nullptr) return runner->CountDrop(DropReason::kNonFinite);
+      return Drop(status == protocol::DecodeStatus::kNonFinite ? DropReason::kNonFinite : DropReason::kMalformed);
+    }
+    SubjectRunner* runner = FindRunner(frame.subject);
+    if (runner == nullptr) return Drop(DropReason::kUnknownSubject);
+    runner->Accept(frame, receive_ns, *this);
+  }
+
+  // Receives every message waiting on the input socket; returns how many.
+  size_t DrainInput() {
+    size_t n = 0;
+    while (input.recv(body, zmq::recv_flags::dontwait)) {
+      size_t parts = 1;
+      while (body.more()) {
+        // The rest of a multipart message arrives with its first part; keep the last.
+        (void)input.recv(extra, zmq::recv_flags::none);
+        std::swap(body, extra);
+        ++parts;
+      }
+      Handle(parts, body, SteadyNs());
+      ++n;
+    }
+    return n;
+  }
+
+  void ApplyPendingReload() {
+    std::unique_ptr<PendingReload> reload;
+    {
+      std::lock_guard lock(mailbox_mutex);
+      reload = std::move(pending_reload);
+      has_pending_reload.store(false);
+    }
+    if (!reload) return;
+    std::vector<std::unique_ptr<SubjectRunner>> next;
+    for (auto& fresh : reload->runners) {
+      auto old = std::find_if(runners.begin(), runners.end(), [&](const auto& r) { return r && r->name() == fresh->name(); });
+      if (old != runners.end() && (*old)->fingerprint() == fresh->fingerprint()) {
+        next.push_back(std::move(*old));  // unchanged: keeps its lookahead and timing
+        continue;
+      }
+      if (old != runners.end()) {
+        (*old)->Flush(*this);
+        fresh->InheritCounters(**old);
+        old->reset();
+      }
+      next.push_back(std::move(fresh));
+    }
+    for (auto& removed : runners) {
+      if (!removed) continue;
+      removed->Flush(*this);
+      stats.retired_published += removed->counters().frames_published;
+      stats.retired_dropped += removed->counters().dropped_total();
+    }
+    runners = std::move(next);
+    const bool resubscribe = config.input_pattern == InputPattern::kSub && !config.subscribe_all;
+    if (resubscribe)
+      for (const SubjectConfig& s : config.subjects) input.set(zmq::sockopt::unsubscribe, Topic("markers", s.name));
+    // Endpoints and socket options stay as bound; the rest of the config applies now.
+    reload->config.input_endpoint = config.input_endpoint;
+    reload->config.input_pattern = config.input_pattern;
+    reload->config.output_endpoint = config.output_endpoint;
+    reload->config.subscribe_all = config.subscribe_all;
+    config = std::move(reload->config);
+    if (resubscribe)
+      for (const auto& r : runners) input.set(zmq::sockopt::subscribe, Topic("markers", r->name()));
+    ++stats.reloads;
+    for (const auto& r : runners) r->PublishDescription(*this);
+  }
+
+  void Snapshot(bool wait) {
+    std::unique_lock lock(stats_mutex, std::defer_lock);
+    if (wait) {
+      lock.lock();
+    } else if (!lock.try_lock()) {
+      return;  // the control plane is reading; next time
+    }
+    const int64_t now = SteadyNs();
+    DaemonStats& out = shared_stats;
+    auto subjects = std::move(out.subjects);
+    out = stats;
+    out.subjects = std::move(subjects);
+    out.uptime_s = static_cast<double>(now - start_ns) * 1e-9;
+    out.data_plane_heartbeat_ns = now;
+    out.subjects.resize(runners.size());
+    for (size_t i = 0; i < runners.size(); ++i) {
+      const SubjectRunner& r = *runners[i];
+      SubjectStats& s = out.subjects[i];
+      s.name = r.name();
+      s.state = r.state();
+      s.counters = r.counters();
+      s.cleanup = r.cleanup_counters();
+      s.pending = r.pending();
+      s.since_last_input_s = r.last_receive_ns() < 0 ? -1.0 : static_cast<double>(now - r.last_receive_ns()) * 1e-9;
+      const protocol::SubjectDescriptionMessage& d = r.description();
+      s.markers = static_cast<int>(d.marker_names.size());
+      s.joints = static_cast<int>(d.joint_names.size());
+      s.rate_hz = d.rate_hz;
+      s.lookahead = d.lookahead_frames;
+      s.marker_set_hash = d.marker_set_hash;
+      s.skeleton_hash = d.skeleton_hash;
+    }
+  }
+
+  void Loop() {
+    start_ns = SteadyNs();
+    int64_t next_tick = start_ns;
+    int64_t next_snapshot = start_ns;
+    zmq::pollitem_t items[] = {{input.handle(), 0, ZMQ_POLLIN, 0}};
+    stats.running = true;
+    while (!stop.load(std::memory_order_acquire)) {
+      if (has_pending_reload.load(std::memory_order_acquire)) ApplyPendingReload();
+      // A short poll so the watchdog, the stats tick and a stop request are seen promptly.
+      zmq::poll(items, 1, std::chrono::milliseconds(2));
+      if ((items[0].revents & ZMQ_POLLIN) != 0) DrainInput();
+      const int64_t now = SteadyNs();
+      for (auto& r : runners) r->CheckStall(now, Seconds(config.watchdog_timeout_s), *this);
+      if (now >= next_tick) {
+        for (auto& r : runners) {
+          r->PublishStatus(now, *this);
+          r->PublishDescription(*this);
+        }
+        next_tick = now + Seconds(config.stats_interval_s);
+      }
+      if (now >= next_snapshot) {
+        Snapshot(false);
+        next_snapshot = now + 20'000'000;  // 20 ms
+      }
+    }
+    // Graceful shutdown: take what already arrived (waiting briefly for stragglers in
+    // flight), publish everything the lookahead holds, then let PUB linger to send it.
+    for (int quiet = 0; quiet < 5;) {
+      zmq::poll(items, 1, std::chrono::milliseconds(20));
+      quiet = (items[0].revents & ZMQ_POLLIN) != 0 && DrainInput() > 0 ? 0 : quiet + 1;
+    }
+    for (auto& r : runners) {
+      r->Flush(*this);
+      r->PublishStatus(SteadyNs(), *this);
+    }
+    stats.running = false;
+    Snapshot(true);
+    input.close();
+    output.close();
+  }
+
+  struct PendingReload {
+    DaemonConfig config;
+    std::vector<std::unique_ptr<SubjectRunner>> runners;
+  };
+
+  std::unique_ptr<zmq::context_t> owned_context;
+  zmq::context_t& context;
+  zmq::socket_t input;
+  zmq::socket_t output;
+  DaemonConfig config;
+  std::vector<std::unique_ptr<SubjectRunner>> runners;
+  protocol::MarkerFrameMessage frame;
+  zmq::message_t body, extra;
+  DaemonStats stats;  // owned by the data plane thread
+  int64_t start_ns = 0;
+  std::thread thread;
+  std::atomic<bool> stop{false};
+  std::mutex mailbox_mutex;
+  std::unique_ptr<PendingReload> pending_reload;
+  std::atomic<bool> has_pending_reload{false};
+  mutable std::mutex stats_mutex;
+  DaemonStats shared_stats;
+};
+
+// ---------------------------------------------------------------------------------------
+// Control plane: Asio on the thread that called Run.
+
+struct Daemon::ControlPlane {
+  boost::asio::io_context io;
+  std::optional<boost::asio::signal_set> signals;
+  std::optional<boost::asio::steady_timer> tick;
+  std::unique_ptr<HttpServer> http;
+  DaemonConfig config;  // the control plane's copy (what was last applied)
+  DaemonStats last_logged;
+  std::array<int64_t, kDropReasonCount> last_drop_log_ns{};
+  std::array<uint64_t, kDropReasonCount> logged_drops{};
+  int64_t last_log_ns = 0;
+  bool data_plane_alive = true;
+};
+
+Daemon::Daemon(DaemonConfig config, std::string config_path, zmq::context_t* context)
+    : config_path_(std::move(config_path)), data_(std::make_unique<DataPlane>(config, context)), control_(std::make_unique<ControlPlane>()) {
+  control_->config = std::move(config);
+}
+
+Daemon::~Daemon() {
+  Stop();
+  if (data_->thread.joinable()) {
+    data_->stop.store(true);
+    data_->thread.join();
+  }
+}
+
+void Daemon::Stop() {
+  boost::asio::post(control_->io, [this] {
+    spdlog::info("shutting down: flushing the lookahead and publishing what is pending");
+    data_->stop.store(true, std::memory_order_release);
+    if (data_->thread.joinable()) data_->thread.join();
+    if (control_->http) control_->http->Stop();
+    if (control_->tick) control_->tick->cancel();
+    if (control_->signals) control_->signals->cancel();
+    control_->io.stop();
+  });
+}
+
+bool Daemon::Reload() {
+  if (config_path_.empty()) {
+    spdlog::warn("reload requested, but this daemon was not started from a config file");
+    return false;
+  }
+  try {
+    Reload(LoadDaemonConfig(config_path_));
+    return true;
+  } catch (const std::exception& e) {
+    spdlog::error("reload failed, keeping the running config: {}", e.what());
+    ++reload_failures_;
+    return false;
+  }
+}
+
+void Daemon::Reload(DaemonConfig config) {
+  // Runs on the control plane, which owns its copy of the config.
+  boost::asio::post(control_->io, [this, c = std::make_shared<DaemonConfig>(std::move(config))]() mutable { ApplyReload(std::move(*c)); });
+}
+
+void Daemon::ApplyReload(DaemonConfig config) {
+  const DaemonConfig& old = control_->config;
+  if (config.input_endpoint != old.input_endpoint || config.output_endpoint != old.output_endpoint ||
+      config.input_pattern != old.input_pattern || config.subscribe_all != old.subscribe_all ||
+      config.http_port != old.http_port || config.http_address != old.http_address || config.http_enabled != old.http_enabled)
+    spdlog::warn("reload: endpoint changes take effect only after a restart; the sockets stay as they are");
+  auto pending = std::make_unique<DataPlane::PendingReload>();
+  for (const SubjectConfig& s : config.subjects) pending->runners.push_back(std::make_unique<SubjectRunner>(s, config));
+  pending->config = config;
+  std::string names;
+  for (const SubjectConfig& s : config.subjects) names += (names.empty() ? "" : ", ") + s.name;
+  spdlog::info("reload: applying {} ({} subjects: {})", config.source, config.subjects.size(), names);
+  control_->config = std::move(config);
+  std::lock_guard lock(data_->mailbox_mutex);
+  data_->pending_reload = std::move(pending);
+  data_->has_pending_reload.store(true, std::memory_order_release);
+}
+
+DaemonStats Daemon::Stats() const {
+  std::lock_guard lock(data_->stats_mutex);
+  DaemonStats stats = data_->shared_stats;
+  stats.reload_failures = reload_failures_.load();
+  return stats;
+}
+
+bool Daemon::WaitUntilRunning(std::chrono::milliseconds timeout) {
+  std::unique_lock lock(run_mutex_);
+  run_cv_.wait_for(lock, timeout, [&] { return run_state_ != RunState::kStarting; });
+  return run_state_ == RunState::kRunning;
+}
+
+namespace {
+
+void LogStartup(const DaemonConfig& c, int http_port) {
+  spdlog::info("mocapd starting: input {} {} ({}), output PUB {}", c.input_pattern == InputPattern::kSub ? "SUB connect" : "PULL bind",
+               c.input_endpoint, c.input_pattern == InputPattern::kSub && !c.subscribe_all ? "subjects' topics" : "all messages",
+               c.output_endpoint);
+  for (const SubjectConfig& s : c.subjects) {
+    const double budget_ms = 1e3 / s.rate_hz;
+    spdlog::info("  subject '{}': {} markers, {} joints, {:.0f} Hz, lookahead K={} ({:.1f} ms delay), frame budget {:.2f} ms, model {}",
+                 s.name, s.model.markers->num_markers(), s.model.skeleton->num_joints(), s.rate_hz, s.cleanup.lookahead,
+                 s.cleanup.lookahead * budget_ms, budget_ms, s.model_path);
+  }
+  if (http_port > 0) {
+    spdlog::info("control: http://{}:{}/health /subjects /metrics; watchdog {:.2f} s; stats every {:.2f} s", c.http_address, http_port,
+                 c.watchdog_timeout_s, c.stats_interval_s);
+  } else {
+    spdlog::info("control: HTTP disabled; watchdog {:.2f} s", c.watchdog_timeout_s);
+  }
+}
+
+}  // namespace
+
+void Daemon::Run(bool handle_signals) {
+  ControlPlane& cp = *control_;
+  try {
+    data_->Open();
+    if (cp.config.http_enabled) {
+      cp.http = std::make_unique<HttpServer>(cp.io, cp.config.http_address, cp.config.http_port, [this](const std::string& target) {
+        const DaemonStats stats = Stats();
+        const bool alive = stats.running && SteadyNs() - stats.data_plane_heartbeat_ns < 1'000'000'000;
+        if (target == "/metrics") return HttpResponse{200, "text/plain; version=0.0.4; charset=utf-8", FormatPrometheusMetrics(stats)};
+        if (target == "/subjects") return HttpResponse{200, "application/json", FormatSubjectsJson(stats)};
+        if (target == "/health") return HttpResponse{alive ? 200 : 503, "application/json", FormatHealthJson(stats, alive)};
+        return HttpResponse{404, "text/plain; charset=utf-8", "not found; try /health, /subjects or /metrics\n"};
+      });
+      http_port_.store(cp.http->port());
+    }
+  } catch (...) {
+    {
+      std::lock_guard lock(run_mutex_);
+      run_state_ = RunState::kFailed;
+    }
+    run_cv_.notify_all();
+    throw;
+  }
+  LogStartup(cp.config, http_port_.load());
+  data_->Snapshot(true);
+  data_->thread = std::thread([this] { data_->Loop(); });
+
+  if (handle_signals) {
+    cp.signals.emplace(cp.io, SIGINT, SIGTERM, SIGHUP);
+    std::function<void(const boost::system::error_code&, int)> on_signal = [this, &on_signal](const boost::system::error_code& ec, int sig) {
+      if (ec) return;
+      if (sig == SIGHUP) {
+        spdlog::info("SIGHUP: reloading {}", config_path_);
+        Reload();
+        control_->signals->async_wait(on_signal);
+        return;
+      }
+      spdlog::info("{} received", sig == SIGINT ? "SIGINT" : "SIGTERM");
+      Stop();
+    };
+    cp.signals->async_wait(on_signal);
+  }
+
+  // Stats tick: the watchdog on the data plane itself, and rate-limited drop warnings.
+  cp.tick.emplace(cp.io);
+  std::function<void(const boost::system::error_code&)> on_tick = [this, &on_tick](const boost::system::error_code& ec) {
+    if (ec) return;
+    ControlPlane& c = *control_;
+    const DaemonStats now = Stats();
+    const int64_t t = SteadyNs();
+    const bool alive = now.running && t - now.data_plane_heartbeat_ns < 1'000'000'000;
+    if (alive != c.data_plane_alive) {
+      if (!alive) spdlog::error("watchdog: the data plane has not reported for over 1 s");
+      else spdlog::info("watchdog: the data plane is reporting again");
+      c.data_plane_alive = alive;
+    }
+    for (const SubjectStats& s : now.subjects) {
+      const SubjectStats* before = nullptr;
+      for (const SubjectStats& b : c.last_logged.subjects)
+        if (b.name == s.name) before = &b;
+      if (before != nullptr && s.counters.stalls > before->counters.stalls)
+        spdlog::warn("watchdog: subject '{}' input stalled (no frame for {:.2f} s, last frame {})", s.name, s.since_last_input_s,
+                     s.counters.last_frame_number);
+      if (before != nullptr && before->state == protocol::SubjectState::kStalled && s.state != protocol::SubjectState::kStalled)
+        spdlog::info("subject '{}' input resumed at frame {}", s.name, s.counters.last_frame_number);
+      if (before != nullptr && s.counters.restarts > before->counters.restarts)
+        spdlog::warn("subject '{}': capture restart or jump in frame numbers; pipeline re-synchronised at frame {}", s.name,
+                     s.counters.last_frame_number);
+    }
+    // Drops: at most one line per reason per log interval, with the count since the last.
+    for (int reason = 0; reason < kDropReasonCount; ++reason) {
+      auto total = [&](const DaemonStats& st) {
+        uint64_t n = st.unattributed_dropped[static_cast<size_t>(reason)];
+        for (const SubjectStats& s : st.subjects) n += s.counters.dropped[static_cast<size_t>(reason)];
+        return n;
+      };
+      if (t - c.last_drop_log_ns[static_cast<size_t>(reason)] < Seconds(c.config.log_interval_s)) continue;
+      auto& logged = c.logged_drops;
+      const uint64_t n = total(now);
+      if (n > logged[static_cast<size_t>(reason)]) {
+        spdlog::warn("dropped {} input message(s): {} (total {})", n - logged[static_cast<size_t>(reason)],
+                     to_string(static_cast<DropReason>(reason)), n);
+        logged[static_cast<size_t>(reason)] = n;
+        c.last_drop_log_ns[static_cast<size_t>(reason)] = t;
+      }
+    }
+    if (t - c.last_log_ns >= Seconds(c.config.log_interval_s)) {
+      spdlog::info("stats: {} messages in, {} frames published, {} dropped, {} pending", now.messages_in, now.published_total(),
+                   now.dropped_total(), now.pending_total());
+      c.last_log_ns = t;
+    }
+    c.last_logged = now;
+    c.tick->expires_after(std::chrono::milliseconds(static_cast<int64_t>(std::min(c.config.stats_interval_s, 0.25) * 1e3)));
+    c.tick->async_wait(on_tick);
+  };
+  cp.last_log_ns = SteadyNs();
+  cp.tick->expires_after(std::chrono::milliseconds(100));
+  cp.tick->async_wait(on_tick);
+
+  {
+    std::lock_guard lock(run_mutex_);
+    run_state_ = RunState::kRunning;
+  }
+  run_cv_.notify_all();
+  cp.io.run();
+  if (data_->thread.joinable()) {
+    data_->stop.store(true);
+    data_->thread.join();
+  }
+  const DaemonStats final_stats = Stats();
+  spdlog::info("mocapd stopped: {} messages in, {} frames published, {} dropped, {} pending ({})", final_stats.messages_in,
+               final_stats.published_total(), final_stats.dropped_total(), final_stats.pending_total(),
+               final_stats.Balanced() ? "every frame accounted for" : "ACCOUNTING MISMATCH");
+  std::lock_guard lock(run_mutex_);
+  run_state_ = RunState::kStopped;
+}
+
+}  // namespace mocapd

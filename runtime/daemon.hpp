@@ -1,0 +1,116 @@
+// The mocapd daemon (`mocapd run`): a data-plane thread that owns the ZeroMQ sockets
+// and the per-subject pipelines, and a Boost.Asio control plane (signals, stats and
+// watchdog timers, config reload, the HTTP /health, /subjects and /metrics endpoint).
+// The two meet only in a mailbox (reloads, stop) and a statistics snapshot that the data
+// plane refreshes with try_lock, so nothing the control plane does can stall a frame.
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "runtime/daemon_config.hpp"
+#include "runtime/subject_runner.hpp"
+
+namespace zmq {
+class context_t;
+}
+
+namespace mocapd {
+
+struct SubjectStats {
+  std::string name;
+  protocol::SubjectState state = protocol::SubjectState::kWaiting;
+  SubjectCounters counters;
+  CleanupCounters cleanup;
+  uint64_t pending = 0;
+  double since_last_input_s = -1.0;  ///< -1 before the first frame.
+  int markers = 0;
+  int joints = 0;
+  double rate_hz = 0.0;
+  int lookahead = 0;
+  uint64_t marker_set_hash = 0;
+  uint64_t skeleton_hash = 0;
+};
+
+struct DaemonStats {
+  bool running = false;
+  double uptime_s = 0.0;
+  uint64_t messages_in = 0;  ///< Every message received on the input socket.
+  /// Drops not attributable to a configured subject (malformed, unknown subject, ...).
+  std::array<uint64_t, kDropReasonCount> unattributed_dropped{};
+  /// Frames published by subjects a reload removed (so the totals still add up).
+  uint64_t retired_published = 0;
+  uint64_t retired_dropped = 0;
+  uint64_t output_send_failures = 0;
+  uint64_t reloads = 0;
+  uint64_t reload_failures = 0;
+  int64_t data_plane_heartbeat_ns = 0;  ///< Steady clock of the data plane's last loop.
+  std::vector<SubjectStats> subjects;
+
+  /// Frames published (received ones, not inserted), over all subjects and retired ones.
+  uint64_t published_total() const;
+  uint64_t dropped_total() const;
+  uint64_t pending_total() const;
+  /// messages_in == published + dropped + pending: every frame accounted for.
+  bool Balanced() const { return messages_in == published_total() + dropped_total() + pending_total(); }
+};
+
+class Daemon {
+ public:
+  /// config_path is re-read on reload (SIGHUP); may be empty when config is built in code.
+  /// context: a ZeroMQ context to share (inproc endpoints need it); nullptr for its own.
+  Daemon(DaemonConfig config, std::string config_path, zmq::context_t* context = nullptr);
+  ~Daemon();
+  Daemon(const Daemon&) = delete;
+  Daemon& operator=(const Daemon&) = delete;
+
+  /// Binds and connects the sockets and starts the data plane; then runs the control
+  /// plane on the calling thread until Stop() or SIGINT/SIGTERM (with handle_signals).
+  /// Returns after the data plane flushed and published everything pending.
+  /// Throws std::runtime_error if a socket or the HTTP port cannot be bound.
+  void Run(bool handle_signals);
+  /// Thread-safe; Run returns once the shutdown is done.
+  void Stop();
+  /// Thread-safe: re-reads the config file and applies it; false (logged) if invalid.
+  bool Reload();
+  /// Thread-safe: applies a new config (on the control plane, so only while Run runs).
+  /// Subjects whose model and options are unchanged keep their pipeline (no frame lost or
+  /// re-timed); changed ones are flushed and rebuilt; removed ones are flushed.
+  void Reload(DaemonConfig config);
+  /// Blocks until Run has bound everything (or failed); false on timeout or failure.
+  bool WaitUntilRunning(std::chrono::milliseconds timeout);
+  /// The latest statistics snapshot (at most a few milliseconds old; exact after Run returns).
+  DaemonStats Stats() const;
+  /// The HTTP port actually bound (after WaitUntilRunning), 0 if disabled.
+  int http_port() const { return http_port_.load(); }
+
+  struct DataPlane;
+  struct ControlPlane;
+
+ private:
+  void ApplyReload(DaemonConfig config);
+
+  std::string config_path_;
+  std::atomic<uint64_t> reload_failures_{0};
+  std::unique_ptr<DataPlane> data_;
+  std::unique_ptr<ControlPlane> control_;
+  std::atomic<int> http_port_{0};
+  std::mutex run_mutex_;
+  std::condition_variable run_cv_;
+  enum class RunState { kStarting, kRunning, kFailed, kStopped } run_state_ = RunState::kStarting;
+};
+
+/// Prometheus text exposition (version 0.0.4) of a snapshot.
+std::string FormatPrometheusMetrics(const DaemonStats& stats);
+/// JSON for /subjects and /health.
+std::string FormatSubjectsJson(const DaemonStats& stats);
+std::string FormatHealthJson(const DaemonStats& stats, bool data_plane_alive);
+
+}  // namespace mocapd

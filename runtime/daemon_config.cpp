@@ -1,0 +1,291 @@
+// Reading and validating the daemon's TOML configuration.
+#include "runtime/daemon_config.hpp"
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <set>
+#include <sstream>
+#include <stdexcept>
+#include <toml++/toml.h>
+
+#include "protocol/messages.hpp"
+
+namespace mocapd {
+namespace {
+
+// Reads typed fields from one table, remembering which keys it was asked for so that
+// anything else (a typo, a field from another version) is reported instead of ignored.
+class TableReader {
+ public:
+  TableReader(const toml::table& table, std::string path, std::string source)
+      : table_(table), path_(std::move(path)), source_(std::move(source)) {}
+
+  [[noreturn]] void Fail(const toml::node* node, const std::string& key, const std::string& what) const {
+    const auto line = node != nullptr ? node->source().begin.line : table_.source().begin.line;
+    const std::string field = path_.empty() ? key : path_ + "." + key;
+    throw std::runtime_error(source_ + ":" + std::to_string(line) + ": field '" + field + "': " + what);
+  }
+
+  const toml::node* Find(const std::string& key) {
+    known_.insert(key);
+    return table_.get(key);
+  }
+
+  double Number(const std::string& key, double fallback, double min, double max) {
+    const toml::node* node = Find(key);
+    if (node == nullptr) return fallback;
+    const auto v = node->value<double>();
+    if (!v || !node->is_number()) Fail(node, key, "expected a number");
+    if (!std::isfinite(*v) || *v < min || *v > max) Fail(node, key, "must be in [" + Str(min) + ", " + Str(max) + "], got " + Str(*v));
+    return *v;
+  }
+
+  int Integer(const std::string& key, int fallback, int min, int max) {
+    const toml::node* node = Find(key);
+    if (node == nullptr) return fallback;
+    const auto v = node->value<int64_t>();
+    if (!v || !node->is_integer()) Fail(node, key, "expected an integer");
+    if (*v < min || *v > max) Fail(node, key, "must be in [" + std::to_string(min) + ", " + std::to_string(max) + "], got " + std::to_string(*v));
+    return static_cast<int>(*v);
+  }
+
+  bool Bool(const std::string& key, bool fallback) {
+    const toml::node* node = Find(key);
+    if (node == nullptr) return fallback;
+    if (!node->is_boolean()) Fail(node, key, "expected true or false");
+    return *node->value<bool>();
+  }
+
+  std::string String(const std::string& key, const std::string& fallback, bool required = false) {
+    const toml::node* node = Find(key);
+    if (node == nullptr) {
+      if (required) Fail(nullptr, key, "missing");
+      return fallback;
+    }
+    if (!node->is_string()) Fail(node, key, "expected a string");
+    return *node->value<std::string>();
+  }
+
+  std::string Choice(const std::string& key, const std::string& fallback, std::initializer_list<const char*> choices) {
+    const std::string v = String(key, fallback);
+    std::string list;
+    for (const char* c : choices) {
+      if (v == c) return v;
+      list += (list.empty() ? "" : " | ") + std::string(c);
+    }
+    Fail(table_.get(key), key, "expected " + list + ", got '" + v + "'");
+  }
+
+  /// A sub-table; an absent one reads as empty (all defaults).
+  TableReader Sub(const std::string& key) {
+    const toml::node* node = Find(key);
+    if (node != nullptr && !node->is_table()) Fail(node, key, "expected a table [" + Join(key) + "]");
+    return TableReader(node != nullptr ? *node->as_table() : kEmpty, Join(key), source_);
+  }
+
+  /// Every key present must have been asked for.
+  void RejectUnknown() const {
+    for (const auto& [key, node] : table_)
+      if (known_.count(std::string(key.str())) == 0) Fail(&node, std::string(key.str()), "unknown field");
+  }
+
+  const std::string& source() const { return source_; }
+
+ private:
+  std::string Join(const std::string& key) const { return path_.empty() ? key : path_ + "." + key; }
+  static std::string Str(double v) {
+    std::ostringstream s;
+    s << v;
+    return s.str();
+  }
+  static inline const toml::table kEmpty{};
+  const toml::table& table_;
+  std::string path_;
+  std::string source_;
+  std::set<std::string> known_;
+};
+
+// "tcp://HOST:PORT": host and port; other transports have no host.
+bool SplitTcp(const std::string& endpoint, std::string* host, std::string* port) {
+  if (endpoint.rfind("tcp://", 0) != 0) return false;
+  const std::string rest = endpoint.substr(6);
+  const size_t colon = rest.rfind(':');
+  if (colon == std::string::npos) return false;
+  *host = rest.substr(0, colon);
+  *port = rest.substr(colon + 1);
+  if (host->size() >= 2 && host->front() == '[' && host->back() == ']') *host = host->substr(1, host->size() - 2);
+  return true;
+}
+
+bool IsLoopbackHost(const std::string& host) { return host == "127.0.0.1" || host == "localhost" || host == "::1"; }
+
+std::string Endpoint(TableReader& t, const std::string& key, const std::string& fallback) {
+  const std::string e = t.String(key, fallback);
+  std::string host, port;
+  const bool ok = e.rfind("ipc://", 0) == 0 ? e.size() > 6
+                  : e.rfind("inproc://", 0) == 0 ? e.size() > 9
+                  : SplitTcp(e, &host, &port) && !host.empty() && !port.empty();
+  if (!ok) t.Fail(nullptr, key, "expected tcp://HOST:PORT, ipc://PATH or inproc://NAME, got '" + e + "'");
+  return e;
+}
+
+void ReadDetectors(TableReader t, CleanupOptions* o) {
+  constexpr double kMm = 1e-3;
+  constexpr double kDeg = M_PI / 180.0;
+  o->disagreement_position_m = t.Number("disagreement_position_mm", o->disagreement_position_m / kMm, 1, 1000) * kMm;
+  o->disagreement_rotation_rad = t.Number("disagreement_rotation_deg", o->disagreement_rotation_rad / kDeg, 1, 180) * kDeg;
+  o->residual_floor_m = t.Number("residual_floor_mm", o->residual_floor_m / kMm, 0.1, 1000) * kMm;
+  o->residual_scale_factor = t.Number("residual_scale_factor", o->residual_scale_factor, 1, 100);
+  o->spike_m = t.Number("spike_mm", o->spike_m / kMm, 1, 1000) * kMm;
+  o->rigid_tolerance_m = t.Number("rigid_tolerance_mm", o->rigid_tolerance_m / kMm, 1, 1000) * kMm;
+  o->swap_margin_m = t.Number("swap_margin_mm", o->swap_margin_m / kMm, 0, 1000) * kMm;
+  o->swap_search_m = t.Number("swap_search_mm", o->swap_search_m / kMm, 1, 2000) * kMm;
+  o->relabel_swaps = t.Bool("relabel_swaps", o->relabel_swaps);
+  o->frozen_frames = t.Integer("frozen_frames", o->frozen_frames, 2, 10000);
+  o->fallen_frames = t.Integer("fallen_frames", o->fallen_frames, 2, 100000);
+  o->fallen_residual_m = t.Number("fallen_residual_mm", o->fallen_residual_m / kMm, 1, 10000) * kMm;
+  o->small_gap_frames = t.Integer("small_gap_frames", o->small_gap_frames, 0, 1000);
+  o->small_track_frames = t.Integer("small_track_frames", o->small_track_frames, 0, 1000);
+  o->max_trim_frames = t.Integer("max_trim_frames", o->max_trim_frames, 0, 1000);
+  t.RejectUnknown();
+}
+
+}  // namespace
+
+const SubjectConfig* DaemonConfig::FindSubject(const std::string& name) const {
+  for (const SubjectConfig& s : subjects)
+    if (s.name == name) return &s;
+  return nullptr;
+}
+
+std::string SubjectFingerprint(const SubjectConfig& s, const DaemonConfig& c) {
+  const CleanupOptions& o = s.cleanup;
+  std::ostringstream f;
+  f.precision(17);
+  f << FormatSubjectModel(s.model) << '\n'
+    << s.name << ' ' << s.rate_hz << ' ' << o.lookahead << ' ' << o.window << ' ' << o.disagreement_position_m << ' '
+    << o.disagreement_rotation_rad << ' ' << o.residual_floor_m << ' ' << o.residual_scale_factor << ' ' << o.spike_m << ' '
+    << o.rigid_tolerance_m << ' ' << o.swap_margin_m << ' ' << o.swap_search_m << ' ' << o.relabel_swaps << ' ' << o.frozen_frames << ' '
+    << o.fallen_frames << ' ' << o.fallen_residual_m << ' ' << o.small_gap_frames << ' ' << o.small_track_frames << ' ' << o.max_trim_frames
+    << ' ' << c.max_gap_frames << ' ' << c.restart_backjump_frames << ' ' << c.publish_cleaned_markers << ' ' << c.publish_global_transforms;
+  return f.str();
+}
+
+bool IsLocalEndpoint(const std::string& endpoint) {
+  if (endpoint.rfind("ipc://", 0) == 0 || endpoint.rfind("inproc://", 0) == 0) return true;
+  std::string host, port;
+  return SplitTcp(endpoint, &host, &port) && IsLoopbackHost(host);
+}
+
+DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& source_name, const std::string& base_dir) {
+  toml::table root;
+  try {
+    root = toml::parse(text, source_name);
+  } catch (const toml::parse_error& e) {
+    throw std::runtime_error(source_name + ":" + std::to_string(e.source().begin.line) + ": " + std::string(e.description()));
+  }
+  DaemonConfig c;
+  c.source = source_name;
+  TableReader top(root, "", source_name);
+  const int version = top.Integer("format_version", 0, 1, 1);
+  if (version != 1) top.Fail(nullptr, "format_version", "missing (this daemon reads version 1)");
+
+  TableReader input = top.Sub("input");
+  c.input_endpoint = Endpoint(input, "endpoint", c.input_endpoint);
+  c.input_pattern = input.Choice("pattern", "sub", {"sub", "pull"}) == "sub" ? InputPattern::kSub : InputPattern::kPull;
+  c.subscribe_all = input.Choice("subscribe", "subjects", {"subjects", "all"}) == "all";
+  c.receive_high_water_mark = input.Integer("receive_high_water_mark", c.receive_high_water_mark, 1, 10'000'000);
+  c.max_message_bytes = static_cast<size_t>(input.Integer("max_message_bytes", static_cast<int>(c.max_message_bytes), 64, 64 << 20));
+  input.RejectUnknown();
+
+  TableReader output = top.Sub("output");
+  c.output_endpoint = Endpoint(output, "endpoint", c.output_endpoint);
+  c.send_high_water_mark = output.Integer("send_high_water_mark", c.send_high_water_mark, 1, 10'000'000);
+  c.publish_cleaned_markers = output.Bool("cleaned_markers", c.publish_cleaned_markers);
+  c.publish_global_transforms = output.Bool("global_transforms", c.publish_global_transforms);
+  output.RejectUnknown();
+
+  TableReader control = top.Sub("control");
+  c.http_enabled = control.Bool("http", c.http_enabled);
+  c.http_address = control.String("http_address", c.http_address);
+  c.http_port = control.Integer("http_port", c.http_port, 0, 65535);
+  c.stats_interval_s = control.Number("stats_interval_s", c.stats_interval_s, 0.05, 3600);
+  c.watchdog_timeout_s = control.Number("watchdog_timeout_s", c.watchdog_timeout_s, 0.01, 3600);
+  c.log_interval_s = control.Number("log_interval_s", c.log_interval_s, 0.1, 86400);
+  c.allow_remote = control.Bool("allow_remote", c.allow_remote);
+  control.RejectUnknown();
+  // Anything reachable from other machines must be asked for: a stage network is shared.
+  if (!c.allow_remote) {
+    TableReader in = top.Sub("input"), out = top.Sub("output"), ctl = top.Sub("control");
+    if (c.input_pattern == InputPattern::kPull && !IsLocalEndpoint(c.input_endpoint))
+      in.Fail(root["input"]["endpoint"].node(), "endpoint", "binds a non-loopback address; set control.allow_remote = true to allow it");
+    if (!IsLocalEndpoint(c.output_endpoint))
+      out.Fail(root["output"]["endpoint"].node(), "endpoint", "binds a non-loopback address; set control.allow_remote = true to allow it");
+    if (c.http_enabled && !IsLoopbackHost(c.http_address))
+      ctl.Fail(root["control"]["http_address"].node(), "http_address", "is not loopback; set control.allow_remote = true to allow it");
+  }
+
+  TableReader frames = top.Sub("frames");
+  c.max_gap_frames = frames.Integer("max_gap_frames", c.max_gap_frames, 0, 100000);
+  c.restart_backjump_frames = frames.Integer("restart_backjump_frames", c.restart_backjump_frames, 1, 1'000'000);
+  frames.RejectUnknown();
+
+  CleanupOptions defaults;
+  TableReader pipeline = top.Sub("pipeline");
+  defaults.lookahead = pipeline.Integer("lookahead", defaults.lookahead, 0, 1000);
+  defaults.window = pipeline.Integer("window", defaults.window, 2, 100000);
+  ReadDetectors(pipeline.Sub("detectors"), &defaults);
+  pipeline.RejectUnknown();
+
+  const toml::node* subjects = top.Find("subject");
+  if (subjects == nullptr) top.Fail(nullptr, "subject", "no [[subject]] tables: name at least one subject to solve");
+  const toml::array* list = subjects->as_array();
+  if (list == nullptr || list->empty()) top.Fail(subjects, "subject", "expected [[subject]] tables");
+  for (size_t i = 0; i < list->size(); ++i) {
+    const toml::table* table = (*list)[i].as_table();
+    const std::string path = "subject[" + std::to_string(i) + "]";
+    if (table == nullptr) top.Fail(&(*list)[i], path, "expected a table");
+    TableReader t(*table, path, source_name);
+    SubjectConfig s;
+    s.name = t.String("name", "", true);
+    if (s.name.empty() || s.name.size() > protocol::kMaxSubjectName || s.name.find_first_of("/ \t\n") != std::string::npos)
+      t.Fail(table->get("name"), "name", "must be 1..63 characters without '/' or spaces");
+    if (c.FindSubject(s.name) != nullptr) t.Fail(table->get("name"), "name", "subject '" + s.name + "' is listed twice");
+    s.model_path = t.String("model", "", true);
+    if (!s.model_path.empty() && std::filesystem::path(s.model_path).is_relative())
+      s.model_path = (std::filesystem::path(base_dir) / s.model_path).lexically_normal().string();
+    s.rate_hz = t.Number("rate_hz", s.rate_hz, 1, 2000);
+    s.cleanup = defaults;
+    s.cleanup.rate_hz = s.rate_hz;
+    s.cleanup.lookahead = t.Integer("lookahead", defaults.lookahead, 0, 1000);
+    t.RejectUnknown();
+    try {
+      s.model = ReadSubjectModel(s.model_path);
+    } catch (const std::exception& e) {
+      t.Fail(table->get("model"), "model", e.what());
+    }
+    if (s.model.markers->num_markers() > static_cast<int>(protocol::kMaxMarkers) ||
+        s.model.skeleton->num_joints() > static_cast<int>(protocol::kMaxJoints))
+      t.Fail(table->get("model"), "model", "more markers or joints than the wire protocol carries");
+    try {
+      s.cleanup.Validate();
+    } catch (const std::exception& e) {
+      t.Fail(nullptr, "pipeline", e.what());
+    }
+    c.subjects.push_back(std::move(s));
+  }
+  top.RejectUnknown();
+  return c;
+}
+
+DaemonConfig LoadDaemonConfig(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw std::runtime_error(path + ": cannot open for reading");
+  std::ostringstream text;
+  text << in.rdbuf();
+  const std::string base = std::filesystem::path(path).parent_path().string();
+  return ParseDaemonConfig(text.str(), path, base.empty() ? "." : base);
+}
+
+}  // namespace mocapd

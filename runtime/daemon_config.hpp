@@ -1,0 +1,68 @@
+// The daemon's configuration (`mocapd run --config FILE`, format documented field by
+// field in config/mocapd.toml): endpoints, subjects and their model files, lookahead,
+// window and detector thresholds, frame-accounting limits and the control plane. Loading
+// validates everything and throws with the file, line and field of the first problem, so
+// a typo is caught at start-up (or at a SIGHUP reload, which then keeps the old config).
+#pragma once
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "filters/cleanup_pipeline.hpp"
+#include "sim/subject_file.hpp"
+
+namespace mocapd {
+
+enum class InputPattern { kSub, kPull };
+
+struct SubjectConfig {
+  std::string name;        ///< Topic name; frames must carry it.
+  std::string model_path;  ///< Resolved against the config file's directory.
+  double rate_hz = 120.0;
+  CleanupOptions cleanup;  ///< Pipeline options (rate, lookahead, window, thresholds).
+  SubjectModel model;      ///< Loaded from model_path.
+};
+
+struct DaemonConfig {
+  std::string source;  ///< The file it came from (for messages and reloads).
+  // Input.
+  std::string input_endpoint = "tcp://127.0.0.1:5555";
+  InputPattern input_pattern = InputPattern::kSub;
+  bool subscribe_all = false;  ///< SUB: every topic, not just the configured subjects'.
+  int receive_high_water_mark = 10000;
+  size_t max_message_bytes = 65536;
+  // Output.
+  std::string output_endpoint = "tcp://127.0.0.1:5556";
+  int send_high_water_mark = 1000;
+  bool publish_cleaned_markers = true;
+  bool publish_global_transforms = false;
+  // Control plane.
+  bool http_enabled = true;
+  std::string http_address = "127.0.0.1";
+  int http_port = 8480;  ///< 0: any free port (logged at start-up).
+  double stats_interval_s = 1.0;
+  double watchdog_timeout_s = 0.5;
+  double log_interval_s = 10.0;
+  bool allow_remote = false;
+  // Frame accounting.
+  int max_gap_frames = 240;
+  int restart_backjump_frames = 120;
+  std::vector<SubjectConfig> subjects;
+
+  const SubjectConfig* FindSubject(const std::string& name) const;
+};
+
+/// Parses and validates a config; subject model paths are resolved against base_dir
+/// and loaded. Throws std::runtime_error "SOURCE:LINE: field 'a.b': problem".
+DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& source_name, const std::string& base_dir);
+DaemonConfig LoadDaemonConfig(const std::string& path);
+
+/// What a subject's pipeline is built from (its model and every option it uses): a reload
+/// keeps a running pipeline, and its lookahead, when this has not changed.
+std::string SubjectFingerprint(const SubjectConfig& subject, const DaemonConfig& config);
+
+/// True for endpoints that only the local machine can reach (loopback tcp, ipc, inproc).
+bool IsLocalEndpoint(const std::string& endpoint);
+
+}  // namespace mocapd

@@ -1,0 +1,247 @@
+// Per-subject frame accounting, sequencing and output encoding for the daemon.
+#include "runtime/subject_runner.hpp"
+
+#include <chrono>
+#include <cmath>
+
+namespace mocapd {
+namespace {
+
+uint64_t WallClockNs() {
+  return static_cast<uint64_t>(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch()).count());
+}
+
+int64_t SteadyNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+}  // namespace
+
+const char* to_string(DropReason reason) {
+  switch (reason) {
+    case DropReason::kOversized: return "oversized";
+    case DropReason::kMalformed: return "malformed";
+    case DropReason::kNonFinite: return "non_finite";
+    case DropReason::kNotMarkerFrame: return "not_marker_frame";
+    case DropReason::kUnknownSubject: return "unknown_subject";
+    case DropReason::kModelMismatch: return "model_mismatch";
+    case DropReason::kRateMismatch: return "rate_mismatch";
+    case DropReason::kDuplicate: return "duplicate";
+    case DropReason::kOutOfOrder: return "out_of_order";
+  }
+  return "?";
+}
+
+std::string Topic(std::string_view kind, std::string_view subject) {
+  std::string t(kind);
+  t += '/';
+  t += subject;
+  t += '/';
+  return t;
+}
+
+void LatencyHistogram::Add(double seconds) {
+  size_t b = 0;
+  while (b < kLatencyBucketsS.size() && seconds > kLatencyBucketsS[b]) ++b;
+  ++counts[b];
+  sum_s += seconds;
+  ++count;
+}
+
+uint64_t SubjectCounters::dropped_total() const {
+  uint64_t n = 0;
+  for (uint64_t d : dropped) n += d;
+  return n;
+}
+
+SubjectRunner::SubjectRunner(const SubjectConfig& config, const DaemonConfig& daemon)
+    : name_(config.name),
+      fingerprint_(SubjectFingerprint(config, daemon)),
+      marker_hash_(protocol::MarkerSetHash(*config.model.markers)),
+      skeleton_hash_(protocol::SkeletonHash(*config.model.skeleton)),
+      rate_hz_(config.rate_hz),
+      max_gap_frames_(daemon.max_gap_frames),
+      restart_backjump_frames_(daemon.restart_backjump_frames),
+      publish_cleaned_(daemon.publish_cleaned_markers),
+      publish_globals_(daemon.publish_global_transforms),
+      skeleton_(config.model.skeleton),
+      pipeline_(config.model.skeleton, config.model.markers, config.cleanup),
+      stamps_(static_cast<size_t>(config.cleanup.lookahead + 2)),
+      missing_(static_cast<size_t>(config.model.markers->num_markers()), Vec3::Constant(kNaN)),
+      kinematics_(*config.model.skeleton),
+      description_(protocol::DescribeSubject(config.name, *config.model.skeleton, *config.model.markers,
+                                             static_cast<float>(config.rate_hz), config.cleanup.lookahead)),
+      skeleton_topic_(Topic("skeleton", config.name)),
+      cleaned_topic_(Topic("cleaned", config.name)),
+      description_topic_(Topic("subject", config.name)),
+      status_topic_(Topic("status", config.name)) {
+  const auto joints = static_cast<size_t>(skeleton_->num_joints());
+  const auto markers = static_cast<size_t>(config.model.markers->num_markers());
+  skeleton_message_.subject = name_;
+  skeleton_message_.model_hash = skeleton_hash_;
+  skeleton_message_.rotations.resize(joints);
+  if (publish_globals_) {
+    skeleton_message_.global_rotations.resize(joints);
+    skeleton_message_.global_positions.resize(joints);
+  }
+  cleaned_message_.subject = name_;
+  cleaned_message_.model_hash = marker_hash_;
+  cleaned_message_.positions.resize(markers);
+  cleaned_message_.status.resize(markers);
+  cleaned_message_.reason.resize(markers);
+  status_message_.subject = name_;
+  // The largest message this runner encodes, so encoding never grows the buffer.
+  buffer_.reserve(256 + 64 * markers + 128 * joints);
+}
+
+uint64_t SubjectRunner::pending() const { return static_cast<uint64_t>(pushed_ - published_); }
+
+void SubjectRunner::CountDrop(DropReason reason) {
+  ++counters_.frames_in;
+  ++counters_.dropped[static_cast<size_t>(reason)];
+}
+
+void SubjectRunner::InheritCounters(const SubjectRunner& previous) {
+  counters_ = previous.counters_;
+  started_ = false;
+}
+
+std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessage& frame, int64_t receive_ns, OutputSink& sink) {
+  auto drop = [&](DropReason reason) {
+    CountDrop(reason);
+    return std::optional<DropReason>(reason);
+  };
+  if (frame.model_hash != marker_hash_ || frame.positions.size() != missing_.size()) return drop(DropReason::kModelMismatch);
+  if (std::abs(frame.rate_hz - rate_hz_) > 1e-3 * rate_hz_) return drop(DropReason::kRateMismatch);
+
+  if (started_ && frame.frame_number != next_frame_number_) {
+    if (frame.frame_number > next_frame_number_) {
+      const uint64_t missing = frame.frame_number - next_frame_number_;
+      if (missing > static_cast<uint64_t>(max_gap_frames_)) {
+        // Too long to bridge with repaired frames: start over from this frame.
+        Resynchronise(sink);
+      } else {
+        for (uint64_t k = 0; k < missing; ++k) {
+          Push(missing_, Stamp{next_frame_number_, 0, true}, receive_ns, sink);
+          ++counters_.frames_inserted;
+        }
+      }
+    } else {
+      const uint64_t back = next_frame_number_ - 1 - frame.frame_number;
+      // A restart of the capture numbers frames from the start again while its clock goes
+      // on; a late packet has an older timestamp. A long jump back is a restart either way.
+      const bool restart = back >= static_cast<uint64_t>(restart_backjump_frames_) ||
+                           (back > 0 && frame.capture_time_ns > last_capture_ns_);
+      if (!restart) {
+        // ++frames_in happens in the drop, so the last frame number stays the newest.
+        return drop(back == 0 ? DropReason::kDuplicate : DropReason::kOutOfOrder);
+      }
+      Resynchronise(sink);
+    }
+  }
+  ++counters_.frames_in;
+  ++counters_.frames_accepted;
+  started_ = true;
+  last_receive_ns_ = receive_ns;
+  last_capture_ns_ = frame.capture_time_ns;
+  counters_.last_frame_number = frame.frame_number;
+  if (state_ == protocol::SubjectState::kWaiting || state_ == protocol::SubjectState::kStalled) state_ = protocol::SubjectState::kTracking;
+  Push(frame.positions, Stamp{frame.frame_number, frame.capture_time_ns, false}, receive_ns, sink);
+  return std::nullopt;
+}
+
+void SubjectRunner::Resynchronise(OutputSink& sink) {
+  Flush(sink);
+  pipeline_.Reset();
+  pushed_ = published_ = 0;
+  started_ = false;
+  ++counters_.restarts;
+}
+
+void SubjectRunner::Push(std::span<const Vec3> positions, const Stamp& stamp, int64_t receive_ns, OutputSink& sink) {
+  stamps_[static_cast<size_t>(pushed_) % stamps_.size()] = stamp;
+  ++pushed_;
+  next_frame_number_ = stamp.frame_number + 1;
+  if (pipeline_.Push(positions)) Publish(receive_ns, sink);
+}
+
+void SubjectRunner::Flush(OutputSink& sink) {
+  while (pipeline_.Flush()) Publish(-1, sink);
+}
+
+void SubjectRunner::Publish(int64_t trigger_receive_ns, OutputSink& sink) {
+  const CleanFrame& out = pipeline_.output();
+  const Stamp& stamp = stamps_[static_cast<size_t>(out.frame) % stamps_.size()];
+  ++published_;
+  if (stamp.inserted) {
+    ++counters_.inserted_published;
+  } else {
+    ++counters_.frames_published;
+  }
+  const uint64_t publish_ns = WallClockNs();
+  bool repaired = false;
+  for (MarkerStatus s : out.status) repaired |= s != MarkerStatus::kObserved;
+  const bool lost = out.final_solve.status == IkStatus::kTooFewMarkers;
+  state_ = lost ? protocol::SubjectState::kLost : repaired ? protocol::SubjectState::kRepairing : protocol::SubjectState::kTracking;
+
+  protocol::SkeletonFrameMessage& s = skeleton_message_;
+  s.frame_number = stamp.frame_number;
+  s.capture_time_ns = stamp.capture_ns;
+  s.publish_time_ns = publish_ns;
+  s.status = static_cast<uint8_t>(out.final_solve.status);
+  s.subject_state = state_;
+  s.residual_m = std::isfinite(out.final_solve.rms_residual_m) ? static_cast<float>(out.final_solve.rms_residual_m) : 0.0f;
+  s.root_translation = out.pose.translation[0];
+  for (size_t j = 0; j < s.rotations.size(); ++j) s.rotations[j] = out.pose.rotation[j];
+  if (publish_globals_) {
+    ForwardKinematics(*skeleton_, out.pose, &kinematics_);
+    for (size_t j = 0; j < s.rotations.size(); ++j) {
+      s.global_rotations[j] = Quat(kinematics_.R_WJ[j]);
+      s.global_positions[j] = kinematics_.p_WJ[j];
+    }
+  }
+  protocol::EncodeSkeletonFrame(s, &buffer_);
+  sink.Send(skeleton_topic_, buffer_);
+
+  if (publish_cleaned_) {
+    protocol::CleanedMarkersMessage& c = cleaned_message_;
+    c.frame_number = stamp.frame_number;
+    c.capture_time_ns = stamp.capture_ns;
+    c.publish_time_ns = publish_ns;
+    for (size_t m = 0; m < c.positions.size(); ++m) {
+      c.positions[m] = out.markers[m];
+      c.status[m] = static_cast<uint8_t>(out.status[m]);
+      c.reason[m] = static_cast<uint8_t>(out.reason[m]);
+    }
+    protocol::EncodeCleanedMarkers(c, &buffer_);
+    sink.Send(cleaned_topic_, buffer_);
+  }
+  if (trigger_receive_ns >= 0) counters_.processing.Add(static_cast<double>(SteadyNs() - trigger_receive_ns) * 1e-9);
+}
+
+bool SubjectRunner::CheckStall(int64_t now_ns, int64_t timeout_ns, OutputSink& sink) {
+  if (last_receive_ns_ < 0 || state_ == protocol::SubjectState::kStalled || now_ns - last_receive_ns_ <= timeout_ns) return false;
+  state_ = protocol::SubjectState::kStalled;
+  ++counters_.stalls;
+  PublishStatus(now_ns, sink);
+  return true;
+}
+
+void SubjectRunner::PublishDescription(OutputSink& sink) {
+  protocol::EncodeSubjectDescription(description_, &buffer_);
+  sink.Send(description_topic_, buffer_);
+}
+
+void SubjectRunner::PublishStatus(int64_t now_ns, OutputSink& sink) {
+  protocol::SubjectStatusMessage& m = status_message_;
+  m.state = state_;
+  m.last_frame_number = counters_.last_frame_number;
+  m.since_last_input_ns = last_receive_ns_ < 0 ? 0 : static_cast<uint64_t>(std::max<int64_t>(0, now_ns - last_receive_ns_));
+  m.frames_in = counters_.frames_in;
+  m.frames_out = counters_.frames_published + counters_.inserted_published;
+  m.frames_dropped = counters_.dropped_total();
+  protocol::EncodeSubjectStatus(m, &buffer_);
+  sink.Send(status_topic_, buffer_);
+}
+
+}  // namespace mocapd

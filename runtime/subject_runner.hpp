@@ -1,0 +1,149 @@
+// One live subject inside the daemon: checks each incoming marker frame against the
+// subject's model and frame sequence, feeds the cleanup pipeline (inserting all-missing
+// frames for missing frame numbers, re-synchronising on a capture restart), and encodes
+// every published frame for the output sink. No sockets here, so the frame accounting
+// can be tested directly; the data plane owns the sockets. Accept, Flush and the
+// encoders allocate nothing after the first frames (the pipeline and the messages are
+// sized at construction).
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "filters/cleanup_pipeline.hpp"
+#include "protocol/messages.hpp"
+#include "runtime/daemon_config.hpp"
+
+namespace mocapd {
+
+/// Why an incoming message was not turned into a published frame.
+enum class DropReason : uint8_t {
+  kOversized,       ///< Longer than input.max_message_bytes.
+  kMalformed,       ///< Failed to decode (bad header, sizes, fields) or had too many parts.
+  kNonFinite,       ///< A valid marker or the rate was NaN or Inf.
+  kNotMarkerFrame,  ///< A well-formed message of another type.
+  kUnknownSubject,  ///< No configured subject of that name.
+  kModelMismatch,   ///< Marker-set hash or marker count differs from the subject's model.
+  kRateMismatch,    ///< Capture rate differs from the subject's configured rate.
+  kDuplicate,       ///< The frame number just received, again.
+  kOutOfOrder,      ///< Older than the newest frame already received.
+};
+inline constexpr int kDropReasonCount = 9;
+const char* to_string(DropReason reason);
+
+/// Where a runner's output goes (the data plane's PUB socket, or a test's recorder).
+class OutputSink {
+ public:
+  virtual ~OutputSink() = default;
+  virtual void Send(std::string_view topic, std::span<const uint8_t> message) = 0;
+};
+
+/// Fixed latency buckets (upper bounds, seconds) for the Prometheus histogram.
+inline constexpr std::array<double, 13> kLatencyBucketsS = {25e-6, 50e-6, 100e-6, 250e-6, 500e-6, 1e-3, 2.5e-3,
+                                                             5e-3,  10e-3, 25e-3,  50e-3,  100e-3, 1.0};
+
+struct LatencyHistogram {
+  std::array<uint64_t, kLatencyBucketsS.size() + 1> counts{};  ///< Last: above every bound.
+  double sum_s = 0.0;
+  uint64_t count = 0;
+  void Add(double seconds);
+};
+
+struct SubjectCounters {
+  uint64_t frames_in = 0;         ///< Marker frames received for this subject (accepted or not).
+  uint64_t frames_accepted = 0;   ///< Pushed into the pipeline.
+  uint64_t frames_published = 0;  ///< Published frames that came in (not inserted).
+  uint64_t frames_inserted = 0;   ///< All-missing frames pushed for missing frame numbers...
+  uint64_t inserted_published = 0;  ///< ...and how many of those were published.
+  std::array<uint64_t, kDropReasonCount> dropped{};
+  uint64_t restarts = 0;  ///< Capture restarts and long jumps re-synchronised.
+  uint64_t stalls = 0;    ///< Times the watchdog saw the input stall.
+  LatencyHistogram processing;  ///< Receive of the frame that completed a publication -> its send.
+  uint64_t last_frame_number = 0;
+  uint64_t dropped_total() const;
+};
+
+class SubjectRunner {
+ public:
+  /// config must outlive nothing: the runner copies what it needs.
+  SubjectRunner(const SubjectConfig& config, const DaemonConfig& daemon);
+
+  const std::string& name() const { return name_; }
+  const std::string& fingerprint() const { return fingerprint_; }
+
+  /// Takes one decoded marker frame of this subject, received at receive_ns (steady
+  /// clock). Publishes whatever became final through sink. Returns the drop reason if
+  /// the frame was rejected (and counts it), nothing otherwise.
+  std::optional<DropReason> Accept(const protocol::MarkerFrameMessage& frame, int64_t receive_ns, OutputSink& sink);
+  /// Counts a frame for this subject that was rejected before it could be decoded fully.
+  void CountDrop(DropReason reason);
+  /// Publishes everything still held in the lookahead (shutdown, reload, restart).
+  void Flush(OutputSink& sink);
+  /// Marks the subject stalled if no input came for timeout_ns (publishing a status
+  /// message once when it happens); returns true on that transition.
+  bool CheckStall(int64_t now_ns, int64_t timeout_ns, OutputSink& sink);
+  /// Publishes the subject's description and status (every stats tick).
+  void PublishDescription(OutputSink& sink);
+  void PublishStatus(int64_t now_ns, OutputSink& sink);
+
+  /// Frames accepted into the pipeline but not yet published.
+  uint64_t pending() const;
+  protocol::SubjectState state() const { return state_; }
+  int64_t last_receive_ns() const { return last_receive_ns_; }
+  const SubjectCounters& counters() const { return counters_; }
+  const CleanupCounters& cleanup_counters() const { return pipeline_.counters(); }
+  /// Carries the counters of a runner this one replaces (a reload changed its model).
+  void InheritCounters(const SubjectRunner& previous);
+  const protocol::SubjectDescriptionMessage& description() const { return description_; }
+
+ private:
+  struct Stamp {
+    uint64_t frame_number = 0;
+    uint64_t capture_ns = 0;
+    bool inserted = false;
+  };
+  void Push(std::span<const Vec3> positions, const Stamp& stamp, int64_t receive_ns, OutputSink& sink);
+  void Publish(int64_t trigger_receive_ns, OutputSink& sink);
+  void Resynchronise(OutputSink& sink);
+
+  std::string name_;
+  std::string fingerprint_;
+  uint64_t marker_hash_ = 0;
+  uint64_t skeleton_hash_ = 0;
+  double rate_hz_ = 0.0;
+  int max_gap_frames_ = 0;
+  int restart_backjump_frames_ = 0;
+  bool publish_cleaned_ = true;
+  bool publish_globals_ = false;
+  std::shared_ptr<const Skeleton> skeleton_;
+  CleanupPipeline pipeline_;
+  std::vector<Stamp> stamps_;  ///< Ring by pipeline frame: what each pushed frame was.
+  int64_t pushed_ = 0;         ///< Frames pushed since the last reset.
+  int64_t published_ = 0;      ///< Frames published since the last reset.
+  bool started_ = false;
+  uint64_t next_frame_number_ = 0;
+  uint64_t last_capture_ns_ = 0;
+  int64_t last_receive_ns_ = -1;
+  protocol::SubjectState state_ = protocol::SubjectState::kWaiting;
+  SubjectCounters counters_;
+  std::vector<Vec3> missing_;  ///< An all-missing frame.
+  KinematicsWorkspace kinematics_;
+  protocol::SubjectDescriptionMessage description_;
+  protocol::SkeletonFrameMessage skeleton_message_;
+  protocol::CleanedMarkersMessage cleaned_message_;
+  protocol::SubjectStatusMessage status_message_;
+  std::vector<uint8_t> buffer_;
+  std::string skeleton_topic_, cleaned_topic_, description_topic_, status_topic_;
+};
+
+/// Topic strings: "<kind>/<subject>/" so that a prefix subscription to one subject never
+/// matches another whose name it starts (actor1 vs actor10).
+std::string Topic(std::string_view kind, std::string_view subject);
+
+}  // namespace mocapd
