@@ -207,7 +207,7 @@ struct Daemon::DataPlane final : OutputSink {
       s.state = r.state();
       s.counters = r.counters();
       s.cleanup = r.cleanup_counters();
-      s.pending = r.pending();
+      s.pending = r.pending_received();
       s.since_last_input_s = r.last_receive_ns() < 0 ? -1.0 : static_cast<double>(now - r.last_receive_ns()) * 1e-9;
       const protocol::SubjectDescriptionMessage& d = r.description();
       s.markers = static_cast<int>(d.marker_names.size());

@@ -29,7 +29,7 @@ struct SubjectStats {
   protocol::SubjectState state = protocol::SubjectState::kWaiting;
   SubjectCounters counters;
   CleanupCounters cleanup;
-  uint64_t pending = 0;
+  uint64_t pending = 0;  ///< Received frames held in the lookahead.
   double since_last_input_s = -1.0;  ///< -1 before the first frame.
   int markers = 0;
   int joints = 0;

@@ -92,8 +92,10 @@ class SubjectRunner {
   void PublishDescription(OutputSink& sink);
   void PublishStatus(int64_t now_ns, OutputSink& sink);
 
-  /// Frames accepted into the pipeline but not yet published.
+  /// Frames in the pipeline not yet published (received and inserted ones).
   uint64_t pending() const;
+  /// Of those, the received ones: frames in = published + dropped + this.
+  uint64_t pending_received() const { return pending() - (counters_.frames_inserted - counters_.inserted_published); }
   protocol::SubjectState state() const { return state_; }
   int64_t last_receive_ns() const { return last_receive_ns_; }
   const SubjectCounters& counters() const { return counters_; }

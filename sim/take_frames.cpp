@@ -29,4 +29,15 @@ void TakeMarkerMap::Observe(const C3dTake& take, int frame, std::span<Vec3> p_WM
   }
 }
 
+void TakeMarkerMap::FillMessage(const C3dTake& take, int frame, protocol::MarkerFrameMessage* message) const {
+  message->positions.resize(point_of_marker_.size());
+  message->valid.resize(point_of_marker_.size());
+  for (size_t m = 0; m < point_of_marker_.size(); ++m) {
+    const int p = point_of_marker_[m];
+    const bool ok = p >= 0 && take.valid(frame, p);
+    message->valid[m] = ok ? 1 : 0;
+    message->positions[m] = ok ? take.at(frame, p) : Vec3::Constant(kNaN);
+  }
+}
+
 }  // namespace mocapd

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "filters/marker_model.hpp"
+#include "protocol/messages.hpp"
 #include "sim/c3d.hpp"
 
 namespace mocapd {
@@ -19,6 +20,10 @@ class TakeMarkerMap {
 
   /// Fills p_WM and weights (1 observed, 0 missing or absent from the take) for a frame.
   void Observe(const C3dTake& take, int frame, std::span<Vec3> p_WM, std::span<double> weights) const;
+  /// Fills a marker frame's positions and validity (subject's marker order) for a frame;
+  /// the caller sets subject, hash, frame number, time and rate. Allocates only the
+  /// first time the message holds this many markers.
+  void FillMessage(const C3dTake& take, int frame, protocol::MarkerFrameMessage* message) const;
   int matched() const { return matched_; }
   const std::vector<std::string>& unmatched() const { return unmatched_; }
 

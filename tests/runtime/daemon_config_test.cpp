@@ -1,0 +1,116 @@
+// Tests for the daemon config: the shipped default parses, the demo subject file is the
+// built-in humanoid, and every kind of mistake is an error naming file, line and field.
+#include "runtime/daemon_config.hpp"
+
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <sstream>
+
+#include "sim/humanoid_subject.hpp"
+#include "tests/support/test_takes.hpp"
+
+namespace mocapd {
+namespace {
+
+std::string ReadText(const std::string& path) {
+  std::ifstream in(path);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+// Parses text as if it were config.toml in config/ (so model paths resolve to the
+// shipped demo subject) and returns the error message, or "" if it parsed.
+std::string ErrorOf(const std::string& text) {
+  try {
+    ParseDaemonConfig(text, "test.toml", MOCAPD_CONFIG_DIR);
+  } catch (const std::exception& e) {
+    return e.what();
+  }
+  return "";
+}
+
+const char* kMinimal = R"(format_version = 1
+[[subject]]
+name = "actor1"
+model = "demo_subject.toml"
+)";
+
+TEST(DaemonConfigTest, ShippedDefaultParsesWithDocumentedValues) {
+  const DaemonConfig c = LoadDaemonConfig(std::string(MOCAPD_CONFIG_DIR) + "/mocapd.toml");
+  EXPECT_EQ(c.input_endpoint, "tcp://127.0.0.1:5555");
+  EXPECT_EQ(c.input_pattern, InputPattern::kSub);
+  EXPECT_EQ(c.output_endpoint, "tcp://127.0.0.1:5556");
+  EXPECT_EQ(c.http_port, 8480);
+  ASSERT_EQ(c.subjects.size(), 1u);
+  EXPECT_EQ(c.subjects[0].name, "actor1");
+  EXPECT_EQ(c.subjects[0].cleanup.lookahead, 12);
+  EXPECT_EQ(c.subjects[0].model.markers->num_markers(), 59);
+  // The values written in the file are the defaults: a minimal config means the same.
+  const DaemonConfig minimal = ParseDaemonConfig(kMinimal, "minimal.toml", MOCAPD_CONFIG_DIR);
+  EXPECT_EQ(SubjectFingerprint(minimal.subjects[0], minimal), SubjectFingerprint(c.subjects[0], c));
+  EXPECT_EQ(minimal.watchdog_timeout_s, c.watchdog_timeout_s);
+  EXPECT_EQ(minimal.max_gap_frames, c.max_gap_frames);
+}
+
+TEST(DaemonConfigTest, DemoSubjectFileIsTheBuiltInHumanoid) {
+  EXPECT_EQ(ReadText(std::string(MOCAPD_CONFIG_DIR) + "/demo_subject.toml"), FormatSubjectModel(MakeHumanoidSubject("actor1")))
+      << "regenerate config/demo_subject.toml from MakeHumanoidSubject(\"actor1\")";
+}
+
+TEST(DaemonConfigTest, ErrorsNameFileLineAndField) {
+  EXPECT_EQ(ErrorOf(kMinimal), "");
+  EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[input]\nendpont = \"tcp://127.0.0.1:1\"\n"), "test.toml:6: field 'input.endpont': unknown field");
+  EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[pipeline]\nlookahead = -3\n"), "test.toml:6: field 'pipeline.lookahead': must be in [0, 1000], got -3");
+  EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[input]\npattern = \"push\"\n"), "test.toml:6: field 'input.pattern': expected sub | pull, got 'push'");
+  EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[control]\nwatchdog_timeout_s = \"1s\"\n"), "test.toml:6: field 'control.watchdog_timeout_s': expected a number");
+  EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[pipeline.detectors]\nspike_mm = 0.0\n"),
+            "test.toml:6: field 'pipeline.detectors.spike_mm': must be in [1, 1000], got 0");
+  EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[output]\nendpoint = \"udp://x\"\n"),
+            "test.toml:5: field 'output.endpoint': expected tcp://HOST:PORT, ipc://PATH or inproc://NAME, got 'udp://x'");
+  EXPECT_NE(ErrorOf("format_version = 1\n").find("field 'subject': no [[subject]] tables"), std::string::npos);
+  EXPECT_NE(ErrorOf("[[subject]]\nname = \"a\"\nmodel = \"demo_subject.toml\"\n").find("field 'format_version'"), std::string::npos);
+  EXPECT_NE(ErrorOf("format_version = 1\n[[subject]\n").find("test.toml:2:"), std::string::npos);  // TOML syntax
+}
+
+TEST(DaemonConfigTest, SubjectsAreValidatedOneByOne) {
+  EXPECT_EQ(ErrorOf("format_version = 1\n[[subject]]\nname = \"a/b\"\nmodel = \"demo_subject.toml\"\n"),
+            "test.toml:3: field 'subject[0].name': must be 1..63 characters without '/' or spaces");
+  EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[[subject]]\nname = \"actor1\"\nmodel = \"demo_subject.toml\"\n"),
+            "test.toml:6: field 'subject[1].name': subject 'actor1' is listed twice");
+  const std::string missing = ErrorOf("format_version = 1\n[[subject]]\nname = \"a\"\nmodel = \"nope.toml\"\n");
+  EXPECT_NE(missing.find("test.toml:4: field 'subject[0].model':"), std::string::npos) << missing;
+  EXPECT_NE(missing.find("nope.toml: cannot open"), std::string::npos) << missing;
+  EXPECT_EQ(ErrorOf("format_version = 1\n[[subject]]\nname = \"a\"\n"), "test.toml:2: field 'subject[0].model': missing");
+  EXPECT_EQ(ErrorOf(std::string(kMinimal) + "rate = 120\n"), "test.toml:5: field 'subject[0].rate': unknown field");
+}
+
+TEST(DaemonConfigTest, NonLoopbackBindsMustBeAskedFor) {
+  EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[output]\nendpoint = \"tcp://0.0.0.0:5556\"\n"),
+            "test.toml:6: field 'output.endpoint': binds a non-loopback address; set control.allow_remote = true to allow it");
+  EXPECT_NE(ErrorOf(std::string(kMinimal) + "[control]\nhttp_address = \"0.0.0.0\"\n").find("control.http_address"), std::string::npos);
+  EXPECT_NE(ErrorOf(std::string(kMinimal) + "[input]\npattern = \"pull\"\nendpoint = \"tcp://*:5555\"\n").find("input.endpoint"),
+            std::string::npos);
+  // Connecting a SUB to a remote capture publisher is fine: it binds nothing.
+  EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[input]\nendpoint = \"tcp://10.0.0.5:5555\"\n"), "");
+  EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[output]\nendpoint = \"tcp://0.0.0.0:5556\"\n[control]\nallow_remote = true\n"), "");
+  EXPECT_TRUE(IsLocalEndpoint("ipc:///tmp/x"));
+  EXPECT_TRUE(IsLocalEndpoint("tcp://[::1]:5"));
+  EXPECT_FALSE(IsLocalEndpoint("tcp://*:5"));
+}
+
+TEST(DaemonConfigTest, ThresholdsAndOverridesReachThePipelineOptions) {
+  const DaemonConfig c = ParseDaemonConfig(std::string(kMinimal) + "lookahead = 3\nrate_hz = 240\n[pipeline.detectors]\nspike_mm = 45\n"
+                                                                     "disagreement_rotation_deg = 20\n[pipeline]\nwindow = 60\n",
+                                           "t.toml", MOCAPD_CONFIG_DIR);
+  const CleanupOptions& o = c.subjects[0].cleanup;
+  EXPECT_EQ(o.lookahead, 3);
+  EXPECT_EQ(o.rate_hz, 240.0);
+  EXPECT_DOUBLE_EQ(o.spike_m, 0.045);
+  EXPECT_NEAR(o.disagreement_rotation_rad, 20.0 * M_PI / 180.0, 1e-12);
+  EXPECT_EQ(o.window, 60);
+}
+
+}  // namespace
+}  // namespace mocapd

@@ -1,0 +1,468 @@
+// The daemon over real ZeroMQ sockets (inproc, ipc and tcp loopback) and its HTTP
+// endpoint: a corrupted synthesized take in, every frame out with the right content;
+// shutdown flush; the malformed-message battery; reload; subject topics; a slow
+// subscriber; and the frame accounting (in = published + dropped) in every case.
+#include "runtime/daemon.hpp"
+
+#include <gtest/gtest.h>
+
+#include <boost/asio/connect.hpp>
+#include <boost/asio/ip/tcp.hpp>
+#include <boost/beast/core.hpp>
+#include <boost/beast/http.hpp>
+#include <cmath>
+#include <cstring>
+#include <functional>
+#include <filesystem>
+#include <map>
+#include <thread>
+#include <zmq.hpp>
+
+#include "filters/pose_error.hpp"
+#include "sim/corruption.hpp"
+#include "sim/humanoid_subject.hpp"
+#include "sim/take_frames.hpp"
+#include "tests/support/test_takes.hpp"
+
+namespace mocapd {
+namespace {
+
+using namespace std::chrono_literals;
+
+DaemonConfig TestConfig(const std::string& input, const std::string& output, int lookahead = 12) {
+  DaemonConfig c;
+  c.source = "test";
+  c.input_endpoint = input;
+  c.input_pattern = InputPattern::kPull;
+  c.output_endpoint = output;
+  c.send_high_water_mark = 100000;
+  c.http_port = 0;
+  c.stats_interval_s = 0.05;
+  c.watchdog_timeout_s = 0.3;
+  SubjectConfig s;
+  s.name = "actor1";
+  s.model = MakeHumanoidSubject("actor1");
+  s.rate_hz = 120.0;
+  s.cleanup.rate_hz = 120.0;
+  s.cleanup.lookahead = lookahead;
+  c.subjects.push_back(s);
+  return c;
+}
+
+// Runs a daemon on a thread for the length of a test.
+class RunningDaemon {
+ public:
+  RunningDaemon(zmq::context_t& context, DaemonConfig config) : daemon_(std::move(config), "", &context) {
+    thread_ = std::thread([this] {
+      try {
+        daemon_.Run(false);
+      } catch (const std::exception& e) {
+        error_ = e.what();
+      }
+    });
+    EXPECT_TRUE(daemon_.WaitUntilRunning(10s)) << error_;
+  }
+  ~RunningDaemon() { Stop(); }
+  void Stop() {
+    if (!thread_.joinable()) return;
+    daemon_.Stop();
+    thread_.join();
+  }
+  Daemon& operator*() { return daemon_; }
+  Daemon* operator->() { return &daemon_; }
+
+ private:
+  Daemon daemon_;
+  std::thread thread_;
+  std::string error_;
+};
+
+// Everything the daemon publishes, decoded by kind, received on its own thread.
+class Subscriber {
+ public:
+  Subscriber(zmq::context_t& context, const std::string& endpoint, bool read = true) : socket_(context, zmq::socket_type::sub) {
+    socket_.set(zmq::sockopt::rcvhwm, 0);
+    socket_.set(zmq::sockopt::subscribe, "");
+    socket_.connect(endpoint);
+    if (read) thread_ = std::thread([this] { Loop(); });
+  }
+  ~Subscriber() {
+    stop_ = true;
+    if (thread_.joinable()) thread_.join();
+  }
+  // The subscription is live once a periodic status message got through.
+  bool WaitConnected() {
+    return WaitFor([&] { return statuses > 0; });
+  }
+  template <typename Predicate>
+  bool WaitFor(Predicate done, std::chrono::milliseconds timeout = 20s) {
+    const auto end = std::chrono::steady_clock::now() + timeout;
+    while (std::chrono::steady_clock::now() < end) {
+      {
+        std::lock_guard lock(mutex);
+        if (done()) return true;
+      }
+      std::this_thread::sleep_for(5ms);
+    }
+    std::lock_guard lock(mutex);
+    return done();
+  }
+  std::mutex mutex;
+  std::map<std::string, std::vector<protocol::SkeletonFrameMessage>> skeletons;
+  std::map<std::string, std::vector<protocol::CleanedMarkersMessage>> cleaned;
+  std::map<std::string, protocol::SubjectDescriptionMessage> descriptions;
+  int statuses = 0;
+  int undecodable = 0;
+
+ private:
+  void Loop() {
+    zmq::pollitem_t items[] = {{socket_.handle(), 0, ZMQ_POLLIN, 0}};
+    while (!stop_) {
+      zmq::poll(items, 1, 5ms);
+      zmq::message_t topic, body;
+      while (socket_.recv(topic, zmq::recv_flags::dontwait)) {
+        (void)socket_.recv(body);
+        const std::string t = topic.to_string();
+        const std::span<const uint8_t> bytes(static_cast<const uint8_t*>(body.data()), body.size());
+        std::lock_guard lock(mutex);
+        if (t.starts_with("skeleton/")) {
+          protocol::SkeletonFrameMessage m;
+          if (protocol::DecodeSkeletonFrame(bytes, &m) != protocol::DecodeStatus::kOk) ++undecodable;
+          skeletons[m.subject].push_back(std::move(m));
+        } else if (t.starts_with("cleaned/")) {
+          protocol::CleanedMarkersMessage m;
+          if (protocol::DecodeCleanedMarkers(bytes, &m) != protocol::DecodeStatus::kOk) ++undecodable;
+          cleaned[m.subject].push_back(std::move(m));
+        } else if (t.starts_with("subject/")) {
+          protocol::SubjectDescriptionMessage m;
+          if (protocol::DecodeSubjectDescription(bytes, &m) != protocol::DecodeStatus::kOk) ++undecodable;
+          descriptions[m.subject] = m;
+        } else if (t.starts_with("status/")) {
+          ++statuses;
+        }
+      }
+    }
+  }
+  zmq::socket_t socket_;
+  std::thread thread_;
+  std::atomic<bool> stop_{false};
+};
+
+// A capture sender: marker frames of a take, as the subject's model orders them.
+class Sender {
+ public:
+  Sender(zmq::context_t& context, const std::string& endpoint, const C3dTake& take, const SubjectModel& model, zmq::socket_type type)
+      : socket_(context, type), take_(take), map_(*model.markers, take) {
+    socket_.set(zmq::sockopt::linger, 5000);
+    if (type == zmq::socket_type::pub) {
+      socket_.bind(endpoint);
+    } else {
+      socket_.connect(endpoint);
+    }
+    message_.subject = "actor1";
+    message_.model_hash = protocol::MarkerSetHash(*model.markers);
+    message_.rate_hz = 120.0f;
+  }
+  void Send(int take_frame, uint64_t frame_number, const std::string& topic = "") {
+    map_.FillMessage(take_, take_frame, &message_);
+    message_.frame_number = frame_number;
+    message_.capture_time_ns = 1'000'000'000ull + frame_number * 8'333'333ull;
+    protocol::EncodeMarkerFrame(message_, &bytes_);
+    SendRaw(bytes_, topic);
+  }
+  void SendRaw(std::span<const uint8_t> bytes, const std::string& topic = "") {
+    if (!topic.empty()) socket_.send(zmq::buffer(topic), zmq::send_flags::sndmore);
+    socket_.send(zmq::const_buffer(bytes.data(), bytes.size()));
+  }
+  zmq::socket_t& socket() { return socket_; }
+  protocol::MarkerFrameMessage message_;
+
+ private:
+  zmq::socket_t socket_;
+  const C3dTake& take_;
+  TakeMarkerMap map_;
+  std::vector<uint8_t> bytes_;
+};
+
+bool WaitForStats(Daemon& daemon, const std::function<bool(const DaemonStats&)>& done, std::chrono::milliseconds timeout = 20s) {
+  const auto end = std::chrono::steady_clock::now() + timeout;
+  while (std::chrono::steady_clock::now() < end) {
+    if (done(daemon.Stats())) return true;
+    std::this_thread::sleep_for(5ms);
+  }
+  return done(daemon.Stats());
+}
+
+// Mean global joint position error of published skeletons against the truth, metres.
+double MeanJointError(const std::vector<protocol::SkeletonFrameMessage>& frames, const testing::HumanoidFixture& f) {
+  const Skeleton& sk = *f.skeleton;
+  KinematicsWorkspace solved(sk), truth(sk);
+  double sum = 0.0;
+  int n = 0;
+  for (const auto& m : frames) {
+    Pose pose = RestPose(sk);
+    for (int j = 0; j < sk.num_joints(); ++j) pose.rotation[static_cast<size_t>(j)] = m.rotations[static_cast<size_t>(j)].normalized();
+    pose.translation[0] = m.root_translation;
+    ForwardKinematics(sk, pose, &solved);
+    ForwardKinematics(sk, f.motion[m.frame_number], &truth);
+    for (int j = 0; j < sk.num_joints(); ++j, ++n) sum += (solved.p_WJ[static_cast<size_t>(j)] - truth.p_WJ[static_cast<size_t>(j)]).norm();
+  }
+  return n > 0 ? sum / n : 1e9;
+}
+
+class DaemonTransportTest : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(DaemonTransportTest, EveryFrameOfACorruptedTakeComesOutSolved) {
+  const testing::HumanoidFixture f = testing::MakeHumanoidFixture("walk", 4.0, 120.0, 0.0005);
+  CorruptionOptions corruption;
+  corruption.seed = 3;
+  const CorruptedTake corrupted = CorruptTake(f.take, f.markers.get(), corruption);
+  std::string in, out;
+  const std::string transport = GetParam();
+  if (transport == "inproc") {
+    in = "inproc://daemon-in";
+    out = "inproc://daemon-out";
+  } else if (transport == "ipc") {
+    const std::string dir = testing::TempDir("daemon_ipc");
+    in = "ipc://" + dir + "/in";
+    out = "ipc://" + dir + "/out";
+  } else {
+    in = "tcp://127.0.0.1:47311";
+    out = "tcp://127.0.0.1:47312";
+  }
+  zmq::context_t context;
+  RunningDaemon daemon(context, TestConfig(in, out));
+  Subscriber sub(context, out);
+  ASSERT_TRUE(sub.WaitConnected());
+  const SubjectModel model = MakeHumanoidSubject("actor1");
+  Sender sender(context, in, corrupted.take, model, zmq::socket_type::push);
+  const int frames = corrupted.take.num_frames;
+  for (int t = 0; t < frames; ++t) sender.Send(t, static_cast<uint64_t>(t));
+  // All but the lookahead come out while running; the rest at shutdown.
+  ASSERT_TRUE(WaitForStats(*daemon, [&](const DaemonStats& s) { return s.messages_in == static_cast<uint64_t>(frames); }));
+  daemon.Stop();
+  const DaemonStats stats = daemon->Stats();
+  EXPECT_TRUE(stats.Balanced());
+  EXPECT_EQ(stats.published_total(), static_cast<uint64_t>(frames));
+  EXPECT_EQ(stats.dropped_total(), 0u);
+  ASSERT_TRUE(sub.WaitFor([&] { return sub.skeletons["actor1"].size() == static_cast<size_t>(frames); }));
+  std::lock_guard lock(sub.mutex);
+  const auto& skeletons = sub.skeletons["actor1"];
+  for (int t = 0; t < frames; ++t) ASSERT_EQ(skeletons[static_cast<size_t>(t)].frame_number, static_cast<uint64_t>(t));
+  EXPECT_EQ(sub.cleaned["actor1"].size(), static_cast<size_t>(frames));
+  EXPECT_EQ(sub.undecodable, 0);
+  EXPECT_LT(MeanJointError(skeletons, f), 0.02);
+  // Some samples of a medium-corrupted take were repaired, and said so.
+  size_t repaired = 0;
+  for (const auto& c : sub.cleaned["actor1"])
+    for (uint8_t s : c.status) repaired += s == 1;
+  EXPECT_GT(repaired, 0u);
+  // The description names the model the frames were made for.
+  ASSERT_EQ(sub.descriptions.count("actor1"), 1u);
+  EXPECT_EQ(sub.descriptions["actor1"].skeleton_hash, skeletons[0].model_hash);
+  EXPECT_EQ(sub.descriptions["actor1"].joint_names.size(), skeletons[0].rotations.size());
+}
+
+INSTANTIATE_TEST_SUITE_P(Transports, DaemonTransportTest, ::testing::Values("inproc", "ipc", "tcp"));
+
+TEST(DaemonTest, MalformedMessagesAreCountedByReasonAndTheStreamGoesOn) {
+  const testing::HumanoidFixture f = testing::MakeHumanoidFixture("walk", 1.0, 120.0);
+  zmq::context_t context;
+  DaemonConfig config = TestConfig("inproc://bad-in", "inproc://bad-out", 2);
+  config.max_message_bytes = 4096;
+  RunningDaemon daemon(context, config);
+  const SubjectModel model = MakeHumanoidSubject("actor1");
+  Sender sender(context, "inproc://bad-in", f.take, model, zmq::socket_type::push);
+  int sent = 0;
+  for (int t = 0; t < 10; ++t, ++sent) sender.Send(t, static_cast<uint64_t>(t));
+  std::vector<uint8_t> good;
+  sender.message_.frame_number = 10;
+  protocol::EncodeMarkerFrame(sender.message_, &good);
+  auto variant = [&](auto edit) {
+    std::vector<uint8_t> b = good;
+    edit(b);
+    sender.SendRaw(b);
+    ++sent;
+  };
+  variant([](auto& b) { b.resize(b.size() - 3); });                   // truncated
+  variant([](auto& b) { b[0] = 'X'; });                                // bad magic
+  variant([](auto& b) { b[4] = 2; });                                  // version
+  variant([](auto& b) { b.clear(); });                                 // empty
+  variant([](auto& b) { b.resize(8000, 0); });                         // oversized
+  variant([](auto& b) { b[17] = 'X'; });                               // unknown subject "Xctor1"
+  variant([](auto& b) { b[protocol::kHeaderBytes + 7] ^= 1;});           // model hash
+  variant([](auto& b) {                                                // NaN in a valid marker
+    const float nan = std::nanf("");
+    std::memcpy(&b[b.size() - 13], &nan, 4);
+    b[b.size() - 1] = 1;
+  });
+  protocol::SkeletonFrameMessage skeleton;  // a well-formed message of the wrong kind
+  skeleton.subject = "actor1";
+  std::vector<uint8_t> wrong_kind;
+  protocol::EncodeSkeletonFrame(skeleton, &wrong_kind);
+  sender.SendRaw(wrong_kind);
+  ++sent;
+  // Three parts: never a marker frame.
+  sender.socket().send(zmq::str_buffer("a"), zmq::send_flags::sndmore);
+  sender.socket().send(zmq::str_buffer("b"), zmq::send_flags::sndmore);
+  sender.SendRaw(good);
+  ++sent;
+  sender.Send(9, 9);  // duplicate
+  ++sent;
+  for (int t = 10; t < 20; ++t, ++sent) sender.Send(t, static_cast<uint64_t>(t));
+  ASSERT_TRUE(WaitForStats(*daemon, [&](const DaemonStats& s) { return s.messages_in == static_cast<uint64_t>(sent); }));
+  daemon.Stop();
+  const DaemonStats s = daemon->Stats();
+  auto unattributed = [&](DropReason r) { return s.unattributed_dropped[static_cast<size_t>(r)]; };
+  auto subject = [&](DropReason r) { return s.subjects[0].counters.dropped[static_cast<size_t>(r)]; };
+  EXPECT_EQ(unattributed(DropReason::kMalformed), 5u);  // truncated, magic, version, empty, three parts
+  EXPECT_EQ(unattributed(DropReason::kOversized), 1u);
+  EXPECT_EQ(unattributed(DropReason::kUnknownSubject), 1u);
+  EXPECT_EQ(unattributed(DropReason::kNotMarkerFrame), 1u);
+  EXPECT_EQ(subject(DropReason::kModelMismatch), 1u);
+  EXPECT_EQ(subject(DropReason::kNonFinite), 1u);
+  EXPECT_EQ(subject(DropReason::kDuplicate), 1u);
+  EXPECT_EQ(s.messages_in, static_cast<uint64_t>(sent));
+  EXPECT_EQ(s.published_total(), 20u);
+  EXPECT_TRUE(s.Balanced());
+}
+
+TEST(DaemonTest, ShutdownPublishesEverythingTheLookaheadHolds) {
+  const testing::HumanoidFixture f = testing::MakeHumanoidFixture("reach", 0.5, 120.0);
+  zmq::context_t context;
+  RunningDaemon daemon(context, TestConfig("inproc://flush-in", "inproc://flush-out", 30));
+  Subscriber sub(context, "inproc://flush-out");
+  ASSERT_TRUE(sub.WaitConnected());
+  Sender sender(context, "inproc://flush-in", f.take, MakeHumanoidSubject("actor1"), zmq::socket_type::push);
+  for (int t = 0; t < 25; ++t) sender.Send(t, static_cast<uint64_t>(t));  // fewer than K: nothing is out yet
+  ASSERT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) { return s.messages_in == 25; }));
+  EXPECT_EQ(daemon->Stats().published_total(), 0u);
+  daemon.Stop();
+  EXPECT_TRUE(sub.WaitFor([&] { return sub.skeletons["actor1"].size() == 25; }));
+  EXPECT_EQ(daemon->Stats().published_total(), 25u);
+  EXPECT_TRUE(daemon->Stats().Balanced());
+}
+
+TEST(DaemonTest, ReloadKeepsUnchangedSubjectsRebuildsChangedOnesAndLosesNoFrame) {
+  const testing::HumanoidFixture f = testing::MakeHumanoidFixture("walk", 2.0, 120.0);
+  zmq::context_t context;
+  const DaemonConfig first = TestConfig("inproc://reload-in", "inproc://reload-out", 12);
+  RunningDaemon daemon(context, first);
+  Subscriber sub(context, "inproc://reload-out");
+  ASSERT_TRUE(sub.WaitConnected());
+  Sender sender(context, "inproc://reload-in", f.take, MakeHumanoidSubject("actor1"), zmq::socket_type::push);
+  int t = 0;
+  for (; t < 60; ++t) sender.Send(t, static_cast<uint64_t>(t));
+  ASSERT_TRUE(WaitForStats(*daemon, [&](const DaemonStats& s) { return s.messages_in == 60; }));
+  // Same subject, plus a second one: actor1's pipeline keeps its 12 pending frames.
+  DaemonConfig second = first;
+  second.subjects.push_back(first.subjects[0]);
+  second.subjects.back().name = "actor2";
+  daemon->Reload(second);
+  ASSERT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) { return s.reloads == 1; }));
+  EXPECT_EQ(daemon->Stats().subjects.size(), 2u);
+  EXPECT_EQ(daemon->Stats().subjects[0].pending, 12u);
+  for (; t < 120; ++t) sender.Send(t, static_cast<uint64_t>(t));
+  ASSERT_TRUE(WaitForStats(*daemon, [&](const DaemonStats& s) { return s.messages_in == 120; }));
+  // actor1's lookahead changes: it is flushed and rebuilt; actor2 goes away.
+  DaemonConfig third = first;
+  third.subjects[0].cleanup.lookahead = 4;
+  daemon->Reload(third);
+  ASSERT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) { return s.reloads == 2; }));
+  for (; t < 180; ++t) sender.Send(t, static_cast<uint64_t>(t));
+  ASSERT_TRUE(WaitForStats(*daemon, [&](const DaemonStats& s) { return s.messages_in == 180; }));
+  daemon.Stop();
+  const DaemonStats s = daemon->Stats();
+  EXPECT_TRUE(s.Balanced());
+  EXPECT_EQ(s.published_total(), 180u);
+  EXPECT_EQ(s.subjects.size(), 1u);
+  EXPECT_EQ(s.subjects[0].counters.frames_in, 180u);  // counters carried over the rebuild
+  ASSERT_TRUE(sub.WaitFor([&] { return sub.skeletons["actor1"].size() == 180; }));
+  std::lock_guard lock(sub.mutex);
+  for (size_t k = 0; k < 180; ++k) ASSERT_EQ(sub.skeletons["actor1"][k].frame_number, k);
+}
+
+TEST(DaemonTest, ASubscribingDaemonTakesOnlyItsSubjectsTopics) {
+  const testing::HumanoidFixture f = testing::MakeHumanoidFixture("walk", 1.0, 120.0);
+  zmq::context_t context;
+  DaemonConfig config = TestConfig("inproc://capture", "inproc://sub-out", 0);
+  config.input_pattern = InputPattern::kSub;
+  const SubjectModel model = MakeHumanoidSubject("actor1");
+  Sender capture(context, "inproc://capture", f.take, model, zmq::socket_type::pub);  // binds first
+  RunningDaemon daemon(context, config);
+  // Wait until the daemon's subscription reached the publisher.
+  int t = 0;
+  ASSERT_TRUE(WaitForStats(*daemon, [&](const DaemonStats& s) {
+    capture.Send(0, static_cast<uint64_t>(t++), "markers/actor1/");
+    return s.messages_in > 0;
+  }));
+  const uint64_t before = daemon->Stats().messages_in;
+  for (int k = 0; k < 10; ++k) capture.Send(k, 1000 + k, "markers/actor10/");  // another daemon's actor
+  for (int k = 0; k < 10; ++k) capture.Send(k, static_cast<uint64_t>(t++), "markers/actor1/");
+  ASSERT_TRUE(WaitForStats(*daemon, [&](const DaemonStats& s) { return s.subjects[0].counters.frames_in >= before + 10; }));
+  daemon.Stop();
+  const DaemonStats s = daemon->Stats();
+  EXPECT_EQ(s.unattributed_dropped[static_cast<size_t>(DropReason::kUnknownSubject)], 0u);
+  EXPECT_EQ(s.messages_in, s.subjects[0].counters.frames_in);
+  EXPECT_TRUE(s.Balanced());
+}
+
+TEST(DaemonTest, ASubscriberThatNeverReadsDoesNotSlowTheDataPlane) {
+  const testing::HumanoidFixture f = testing::MakeHumanoidFixture("walk", 3.0, 120.0);
+  zmq::context_t context;
+  DaemonConfig config = TestConfig("inproc://slow-in", "inproc://slow-out", 0);
+  config.send_high_water_mark = 10;
+  RunningDaemon daemon(context, config);
+  Subscriber stuck(context, "inproc://slow-out", /*read=*/false);
+  std::this_thread::sleep_for(100ms);
+  Sender sender(context, "inproc://slow-in", f.take, MakeHumanoidSubject("actor1"), zmq::socket_type::push);
+  for (int t = 0; t < f.take.num_frames; ++t) sender.Send(t, static_cast<uint64_t>(t));
+  // Every frame is processed and published (the PUB drops what the subscriber cannot
+  // take) instead of the data plane waiting for it.
+  EXPECT_TRUE(WaitForStats(*daemon, [&](const DaemonStats& s) { return s.published_total() == static_cast<uint64_t>(f.take.num_frames); }));
+  daemon.Stop();
+  EXPECT_TRUE(daemon->Stats().Balanced());
+}
+
+std::pair<int, std::string> HttpGet(int port, const std::string& target) {
+  namespace beast = boost::beast;
+  boost::asio::io_context io;
+  boost::asio::ip::tcp::resolver resolver(io);
+  beast::tcp_stream stream(io);
+  stream.connect(resolver.resolve("127.0.0.1", std::to_string(port)));
+  beast::http::request<beast::http::empty_body> request(beast::http::verb::get, target, 11);
+  request.set(beast::http::field::host, "127.0.0.1");
+  beast::http::write(stream, request);
+  beast::flat_buffer buffer;
+  beast::http::response<beast::http::string_body> response;
+  beast::http::read(stream, buffer, response);
+  return {response.result_int(), response.body()};
+}
+
+TEST(DaemonTest, HttpServesHealthSubjectsAndMetrics) {
+  const testing::HumanoidFixture f = testing::MakeHumanoidFixture("walk", 1.0, 120.0);
+  zmq::context_t context;
+  RunningDaemon daemon(context, TestConfig("inproc://http-in", "inproc://http-out", 4));
+  ASSERT_GT(daemon->http_port(), 0);
+  Sender sender(context, "inproc://http-in", f.take, MakeHumanoidSubject("actor1"), zmq::socket_type::push);
+  for (int t = 0; t < 50; ++t) sender.Send(t, static_cast<uint64_t>(t));
+  ASSERT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) { return s.published_total() == 46; }));
+  std::this_thread::sleep_for(50ms);  // one more snapshot
+  const auto [health_code, health] = HttpGet(daemon->http_port(), "/health");
+  EXPECT_EQ(health_code, 200);
+  EXPECT_NE(health.find("\"accounted\": true"), std::string::npos) << health;
+  const auto [subjects_code, subjects] = HttpGet(daemon->http_port(), "/subjects");
+  EXPECT_EQ(subjects_code, 200);
+  EXPECT_NE(subjects.find("\"frames_published\": 46"), std::string::npos) << subjects;
+  const auto [metrics_code, metrics] = HttpGet(daemon->http_port(), "/metrics");
+  EXPECT_EQ(metrics_code, 200);
+  EXPECT_NE(metrics.find("mocapd_frames_published_total{subject=\"actor1\"} 46"), std::string::npos) << metrics;
+  EXPECT_NE(metrics.find("mocapd_processing_latency_seconds_count{subject=\"actor1\"} 46"), std::string::npos);
+  EXPECT_EQ(HttpGet(daemon->http_port(), "/nope").first, 404);
+  // The watchdog: no input for longer than its timeout.
+  EXPECT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) { return s.subjects[0].state == protocol::SubjectState::kStalled; }));
+  EXPECT_NE(HttpGet(daemon->http_port(), "/health").second.find("\"status\": \"degraded\""), std::string::npos);
+}
+
+}  // namespace
+}  // namespace mocapd

@@ -1,0 +1,210 @@
+// Tests for the daemon's per-subject frame accounting and sequencing, without sockets:
+// every frame in is published or dropped with a reason, gaps in the frame numbers are
+// filled, restarts re-synchronise, and nothing for another model is ever applied.
+#include "runtime/subject_runner.hpp"
+
+#include <gtest/gtest.h>
+
+#include "sim/humanoid_subject.hpp"
+#include "sim/take_frames.hpp"
+#include "tests/support/allocation_counter.hpp"
+#include "tests/support/test_takes.hpp"
+
+namespace mocapd {
+namespace {
+
+// Decodes what the runner sends, by topic.
+class RecordingSink : public OutputSink {
+ public:
+  void Send(std::string_view topic, std::span<const uint8_t> message) override {
+    if (topic.starts_with("skeleton/")) {
+      protocol::SkeletonFrameMessage m;
+      EXPECT_EQ(protocol::DecodeSkeletonFrame(message, &m), protocol::DecodeStatus::kOk);
+      skeletons.push_back(m);
+    } else if (topic.starts_with("cleaned/")) {
+      protocol::CleanedMarkersMessage m;
+      EXPECT_EQ(protocol::DecodeCleanedMarkers(message, &m), protocol::DecodeStatus::kOk);
+      cleaned.push_back(m);
+    } else if (topic.starts_with("status/")) {
+      protocol::SubjectStatusMessage m;
+      EXPECT_EQ(protocol::DecodeSubjectStatus(message, &m), protocol::DecodeStatus::kOk);
+      statuses.push_back(m);
+    } else {
+      ++others;
+    }
+  }
+  std::vector<protocol::SkeletonFrameMessage> skeletons;
+  std::vector<protocol::CleanedMarkersMessage> cleaned;
+  std::vector<protocol::SubjectStatusMessage> statuses;
+  int others = 0;
+};
+
+class SubjectRunnerTest : public ::testing::Test {
+ protected:
+  SubjectRunnerTest() : fixture_(testing::MakeHumanoidFixture("walk", 2.0, 120.0)), map_(*fixture_.markers, fixture_.take) {
+    subject_.name = "actor1";
+    subject_.model = MakeHumanoidSubject("actor1");
+    subject_.rate_hz = 120.0;
+    subject_.cleanup.rate_hz = 120.0;
+    subject_.cleanup.lookahead = 4;
+  }
+
+  protocol::MarkerFrameMessage Frame(int take_frame, uint64_t frame_number, uint64_t capture_ns) const {
+    protocol::MarkerFrameMessage m;
+    m.subject = "actor1";
+    m.model_hash = protocol::MarkerSetHash(*subject_.model.markers);
+    m.frame_number = frame_number;
+    m.capture_time_ns = capture_ns;
+    m.rate_hz = 120.0f;
+    map_.FillMessage(fixture_.take, take_frame, &m);
+    return m;
+  }
+
+  static void ExpectBalanced(const SubjectRunner& r) {
+    const SubjectCounters& c = r.counters();
+    EXPECT_EQ(c.frames_in, c.frames_published + c.dropped_total() + r.pending_received());
+  }
+
+  testing::HumanoidFixture fixture_;
+  TakeMarkerMap map_;
+  SubjectConfig subject_;
+  DaemonConfig daemon_;
+  RecordingSink sink_;
+};
+
+TEST_F(SubjectRunnerTest, EveryFrameComesOutInOrderWithItsNumberAndCaptureTime) {
+  SubjectRunner runner(subject_, daemon_);
+  for (int f = 0; f < 100; ++f) EXPECT_FALSE(runner.Accept(Frame(f, 5000 + f, 1000 * f), f, sink_).has_value());
+  EXPECT_EQ(sink_.skeletons.size(), 96u);  // K = 4 held back
+  EXPECT_EQ(runner.pending(), 4u);
+  ExpectBalanced(runner);
+  runner.Flush(sink_);
+  ASSERT_EQ(sink_.skeletons.size(), 100u);
+  ASSERT_EQ(sink_.cleaned.size(), 100u);
+  for (int f = 0; f < 100; ++f) {
+    EXPECT_EQ(sink_.skeletons[static_cast<size_t>(f)].frame_number, 5000u + f);
+    EXPECT_EQ(sink_.skeletons[static_cast<size_t>(f)].capture_time_ns, 1000u * f);
+    EXPECT_EQ(sink_.cleaned[static_cast<size_t>(f)].frame_number, 5000u + f);
+  }
+  EXPECT_EQ(runner.counters().frames_published, 100u);
+  ExpectBalanced(runner);
+  // Clean input: every published marker is the captured one, unchanged (as f32).
+  const protocol::CleanedMarkersMessage& c = sink_.cleaned[50];
+  const protocol::MarkerFrameMessage in = Frame(50, 5050, 0);
+  for (size_t m = 0; m < c.positions.size(); ++m) {
+    EXPECT_EQ(c.status[m], 0);
+    EXPECT_EQ(c.positions[m].cast<float>(), in.positions[m].cast<float>());
+  }
+  // The solved root follows the truth.
+  const Vec3 root_truth = fixture_.motion[50].translation[0];
+  EXPECT_LT((sink_.skeletons[50].root_translation - root_truth).norm(), 0.01);
+}
+
+TEST_F(SubjectRunnerTest, MissingFrameNumbersBecomeRepairedFrames) {
+  SubjectRunner runner(subject_, daemon_);
+  for (int f = 0; f < 60; ++f) {
+    if (f >= 20 && f < 25) continue;  // five frames lost on the network
+    ASSERT_FALSE(runner.Accept(Frame(f, f, 0), 0, sink_).has_value());
+  }
+  runner.Flush(sink_);
+  ASSERT_EQ(sink_.skeletons.size(), 60u);
+  for (size_t f = 0; f < 60; ++f) EXPECT_EQ(sink_.skeletons[f].frame_number, f);
+  EXPECT_EQ(runner.counters().frames_inserted, 5u);
+  EXPECT_EQ(runner.counters().inserted_published, 5u);
+  EXPECT_EQ(runner.counters().frames_published, 55u);
+  // The inserted frames' markers were all repaired (none is "observed").
+  for (uint8_t s : sink_.cleaned[22].status) EXPECT_NE(s, 0);
+  ExpectBalanced(runner);
+}
+
+TEST_F(SubjectRunnerTest, DuplicatesAndLateFramesAreDroppedAndCounted) {
+  SubjectRunner runner(subject_, daemon_);
+  for (int f = 0; f < 30; ++f) ASSERT_FALSE(runner.Accept(Frame(f, f, 1000 + f), 0, sink_).has_value());
+  EXPECT_EQ(runner.Accept(Frame(29, 29, 1029), 0, sink_), DropReason::kDuplicate);
+  EXPECT_EQ(runner.Accept(Frame(25, 25, 1025), 0, sink_), DropReason::kOutOfOrder);
+  EXPECT_FALSE(runner.Accept(Frame(30, 30, 1030), 0, sink_).has_value());
+  runner.Flush(sink_);
+  EXPECT_EQ(sink_.skeletons.size(), 31u);
+  EXPECT_EQ(runner.counters().dropped[static_cast<size_t>(DropReason::kDuplicate)], 1u);
+  EXPECT_EQ(runner.counters().dropped[static_cast<size_t>(DropReason::kOutOfOrder)], 1u);
+  EXPECT_EQ(runner.counters().frames_in, 33u);
+  ExpectBalanced(runner);
+}
+
+TEST_F(SubjectRunnerTest, FramesForAnotherModelOrRateAreNeverApplied) {
+  SubjectRunner runner(subject_, daemon_);
+  protocol::MarkerFrameMessage wrong_hash = Frame(0, 0, 0);
+  wrong_hash.model_hash ^= 1;
+  EXPECT_EQ(runner.Accept(wrong_hash, 0, sink_), DropReason::kModelMismatch);
+  protocol::MarkerFrameMessage fewer = Frame(0, 0, 0);
+  fewer.positions.pop_back();
+  fewer.valid.pop_back();
+  EXPECT_EQ(runner.Accept(fewer, 0, sink_), DropReason::kModelMismatch);
+  protocol::MarkerFrameMessage rate = Frame(0, 0, 0);
+  rate.rate_hz = 240.0f;
+  EXPECT_EQ(runner.Accept(rate, 0, sink_), DropReason::kRateMismatch);
+  runner.Flush(sink_);
+  EXPECT_TRUE(sink_.skeletons.empty());
+  EXPECT_EQ(runner.counters().dropped_total(), 3u);
+  ExpectBalanced(runner);
+}
+
+TEST_F(SubjectRunnerTest, CaptureRestartFlushesAndStartsOver) {
+  SubjectRunner runner(subject_, daemon_);
+  for (int f = 0; f < 50; ++f) ASSERT_FALSE(runner.Accept(Frame(f, 1000 + f, 1'000'000ull * f), 0, sink_).has_value());
+  // The capture restarts: frame numbers from 0 again, its clock going on.
+  for (int f = 0; f < 50; ++f) ASSERT_FALSE(runner.Accept(Frame(50 + f, f, 1'000'000ull * (100 + f)), 0, sink_).has_value());
+  runner.Flush(sink_);
+  ASSERT_EQ(sink_.skeletons.size(), 100u);
+  EXPECT_EQ(sink_.skeletons[49].frame_number, 1049u);
+  EXPECT_EQ(sink_.skeletons[50].frame_number, 0u);
+  EXPECT_EQ(sink_.skeletons[99].frame_number, 49u);
+  EXPECT_EQ(runner.counters().restarts, 1u);
+  EXPECT_EQ(runner.counters().frames_inserted, 0u);
+  ExpectBalanced(runner);
+}
+
+TEST_F(SubjectRunnerTest, ALongJumpAheadResynchronisesInsteadOfInsertingFrames) {
+  daemon_.max_gap_frames = 10;
+  SubjectRunner runner(subject_, daemon_);
+  for (int f = 0; f < 20; ++f) ASSERT_FALSE(runner.Accept(Frame(f, f, 0), 0, sink_).has_value());
+  for (int f = 20; f < 40; ++f) ASSERT_FALSE(runner.Accept(Frame(f, 1000 + f, 0), 0, sink_).has_value());
+  runner.Flush(sink_);
+  EXPECT_EQ(sink_.skeletons.size(), 40u);
+  EXPECT_EQ(runner.counters().frames_inserted, 0u);
+  EXPECT_EQ(runner.counters().restarts, 1u);
+  ExpectBalanced(runner);
+}
+
+TEST_F(SubjectRunnerTest, WatchdogMarksAStalledSubjectOnceAndPublishesIt) {
+  SubjectRunner runner(subject_, daemon_);
+  EXPECT_FALSE(runner.CheckStall(10'000'000'000, 500'000'000, sink_));  // nothing received yet: waiting, not stalled
+  EXPECT_EQ(runner.state(), protocol::SubjectState::kWaiting);
+  ASSERT_FALSE(runner.Accept(Frame(0, 0, 0), 1'000'000'000, sink_).has_value());
+  EXPECT_FALSE(runner.CheckStall(1'400'000'000, 500'000'000, sink_));
+  EXPECT_TRUE(runner.CheckStall(1'600'000'000, 500'000'000, sink_));
+  EXPECT_FALSE(runner.CheckStall(1'700'000'000, 500'000'000, sink_));
+  ASSERT_EQ(sink_.statuses.size(), 1u);
+  EXPECT_EQ(sink_.statuses[0].state, protocol::SubjectState::kStalled);
+  EXPECT_EQ(sink_.statuses[0].since_last_input_ns, 600'000'000u);
+  EXPECT_EQ(runner.counters().stalls, 1u);
+  ASSERT_FALSE(runner.Accept(Frame(1, 1, 0), 1'800'000'000, sink_).has_value());
+  EXPECT_NE(runner.state(), protocol::SubjectState::kStalled);
+}
+
+TEST_F(SubjectRunnerTest, SteadyStateAcceptAllocatesNothing) {
+  SubjectRunner runner(subject_, daemon_);
+  for (int f = 0; f < 40; ++f) ASSERT_FALSE(runner.Accept(Frame(f, f, 0), 0, sink_).has_value());
+  std::vector<protocol::MarkerFrameMessage> frames;
+  for (int f = 40; f < 80; ++f) frames.push_back(Frame(f, f, 0));
+  class NullSink : public OutputSink {
+   public:
+    void Send(std::string_view, std::span<const uint8_t>) override {}
+  } null_sink;
+  testing::ScopedAllocationCounter counter;
+  for (const auto& frame : frames) ASSERT_FALSE(runner.Accept(frame, 0, null_sink).has_value());
+  EXPECT_EQ(counter.count(), 0u);
+}
+
+}  // namespace
+}  // namespace mocapd
