@@ -421,6 +421,24 @@ DecodeStatus DecodeSubjectStatus(std::span<const uint8_t> bytes, SubjectStatusMe
   return DecodeStatus::kOk;
 }
 
+void EncodeEndOfStream(const EndOfStreamMessage& m, std::vector<uint8_t>* out) {
+  out->clear();
+  ByteWriter w(out);
+  WriteHeader(w, MessageType::kEndOfStream);
+  WriteSubject(w, m.subject);
+  w.WriteU64(m.last_frame_number);
+  FinishMessage(out);
+}
+
+DecodeStatus DecodeEndOfStream(std::span<const uint8_t> bytes, EndOfStreamMessage* m) {
+  ByteReader r(bytes);
+  if (const DecodeStatus s = ReadHeader(r, MessageType::kEndOfStream); s != DecodeStatus::kOk) return s;
+  if (const DecodeStatus s = ReadSubject(r, &m->subject); s != DecodeStatus::kOk) return s;
+  if (!r.ReadU64(&m->last_frame_number)) return DecodeStatus::kTooShort;
+  if (r.remaining() != 0) return DecodeStatus::kSizeMismatch;
+  return DecodeStatus::kOk;
+}
+
 DecodeStatus PeekType(std::span<const uint8_t> bytes, MessageType* type) {
   ByteReader r(bytes);
   uint32_t magic = 0;
@@ -428,7 +446,7 @@ DecodeStatus PeekType(std::span<const uint8_t> bytes, MessageType* type) {
   if (!r.ReadU32(&magic) || !r.ReadU16(&version) || !r.ReadU16(&raw)) return DecodeStatus::kTooShort;
   if (magic != kMagic) return DecodeStatus::kBadMagic;
   if (version != kVersion) return DecodeStatus::kUnsupportedVersion;
-  if (raw < static_cast<uint16_t>(MessageType::kSubjectDescription) || raw > static_cast<uint16_t>(MessageType::kSubjectStatus))
+  if (raw < static_cast<uint16_t>(MessageType::kSubjectDescription) || raw > static_cast<uint16_t>(MessageType::kEndOfStream))
     return DecodeStatus::kWrongType;
   *type = static_cast<MessageType>(raw);
   return DecodeStatus::kOk;

@@ -28,6 +28,7 @@ enum class MessageType : uint16_t {
   kSkeletonFrame = 3,
   kCleanedMarkers = 4,
   kSubjectStatus = 5,
+  kEndOfStream = 6,
 };
 
 /// How a subject is doing, carried by skeleton frames and status messages.
@@ -125,6 +126,14 @@ struct SubjectStatusMessage {
   uint64_t frames_dropped = 0;
 };
 
+/// Capture to daemon: the subject's stream ends here (a recorded take is over, or the
+/// capture stops). The daemon publishes everything its lookahead holds for the subject
+/// at once and starts the next frame afresh, instead of waiting for K more frames.
+struct EndOfStreamMessage {
+  std::string subject;
+  uint64_t last_frame_number = 0;  ///< The last frame sent (informational).
+};
+
 /// Appends the encoded message to out (cleared first). Never fails for messages within
 /// the limits; throws std::invalid_argument otherwise (a programming error upstream).
 void EncodeMarkerFrame(const MarkerFrameMessage& message, std::vector<uint8_t>* out);
@@ -132,6 +141,7 @@ void EncodeSkeletonFrame(const SkeletonFrameMessage& message, std::vector<uint8_
 void EncodeSubjectDescription(const SubjectDescriptionMessage& message, std::vector<uint8_t>* out);
 void EncodeCleanedMarkers(const CleanedMarkersMessage& message, std::vector<uint8_t>* out);
 void EncodeSubjectStatus(const SubjectStatusMessage& message, std::vector<uint8_t>* out);
+void EncodeEndOfStream(const EndOfStreamMessage& message, std::vector<uint8_t>* out);
 
 /// The description of a solved subject, from its model.
 SubjectDescriptionMessage DescribeSubject(const std::string& subject, const Skeleton& skeleton, const MarkerSet& markers,
@@ -146,5 +156,6 @@ DecodeStatus DecodeSkeletonFrame(std::span<const uint8_t> bytes, SkeletonFrameMe
 DecodeStatus DecodeSubjectDescription(std::span<const uint8_t> bytes, SubjectDescriptionMessage* message);
 DecodeStatus DecodeCleanedMarkers(std::span<const uint8_t> bytes, CleanedMarkersMessage* message);
 DecodeStatus DecodeSubjectStatus(std::span<const uint8_t> bytes, SubjectStatusMessage* message);
+DecodeStatus DecodeEndOfStream(std::span<const uint8_t> bytes, EndOfStreamMessage* message);
 
 }  // namespace mocapd::protocol

@@ -111,6 +111,13 @@ struct Daemon::DataPlane final : OutputSink {
     const std::span<const uint8_t> bytes(static_cast<const uint8_t*>(message.data()), message.size());
     protocol::MessageType type;
     if (protocol::PeekType(bytes, &type) != protocol::DecodeStatus::kOk) return Drop(DropReason::kMalformed);
+    if (type == protocol::MessageType::kEndOfStream) {
+      if (protocol::DecodeEndOfStream(bytes, &end_of_stream) != protocol::DecodeStatus::kOk) return Drop(DropReason::kMalformed);
+      SubjectRunner* runner = FindRunner(end_of_stream.subject);
+      if (runner == nullptr) return Drop(DropReason::kUnknownSubject);
+      ++stats.control_messages;
+      return runner->EndOfStream(*this);
+    }
     if (type != protocol::MessageType::kMarkerFrame) return Drop(DropReason::kNotMarkerFrame);
     const protocol::DecodeStatus status = protocol::DecodeMarkerFrame(bytes, &frame);
     if (status != protocol::DecodeStatus::kOk) {
@@ -272,6 +279,7 @@ struct Daemon::DataPlane final : OutputSink {
   DaemonConfig config;
   std::vector<std::unique_ptr<SubjectRunner>> runners;
   protocol::MarkerFrameMessage frame;
+  protocol::EndOfStreamMessage end_of_stream;
   zmq::message_t body, extra;
   DaemonStats stats;  // owned by the data plane thread
   int64_t start_ns = 0;

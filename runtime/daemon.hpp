@@ -43,6 +43,7 @@ struct DaemonStats {
   bool running = false;
   double uptime_s = 0.0;
   uint64_t messages_in = 0;  ///< Every message received on the input socket.
+  uint64_t control_messages = 0;  ///< Accepted end-of-stream messages (not frames).
   /// Drops not attributable to a configured subject (malformed, unknown subject, ...).
   std::array<uint64_t, kDropReasonCount> unattributed_dropped{};
   /// Frames published by subjects a reload removed (so the totals still add up).
@@ -58,8 +59,8 @@ struct DaemonStats {
   uint64_t published_total() const;
   uint64_t dropped_total() const;
   uint64_t pending_total() const;
-  /// messages_in == published + dropped + pending: every frame accounted for.
-  bool Balanced() const { return messages_in == published_total() + dropped_total() + pending_total(); }
+  /// messages_in == published + dropped + pending (+ control messages): every frame accounted for.
+  bool Balanced() const { return messages_in == published_total() + dropped_total() + pending_total() + control_messages; }
 };
 
 class Daemon {

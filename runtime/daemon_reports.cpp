@@ -26,6 +26,7 @@ std::string FormatPrometheusMetrics(const DaemonStats& stats) {
   gauge("mocapd_up", "1 while the data plane is running").Add({}).Set(stats.running ? 1 : 0);
   gauge("mocapd_uptime_seconds", "Seconds since the data plane started").Add({}).Set(stats.uptime_s);
   counter("mocapd_messages_received_total", "Messages received on the input socket").Add({}).Increment(static_cast<double>(stats.messages_in));
+  counter("mocapd_control_messages_total", "End-of-stream messages accepted").Add({}).Increment(static_cast<double>(stats.control_messages));
   counter("mocapd_reloads_total", "Configuration reloads applied").Add({}).Increment(static_cast<double>(stats.reloads));
   counter("mocapd_reload_failures_total", "Configuration reloads refused (invalid config)").Add({}).Increment(static_cast<double>(stats.reload_failures));
   counter("mocapd_output_send_failures_total", "Messages the PUB socket could not queue").Add({}).Increment(static_cast<double>(stats.output_send_failures));

@@ -158,6 +158,14 @@ void SubjectRunner::Resynchronise(OutputSink& sink) {
   ++counters_.restarts;
 }
 
+void SubjectRunner::EndOfStream(OutputSink& sink) {
+  Flush(sink);
+  pipeline_.Reset();
+  pushed_ = published_ = 0;
+  started_ = false;
+  ++counters_.ends_of_stream;
+}
+
 void SubjectRunner::Push(std::span<const Vec3> positions, const Stamp& stamp, int64_t receive_ns, OutputSink& sink) {
   stamps_[static_cast<size_t>(pushed_) % stamps_.size()] = stamp;
   ++pushed_;

@@ -64,6 +64,7 @@ struct SubjectCounters {
   std::array<uint64_t, kDropReasonCount> dropped{};
   uint64_t restarts = 0;  ///< Capture restarts and long jumps re-synchronised.
   uint64_t stalls = 0;    ///< Times the watchdog saw the input stall.
+  uint64_t ends_of_stream = 0;  ///< End-of-stream messages (not frames: outside the frame balance).
   LatencyHistogram processing;  ///< Receive of the frame that completed a publication -> its send.
   uint64_t last_frame_number = 0;
   uint64_t dropped_total() const;
@@ -85,6 +86,8 @@ class SubjectRunner {
   void CountDrop(DropReason reason);
   /// Publishes everything still held in the lookahead (shutdown, reload, restart).
   void Flush(OutputSink& sink);
+  /// The sender says the stream ended: publish the lookahead now; the next frame starts afresh.
+  void EndOfStream(OutputSink& sink);
   /// Marks the subject stalled if no input came for timeout_ns (publishing a status
   /// message once when it happens); returns true on that transition.
   bool CheckStall(int64_t now_ns, int64_t timeout_ns, OutputSink& sink);

@@ -15,6 +15,7 @@ MARKER_FRAME = 2
 SKELETON_FRAME = 3
 CLEANED_MARKERS = 4
 SUBJECT_STATUS = 5
+END_OF_STREAM = 6
 SUBJECT_STATES = ("tracking", "repairing", "lost", "stalled", "waiting")
 MARKER_STATUS = ("observed", "repaired", "unrecoverable")
 MASK_REASONS = ("none", "missing", "disagreement", "residual", "spike", "rigid_distance", "swap", "frozen",
@@ -180,12 +181,22 @@ def decode_subject_status(data):
             "frames_dropped": dropped}
 
 
+def decode_end_of_stream(data):
+    r = _check_type(data, END_OF_STREAM)
+    subject = r.subject()
+    (last_frame,) = r.take("<Q")
+    if r.offset != len(data):
+        raise ValueError("size_mismatch")
+    return {"subject": subject, "last_frame": last_frame}
+
+
 DECODERS = {
     SUBJECT_DESCRIPTION: ("subject_description", decode_subject_description),
     MARKER_FRAME: ("marker_frame", decode_marker_frame),
     SKELETON_FRAME: ("skeleton_frame", decode_skeleton_frame),
     CLEANED_MARKERS: ("cleaned_markers", decode_cleaned_markers),
     SUBJECT_STATUS: ("subject_status", decode_subject_status),
+    END_OF_STREAM: ("end_of_stream", decode_end_of_stream),
 }
 
 

@@ -11,6 +11,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   static mocapd::protocol::SubjectDescriptionMessage description;
   static mocapd::protocol::CleanedMarkersMessage cleaned;
   static mocapd::protocol::SubjectStatusMessage status;
+  static mocapd::protocol::EndOfStreamMessage end;
   const std::span<const uint8_t> bytes(data, size);
   mocapd::protocol::MessageType type;
   (void)mocapd::protocol::PeekType(bytes, &type);
@@ -19,5 +20,6 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   (void)mocapd::protocol::DecodeSubjectDescription(bytes, &description);
   (void)mocapd::protocol::DecodeCleanedMarkers(bytes, &cleaned);
   (void)mocapd::protocol::DecodeSubjectStatus(bytes, &status);
+  (void)mocapd::protocol::DecodeEndOfStream(bytes, &end);
   return 0;
 }

@@ -223,6 +223,22 @@ TEST(MessagesTest, CleanedMarkersRoundTripWithStatusAndReason) {
   EXPECT_EQ(DecodeCleanedMarkers(bytes, &dut), DecodeStatus::kBadField);
 }
 
+TEST(MessagesTest, EndOfStreamRoundTrips) {
+  EndOfStreamMessage m;
+  m.subject = "actor3";
+  m.last_frame_number = 4321;
+  std::vector<uint8_t> bytes;
+  EncodeEndOfStream(m, &bytes);
+  EXPECT_EQ(bytes.size(), kHeaderBytes + 1 + 6 + 8);
+  EndOfStreamMessage dut;
+  ASSERT_EQ(DecodeEndOfStream(bytes, &dut), DecodeStatus::kOk);
+  EXPECT_EQ(dut.subject, "actor3");
+  EXPECT_EQ(dut.last_frame_number, 4321u);
+  ExpectEveryTruncationRejected<EndOfStreamMessage>(bytes, DecodeEndOfStream);
+  MarkerFrameMessage other;
+  EXPECT_EQ(DecodeMarkerFrame(bytes, &other), DecodeStatus::kWrongType);
+}
+
 TEST(MessagesTest, SubjectStatusRoundTrips) {
   SubjectStatusMessage m;
   m.subject = "actor2";

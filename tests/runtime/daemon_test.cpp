@@ -343,6 +343,30 @@ TEST(DaemonTest, ShutdownPublishesEverythingTheLookaheadHolds) {
   EXPECT_TRUE(daemon->Stats().Balanced());
 }
 
+TEST(DaemonTest, EndOfStreamPublishesTheLookaheadAtOnceAndTheNextTakeStartsAfresh) {
+  const testing::HumanoidFixture f = testing::MakeHumanoidFixture("reach", 0.5, 120.0);
+  zmq::context_t context;
+  RunningDaemon daemon(context, TestConfig("inproc://eos-in", "inproc://eos-out", 30));
+  Sender sender(context, "inproc://eos-in", f.take, MakeHumanoidSubject("actor1"), zmq::socket_type::push);
+  auto end_of_stream = [&](uint64_t last) {
+    std::vector<uint8_t> bytes;
+    protocol::EncodeEndOfStream({"actor1", last}, &bytes);
+    sender.SendRaw(bytes);
+  };
+  for (int t = 0; t < 25; ++t) sender.Send(t, static_cast<uint64_t>(t));
+  end_of_stream(24);
+  EXPECT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) { return s.published_total() == 25; }));
+  // The same take again, numbered from 0: a new stream, not late frames.
+  for (int t = 0; t < 25; ++t) sender.Send(t, static_cast<uint64_t>(t));
+  end_of_stream(24);
+  EXPECT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) { return s.published_total() == 50; }));
+  const DaemonStats s = daemon->Stats();
+  EXPECT_EQ(s.dropped_total(), 0u);
+  EXPECT_EQ(s.subjects[0].counters.restarts, 0u);
+  EXPECT_EQ(s.control_messages, 2u);
+  EXPECT_TRUE(s.Balanced());
+}
+
 TEST(DaemonTest, ReloadKeepsUnchangedSubjectsRebuildsChangedOnesAndLosesNoFrame) {
   const testing::HumanoidFixture f = testing::MakeHumanoidFixture("walk", 2.0, 120.0);
   zmq::context_t context;
