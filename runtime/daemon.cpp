@@ -433,9 +433,11 @@ void Daemon::Run(bool handle_signals) {
   data_->Snapshot(true);
   data_->thread = std::thread([this] { data_->Loop(); });
 
+  // Handlers re-arm themselves through these, which live until Run returns.
+  std::function<void(const boost::system::error_code&, int)> on_signal;
   if (handle_signals) {
     cp.signals.emplace(cp.io, SIGINT, SIGTERM, SIGHUP);
-    std::function<void(const boost::system::error_code&, int)> on_signal = [this, &on_signal](const boost::system::error_code& ec, int sig) {
+    on_signal = [this, &on_signal](const boost::system::error_code& ec, int sig) {
       if (ec) return;
       if (sig == SIGHUP) {
         spdlog::info("SIGHUP: reloading {}", config_path_);

@@ -1,17 +1,21 @@
 // mocap-sim: the replay simulator's command line. Subcommands:
 //   info   summarise a C3D or BVH take
 //   synth  place a virtual marker set on a BVH (or the built-in humanoid) and write the marker take
+//   replay publish a take's marker frames to the daemon in real time and measure what comes back
 #include <CLI/CLI.hpp>
 #include <exception>
 #include <iostream>
 #include <nlohmann/json.hpp>
 #include <fstream>
 #include <random>
+#include <atomic>
+#include <csignal>
 
 #include "sim/bvh.hpp"
 #include "sim/c3d.hpp"
 #include "sim/corruption.hpp"
 #include "sim/humanoid.hpp"
+#include "sim/replay.hpp"
 #include "sim/marker_layout.hpp"
 #include "sim/subject_file.hpp"
 #include "sim/synthesis.hpp"
@@ -90,6 +94,66 @@ int RunSynth(const SynthOptions& o) {
   return 0;
 }
 
+struct ReplayCommand {
+  std::string take;
+  std::string humanoid;
+  double seconds = 30.0;
+  double synth_rate_hz = 120.0;
+  double noise_mm = 0.5;
+  std::string subject;
+  std::string bvh_units;
+  std::string rate = "realtime";
+  std::string report;
+  std::string plot;
+  mocapd::ReplayOptions options;
+};
+
+std::atomic<bool> g_stop{false};
+
+int RunReplayCommand(ReplayCommand& c) {
+  mocapd::ReplaySource source;
+  if (!c.take.empty() && !c.humanoid.empty()) throw std::invalid_argument("replay: give a TAKE file or --humanoid, not both");
+  if (c.take.empty()) {
+    source = mocapd::HumanoidReplaySource(c.humanoid.empty() ? "mixed" : c.humanoid, c.seconds, c.synth_rate_hz, c.noise_mm, c.options.seed);
+  } else if (c.take.size() > 4 && c.take.substr(c.take.size() - 4) == ".bvh") {
+    source = mocapd::BvhReplaySource(c.take, c.synth_rate_hz, c.bvh_units);
+  } else {
+    source = mocapd::C3dReplaySource(c.take, c.subject);
+  }
+  if (c.rate == "realtime") c.options.rate_hz = 0.0;
+  else if (c.rate == "max") c.options.rate_hz = -1.0;
+  else {
+    try {
+      c.options.rate_hz = std::stod(c.rate);
+    } catch (const std::exception&) {
+      throw std::invalid_argument("replay: --rate must be realtime, max or a rate in Hz, got '" + c.rate + "'");
+    }
+    if (!(c.options.rate_hz > 0 && c.options.rate_hz <= 100000)) throw std::invalid_argument("replay: --rate out of range: " + c.rate);
+  }
+  c.options.stop = &g_stop;
+  c.options.on_status = [](const std::string& line) { std::cout << "  " << line << "\n" << std::flush; };
+  std::signal(SIGINT, [](int) { g_stop = true; });
+  std::signal(SIGTERM, [](int) { g_stop = true; });
+  std::cout << "replaying " << source.description << " to " << c.options.to << " (" << c.options.subjects << " subject(s), "
+            << c.options.loops << " loop(s), " << (c.options.corrupt.empty() ? "clean" : c.options.corrupt + " corruption") << ")\n"
+            << std::flush;
+  const mocapd::ReplayReport report = mocapd::RunReplay(source, c.options);
+  std::cout << "\n" << report.FormatTable();
+  if (!c.report.empty()) {
+    std::ofstream out(c.report);
+    out << report.ToJson().dump(2) << "\n";
+    if (!out) throw std::runtime_error(c.report + ": cannot write");
+    std::cout << "wrote " << c.report << "\n";
+  }
+  if (!c.plot.empty()) {
+    std::ofstream out(c.plot);
+    out << mocapd::LatencyHistogramSvg(report.processing_ms, "mocapd processing latency, " + std::to_string(report.processing.count) + " frames");
+    if (!out) throw std::runtime_error(c.plot + ": cannot write");
+    std::cout << "wrote " << c.plot << "\n";
+  }
+  return report.frames_lost == 0 || c.options.from.empty() ? 0 : 2;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -122,6 +186,35 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({"light", "medium", "heavy"}));
   synth_cmd->add_option("--truth", synth.truth_mask, "With --corrupt: write the ground-truth corruption mask (JSON)");
 
+  ReplayCommand replay;
+  CLI::App* replay_cmd = app.add_subcommand("replay", "Publish a take's marker frames to the daemon and measure latency and accuracy");
+  replay_cmd->add_option("TAKE", replay.take, "Take to replay: .c3d (recorded markers) or .bvh (markers synthesized); default: --humanoid")
+      ->check(CLI::ExistingFile);
+  replay_cmd->add_option("--humanoid", replay.humanoid, "Replay the built-in humanoid: walk | reach | turn | mixed")
+      ->check(CLI::IsMember({"walk", "reach", "turn", "mixed"}));
+  replay_cmd->add_option("--seconds", replay.seconds, "Length of the built-in humanoid's take")->check(CLI::Range(0.1, 3600.0))->capture_default_str();
+  replay_cmd->add_option("--synth-rate", replay.synth_rate_hz, "Rate markers are synthesized at (humanoid, BVH), Hz")
+      ->check(CLI::Range(1.0, 2000.0))
+      ->capture_default_str();
+  replay_cmd->add_option("--noise-mm", replay.noise_mm, "Marker noise of the built-in humanoid's take (sigma)")->check(CLI::Range(0.0, 100.0))->capture_default_str();
+  replay_cmd->add_option("--subject", replay.subject, "Subject model giving a C3D's marker order (default: the built-in humanoid)")
+      ->check(CLI::ExistingFile);
+  replay_cmd->add_option("--bvh-units", replay.bvh_units, "BVH length unit: mm, cm, m or in (default: guess)");
+  replay_cmd->add_option("--to", replay.options.to, "Endpoint for marker frames (PUB binds; with --push, connects)")->capture_default_str();
+  replay_cmd->add_flag("--push", replay.options.push, "PUSH to a daemon whose input is a PULL socket");
+  replay_cmd->add_option("--from", replay.options.from, "The daemon's output endpoint to measure (\"\" to not listen)")->capture_default_str();
+  replay_cmd->add_option("--rate", replay.rate, "realtime (the take's rate) | max | HZ")->capture_default_str();
+  replay_cmd->add_option("--corrupt", replay.options.corrupt, "Corrupt each actor's copy: light | medium | heavy")
+      ->check(CLI::IsMember({"light", "medium", "heavy"}));
+  replay_cmd->add_option("--seed", replay.options.seed, "Corruption (and noise) seed; actor k uses seed + k")->capture_default_str();
+  replay_cmd->add_option("--subjects", replay.options.subjects, "Actors at once (actor1 .. actorN, 2.5 m apart)")->check(CLI::Range(1, 64))->capture_default_str();
+  replay_cmd->add_option("--subject-prefix", replay.options.subject_prefix, "Actor names are PREFIX1 .. PREFIXN")->capture_default_str();
+  replay_cmd->add_option("--loop", replay.options.loops, "Play the take this many times")->check(CLI::Range(1, 100000))->capture_default_str();
+  replay_cmd->add_option("--report", replay.report, "Write the report as JSON");
+  replay_cmd->add_option("--plot", replay.plot, "Write a processing-latency histogram (SVG)");
+  replay_cmd->add_option("--connect-timeout", replay.options.connect_timeout_s, "Seconds to wait for the daemon")->capture_default_str();
+  replay_cmd->add_option("--drain-timeout", replay.options.drain_timeout_s, "Seconds to wait for the last skeletons")->capture_default_str();
+
   CLI11_PARSE(app, argc, argv);
   try {
     if (*info) {
@@ -134,6 +227,7 @@ int main(int argc, char** argv) {
       if (synth.bvh.empty() && synth.humanoid_motion.empty()) throw std::invalid_argument("synth needs --bvh FILE or --humanoid MOTION");
       return RunSynth(synth);
     }
+    if (*replay_cmd) return RunReplayCommand(replay);
   } catch (const std::exception& e) {
     std::cerr << "mocap-sim: error: " << e.what() << "\n";
     return 1;

@@ -1,5 +1,6 @@
 """Reference decoder for the mocapd wire protocol, version 1 (see protocol/README.md): every
-message type the daemon sends or receives.
+message type the daemon sends or receives; plus encoders for what a capture bridge sends
+(marker frames, end of stream).
 
 Standard library only. Every decode function raises ValueError naming the problem
 (the same status names as the C++ decoder) for a malformed message.
@@ -207,3 +208,38 @@ def decode(data):
         raise ValueError("wrong_type")
     kind, decoder = DECODERS[msg_type]
     return kind, decoder(data)
+
+
+def names_hash(names):
+    """The model hash: 64-bit FNV-1a over the names in order, each followed by a zero byte."""
+    h = 1469598103934665603
+    for name in names:
+        for byte in name.encode("utf-8") + b"\0":
+            h ^= byte
+            h = (h * 1099511628211) & 0xFFFFFFFFFFFFFFFF
+    return h
+
+
+def _message(msg_type, payload):
+    return HEADER.pack(MAGIC, VERSION, msg_type, len(payload), 0) + payload
+
+
+def _name(name):
+    raw = name.encode("utf-8")
+    if not 1 <= len(raw) <= 63:
+        raise ValueError("names must be 1..63 bytes")
+    return struct.pack("<B", len(raw)) + raw
+
+
+def encode_marker_frame(subject, model_hash, frame, capture_time_ns, rate_hz, markers):
+    """markers: a list, in the subject's marker order, of (x, y, z) in metres or None (missing)."""
+    if len(markers) > MAX_MARKERS:
+        raise ValueError("too_many_items")
+    body = [_name(subject), struct.pack("<QQQfHH", model_hash, frame, capture_time_ns, rate_hz, len(markers), 0)]
+    for m in markers:
+        body.append(struct.pack("<fffB", 0.0, 0.0, 0.0, 0) if m is None else struct.pack("<fffB", m[0], m[1], m[2], 1))
+    return _message(MARKER_FRAME, b"".join(body))
+
+
+def encode_end_of_stream(subject, last_frame):
+    return _message(END_OF_STREAM, _name(subject) + struct.pack("<Q", last_frame))

@@ -58,6 +58,13 @@ def main(directory):
     expect_error(read(directory, "marker_frame_truncated.bin"), "too_short")
     expect_error(read(directory, "bad_magic.bin"), "bad_magic")
     expect_error(b"", "too_short")
+    # The encoders write what the C++ encoder writes, byte for byte.
+    assert mocapd_protocol.names_hash(["LASI", "RASI", "LKNE"]) == m["model_hash"]
+    encoded = mocapd_protocol.encode_marker_frame("actor1", m["model_hash"], 1234, 987654321, 120.0,
+                                                  [(0.5, 1.25, -0.75), None, (-1.5, 0.0, 2.0)])
+    assert encoded == read(directory, "marker_frame.bin")
+    eos = mocapd_protocol.decode(mocapd_protocol.encode_end_of_stream("actor1", 77))
+    assert eos == ("end_of_stream", {"subject": "actor1", "last_frame": 77})
     print("1 passed, 0 failed")
 
 

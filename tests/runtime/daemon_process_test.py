@@ -1,0 +1,141 @@
+"""`mocapd run` as a process, end to end over tcp loopback: the replay simulator feeds a
+corrupted take, the Python example subscriber decodes the live stream, SIGHUP reloads
+(a broken config is refused and the daemon goes on), /metrics parses as Prometheus text
+with a real parser, and SIGTERM flushes everything with every frame accounted for.
+
+usage: daemon_process_test.py MOCAPD MOCAP_SIM CONFIG_DIR WORK_DIR
+"""
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+
+from prometheus_client.parser import text_string_to_metric_families
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+SUBSCRIBER = os.path.join(HERE, "..", "..", "protocol", "python", "example_subscriber.py")
+
+
+def free_ports(n):
+    sockets = [socket.socket() for _ in range(n)]
+    for s in sockets:
+        s.bind(("127.0.0.1", 0))
+    ports = [s.getsockname()[1] for s in sockets]
+    for s in sockets:
+        s.close()
+    return ports
+
+
+def write_config(path, ports, model, lookahead):
+    with open(path, "w") as f:
+        f.write(f"""format_version = 1
+[input]
+endpoint = "tcp://127.0.0.1:{ports[0]}"
+[output]
+endpoint = "tcp://127.0.0.1:{ports[1]}"
+[control]
+http_port = {ports[2]}
+stats_interval_s = 0.2
+[pipeline]
+lookahead = {lookahead}
+[[subject]]
+name = "actor1"
+model = "{model}"
+""")
+
+
+def get(port, path):
+    with urllib.request.urlopen(f"http://127.0.0.1:{port}{path}", timeout=5) as r:
+        return r.status, r.read().decode()
+
+
+def metrics(port):
+    _, text = get(port, "/metrics")
+    values = {}
+    for family in text_string_to_metric_families(text):
+        for sample in family.samples:
+            values[(sample.name, tuple(sorted(sample.labels.items())))] = sample.value
+    return values
+
+
+def main(mocapd, mocap_sim, config_dir, work):
+    os.makedirs(work, exist_ok=True)
+    ports = free_ports(3)
+    config = os.path.join(work, "mocapd.toml")
+    model = os.path.abspath(os.path.join(config_dir, "demo_subject.toml"))
+    write_config(config, ports, model, 12)
+    log = open(os.path.join(work, "mocapd.log"), "w+")
+    daemon = subprocess.Popen([mocapd, "run", "--config", config], stdout=log, stderr=subprocess.STDOUT)
+    try:
+        for _ in range(200):
+            assert daemon.poll() is None, "the daemon exited at start-up"
+            try:
+                if get(ports[2], "/health")[0] == 200:
+                    break
+            except OSError:
+                time.sleep(0.05)
+        else:
+            raise AssertionError("the daemon's /health never answered")
+
+        subscriber = subprocess.Popen([sys.executable, SUBSCRIBER, "--endpoint", f"tcp://127.0.0.1:{ports[1]}",
+                                       "--subject", "actor1", "--frames", "600", "--timeout", "60"],
+                                      stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        time.sleep(0.5)  # let the subscription reach the daemon's PUB
+        report = os.path.join(work, "replay.json")
+        replay = subprocess.Popen([mocap_sim, "replay", "--humanoid", "walk", "--seconds", "5", "--corrupt", "medium",
+                                   "--to", f"tcp://127.0.0.1:{ports[0]}", "--from", f"tcp://127.0.0.1:{ports[1]}",
+                                   "--report", report], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        time.sleep(1.5)
+        # A reload mid-stream with the same subject: nothing may be lost or re-timed.
+        daemon.send_signal(signal.SIGHUP)
+        time.sleep(0.5)
+        # A broken config is refused; the daemon keeps running the old one.
+        with open(config, "a") as f:
+            f.write("bogus_field = 1\n")
+        daemon.send_signal(signal.SIGHUP)
+        out, _ = replay.communicate(timeout=60)
+        print(out)
+        assert replay.returncode == 0, f"replay failed: {replay.returncode}"
+        with open(report) as f:
+            r = json.load(f)
+        assert r["frames_sent"] == 600 and r["frames_received"] == 600 and r["frames_lost"] == 0, r
+        assert r["accuracy"]["mean_joint_position_error_cm"] < 2.0, r["accuracy"]
+
+        sub_out, _ = subscriber.communicate(timeout=60)
+        print(sub_out)
+        assert subscriber.returncode == 0, "the example subscriber did not decode the stream"
+        assert "summary: actor1: 600 skeleton frames, frames 0..599, 0 discontinuities, 21 joints described" in sub_out, sub_out
+
+        m = metrics(ports[2])
+        actor = (("subject", "actor1"),)
+        assert m[("mocapd_frames_published_total", actor)] == 600, m
+        assert m[("mocapd_messages_received_total", ())] == 601  # 600 frames + end of stream
+        assert m[("mocapd_reloads_total", ())] == 1
+        assert m[("mocapd_reload_failures_total", ())] == 1
+        dropped = sum(v for (name, _), v in m.items() if name == "mocapd_frames_dropped_total")
+        assert dropped == 0, dropped
+        assert m[("mocapd_processing_latency_seconds_count", actor)] > 0
+        status, health = get(ports[2], "/health")
+        assert status == 200 and json.loads(health)["accounted"] is True, health
+        subjects = json.loads(get(ports[2], "/subjects")[1])
+        assert subjects[0]["name"] == "actor1" and subjects[0]["frames_published"] == 600, subjects
+
+        daemon.send_signal(signal.SIGTERM)
+        assert daemon.wait(timeout=30) == 0, "the daemon exited with an error"
+    finally:
+        if daemon.poll() is None:
+            daemon.kill()
+        log.seek(0)
+        text = log.read()
+        print(text)
+    assert "reload failed, keeping the running config" in text and "bogus_field" in text, "the broken reload was not reported"
+    assert "every frame accounted for" in text
+    print("daemon process test passed")
+
+
+if __name__ == "__main__":
+    main(*sys.argv[1:5])
