@@ -3,7 +3,7 @@
 # Idempotent; needs root (or sudo). Nothing else is downloaded.
 set -euo pipefail
 packages=(
-  build-essential cmake ninja-build g++ pkg-config
+  build-essential cmake ninja-build g++ pkg-config curl
   libeigen3-dev libzmq3-dev cppzmq-dev libboost-dev
   libspdlog-dev libfmt-dev libcli11-dev libtomlplusplus-dev nlohmann-json3-dev prometheus-cpp-dev
   libgtest-dev libgmock-dev libbenchmark-dev

@@ -188,6 +188,8 @@ int main(int argc, char** argv) {
 
   ReplayCommand replay;
   CLI::App* replay_cmd = app.add_subcommand("replay", "Publish a take's marker frames to the daemon and measure latency and accuracy");
+  // Scripts pass defaults that a user's later arguments override.
+  replay_cmd->option_defaults()->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);
   replay_cmd->add_option("TAKE", replay.take, "Take to replay: .c3d (recorded markers) or .bvh (markers synthesized); default: --humanoid")
       ->check(CLI::ExistingFile);
   replay_cmd->add_option("--humanoid", replay.humanoid, "Replay the built-in humanoid: walk | reach | turn | mixed")

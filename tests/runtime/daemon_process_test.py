@@ -8,49 +8,16 @@ usage: daemon_process_test.py MOCAPD MOCAP_SIM CONFIG_DIR WORK_DIR
 import json
 import os
 import signal
-import socket
 import subprocess
 import sys
 import time
-import urllib.request
 
 from prometheus_client.parser import text_string_to_metric_families
 
+from daemon_harness import Daemon, http_get as get
+
 HERE = os.path.dirname(os.path.abspath(__file__))
 SUBSCRIBER = os.path.join(HERE, "..", "..", "protocol", "python", "example_subscriber.py")
-
-
-def free_ports(n):
-    sockets = [socket.socket() for _ in range(n)]
-    for s in sockets:
-        s.bind(("127.0.0.1", 0))
-    ports = [s.getsockname()[1] for s in sockets]
-    for s in sockets:
-        s.close()
-    return ports
-
-
-def write_config(path, ports, model, lookahead):
-    with open(path, "w") as f:
-        f.write(f"""format_version = 1
-[input]
-endpoint = "tcp://127.0.0.1:{ports[0]}"
-[output]
-endpoint = "tcp://127.0.0.1:{ports[1]}"
-[control]
-http_port = {ports[2]}
-stats_interval_s = 0.2
-[pipeline]
-lookahead = {lookahead}
-[[subject]]
-name = "actor1"
-model = "{model}"
-""")
-
-
-def get(port, path):
-    with urllib.request.urlopen(f"http://127.0.0.1:{port}{path}", timeout=5) as r:
-        return r.status, r.read().decode()
 
 
 def metrics(port):
@@ -63,24 +30,11 @@ def metrics(port):
 
 
 def main(mocapd, mocap_sim, config_dir, work):
-    os.makedirs(work, exist_ok=True)
-    ports = free_ports(3)
-    config = os.path.join(work, "mocapd.toml")
-    model = os.path.abspath(os.path.join(config_dir, "demo_subject.toml"))
-    write_config(config, ports, model, 12)
-    log = open(os.path.join(work, "mocapd.log"), "w+")
-    daemon = subprocess.Popen([mocapd, "run", "--config", config], stdout=log, stderr=subprocess.STDOUT)
+    d = Daemon(mocapd, config_dir, work)
+    ports = [d.input_port, d.output_port, d.http_port]
+    config = d.config
+    daemon = d.process
     try:
-        for _ in range(200):
-            assert daemon.poll() is None, "the daemon exited at start-up"
-            try:
-                if get(ports[2], "/health")[0] == 200:
-                    break
-            except OSError:
-                time.sleep(0.05)
-        else:
-            raise AssertionError("the daemon's /health never answered")
-
         subscriber = subprocess.Popen([sys.executable, SUBSCRIBER, "--endpoint", f"tcp://127.0.0.1:{ports[1]}",
                                        "--subject", "actor1", "--frames", "600", "--timeout", "60"],
                                       stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
@@ -124,13 +78,11 @@ def main(mocapd, mocap_sim, config_dir, work):
         subjects = json.loads(get(ports[2], "/subjects")[1])
         assert subjects[0]["name"] == "actor1" and subjects[0]["frames_published"] == 600, subjects
 
-        daemon.send_signal(signal.SIGTERM)
-        assert daemon.wait(timeout=30) == 0, "the daemon exited with an error"
+        assert d.stop() == 0, "the daemon exited with an error"
     finally:
         if daemon.poll() is None:
             daemon.kill()
-        log.seek(0)
-        text = log.read()
+        text = d.read_log()
         print(text)
     assert "reload failed, keeping the running config" in text and "bogus_field" in text, "the broken reload was not reported"
     assert "every frame accounted for" in text

@@ -1,0 +1,68 @@
+"""Shared by the Python tests that run `mocapd run` as a process: free ports, a config
+on them, start-up and shutdown."""
+import os
+import signal
+import socket
+import subprocess
+import time
+import urllib.request
+
+
+def free_ports(n):
+    sockets = [socket.socket() for _ in range(n)]
+    for s in sockets:
+        s.bind(("127.0.0.1", 0))
+    ports = [s.getsockname()[1] for s in sockets]
+    for s in sockets:
+        s.close()
+    return ports
+
+
+def http_get(port, path):
+    with urllib.request.urlopen(f"http://127.0.0.1:{port}{path}", timeout=5) as r:
+        return r.status, r.read().decode()
+
+
+class Daemon:
+    """`mocapd run` on fresh loopback ports with the demo subject; logs to WORK/mocapd.log."""
+
+    def __init__(self, mocapd, config_dir, work, lookahead=12, subjects=("actor1",), rate_hz=120.0):
+        os.makedirs(work, exist_ok=True)
+        self.input_port, self.output_port, self.http_port = free_ports(3)
+        self.input = f"tcp://127.0.0.1:{self.input_port}"
+        self.output = f"tcp://127.0.0.1:{self.output_port}"
+        self.config = os.path.join(work, "mocapd.toml")
+        model = os.path.abspath(os.path.join(config_dir, "demo_subject.toml"))
+        with open(self.config, "w") as f:
+            f.write(f"format_version = 1\n[input]\nendpoint = \"{self.input}\"\n[output]\nendpoint = \"{self.output}\"\n"
+                    f"[control]\nhttp_port = {self.http_port}\nstats_interval_s = 0.2\n[pipeline]\nlookahead = {lookahead}\n")
+            for name in subjects:
+                f.write(f"[[subject]]\nname = \"{name}\"\nmodel = \"{model}\"\nrate_hz = {rate_hz}\n")
+        self.log = open(os.path.join(work, "mocapd.log"), "w+")
+        self.process = subprocess.Popen([mocapd, "run", "--config", self.config], stdout=self.log, stderr=subprocess.STDOUT)
+        for _ in range(200):
+            assert self.process.poll() is None, "the daemon exited at start-up:\n" + self.read_log()
+            try:
+                if http_get(self.http_port, "/health")[0] == 200:
+                    return
+            except OSError:
+                time.sleep(0.05)
+        raise AssertionError("the daemon's /health never answered")
+
+    def signal(self, sig):
+        self.process.send_signal(sig)
+
+    def stop(self):
+        """SIGTERM; returns the exit code (0: every frame accounted for)."""
+        if self.process.poll() is None:
+            self.process.send_signal(signal.SIGTERM)
+        try:
+            return self.process.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            self.process.kill()
+            raise
+
+    def read_log(self):
+        self.log.flush()
+        self.log.seek(0)
+        return self.log.read()
