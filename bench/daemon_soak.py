@@ -1,0 +1,142 @@
+#!/usr/bin/env python3
+"""Soak and load runs of the daemon as a process: N actors at a rate for a duration,
+fed by `mocap-sim replay` (built-in humanoid, medium corruption) over tcp loopback.
+Samples the daemon's CPU and resident memory every few seconds from /proc, reads its
+/metrics at the end, and checks that frames in = frames out + counted drops.
+
+    bench/daemon_soak.py --subjects 4 --rate 240 --seconds 600        # the 10-minute soak
+    bench/daemon_soak.py --load --rate 240 --seconds 60               # largest N with p99 < 1 ms, no drops
+
+Prints a table per run and writes JSON with --report.
+"""
+import argparse
+import json
+import os
+import subprocess
+import sys
+import threading
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(HERE)
+sys.path.insert(0, os.path.join(ROOT, "tests", "runtime"))
+from daemon_harness import Daemon, http_get  # noqa: E402
+
+CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
+PAGE = os.sysconf("SC_PAGE_SIZE")
+
+
+def proc_sample(pid):
+    with open(f"/proc/{pid}/stat") as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    cpu_s = (int(fields[11]) + int(fields[12])) / CLOCK_TICKS  # utime + stime
+    with open(f"/proc/{pid}/statm") as f:
+        rss = int(f.read().split()[1]) * PAGE
+    return cpu_s, rss
+
+
+def metric_sum(text, name):
+    total = 0.0
+    for line in text.splitlines():
+        if line.startswith(name + "{") or line.startswith(name + " "):
+            total += float(line.rsplit(" ", 1)[1])
+    return total
+
+
+def run(args, subjects, seconds, work):
+    names = [f"actor{k + 1}" for k in range(subjects)]
+    daemon = Daemon(args.mocapd, os.path.join(ROOT, "config"), work, lookahead=args.lookahead, subjects=names, rate_hz=args.rate)
+    samples = []
+    stop = threading.Event()
+
+    def sampler():
+        start = time.monotonic()
+        while not stop.wait(args.sample_s):
+            samples.append((time.monotonic() - start, *proc_sample(daemon.process.pid)))
+
+    thread = threading.Thread(target=sampler)
+    thread.start()
+    take_seconds = min(seconds, 60.0)
+    loops = max(1, round(seconds / take_seconds))
+    report_path = os.path.join(work, "replay.json")
+    try:
+        replay = subprocess.run([args.mocap_sim, "replay", "--humanoid", "mixed", "--seconds", str(take_seconds), "--synth-rate", str(args.rate),
+                                 "--loop", str(loops), "--subjects", str(subjects), "--corrupt", "medium", "--to", daemon.input,
+                                 "--from", daemon.output, "--report", report_path, "--plot", os.path.join(work, "latency.svg")],
+                                capture_output=True, text=True)
+        stop.set()
+        thread.join()
+        if replay.returncode not in (0, 2):
+            raise RuntimeError(replay.stdout + replay.stderr)
+        time.sleep(0.2)  # the daemon's statistics snapshot is refreshed every 20 ms
+        metrics = http_get(daemon.http_port, "/metrics")[1]
+    finally:
+        stop.set()
+        code = daemon.stop()
+    with open(report_path) as f:
+        r = json.load(f)
+    received = metric_sum(metrics, "mocapd_messages_received_total")
+    published = metric_sum(metrics, "mocapd_frames_published_total")
+    dropped = metric_sum(metrics, "mocapd_frames_dropped_total")
+    control = metric_sum(metrics, "mocapd_control_messages_total")
+    pending = metric_sum(metrics, "mocapd_frames_pending")
+    cpu = [(samples[i + 1][1] - samples[i][1]) / (samples[i + 1][0] - samples[i][0]) * 100 for i in range(len(samples) - 1)]
+    rss_mb = [s[2] / 1e6 for s in samples]
+    quarter = max(1, len(rss_mb) // 4)
+    result = {
+        "subjects": subjects, "rate_hz": args.rate, "seconds": seconds, "lookahead": args.lookahead,
+        "frames_sent": r["frames_sent"], "frames_received_by_replay": r["frames_received"], "frames_lost": r["frames_lost"],
+        "daemon_messages_in": received, "daemon_frames_published": published, "daemon_dropped": dropped,
+        "daemon_control_messages": control, "daemon_pending": pending,
+        "balanced": received == published + dropped + pending + control, "daemon_exit_code": code,
+        "processing_latency": r["processing_latency"], "end_to_end_latency": r["end_to_end_latency"],
+        "accuracy": r.get("accuracy"),
+        "daemon_cpu_percent_mean": sum(cpu) / len(cpu) if cpu else None,
+        "daemon_rss_mb_first_quarter": sum(rss_mb[:quarter]) / quarter if rss_mb else None,
+        "daemon_rss_mb_last_quarter": sum(rss_mb[-quarter:]) / quarter if rss_mb else None,
+        "daemon_rss_mb_max": max(rss_mb) if rss_mb else None,
+    }
+    p = r["processing_latency"]
+    print(f"N={subjects} @ {args.rate:.0f} Hz, {seconds:.0f} s: sent {r['frames_sent']}, received {r['frames_received']}, lost {r['frames_lost']}; "
+          f"daemon in {received:.0f} = published {published:.0f} + dropped {dropped:.0f} + pending {pending:.0f} + control {control:.0f} "
+          f"({'balanced' if result['balanced'] else 'UNBALANCED'}), exit {code}; processing p50 {p['p50_ms']:.3f} p99 {p['p99_ms']:.3f} "
+          f"p99.9 {p['p99.9_ms']:.3f} max {p['max_ms']:.3f} ms; CPU {result['daemon_cpu_percent_mean'] or 0:.0f} %; "
+          f"RSS {result['daemon_rss_mb_first_quarter'] or 0:.1f} -> {result['daemon_rss_mb_last_quarter'] or 0:.1f} MB", flush=True)
+    return result
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--mocapd", default=os.path.join(ROOT, "build", "release", "runtime", "mocapd"))
+    parser.add_argument("--mocap-sim", dest="mocap_sim", default=os.path.join(ROOT, "build", "release", "sim", "mocap-sim"))
+    parser.add_argument("--subjects", type=int, default=4)
+    parser.add_argument("--rate", type=float, default=240.0)
+    parser.add_argument("--seconds", type=float, default=600.0)
+    parser.add_argument("--lookahead", type=int, default=12)
+    parser.add_argument("--sample-s", dest="sample_s", type=float, default=5.0)
+    parser.add_argument("--load", action="store_true", help="increase N until p99 processing >= 1 ms or a frame is lost")
+    parser.add_argument("--work", default=os.path.join(ROOT, "build", "soak"))
+    parser.add_argument("--report", default="")
+    args = parser.parse_args()
+    results = []
+    if args.load:
+        n = 1
+        while True:
+            res = run(args, n, args.seconds, os.path.join(args.work, f"n{n}"))
+            results.append(res)
+            ok = res["processing_latency"]["p99_ms"] < 1.0 and res["frames_lost"] == 0 and res["daemon_dropped"] == 0
+            if not ok or n >= 32:
+                break
+            n += 1
+        passing = [r["subjects"] for r in results if r["processing_latency"]["p99_ms"] < 1.0 and r["frames_lost"] == 0 and r["daemon_dropped"] == 0]
+        print(f"largest N with p99 processing < 1 ms and no loss at {args.rate:.0f} Hz: {max(passing) if passing else 0}")
+    else:
+        results.append(run(args, args.subjects, args.seconds, args.work))
+    if args.report:
+        with open(args.report, "w") as f:
+            json.dump(results, f, indent=2)
+    return 0 if all(r["balanced"] and r["daemon_exit_code"] == 0 for r in results) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
