@@ -367,6 +367,31 @@ TEST(DaemonTest, EndOfStreamPublishesTheLookaheadAtOnceAndTheNextTakeStartsAfres
   EXPECT_TRUE(s.Balanced());
 }
 
+TEST(DaemonTest, ACaptureRestartAndLostFramesKeepEveryFrameAccountedFor) {
+  const testing::HumanoidFixture f = testing::MakeHumanoidFixture("walk", 1.0, 120.0);
+  zmq::context_t context;
+  RunningDaemon daemon(context, TestConfig("inproc://restart-in", "inproc://restart-out", 6));
+  Subscriber sub(context, "inproc://restart-out");
+  ASSERT_TRUE(sub.WaitConnected());
+  Sender sender(context, "inproc://restart-in", f.take, MakeHumanoidSubject("actor1"), zmq::socket_type::push);
+  // Frames 5000..5059 with 5020..5024 lost on the way, then the capture restarts at 0.
+  for (int t = 0; t < 60; ++t)
+    if (t < 20 || t >= 25) sender.Send(t, 5000 + static_cast<uint64_t>(t));
+  for (int t = 0; t < 40; ++t) sender.Send(60 + t, static_cast<uint64_t>(t));
+  ASSERT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) { return s.messages_in == 95; }));
+  daemon.Stop();
+  const DaemonStats s = daemon->Stats();
+  EXPECT_TRUE(s.Balanced());
+  EXPECT_EQ(s.published_total(), 95u);
+  EXPECT_EQ(s.subjects[0].counters.frames_inserted, 5u);
+  EXPECT_EQ(s.subjects[0].counters.restarts, 1u);
+  ASSERT_TRUE(sub.WaitFor([&] { return sub.skeletons["actor1"].size() == 100; }));
+  std::lock_guard lock(sub.mutex);
+  const auto& out = sub.skeletons["actor1"];
+  for (size_t k = 0; k < 60; ++k) EXPECT_EQ(out[k].frame_number, 5000 + k);  // the lost ones filled in
+  for (size_t k = 60; k < 100; ++k) EXPECT_EQ(out[k].frame_number, k - 60);
+}
+
 TEST(DaemonTest, ReloadKeepsUnchangedSubjectsRebuildsChangedOnesAndLosesNoFrame) {
   const testing::HumanoidFixture f = testing::MakeHumanoidFixture("walk", 2.0, 120.0);
   zmq::context_t context;
