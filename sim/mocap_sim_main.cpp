@@ -1,7 +1,8 @@
 // mocap-sim: the replay simulator's command line. Subcommands:
 //   info   summarise a C3D or BVH take
 //   synth  place a virtual marker set on a BVH (or the built-in humanoid) and write the marker take
-//   replay publish a take's marker frames to the daemon in real time and measure what comes back
+//   replay publish a take's (or a recording's) marker frames to the daemon in real time and measure what comes back
+//   record subscribe to a capture publisher and record its stream with timing
 #include <CLI/CLI.hpp>
 #include <exception>
 #include <iostream>
@@ -15,6 +16,7 @@
 #include "sim/c3d.hpp"
 #include "sim/corruption.hpp"
 #include "sim/humanoid.hpp"
+#include "sim/recording.hpp"
 #include "sim/replay.hpp"
 #include "sim/marker_layout.hpp"
 #include "sim/subject_file.hpp"
@@ -113,7 +115,12 @@ std::atomic<bool> g_stop{false};
 int RunReplayCommand(ReplayCommand& c) {
   mocapd::ReplaySource source;
   if (!c.take.empty() && !c.humanoid.empty()) throw std::invalid_argument("replay: give a TAKE file or --humanoid, not both");
-  if (c.take.empty()) {
+  const bool recording = !c.take.empty() && mocapd::IsRecordingFile(c.take);
+  if (recording) {
+    if (c.rate != "realtime" && c.rate != "max") throw std::invalid_argument("replay: a recording plays at --rate realtime (its own timing) or max");
+    if (!c.options.corrupt.empty() || c.options.subjects != 1 || c.options.loops != 1)
+      throw std::invalid_argument("replay: --corrupt, --subjects and --loop apply to takes, not recordings");
+  } else if (c.take.empty()) {
     source = mocapd::HumanoidReplaySource(c.humanoid.empty() ? "mixed" : c.humanoid, c.seconds, c.synth_rate_hz, c.noise_mm, c.options.seed);
   } else if (c.take.size() > 4 && c.take.substr(c.take.size() - 4) == ".bvh") {
     source = mocapd::BvhReplaySource(c.take, c.synth_rate_hz, c.bvh_units);
@@ -134,10 +141,20 @@ int RunReplayCommand(ReplayCommand& c) {
   c.options.on_status = [](const std::string& line) { std::cout << "  " << line << "\n" << std::flush; };
   std::signal(SIGINT, [](int) { g_stop = true; });
   std::signal(SIGTERM, [](int) { g_stop = true; });
-  std::cout << "replaying " << source.description << " to " << c.options.to << " (" << c.options.subjects << " subject(s), "
+  if (!recording)
+    std::cout << "replaying " << source.description << " to " << c.options.to << " (" << c.options.subjects << " subject(s), "
             << c.options.loops << " loop(s), " << (c.options.corrupt.empty() ? "clean" : c.options.corrupt + " corruption") << ")\n"
             << std::flush;
-  const mocapd::ReplayReport report = mocapd::RunReplay(source, c.options);
+  mocapd::ReplayReport report;
+  if (recording) {
+    const mocapd::Recording rec = mocapd::ReadRecording(c.take);
+    if (rec.ignored_tail_bytes > 0)
+      std::cout << "note: " << c.take << " ends in an interrupted record (" << rec.ignored_tail_bytes << " bytes ignored)\n";
+    std::cout << "replaying recording " << c.take << " (" << rec.messages.size() << " messages) to " << c.options.to << "\n" << std::flush;
+    report = mocapd::RunRecordingReplay(rec, c.take, c.options);
+  } else {
+    report = mocapd::RunReplay(source, c.options);
+  }
   std::cout << "\n" << report.FormatTable();
   if (!c.report.empty()) {
     std::ofstream out(c.report);
@@ -217,6 +234,14 @@ int main(int argc, char** argv) {
   replay_cmd->add_option("--connect-timeout", replay.options.connect_timeout_s, "Seconds to wait for the daemon")->capture_default_str();
   replay_cmd->add_option("--drain-timeout", replay.options.drain_timeout_s, "Seconds to wait for the last skeletons")->capture_default_str();
 
+  mocapd::RecordOptions record;
+  std::string record_subjects;
+  CLI::App* record_cmd = app.add_subcommand("record", "Record a capture publisher's marker stream with its timing (crash-safe)");
+  record_cmd->add_option("--from", record.from, "The capture publisher (PUB) to subscribe to")->capture_default_str();
+  record_cmd->add_option("--out", record.out, "Recording to write (.mcr)")->required();
+  record_cmd->add_option("--subjects", record_subjects, "Comma-separated subjects to record (default: all)");
+  record_cmd->add_option("--seconds", record.seconds, "Stop after this long (default: until Ctrl-C)")->check(CLI::NonNegativeNumber);
+
   CLI11_PARSE(app, argc, argv);
   try {
     if (*info) {
@@ -230,6 +255,20 @@ int main(int argc, char** argv) {
       return RunSynth(synth);
     }
     if (*replay_cmd) return RunReplayCommand(replay);
+    if (*record_cmd) {
+      for (size_t a = 0, b; a < record_subjects.size(); a = b + 1) {
+        b = record_subjects.find(',', a);
+        if (b == std::string::npos) b = record_subjects.size();
+        if (b > a) record.subjects.push_back(record_subjects.substr(a, b - a));
+      }
+      std::signal(SIGINT, [](int) { g_stop = true; });
+      std::signal(SIGTERM, [](int) { g_stop = true; });
+      record.stop = &g_stop;
+      std::cout << "recording " << record.from << " to " << record.out << "\n" << std::flush;
+      const uint64_t n = mocapd::RecordStream(record, [](const std::string& line) { std::cout << "  " << line << "\n" << std::flush; });
+      std::cout << "wrote " << record.out << ": " << n << " messages\n";
+      return 0;
+    }
   } catch (const std::exception& e) {
     std::cerr << "mocap-sim: error: " << e.what() << "\n";
     return 1;

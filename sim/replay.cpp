@@ -10,6 +10,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <thread>
+#include <unordered_map>
 #include <zmq.hpp>
 
 #include "filters/pose_error.hpp"
@@ -19,6 +20,7 @@
 #include "sim/humanoid.hpp"
 #include "sim/humanoid_subject.hpp"
 #include "sim/marker_layout.hpp"
+#include "sim/recording.hpp"
 #include "sim/subject_file.hpp"
 #include "sim/synthesis.hpp"
 #include "sim/take_frames.hpp"
@@ -59,16 +61,220 @@ nlohmann::json SummaryJson(const LatencySummary& s) {
 
 std::string SubjectName(const ReplayOptions& o, int k) { return o.subject_prefix + std::to_string(k + 1); }
 
-// Per subject: what was sent when, and what came back.
-struct SubjectTrack {
+// One frame (or end of stream) to send, produced in order by a FrameProducer.
+struct Outgoing {
+  size_t subject = 0;
+  uint64_t frame_number = 0;
+  bool end_of_stream = false;
+  int64_t due_ns = 0;  ///< Since the start; < 0: as soon as possible.
+};
+
+// Per subject: every frame sent (in send order) and when its skeleton came back.
+struct SubjectLog {
   std::string name;
   std::string topic;
-  C3dTake take;
-  Vec3 offset = Vec3::Zero();
-  std::vector<int64_t> sent_ns;      ///< By sequence number; 0 = not sent.
-  std::vector<int64_t> received_ns;  ///< 0 = not received.
-  std::vector<int64_t> flushed_ns;   ///< Per loop: when end-of-stream went out.
+  Vec3 offset = Vec3::Zero();  ///< Where this actor stands (takes: for the truth).
+  struct Sent {
+    uint64_t frame_number;
+    int64_t sent_ns;
+    bool end_of_stream;
+  };
+  std::vector<Sent> sent;
+  std::unordered_map<uint64_t, int64_t> received_ns;  ///< Frame number -> arrival; pre-sized.
 };
+
+// Encodes the next message into bytes; false when there is nothing more to send.
+using FrameProducer = std::function<bool(Outgoing*, std::vector<uint8_t>*)>;
+
+// The truth for a received skeleton frame, or nullptr when unknown.
+using TruthLookup = std::function<const Pose*(size_t subject, uint64_t frame_number, Pose* scratch)>;
+
+ReplayReport RunSchedule(std::vector<SubjectLog>& logs, uint64_t marker_hash, bool check_hash, const FrameProducer& produce,
+                         const TruthLookup& truth, const Skeleton* skeleton, double frame_period_s, const ReplayOptions& o) {
+  zmq::context_t context;
+  zmq::socket_t out(context, o.push ? zmq::socket_type::push : zmq::socket_type::xpub);
+  out.set(zmq::sockopt::sndhwm, 0);  // never drop a frame on our side
+  out.set(zmq::sockopt::linger, 2000);
+  try {
+    if (o.push) out.connect(o.to);
+    else out.bind(o.to);
+  } catch (const zmq::error_t& e) {
+    throw std::runtime_error("replay: cannot " + std::string(o.push ? "connect to " : "bind ") + o.to + ": " + e.what());
+  }
+  std::optional<zmq::socket_t> in;
+  if (!o.from.empty()) {
+    in.emplace(context, zmq::socket_type::sub);
+    in->set(zmq::sockopt::rcvhwm, 0);
+    in->set(zmq::sockopt::subscribe, "skeleton/");
+    in->set(zmq::sockopt::subscribe, "subject/");
+    in->connect(o.from);
+  }
+
+  // Handshake: the daemon subscribed to our frames, and we hold its subject descriptions.
+  ReplayReport report;
+  report.subjects = static_cast<int>(logs.size());
+  const int64_t deadline = SteadyNs() + static_cast<int64_t>(o.connect_timeout_s * 1e9);
+  std::vector<bool> subscribed(logs.size(), o.push), described(logs.size(), !in.has_value());
+  auto all = [](const std::vector<bool>& v) { return std::all_of(v.begin(), v.end(), [](bool b) { return b; }); };
+  while (!(all(subscribed) && all(described))) {
+    if (SteadyNs() > deadline) {
+      for (size_t k = 0; k < logs.size(); ++k) {
+        if (!subscribed[k])
+          throw std::runtime_error("replay: nothing subscribed to " + logs[k].topic + " on " + o.to + " within " +
+                                   std::to_string(o.connect_timeout_s) + " s (is the daemon running with subject '" + logs[k].name + "'?)");
+        if (!described[k])
+          throw std::runtime_error("replay: no description of subject '" + logs[k].name + "' from " + o.from + " within " +
+                                   std::to_string(o.connect_timeout_s) + " s (is the daemon publishing there, with that subject?)");
+      }
+    }
+    std::vector<zmq::pollitem_t> items = {{out.handle(), 0, ZMQ_POLLIN, 0}};
+    if (in) items.push_back({in->handle(), 0, ZMQ_POLLIN, 0});
+    zmq::poll(items.data(), items.size(), std::chrono::milliseconds(20));
+    zmq::message_t m;
+    while (!o.push && out.recv(m, zmq::recv_flags::dontwait)) {
+      const std::string sub = m.to_string();
+      if (sub.empty() || sub[0] != 1) continue;
+      for (size_t k = 0; k < logs.size(); ++k)
+        if (logs[k].topic.starts_with(sub.substr(1))) subscribed[k] = true;
+    }
+    while (in && in->recv(m, zmq::recv_flags::dontwait)) {
+      zmq::message_t body;
+      if (!m.more() || !in->recv(body)) continue;
+      protocol::SubjectDescriptionMessage d;
+      if (!m.to_string().starts_with("subject/") ||
+          protocol::DecodeSubjectDescription({static_cast<const uint8_t*>(body.data()), body.size()}, &d) != protocol::DecodeStatus::kOk)
+        continue;
+      for (size_t k = 0; k < logs.size(); ++k) {
+        if (logs[k].name != d.subject) continue;
+        if (check_hash && d.marker_set_hash != marker_hash)
+          throw std::runtime_error("replay: the daemon's subject '" + d.subject + "' has another marker set than this take's (model hash mismatch)");
+        described[k] = true;
+        report.lookahead = d.lookahead_frames;
+      }
+    }
+  }
+
+  // Receiver: stamps each skeleton frame on arrival and scores it against the truth.
+  std::atomic<bool> receiving{true};
+  std::atomic<uint64_t> received{0}, duplicated{0};
+  std::optional<PoseErrorAccumulator> accuracy;
+  if (skeleton != nullptr) accuracy.emplace(*skeleton);
+  std::thread receiver;
+  if (in) {
+    receiver = std::thread([&] {
+      zmq::pollitem_t item = {in->handle(), 0, ZMQ_POLLIN, 0};
+      protocol::SkeletonFrameMessage message;
+      std::optional<KinematicsWorkspace> solved_fk, truth_fk;
+      Pose solved, scratch;
+      if (skeleton != nullptr) {
+        solved_fk.emplace(*skeleton);
+        truth_fk.emplace(*skeleton);
+        solved = RestPose(*skeleton);
+      }
+      zmq::message_t topic, body;
+      while (receiving.load()) {
+        zmq::poll(&item, 1, std::chrono::milliseconds(5));
+        while (in->recv(topic, zmq::recv_flags::dontwait)) {
+          if (!topic.more() || !in->recv(body)) continue;
+          const int64_t now = SteadyNs();
+          if (!topic.to_string().starts_with("skeleton/")) continue;
+          if (protocol::DecodeSkeletonFrame({static_cast<const uint8_t*>(body.data()), body.size()}, &message) != protocol::DecodeStatus::kOk)
+            continue;
+          size_t k = 0;
+          while (k < logs.size() && logs[k].name != message.subject) ++k;
+          if (k == logs.size()) continue;
+          const auto slot = logs[k].received_ns.find(message.frame_number);
+          if (slot == logs[k].received_ns.end()) continue;  // not one we sent (inserted by the daemon)
+          if (slot->second != 0) {
+            ++duplicated;
+            continue;
+          }
+          slot->second = now;
+          ++received;
+          const Pose* expected = truth ? truth(k, message.frame_number, &scratch) : nullptr;
+          if (expected == nullptr || static_cast<int>(message.rotations.size()) != skeleton->num_joints()) continue;
+          for (size_t j = 0; j < message.rotations.size(); ++j) solved.rotation[j] = message.rotations[j].normalized();
+          solved.translation[0] = message.root_translation;
+          ForwardKinematics(*skeleton, solved, &*solved_fk);
+          ForwardKinematics(*skeleton, *expected, &*truth_fk);
+          accuracy->Add(*truth_fk, *solved_fk);
+        }
+      }
+    });
+  }
+
+  // Sender, paced by the steady clock.
+  std::vector<uint8_t> bytes;
+  Outgoing next;
+  const int64_t start = SteadyNs();
+  int64_t next_status = start + 1'000'000'000;
+  uint64_t sent = 0;
+  while (!(o.stop != nullptr && o.stop->load()) && produce(&next, &bytes)) {
+    if (next.due_ns >= 0) std::this_thread::sleep_until(Clock::time_point(std::chrono::nanoseconds(start + next.due_ns)));
+    SubjectLog& log = logs[next.subject];
+    const int64_t now = SteadyNs();
+    log.sent.push_back({next.frame_number, now, next.end_of_stream});
+    out.send(zmq::buffer(log.topic), zmq::send_flags::sndmore);
+    out.send(zmq::buffer(bytes), zmq::send_flags::none);
+    if (!next.end_of_stream) ++sent;
+    if (o.on_status && now >= next_status) {
+      char line[160];
+      std::snprintf(line, sizeof(line), "t=%6.1fs  sent %8llu frames  received %8llu skeletons", static_cast<double>(now - start) * 1e-9,
+                    static_cast<unsigned long long>(sent), static_cast<unsigned long long>(received.load()));
+      o.on_status(line);
+      next_status += 1'000'000'000;
+    }
+  }
+  const int64_t send_end = SteadyNs();
+  report.frames_sent = sent;
+  report.send_seconds = static_cast<double>(send_end - start) * 1e-9;
+  if (!in) return report;
+  report.listened = true;
+  const int64_t drain_deadline = SteadyNs() + static_cast<int64_t>(o.drain_timeout_s * 1e9);
+  while (received.load() < sent && SteadyNs() < drain_deadline) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  receiving = false;
+  receiver.join();
+
+  report.frames_received = received.load();
+  report.frames_duplicated = duplicated.load();
+  report.frames_lost = sent - std::min<uint64_t>(sent, report.frames_received);
+  std::vector<double> e2e;
+  e2e.reserve(sent);
+  report.processing_ms.reserve(sent);
+  const auto K = static_cast<uint64_t>(report.lookahead);
+  for (const SubjectLog& log : logs) {
+    for (size_t i = 0; i < log.sent.size(); ++i) {
+      const SubjectLog::Sent& s = log.sent[i];
+      if (s.end_of_stream) continue;
+      const int64_t got = log.received_ns.at(s.frame_number);
+      if (got == 0) continue;
+      e2e.push_back(static_cast<double>(got - s.sent_ns) * 1e-6);
+      // What let this frame out: the first later frame numbered at least K on (the
+      // daemon fills numbers that never came), or the end of its stream.
+      int64_t trigger_ns = 0;
+      for (size_t j = i; j < log.sent.size(); ++j) {
+        if (log.sent[j].end_of_stream || log.sent[j].frame_number < s.frame_number || log.sent[j].frame_number >= s.frame_number + K) {
+          if (log.sent[j].end_of_stream || log.sent[j].frame_number >= s.frame_number + K) trigger_ns = log.sent[j].sent_ns;
+          break;
+        }
+      }
+      if (trigger_ns == 0) continue;
+      const double ms = static_cast<double>(got - trigger_ns) * 1e-6;
+      report.processing_ms.push_back(ms);
+      if (ms * 1e-3 > frame_period_s) ++report.frames_late;
+    }
+  }
+  report.end_to_end = Summarise(e2e);
+  report.processing = Summarise(report.processing_ms);
+  report.throughput_fps = report.send_seconds > 0 ? static_cast<double>(report.frames_received) / report.send_seconds : 0.0;
+  if (accuracy && accuracy->frames() > 0) {
+    report.has_truth = true;
+    report.mean_position_error_cm = accuracy->mean_position_error_m() * 100.0;
+    report.max_position_error_cm = accuracy->max_position_error_m() * 100.0;
+    report.mean_rotation_error_deg = accuracy->mean_rotation_error_rad() * 180.0 / M_PI;
+  }
+  return report;
+}
 
 }  // namespace
 
@@ -121,231 +327,147 @@ ReplayReport RunReplay(const ReplaySource& source, const ReplayOptions& o) {
   const size_t total = static_cast<size_t>(n) * static_cast<size_t>(o.loops);
   const double rate = o.rate_hz > 0 ? o.rate_hz : source.rate_hz;
   const bool max_rate = o.rate_hz < 0;
-  const int64_t period_ns = static_cast<int64_t>(1e9 / rate);
   const TakeMarkerMap map(*source.markers, source.take);
   const uint64_t marker_hash = protocol::MarkerSetHash(*source.markers);
 
-  std::vector<SubjectTrack> tracks(static_cast<size_t>(o.subjects));
+  std::vector<SubjectLog> logs(static_cast<size_t>(o.subjects));
+  std::vector<C3dTake> corrupted(static_cast<size_t>(o.subjects));
   for (int k = 0; k < o.subjects; ++k) {
-    SubjectTrack& t = tracks[static_cast<size_t>(k)];
-    t.name = SubjectName(o, k);
-    t.topic = "markers/" + t.name + "/";
-    t.offset = Vec3(kActorSpacingM * k, 0.0, 0.0);
-    t.sent_ns.assign(total, 0);
-    t.received_ns.assign(total, 0);
-    t.flushed_ns.assign(static_cast<size_t>(o.loops), 0);
+    SubjectLog& log = logs[static_cast<size_t>(k)];
+    log.name = SubjectName(o, k);
+    log.topic = "markers/" + log.name + "/";
+    log.offset = Vec3(kActorSpacingM * k, 0.0, 0.0);
+    log.sent.reserve(total + static_cast<size_t>(o.loops));
+    log.received_ns.reserve(total);
+    for (size_t seq = 0; seq < total; ++seq) log.received_ns.emplace(seq, 0);
     if (!o.corrupt.empty()) {
       CorruptionOptions c;
       c.severity = ParseCorruptionSeverity(o.corrupt);
       c.seed = o.seed + static_cast<uint64_t>(k);
-      t.take = CorruptTake(source.take, source.markers.get(), c).take;
-    } else if (k == 0) {
-      t.take = source.take;
+      corrupted[static_cast<size_t>(k)] = CorruptTake(source.take, source.markers.get(), c).take;
     }
   }
-  auto take_of = [&](size_t k) -> const C3dTake& { return tracks[k].take.num_frames > 0 ? tracks[k].take : tracks[0].take; };
-
-  zmq::context_t context;
-  zmq::socket_t out(context, o.push ? zmq::socket_type::push : zmq::socket_type::xpub);
-  out.set(zmq::sockopt::sndhwm, 0);  // never drop a frame on our side
-  out.set(zmq::sockopt::linger, 2000);
-  try {
-    if (o.push) out.connect(o.to);
-    else out.bind(o.to);
-  } catch (const zmq::error_t& e) {
-    throw std::runtime_error("replay: cannot " + std::string(o.push ? "connect to " : "bind ") + o.to + ": " + e.what());
-  }
-  std::optional<zmq::socket_t> in;
-  if (!o.from.empty()) {
-    in.emplace(context, zmq::socket_type::sub);
-    in->set(zmq::sockopt::rcvhwm, 0);
-    in->set(zmq::sockopt::subscribe, "skeleton/");
-    in->set(zmq::sockopt::subscribe, "subject/");
-    in->connect(o.from);
-  }
-
-  // Handshake: the daemon subscribed to our frames, and we hold its subject descriptions.
-  ReplayReport report;
-  report.source = source.description;
-  report.rate_hz = rate;
-  report.subjects = o.subjects;
-  const int64_t deadline = SteadyNs() + static_cast<int64_t>(o.connect_timeout_s * 1e9);
-  std::vector<bool> subscribed(tracks.size(), o.push), described(tracks.size(), !in.has_value());
-  auto all = [](const std::vector<bool>& v) { return std::all_of(v.begin(), v.end(), [](bool b) { return b; }); };
-  while (!(all(subscribed) && all(described))) {
-    if (SteadyNs() > deadline) {
-      for (size_t k = 0; k < tracks.size(); ++k) {
-        if (!subscribed[k])
-          throw std::runtime_error("replay: nothing subscribed to " + tracks[k].topic + " on " + o.to + " within " +
-                                   std::to_string(o.connect_timeout_s) + " s (is the daemon running with subject '" + tracks[k].name + "'?)");
-        if (!described[k])
-          throw std::runtime_error("replay: no description of subject '" + tracks[k].name + "' from " + o.from + " within " +
-                                   std::to_string(o.connect_timeout_s) + " s (is the daemon publishing there, with that subject?)");
-      }
-    }
-    std::vector<zmq::pollitem_t> items = {{out.handle(), 0, ZMQ_POLLIN, 0}};
-    if (in) items.push_back({in->handle(), 0, ZMQ_POLLIN, 0});
-    zmq::poll(items.data(), items.size(), std::chrono::milliseconds(20));
-    zmq::message_t m;
-    while (!o.push && out.recv(m, zmq::recv_flags::dontwait)) {
-      const std::string sub = m.to_string();
-      if (sub.empty() || sub[0] != 1) continue;
-      for (size_t k = 0; k < tracks.size(); ++k)
-        if (tracks[k].topic.starts_with(sub.substr(1))) subscribed[k] = true;
-    }
-    while (in && in->recv(m, zmq::recv_flags::dontwait)) {
-      zmq::message_t body;
-      if (!m.more() || !in->recv(body)) continue;
-      protocol::SubjectDescriptionMessage d;
-      if (!m.to_string().starts_with("subject/") ||
-          protocol::DecodeSubjectDescription({static_cast<const uint8_t*>(body.data()), body.size()}, &d) != protocol::DecodeStatus::kOk)
-        continue;
-      for (size_t k = 0; k < tracks.size(); ++k) {
-        if (tracks[k].name != d.subject) continue;
-        if (d.marker_set_hash != marker_hash)
-          throw std::runtime_error("replay: the daemon's subject '" + d.subject + "' has another marker set than this take's (model hash mismatch)");
-        described[k] = true;
-        report.lookahead = d.lookahead_frames;
-      }
-    }
-  }
-
-  // Receiver: stamps each skeleton frame on arrival and scores it against the truth.
-  std::atomic<bool> receiving{true};
-  std::atomic<uint64_t> received{0}, duplicated{0};
-  std::mutex accuracy_mutex;
-  PoseErrorAccumulator accuracy(*source.skeleton);
-  std::thread receiver;
-  if (in) {
-    receiver = std::thread([&] {
-      zmq::pollitem_t item = {in->handle(), 0, ZMQ_POLLIN, 0};
-      protocol::SkeletonFrameMessage skeleton;
-      KinematicsWorkspace solved_fk(*source.skeleton), truth_fk(*source.skeleton);
-      Pose solved = RestPose(*source.skeleton), truth;
-      zmq::message_t topic, body;
-      while (receiving.load()) {
-        zmq::poll(&item, 1, std::chrono::milliseconds(5));
-        while (in->recv(topic, zmq::recv_flags::dontwait)) {
-          if (!topic.more() || !in->recv(body)) continue;
-          const int64_t now = SteadyNs();
-          if (!topic.to_string().starts_with("skeleton/")) continue;
-          if (protocol::DecodeSkeletonFrame({static_cast<const uint8_t*>(body.data()), body.size()}, &skeleton) != protocol::DecodeStatus::kOk)
-            continue;
-          size_t k = 0;
-          while (k < tracks.size() && tracks[k].name != skeleton.subject) ++k;
-          if (k == tracks.size() || skeleton.frame_number >= total) continue;
-          int64_t& stamp = tracks[k].received_ns[skeleton.frame_number];
-          if (stamp != 0) {
-            ++duplicated;
-            continue;
-          }
-          stamp = now;
-          ++received;
-          if (source.truth.empty() || static_cast<int>(skeleton.rotations.size()) != source.skeleton->num_joints()) continue;
-          for (size_t j = 0; j < skeleton.rotations.size(); ++j) solved.rotation[j] = skeleton.rotations[j].normalized();
-          solved.translation[0] = skeleton.root_translation;
-          truth = source.truth[skeleton.frame_number % static_cast<uint64_t>(n)];
-          truth.translation[0] += tracks[k].offset;
-          ForwardKinematics(*source.skeleton, solved, &solved_fk);
-          ForwardKinematics(*source.skeleton, truth, &truth_fk);
-          std::lock_guard lock(accuracy_mutex);
-          accuracy.Add(truth_fk, solved_fk);
-        }
-      }
-    });
-  }
-
-  // Sender, paced by the steady clock.
+  // Frames go out subject after subject for each capture tick; after each pass over the
+  // take, an end of stream per subject (the next pass starts afresh).
   protocol::MarkerFrameMessage message;
   message.model_hash = marker_hash;
   message.rate_hz = static_cast<float>(source.rate_hz);
-  std::vector<uint8_t> bytes;
-  auto send = [&](const std::string& topic, const std::vector<uint8_t>& b) {
-    out.send(zmq::buffer(topic), zmq::send_flags::sndmore);
-    out.send(zmq::buffer(b), zmq::send_flags::none);
-  };
-  auto send_end_of_stream = [&](size_t loop) {
-    for (SubjectTrack& t : tracks) {
-      protocol::EncodeEndOfStream({t.name, (loop + 1) * static_cast<uint64_t>(n) - 1}, &bytes);
-      t.flushed_ns[loop] = SteadyNs();
-      send(t.topic, bytes);
-    }
-  };
-  const int64_t start = SteadyNs();
-  int64_t next_status = start + 1'000'000'000;
-  uint64_t sent = 0;
-  for (size_t seq = 0; seq < total; ++seq) {
-    if (o.stop != nullptr && o.stop->load()) break;
-    if (!max_rate) {
-      const int64_t due = start + static_cast<int64_t>(seq) * period_ns;
-      std::this_thread::sleep_until(Clock::time_point(std::chrono::nanoseconds(due)));
-    }
-    const int f = static_cast<int>(seq % static_cast<size_t>(n));
-    for (size_t k = 0; k < tracks.size(); ++k) {
-      SubjectTrack& t = tracks[k];
-      map.FillMessage(take_of(k), f, &message);
+  size_t seq = 0, subject = 0;
+  bool ending = false;
+  const int64_t period_ns = static_cast<int64_t>(1e9 / rate);
+  const FrameProducer produce = [&](Outgoing* next, std::vector<uint8_t>* bytes) {
+    if (seq >= total && !ending) return false;
+    next->subject = subject;
+    // An end of stream goes out right after its pass's last frame.
+    next->due_ns = max_rate ? -1 : static_cast<int64_t>(ending ? seq - 1 : seq) * period_ns;
+    SubjectLog& log = logs[subject];
+    if (ending) {
+      next->end_of_stream = true;
+      next->frame_number = seq - 1;
+      protocol::EncodeEndOfStream({log.name, seq - 1}, bytes);
+    } else {
+      const int f = static_cast<int>(seq % static_cast<size_t>(n));
+      const C3dTake& take = o.corrupt.empty() ? source.take : corrupted[subject];
+      map.FillMessage(take, f, &message);
       for (size_t m = 0; m < message.positions.size(); ++m)
-        if (message.valid[m]) message.positions[m] += t.offset;
-      message.subject = t.name;
+        if (message.valid[m]) message.positions[m] += log.offset;
+      message.subject = log.name;
       message.frame_number = seq;
       message.capture_time_ns = WallNs();
-      protocol::EncodeMarkerFrame(message, &bytes);
-      t.sent_ns[seq] = SteadyNs();
-      send(t.topic, bytes);
-      ++sent;
+      next->end_of_stream = false;
+      next->frame_number = seq;
+      protocol::EncodeMarkerFrame(message, bytes);
     }
-    if (o.end_of_stream && f == n - 1) send_end_of_stream(seq / static_cast<size_t>(n));
-    if (o.on_status && SteadyNs() >= next_status) {
-      char line[160];
-      std::snprintf(line, sizeof(line), "t=%6.1fs  sent %8llu frames  received %8llu skeletons", static_cast<double>(SteadyNs() - start) * 1e-9,
-                    static_cast<unsigned long long>(sent), static_cast<unsigned long long>(received.load()));
-      o.on_status(line);
-      next_status += 1'000'000'000;
+    if (++subject == logs.size()) {
+      subject = 0;
+      if (ending) {
+        ending = false;
+      } else {
+        ++seq;
+        ending = o.end_of_stream && seq % static_cast<size_t>(n) == 0;
+      }
     }
-  }
-  const int64_t send_end = SteadyNs();
-  if (in) {
-    const int64_t drain_deadline = SteadyNs() + static_cast<int64_t>(o.drain_timeout_s * 1e9);
-    while (received.load() < sent && SteadyNs() < drain_deadline) std::this_thread::sleep_for(std::chrono::milliseconds(5));
-    receiving = false;
-    receiver.join();
-  }
+    return true;
+  };
+  const TruthLookup truth = [&](size_t k, uint64_t frame_number, Pose* scratch) -> const Pose* {
+    if (source.truth.empty()) return nullptr;
+    *scratch = source.truth[frame_number % static_cast<uint64_t>(n)];
+    scratch->translation[0] += logs[k].offset;
+    return scratch;
+  };
+  ReplayReport report = RunSchedule(logs, marker_hash, true, produce, truth, source.skeleton.get(), 1.0 / rate, o);
+  report.source = source.description;
+  report.rate_hz = rate;
+  return report;
+}
 
-  report.frames_sent = sent;
-  report.send_seconds = static_cast<double>(send_end - start) * 1e-9;
-  if (!in) return report;
-  report.frames_received = received.load();
-  report.frames_duplicated = duplicated.load();
-  report.frames_lost = sent - std::min<uint64_t>(sent, report.frames_received);
-  std::vector<double> e2e;
-  e2e.reserve(sent);
-  report.processing_ms.reserve(sent);
-  const auto K = static_cast<size_t>(report.lookahead);
-  for (const SubjectTrack& t : tracks) {
-    for (size_t seq = 0; seq < total; ++seq) {
-      if (t.sent_ns[seq] == 0 || t.received_ns[seq] == 0) continue;
-      e2e.push_back(static_cast<double>(t.received_ns[seq] - t.sent_ns[seq]) * 1e-6);
-      // The frame that let this one out: K later in the same loop, or the end of stream.
-      const size_t loop = seq / static_cast<size_t>(n);
-      const size_t trigger = seq + K;
-      int64_t trigger_ns = 0;
-      if (trigger / static_cast<size_t>(n) == loop && trigger < total) trigger_ns = t.sent_ns[trigger];
-      else if (o.end_of_stream) trigger_ns = t.flushed_ns[loop];
-      if (trigger_ns == 0) continue;
-      const double ms = static_cast<double>(t.received_ns[seq] - trigger_ns) * 1e-6;
-      report.processing_ms.push_back(ms);
-      if (ms * 1e6 > static_cast<double>(period_ns)) ++report.frames_late;
+ReplayReport RunRecordingReplay(const Recording& recording, const std::string& description, const ReplayOptions& o) {
+  // The subjects and frames in the recording: every marker frame and end of stream.
+  std::vector<SubjectLog> logs;
+  std::vector<std::pair<size_t, uint64_t>> index(recording.messages.size(), {SIZE_MAX, 0});
+  std::vector<bool> is_end(recording.messages.size(), false);
+  protocol::MarkerFrameMessage frame;
+  protocol::EndOfStreamMessage end;
+  double rate_hz = 0.0;
+  for (size_t i = 0; i < recording.messages.size(); ++i) {
+    const auto& bytes = recording.messages[i].message;
+    std::string subject;
+    uint64_t number = 0;
+    if (protocol::DecodeMarkerFrame(bytes, &frame) == protocol::DecodeStatus::kOk) {
+      subject = frame.subject;
+      number = frame.frame_number;
+      rate_hz = frame.rate_hz;
+    } else if (protocol::DecodeEndOfStream(bytes, &end) == protocol::DecodeStatus::kOk) {
+      subject = end.subject;
+      number = end.last_frame_number;
+      is_end[i] = true;
+    } else {
+      continue;  // recorded as it came; a glitch the daemon will count, not ours to send
     }
+    size_t k = 0;
+    while (k < logs.size() && logs[k].name != subject) ++k;
+    if (k == logs.size()) {
+      logs.emplace_back();
+      logs.back().name = subject;
+      logs.back().topic = "markers/" + subject + "/";
+    }
+    if (!is_end[i]) logs[k].received_ns.emplace(number, 0);
+    index[i] = {k, number};
   }
-  report.end_to_end = Summarise(e2e);
-  report.processing = Summarise(report.processing_ms);
-  report.throughput_fps = report.send_seconds > 0 ? static_cast<double>(report.frames_received) / report.send_seconds : 0.0;
-  if (accuracy.frames() > 0) {
-    report.has_truth = true;
-    report.mean_position_error_cm = accuracy.mean_position_error_m() * 100.0;
-    report.max_position_error_cm = accuracy.max_position_error_m() * 100.0;
-    report.mean_rotation_error_deg = accuracy.mean_rotation_error_rad() * 180.0 / M_PI;
-  }
+  if (logs.empty()) throw std::runtime_error("replay: the recording holds no marker frames");
+  for (SubjectLog& log : logs) log.sent.reserve(recording.messages.size());
+  const bool max_rate = o.rate_hz < 0;
+  size_t i = 0;
+  size_t closing = 0;  // after the recording: end the streams it left open
+  const FrameProducer produce = [&](Outgoing* next, std::vector<uint8_t>* bytes) {
+    while (i < recording.messages.size() && index[i].first == SIZE_MAX) ++i;
+    if (i >= recording.messages.size()) {
+      for (; o.end_of_stream && closing < logs.size(); ++closing) {
+        const SubjectLog& log = logs[closing];
+        if (log.sent.empty() || log.sent.back().end_of_stream) continue;
+        next->subject = closing;
+        next->frame_number = log.sent.back().frame_number;
+        next->end_of_stream = true;
+        next->due_ns = -1;
+        protocol::EncodeEndOfStream({log.name, next->frame_number}, bytes);
+        ++closing;
+        return true;
+      }
+      return false;
+    }
+    const RecordedMessage& m = recording.messages[i];
+    next->subject = index[i].first;
+    next->frame_number = index[i].second;
+    next->end_of_stream = is_end[i];
+    next->due_ns = max_rate ? -1 : m.offset_ns - recording.messages.front().offset_ns;
+    bytes->assign(m.message.begin(), m.message.end());
+    ++i;
+    return true;
+  };
+  ReplayOptions options = o;
+  ReplayReport report = RunSchedule(logs, 0, false, produce, nullptr, nullptr, rate_hz > 0 ? 1.0 / rate_hz : 1.0 / 120.0, options);
+  report.source = description;
+  report.rate_hz = rate_hz;
   return report;
 }
 
@@ -384,6 +506,10 @@ std::string ReplayReport::FormatTable() const {
   };
   s << "replay: " << source << "\n";
   row("subjects x rate", std::to_string(subjects) + " x " + num(rate_hz, 0) + " Hz, lookahead K = " + std::to_string(lookahead));
+  if (!listened) {
+    row("frames sent", std::to_string(frames_sent) + " (the daemon's output was not measured: --from \"\")");
+    return s.str();
+  }
   row("frames sent / received", std::to_string(frames_sent) + " / " + std::to_string(frames_received));
   row("frames lost / duplicated / late", std::to_string(frames_lost) + " / " + std::to_string(frames_duplicated) + " / " + std::to_string(frames_late));
   row("throughput (skeletons/s)", num(throughput_fps, 1));

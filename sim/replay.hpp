@@ -70,6 +70,7 @@ struct ReplayReport {
   std::string source;
   double rate_hz = 0.0;
   int subjects = 0;
+  bool listened = false;      ///< The daemon's output was measured (--from given).
   int lookahead = 0;          ///< K, from the daemon's subject description.
   uint64_t frames_sent = 0;   ///< Over all subjects.
   uint64_t frames_received = 0;
@@ -93,6 +94,12 @@ struct ReplayReport {
 /// endpoint if nothing subscribes to the frames or the daemon never describes a subject
 /// within connect_timeout_s.
 ReplayReport RunReplay(const ReplaySource& source, const ReplayOptions& options);
+
+struct Recording;
+/// Replays a recorded stream (sim/recording.hpp) with its original timing (rate_hz < 0:
+/// as fast as possible), measuring like RunReplay (no ground truth). Messages that were
+/// not marker frames or ends of stream when recorded are skipped.
+ReplayReport RunRecordingReplay(const Recording& recording, const std::string& description, const ReplayOptions& options);
 
 /// An SVG histogram of processing latencies (log-spaced bins), for a person to look at.
 std::string LatencyHistogramSvg(const std::vector<double>& latencies_ms, const std::string& title);

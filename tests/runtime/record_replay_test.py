@@ -1,0 +1,66 @@
+"""`mocap-sim record` then `mocap-sim replay RECORDING` through `mocapd run`: a stream
+recorded from a publisher plays back into the daemon with nothing lost; a recorder
+killed mid-way leaves a recording that still replays.
+
+usage: record_replay_test.py MOCAPD MOCAP_SIM CONFIG_DIR WORK_DIR
+"""
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+from daemon_harness import Daemon, free_ports
+
+
+def record(mocap_sim, work, name, seconds, kill_after=None):
+    (port,) = free_ports(1)
+    endpoint = f"tcp://127.0.0.1:{port}"
+    path = os.path.join(work, name)
+    recorder = subprocess.Popen([mocap_sim, "record", "--from", endpoint, "--out", path], stdout=subprocess.PIPE,
+                                stderr=subprocess.STDOUT, text=True)
+    time.sleep(0.3)
+    sender = subprocess.Popen([mocap_sim, "replay", "--humanoid", "walk", "--seconds", str(seconds), "--corrupt", "medium",
+                               "--to", endpoint, "--from", ""], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    if kill_after is not None:
+        time.sleep(kill_after)
+        recorder.send_signal(signal.SIGKILL)  # no chance to close the file
+        sender.communicate(timeout=60)
+    else:
+        out, _ = sender.communicate(timeout=60)
+        assert sender.returncode == 0, out
+        time.sleep(0.3)
+        recorder.send_signal(signal.SIGINT)
+    out, _ = recorder.communicate(timeout=30)
+    print(out)
+    return path
+
+
+def replay(mocapd, mocap_sim, config_dir, work, path):
+    daemon = Daemon(mocapd, config_dir, os.path.join(work, "daemon_" + os.path.basename(path)))
+    report = path + ".json"
+    try:
+        r = subprocess.run([mocap_sim, "replay", path, "--to", daemon.input, "--from", daemon.output, "--report", report],
+                           capture_output=True, text=True, timeout=120)
+        print(r.stdout, r.stderr)
+        assert r.returncode == 0, r.returncode
+    finally:
+        assert daemon.stop() == 0
+    with open(report) as f:
+        return json.load(f), r.stdout
+
+
+def main(mocapd, mocap_sim, config_dir, work):
+    os.makedirs(work, exist_ok=True)
+    full = record(mocap_sim, work, "full.mcr", 3)
+    r, _ = replay(mocapd, mocap_sim, config_dir, work, full)
+    assert r["frames_sent"] == 360 and r["frames_received"] == 360 and r["frames_lost"] == 0, r
+    cut = record(mocap_sim, work, "killed.mcr", 3, kill_after=1.5)
+    r, out = replay(mocapd, mocap_sim, config_dir, work, cut)
+    assert 60 < r["frames_sent"] < 360 and r["frames_lost"] == 0, r
+    print("record / replay test passed")
+
+
+if __name__ == "__main__":
+    main(*sys.argv[1:5])
