@@ -27,6 +27,7 @@ namespace {
 struct Scores {
   double pos_cm = 0, rot_deg = 0, marker_rmse_mm = 0, jerk_ratio = 0;
   int pops = 0;
+  std::vector<std::pair<int, int>> pop_frames;  ///< (frame, joint) of each pop's worst joint
   double p50_us = 0, p99_us = 0;
 };
 
@@ -57,10 +58,19 @@ class Scorer {
     }
     s.jerk_ratio = jerk_t > 0 ? jerk_e / jerk_t : 0;
     for (size_t f = 1; f < est_p.size(); ++f) {
-      bool pop = false;
-      for (size_t j = 0; j < est_p[f].size(); ++j)
-        pop = pop || (est_p[f][j] - est_p[f - 1][j]).norm() - (tru_p[f][j] - tru_p[f - 1][j]).norm() > 0.02;
-      s.pops += pop;
+      double worst = 0.02;
+      int worst_joint = -1;
+      for (size_t j = 0; j < est_p[f].size(); ++j) {
+        const double excess = (est_p[f][j] - est_p[f - 1][j]).norm() - (tru_p[f][j] - tru_p[f - 1][j]).norm();
+        if (excess > worst) {
+          worst = excess;
+          worst_joint = static_cast<int>(j);
+        }
+      }
+      if (worst_joint >= 0) {
+        ++s.pops;
+        s.pop_frames.emplace_back(static_cast<int>(f), worst_joint);
+      }
     }
     return s;
   }
@@ -129,6 +139,8 @@ Scores SolveBaseline(const bench::BenchTake& take, const C3dTake& markers) {
   return scorer.Finish();
 }
 
+bool g_explain_pops = false;
+
 Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const C3dTake& clean, int lookahead) {
   const auto skeleton = std::make_shared<const Skeleton>(take.bvh.skeleton);
   CleanupOptions options;
@@ -139,8 +151,14 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
   std::vector<double> times;
   double sq = 0;
   long n = 0;
+  std::vector<std::vector<MaskReason>> reasons;  // per published frame (for --explain-pops)
+  std::vector<std::vector<MarkerStatus>> statuses;
   auto collect = [&]() {
     const CleanFrame& o = pipeline.output();
+    if (g_explain_pops) {
+      reasons.push_back(o.reason);
+      statuses.push_back(o.status);
+    }
     scorer.Add(static_cast<int>(o.frame), o.pose);
     for (size_t m = 0; m < obs.size(); ++m) {
       if (bad.at(static_cast<int>(o.frame), static_cast<int>(m)) == CorruptionKind::kNone || !o.markers[m].allFinite()) continue;
@@ -158,6 +176,25 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
   }
   while (pipeline.Flush()) collect();
   Scores s = scorer.Finish();
+  if (g_explain_pops) {
+    // Each pop: the joint, and what its markers were around it (o observed, r repaired
+    // with the reason's first letter, x unrecoverable; truth C if it was corrupted).
+    for (const auto& [f, j] : s.pop_frames) {
+      std::printf("pop %s K=%d frame %d joint %s:", take.name.c_str(), lookahead, f, skeleton->joint(j).name.c_str());
+      for (int m = 0; m < take.markers->num_markers(); ++m) {
+        if (take.markers->primary_joint(m) != j) continue;
+        std::printf(" %s[", take.markers->marker(m).name.c_str());
+        for (int g = std::max(0, f - 6); g <= std::min<int>(f + 2, static_cast<int>(reasons.size()) - 1); ++g) {
+          const MarkerStatus st = statuses[static_cast<size_t>(g)][static_cast<size_t>(m)];
+          const char c = st == MarkerStatus::kObserved ? 'o' : st == MarkerStatus::kUnrecoverable ? 'x'
+                                                                                                   : to_string(reasons[static_cast<size_t>(g)][static_cast<size_t>(m)])[0];
+          std::printf("%c%s", g == f ? '|' : c, g == f ? std::string(1, c).c_str() : "");
+        }
+        std::printf("]");
+      }
+      std::printf("\n");
+    }
+  }
   s.marker_rmse_mm = n > 0 ? std::sqrt(sq / static_cast<double>(n)) * 1e3 : 0;
   s.p50_us = Quantile(times, 0.5);
   s.p99_us = Quantile(times, 0.99);
@@ -171,6 +208,7 @@ int main(int argc, char** argv) {
   std::vector<std::string> severities, paths;
   for (int i = 1; i < argc; ++i) {
     if (std::strcmp(argv[i], "--seeds") == 0 && i + 1 < argc) seeds = std::atoi(argv[++i]);
+    else if (std::strcmp(argv[i], "--explain-pops") == 0) g_explain_pops = true;
     else if (std::strcmp(argv[i], "--severity") == 0 && i + 1 < argc) severities.emplace_back(argv[++i]);
     else paths.emplace_back(argv[i]);
   }
