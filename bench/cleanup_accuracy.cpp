@@ -6,10 +6,11 @@
 // Reports the solved skeleton's mean global joint position (cm) and rotation (deg) error,
 // the cleaned-marker RMSE on corrupted samples (mm), the jerk ratio against the truth and
 // the number of pops (a joint moving > 2 cm per frame beyond the truth's own motion).
-// Usage: cleanup_accuracy [--seeds N] [--severity light|medium|heavy]... [TAKE.bvh ...]
+// Usage: cleanup_accuracy [--seeds N] [--severity light|medium|heavy]... [--lookahead K (ours only)] [--explain-pops] [TAKE.bvh ...]
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <map>
 #include <string>
@@ -145,6 +146,14 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
   const auto skeleton = std::make_shared<const Skeleton>(take.bvh.skeleton);
   CleanupOptions options;
   options.lookahead = lookahead;
+  // Experiments without rebuilding: MOCAPD_EXP_<FIELD>=value for a few options.
+  if (const char* v = std::getenv("MOCAPD_EXP_REPAIRED_WEIGHT")) options.repaired_weight = std::atof(v);
+  if (const char* v = std::getenv("MOCAPD_EXP_FINAL_TEMPORAL")) options.final_ik.temporal_weight = std::atof(v);
+  if (const char* v = std::getenv("MOCAPD_EXP_FINAL_GAIN")) options.final_ik.prediction_velocity_gain = std::atof(v);
+  if (const char* v = std::getenv("MOCAPD_EXP_ROBUST_GAIN")) options.robust_ik.prediction_velocity_gain = std::atof(v);
+  if (const char* v = std::getenv("MOCAPD_EXP_FINAL_ITERS")) options.final_ik.max_iterations = std::atoi(v);
+  if (const char* v = std::getenv("MOCAPD_EXP_NAIVE_ITERS")) options.naive_ik.max_iterations = std::atoi(v);
+  if (const char* v = std::getenv("MOCAPD_EXP_ROBUST_ITERS")) options.robust_ik.max_iterations = std::atoi(v);
   CleanupPipeline pipeline(skeleton, take.markers, options);
   Scorer scorer(*skeleton, take.motion);
   std::vector<Vec3> obs(static_cast<size_t>(take.markers->num_markers()));
@@ -205,10 +214,12 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
 
 int main(int argc, char** argv) {
   int seeds = 2;
+  int only_lookahead = -1;  // -1: the baselines and K = 0, 4, 12
   std::vector<std::string> severities, paths;
   for (int i = 1; i < argc; ++i) {
     if (std::strcmp(argv[i], "--seeds") == 0 && i + 1 < argc) seeds = std::atoi(argv[++i]);
     else if (std::strcmp(argv[i], "--explain-pops") == 0) g_explain_pops = true;
+    else if (std::strcmp(argv[i], "--lookahead") == 0 && i + 1 < argc) only_lookahead = std::atoi(argv[++i]);
     else if (std::strcmp(argv[i], "--severity") == 0 && i + 1 < argc) severities.emplace_back(argv[++i]);
     else paths.emplace_back(argv[i]);
   }
@@ -228,6 +239,10 @@ int main(int argc, char** argv) {
         co.severity = ParseCorruptionSeverity(severity_name);
         co.seed = static_cast<uint64_t>(seed);
         const CorruptedTake bad = CorruptTake(clean, take.markers.get(), co);
+        if (only_lookahead >= 0) {
+          results["mocapd K=" + std::to_string(only_lookahead)].push_back(RunPipeline(take, bad, clean, only_lookahead));
+          continue;
+        }
         results["raw IK"].push_back(SolveBaseline(take, bad.take));
         results["linear fill + IK"].push_back(SolveBaseline(take, FillGaps(bad.take, false)));
         results["cubic fill + IK"].push_back(SolveBaseline(take, FillGaps(bad.take, true)));
@@ -236,6 +251,7 @@ int main(int argc, char** argv) {
     }
     for (const char* method : {"raw IK", "linear fill + IK", "cubic fill + IK", "mocapd K=0", "mocapd K=4", "mocapd K=12"}) {
       const auto& v = results[method];
+      if (v.empty()) continue;
       Scores mean;
       for (const Scores& s : v) {
         mean.pos_cm += s.pos_cm / v.size();

@@ -94,7 +94,7 @@ struct CleanupOptions {
   double interpolated_weight = 1.0;
   // Solves.
   IkOptions naive_ik;   ///< Y: plain least squares.
-  IkOptions robust_ik;  ///< Y^: Huber (huber_delta_m = 4 mm, decaying velocity prediction by default).
+  IkOptions robust_ik;  ///< Y^: Huber (huber_delta_m = 4 mm, weak velocity prediction by default).
   IkOptions final_ik;   ///< Y-: decaying velocity prediction, so joints without data come to rest.
   CleanupOptions();
   /// Throws std::invalid_argument naming the field if an option is out of range.
