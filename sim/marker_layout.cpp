@@ -80,8 +80,8 @@ std::string RoleOfName(const std::string& bare) {
   return "";
 }
 
-// Bone of a segment: the vector (rest pose, world frame) from its joint to where the
-// segment ends.
+}  // namespace
+
 Vec3 SegmentBoneWorld(const Skeleton& skeleton, const HumanoidRoles& roles, const KinematicsWorkspace& rest,
                       std::span<const BvhEndSite> end_sites, const std::string& role, int joint, double height) {
   static const std::map<std::string, std::string> kNext = {
@@ -120,7 +120,6 @@ Vec3 SegmentBoneWorld(const Skeleton& skeleton, const HumanoidRoles& roles, cons
   return dir.normalized() * nominal * height / 1.75;
 }
 
-}  // namespace
 
 std::vector<LayoutMarker> DefaultMarkerLayout() {
   std::vector<LayoutMarker> layout = {

@@ -44,6 +44,12 @@ struct HumanoidRoles {
 /// forearm, hand, thigh, shin, foot).
 HumanoidRoles MatchHumanoidRoles(const Skeleton& skeleton);
 
+/// The bone of a role's segment: the vector, in the rest pose's world frame, from the
+/// role's joint to where its segment ends (the next joint along the limb or spine, an End
+/// Site, or a nominal length along the parent's bone scaled by height / 1.75 m).
+Vec3 SegmentBoneWorld(const Skeleton& skeleton, const HumanoidRoles& roles, const KinematicsWorkspace& rest,
+                      std::span<const BvhEndSite> end_sites, const std::string& role, int joint, double height);
+
 /// Places a layout on the skeleton's rest pose. end_sites (may be empty) give bone
 /// directions for end segments. Throws std::invalid_argument naming the marker whose
 /// segment is unknown. Markers on optional roles the skeleton lacks are skipped.

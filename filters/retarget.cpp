@@ -1,0 +1,258 @@
+// Retargeting an actor's solved pose onto a character (thesis ch. 4).
+#include "filters/retarget.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace mocapd {
+namespace {
+
+constexpr int kAlong = 4;   // candidate rings along each bone
+constexpr int kAround = 8;  // candidate points around each ring
+
+struct Capsule {
+  Vec3 origin, axis, e1, e2;
+  double length = 0, radius = 0;
+};
+
+// The capsule of a bone in the rest pose's world frame. The angle around the bone is
+// measured from the world's forward axis (from the side axis for bones that point
+// forward), so both rigs -- in the same rest orientation -- agree on it.
+Capsule MakeCapsule(const Vec3& origin, const Vec3& bone, double radius_fraction) {
+  Capsule c;
+  c.origin = origin;
+  c.length = std::max(bone.norm(), 1e-4);
+  c.axis = bone / c.length;
+  Vec3 reference = std::abs(c.axis.dot(Vec3::UnitZ())) < 0.9 ? Vec3::UnitZ() : Vec3::UnitX();
+  c.e1 = (reference - reference.dot(c.axis) * c.axis).normalized();
+  c.e2 = c.axis.cross(c.e1);
+  c.radius = std::clamp(radius_fraction * c.length, 0.02, 0.12);
+  return c;
+}
+
+Vec3 CandidateNormal(const Capsule& c, int k) {
+  const double angle = 2.0 * M_PI * (k % kAround) / kAround;
+  return std::cos(angle) * c.e1 + std::sin(angle) * c.e2;
+}
+
+double CandidateAlong(int k) { return 0.2 + 0.6 * (k / kAround) / (kAlong - 1.0); }
+
+Vec3 CandidatePoint(const Capsule& c, int k) {
+  return c.origin + CandidateAlong(k) * c.length * c.axis + c.radius * CandidateNormal(c, k);
+}
+
+// Farthest-point sampling (thesis Algorithm 5) of the candidates: each next point is the
+// one farthest from those already chosen, which spreads them evenly over the surface.
+std::vector<int> FarthestPoints(const Capsule& c, int count) {
+  std::vector<int> chosen = {0};
+  std::vector<double> distance(kAlong * kAround, 1e300);
+  while (static_cast<int>(chosen.size()) < std::min(count, kAlong * kAround)) {
+    const Vec3 last = CandidatePoint(c, chosen.back());
+    int best = -1;
+    for (int k = 0; k < kAlong * kAround; ++k) {
+      distance[static_cast<size_t>(k)] = std::min(distance[static_cast<size_t>(k)], (CandidatePoint(c, k) - last).squaredNorm());
+      if (best < 0 || distance[static_cast<size_t>(k)] > distance[static_cast<size_t>(best)]) best = k;
+    }
+    chosen.push_back(best);
+  }
+  return chosen;
+}
+
+double Smoothstep(double x) {
+  x = std::clamp(x, 0.0, 1.0);
+  return x * x * (3.0 - 2.0 * x);
+}
+
+}  // namespace
+
+void RetargetOptions::Validate() const {
+  auto require = [](bool ok, const char* field, const char* rule) {
+    if (!ok) throw std::invalid_argument(std::string("retarget option ") + field + " must be " + rule);
+  };
+  require(rate_hz > 0 && std::isfinite(rate_hz), "rate_hz", "> 0");
+  require(points_per_bone >= 1 && points_per_bone <= kAlong * kAround, "points_per_bone", "in [1, 32]");
+  require(surface_radius_fraction > 0 && surface_radius_fraction < 1, "surface_radius_fraction", "in (0, 1)");
+  require(normal_lever_m > 0 && normal_lever_m < 1, "normal_lever_m", "in (0, 1) m");
+  require(end_effector_weight >= 0 && torso_weight >= 0 && limb_weight >= 0 && root_weight >= 0, "weights", ">= 0");
+  require(damping >= 0 && std::isfinite(damping), "damping", ">= 0");
+  require(max_iterations >= 1 && max_iterations <= 100, "max_iterations", "in [1, 100]");
+  require(contact_height_m >= 0 && contact_speed_m_s >= 0, "contact_height_m / contact_speed_m_s", ">= 0");
+  require(release_frames >= 1, "release_frames", ">= 1");
+}
+
+Retargeter::Retargeter(std::shared_ptr<const Skeleton> source, std::shared_ptr<const Skeleton> target, RetargetMap map,
+                       const RetargetOptions& options)
+    : source_(std::move(source)),
+      target_(std::move(target)),
+      map_(std::move(map)),
+      options_(options),
+      state_(*target_, MarkerSet(*target_, {MarkerDefinition{"root", 1, {MarkerAttachment{0, 1.0, Vec3::Zero()}, {}}}})),
+      source_fk_(*source_) {
+  options_.Validate();
+  if (map_.bones.empty()) throw std::invalid_argument("retarget: no corresponding bones");
+  auto check = [](int j, const Skeleton& sk, const std::string& what) {
+    if (j < 0 || j >= sk.num_joints()) throw std::invalid_argument("retarget: " + what + " joint index out of range");
+  };
+  check(map_.source_root, *source_, "source root");
+  check(map_.target_root, *target_, "target root");
+  scale_ = map_.target_leg_length_m / map_.source_leg_length_m;
+  if (!(scale_ > 0 && std::isfinite(scale_))) throw std::invalid_argument("retarget: leg lengths must be positive");
+
+  KinematicsWorkspace source_rest(*source_), target_rest(*target_);
+  ForwardKinematics(*source_, RestPose(*source_), &source_rest);
+  ForwardKinematics(*target_, RestPose(*target_), &target_rest);
+  std::vector<MarkerDefinition> defs;
+  std::vector<double> region_weight;
+  for (size_t b = 0; b < map_.bones.size(); ++b) {
+    const RetargetBone& bone = map_.bones[b];
+    check(bone.source_joint, *source_, bone.role);
+    check(bone.target_joint, *target_, bone.role);
+    const auto js = static_cast<size_t>(bone.source_joint), jt = static_cast<size_t>(bone.target_joint);
+    const Capsule cs = MakeCapsule(source_rest.p_WJ[js], bone.source_bone, options_.surface_radius_fraction);
+    const Capsule ct = MakeCapsule(target_rest.p_WJ[jt], bone.target_bone, options_.surface_radius_fraction);
+    const bool positions = bone.region == RetargetRegion::kEndEffector;
+    const double weight = (positions ? options_.end_effector_weight
+                           : bone.region == RetargetRegion::kTorso ? options_.torso_weight
+                                                                   : options_.limb_weight) /
+                          options_.points_per_bone;
+    for (int k : FarthestPoints(cs, options_.points_per_bone)) {
+      SurfacePoint p;
+      p.bone = static_cast<int>(b);
+      p.source_offset = source_rest.R_WJ[js].transpose() * (CandidatePoint(cs, k) - cs.origin);
+      p.source_normal = source_rest.R_WJ[js].transpose() * CandidateNormal(cs, k);
+      p.source_axis = source_rest.R_WJ[js].transpose() * cs.axis;
+      p.target_along_m = CandidateAlong(k) * ct.length;
+      // A normal-tracked point is represented on the target by a lever point: as far
+      // along the bone's axis as the surface point, one lever out along its normal.
+      const Vec3 world = positions ? CandidatePoint(ct, k)
+                                   : Vec3(ct.origin + p.target_along_m * ct.axis + options_.normal_lever_m * CandidateNormal(ct, k));
+      p.marker = static_cast<int>(defs.size());
+      MarkerDefinition def;
+      def.name = bone.role + "_" + std::to_string(k);
+      def.attachments[0] = {bone.target_joint, 1.0, target_rest.R_WJ[jt].transpose() * (world - ct.origin)};
+      defs.push_back(def);
+      region_weight.push_back(weight);
+      points_.push_back(p);
+    }
+  }
+  root_marker_ = static_cast<int>(defs.size());
+  MarkerDefinition root;
+  root.name = "root";
+  root.attachments[0] = {map_.target_root, 1.0, Vec3::Zero()};
+  defs.push_back(root);
+  region_weight.push_back(options_.root_weight);
+  markers_ = std::make_unique<MarkerSet>(*target_, std::move(defs));
+  state_ = IkState(*target_, *markers_);
+  weights_ = region_weight;
+  goals_.assign(weights_.size(), Vec3::Zero());
+  source_origin_before_.assign(static_cast<size_t>(source_->num_joints()), Vec3::Zero());
+  ik_.max_iterations = options_.max_iterations;
+  ik_.temporal_weight = options_.damping * options_.damping;
+  ik_.min_markers = 1;
+  refine_ik_ = ik_;
+  refine_ik_.predict_constant_velocity = false;
+  settle_ik_ = ik_;
+  settle_ik_.max_iterations = 10;
+  settle_ik_.temporal_weight = 0.0;
+  settle_ik_.predict_constant_velocity = false;
+}
+
+void Retargeter::Reset() {
+  state_.Reset();
+  planted_ = {false, false};
+  since_release_ = {1 << 20, 1 << 20};
+  foot_correction_ = release_correction_ = lock_ = {Vec3::Zero(), Vec3::Zero()};
+  floor_ankle_y_ = 1e9;
+  frames_ = 0;
+}
+
+void Retargeter::ComputeGoals(bool predict) {
+  const KinematicsWorkspace& warm = state_.kinematics();
+  for (const SurfacePoint& p : points_) {
+    const RetargetBone& bone = map_.bones[static_cast<size_t>(p.bone)];
+    const auto js = static_cast<size_t>(bone.source_joint);
+    const Vec3 source_point = source_fk_.R_WJ[js] * p.source_offset + source_fk_.p_WJ[js];
+    Vec3& goal = goals_[static_cast<size_t>(p.marker)];
+    if (bone.region == RetargetRegion::kEndEffector) {
+      const Vec3 tracked = scale_ * source_point;
+      // A foot in contact keeps its horizontal place: every point of that foot moves by
+      // the same correction, so the foot still rolls heel to toe but does not slide.
+      goal = bone.foot_side < 0 ? tracked : Vec3(tracked + foot_correction_[static_cast<size_t>(bone.foot_side)]);
+    } else {
+      // Where the lever point belongs: from the target joint's origin along the actor's
+      // bone axis, then out along the actor's normal -- zero residual exactly when the
+      // target bone points and turns like the actor's, whatever either rest pose is. The
+      // origin is the last solution's, moved by the actor's own (scaled) motion since the
+      // last frame: no lag, and no feedback of the solve's velocity into its goals.
+      const auto jt = static_cast<size_t>(bone.target_joint);
+      const Vec3 anchor = warm.p_WJ[jt] + (predict ? Vec3(scale_ * (source_fk_.p_WJ[js] - source_origin_before_[js])) : Vec3::Zero());
+      goal = anchor + p.target_along_m * (source_fk_.R_WJ[js] * p.source_axis) + options_.normal_lever_m * (source_fk_.R_WJ[js] * p.source_normal);
+    }
+  }
+  goals_[static_cast<size_t>(root_marker_)] = scale_ * source_fk_.p_WJ[static_cast<size_t>(map_.source_root)];
+}
+
+const Pose& Retargeter::Retarget(const Pose& source_pose) {
+  ForwardKinematics(*source_, source_pose, &source_fk_);
+  // Contacts: the actor's ankles against the lowest ankle height seen so far.
+  std::array<bool, 2> planted_now = planted_;
+  for (int side = 0; side < 2; ++side) {
+    const int ankle = map_.source_ankles[static_cast<size_t>(side)];
+    if (ankle < 0) continue;
+    const Vec3& p = source_fk_.p_WJ[static_cast<size_t>(ankle)];
+    floor_ankle_y_ = std::min(floor_ankle_y_, p.y());
+    Vec3 moved = p - previous_ankle_[static_cast<size_t>(side)];
+    moved.y() = 0.0;
+    const double speed = frames_ > 0 ? moved.norm() * options_.rate_hz : 0.0;
+    const double height = p.y() - floor_ankle_y_;
+    const bool was = planted_[static_cast<size_t>(side)];
+    // Hysteresis: leaving contact needs clearly more than entering it.
+    planted_now[static_cast<size_t>(side)] =
+        was ? height < 1.5 * options_.contact_height_m && speed < 1.5 * options_.contact_speed_m_s
+            : height < options_.contact_height_m && speed < options_.contact_speed_m_s && frames_ > 0;
+    previous_ankle_[static_cast<size_t>(side)] = p;
+  }
+  for (int side = 0; side < 2; ++side) {
+    const auto sd = static_cast<size_t>(side);
+    const int ankle = map_.source_ankles[sd];
+    if (ankle < 0) continue;
+    Vec3 reference = scale_ * source_fk_.p_WJ[static_cast<size_t>(ankle)];
+    reference.y() = 0.0;
+    if (planted_now[sd] && !planted_[sd]) lock_[sd] = reference + foot_correction_[sd];  // touch-down
+    if (planted_now[sd]) {
+      foot_correction_[sd] = lock_[sd] - reference;
+      release_correction_[sd] = foot_correction_[sd];
+    } else {
+      // Lifted: ease the correction away over release_frames.
+      const double blend = Smoothstep(static_cast<double>(since_release_[sd] + 1) / options_.release_frames);
+      foot_correction_[sd] = (1.0 - blend) * release_correction_[sd];
+    }
+  }
+  ComputeGoals(/*predict=*/frames_ > 0);
+
+  for (int side = 0; side < 2; ++side) {
+    const auto s = static_cast<size_t>(side);
+    since_release_[s] = planted_now[s] ? 0 : planted_[s] ? 0 : since_release_[s] + 1;
+  }
+  planted_ = planted_now;
+  summary_.ik = SolveIk(*target_, *markers_, ik_, goals_, weights_, &state_);
+  for (int pass = 0; pass < options_.anchor_passes; ++pass) {
+    ComputeGoals(false);
+    summary_.ik = SolveIk(*target_, *markers_, refine_ik_, goals_, weights_, &state_);
+  }
+  if (frames_ == 0) {
+    // The first frame starts from the rest pose, where the normal anchors are wrong:
+    // re-anchor on each solution until the pose settles (once, not per frame).
+    for (int pass = 0; pass < options_.first_frame_passes; ++pass) {
+      ComputeGoals(false);
+      summary_.ik = SolveIk(*target_, *markers_, settle_ik_, goals_, weights_, &state_);
+    }
+  }
+  summary_.planted = planted_;
+  std::copy(source_fk_.p_WJ.begin(), source_fk_.p_WJ.end(), source_origin_before_.begin());
+  ++frames_;
+  return state_.pose();
+}
+
+}  // namespace mocapd

@@ -1,0 +1,116 @@
+// Role matching between an actor's and a character's skeletons.
+#include "sim/retarget_map.hpp"
+
+#include <algorithm>
+#include <set>
+#include <stdexcept>
+
+#include "sim/marker_layout.hpp"
+
+namespace mocapd {
+namespace {
+
+struct RoleSpec {
+  const char* role;
+  RetargetRegion region;
+  int foot_side;
+};
+
+// Every role that can carry surface points, and what it tracks.
+constexpr RoleSpec kRoles[] = {
+    {"pelvis", RetargetRegion::kTorso, -1},       {"spine", RetargetRegion::kTorso, -1},
+    {"chest", RetargetRegion::kTorso, -1},        {"neck", RetargetRegion::kLimb, -1},
+    {"head", RetargetRegion::kEndEffector, -1},   {"clavicle_l", RetargetRegion::kLimb, -1},
+    {"clavicle_r", RetargetRegion::kLimb, -1},    {"upper_arm_l", RetargetRegion::kLimb, -1},
+    {"upper_arm_r", RetargetRegion::kLimb, -1},   {"forearm_l", RetargetRegion::kLimb, -1},
+    {"forearm_r", RetargetRegion::kLimb, -1},     {"hand_l", RetargetRegion::kEndEffector, -1},
+    {"hand_r", RetargetRegion::kEndEffector, -1}, {"thigh_l", RetargetRegion::kLimb, -1},
+    {"thigh_r", RetargetRegion::kLimb, -1},       {"shin_l", RetargetRegion::kLimb, -1},
+    {"shin_r", RetargetRegion::kLimb, -1},        {"foot_l", RetargetRegion::kEndEffector, 0},
+    {"foot_r", RetargetRegion::kEndEffector, 1},  {"toe_l", RetargetRegion::kEndEffector, 0},
+    {"toe_r", RetargetRegion::kEndEffector, 1},
+};
+
+const char* RegionName(RetargetRegion r) {
+  return r == RetargetRegion::kEndEffector ? "position" : r == RetargetRegion::kTorso ? "normals (torso)" : "normals (limb)";
+}
+
+// Rest height of the root above the lowest joint or End Site: the leg length that
+// scales the actor's positions onto the character.
+double RootHeight(const Skeleton& sk, const KinematicsWorkspace& rest, std::span<const BvhEndSite> end_sites, int root) {
+  double lowest = rest.p_WJ[static_cast<size_t>(root)].y();
+  for (int j = 0; j < sk.num_joints(); ++j) lowest = std::min(lowest, rest.p_WJ[static_cast<size_t>(j)].y());
+  for (const BvhEndSite& e : end_sites)
+    lowest = std::min(lowest, Vec3(rest.R_WJ[static_cast<size_t>(e.parent)] * e.offset + rest.p_WJ[static_cast<size_t>(e.parent)]).y());
+  return rest.p_WJ[static_cast<size_t>(root)].y() - lowest;
+}
+
+double Height(const KinematicsWorkspace& rest) {
+  double lo = 1e9, hi = -1e9;
+  for (const Vec3& p : rest.p_WJ) {
+    lo = std::min(lo, p.y());
+    hi = std::max(hi, p.y());
+  }
+  return std::clamp(hi - lo, 0.5, 2.5);
+}
+
+}  // namespace
+
+RetargetMap MakeRetargetMap(const Skeleton& source, std::span<const BvhEndSite> source_end_sites, const Skeleton& target,
+                            std::span<const BvhEndSite> target_end_sites, const std::map<std::string, std::string>& overrides) {
+  const HumanoidRoles source_roles = MatchHumanoidRoles(source);
+  HumanoidRoles target_roles = MatchHumanoidRoles(target);
+  std::set<std::string> known;
+  for (const RoleSpec& r : kRoles) known.insert(r.role);
+  for (const auto& [role, joint] : overrides) {
+    if (!known.count(role)) throw std::invalid_argument("retarget joint map: unknown role '" + role + "'");
+    const auto j = target.FindJoint(joint);
+    if (!j) throw std::invalid_argument("retarget joint map: the character has no joint '" + joint + "' (for role " + role + ")");
+    target_roles.joint_of_role[role] = j->value;
+  }
+  KinematicsWorkspace source_rest(source), target_rest(target);
+  ForwardKinematics(source, RestPose(source), &source_rest);
+  ForwardKinematics(target, RestPose(target), &target_rest);
+  const double source_height = Height(source_rest), target_height = Height(target_rest);
+
+  RetargetMap map;
+  map.source_root = source_roles.joint_of_role.at("pelvis");
+  map.target_root = target_roles.joint_of_role.at("pelvis");
+  map.source_leg_length_m = RootHeight(source, source_rest, source_end_sites, map.source_root);
+  map.target_leg_length_m = RootHeight(target, target_rest, target_end_sites, map.target_root);
+  map.source_ankles = {source_roles.joint_of_role.at("foot_l"), source_roles.joint_of_role.at("foot_r")};
+  std::set<int> covered;
+  std::string matched, missing;
+  for (const RoleSpec& spec : kRoles) {
+    const auto s = source_roles.joint_of_role.find(spec.role);
+    const auto t = target_roles.joint_of_role.find(spec.role);
+    if (s == source_roles.joint_of_role.end() || t == target_roles.joint_of_role.end()) {
+      missing += std::string(missing.empty() ? "" : ", ") + spec.role;
+      continue;
+    }
+    RetargetBone bone;
+    bone.role = spec.role;
+    bone.source_joint = s->second;
+    bone.target_joint = t->second;
+    bone.source_bone = SegmentBoneWorld(source, source_roles, source_rest, source_end_sites, spec.role, s->second, source_height);
+    bone.target_bone = SegmentBoneWorld(target, target_roles, target_rest, target_end_sites, spec.role, t->second, target_height);
+    bone.region = spec.region;
+    bone.foot_side = spec.foot_side;
+    map.bones.push_back(bone);
+    covered.insert(t->second);
+    matched += "  " + std::string(spec.role) + ": " + source.joint(s->second).name + " -> " + target.joint(t->second).name + " (" +
+               RegionName(spec.region) + ")\n";
+  }
+  std::string uncovered;
+  for (int j = 0; j < target.num_joints(); ++j)
+    if (!covered.count(j)) uncovered += std::string(uncovered.empty() ? "" : ", ") + target.joint(j).name;
+  char scale[128];
+  std::snprintf(scale, sizeof(scale), "leg length %.3f m -> %.3f m (scale %.3f)\n", map.source_leg_length_m, map.target_leg_length_m,
+                map.target_leg_length_m / map.source_leg_length_m);
+  map.report = "retarget map: " + std::to_string(map.bones.size()) + " bones matched, " + scale + matched +
+               (missing.empty() ? "" : "  roles on only one rig (not tracked): " + missing + "\n") +
+               (uncovered.empty() ? "" : "  character joints without surface points (solved, not tracked): " + uncovered + "\n");
+  return map;
+}
+
+}  // namespace mocapd

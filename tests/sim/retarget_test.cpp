@@ -1,0 +1,119 @@
+// Tests for retargeting: identical rigs give the identity, a uniformly scaled rig the
+// same joint angles, planted feet do not slide, the map reports what matched, and a
+// frame allocates nothing.
+#include "filters/retarget.hpp"
+
+#include <gtest/gtest.h>
+
+#include "sim/humanoid.hpp"
+#include "sim/retarget_map.hpp"
+#include "tests/support/allocation_counter.hpp"
+
+namespace mocapd {
+namespace {
+
+std::shared_ptr<const Skeleton> Scaled(const Skeleton& sk, double factor) {
+  std::vector<Joint> joints(sk.joints().begin(), sk.joints().end());
+  for (Joint& j : joints) j.offset *= factor;
+  return std::make_shared<const Skeleton>(std::move(joints));
+}
+
+double MaxRotationDifferenceDeg(const Pose& a, const Pose& b) {
+  double worst = 0.0;
+  for (size_t j = 0; j < a.rotation.size(); ++j) worst = std::max(worst, a.rotation[j].angularDistance(b.rotation[j]) * 180.0 / M_PI);
+  return worst;
+}
+
+class RetargetTest : public ::testing::Test {
+ protected:
+  RetargetTest() : source_(std::make_shared<const Skeleton>(MakeHumanoidSkeleton())) {
+    motion_ = MakeHumanoidMotion(*source_, HumanoidMotion::kWalk, 3.0, 120.0);
+  }
+  std::shared_ptr<const Skeleton> source_;
+  std::vector<Pose> motion_;
+};
+
+// Contact locking off: the procedural walk's stance feet creep a little, which locking
+// would (rightly) hold still on the character -- not the identity any more.
+RetargetOptions NoContacts() {
+  RetargetOptions o;
+  o.contact_height_m = 0.0;
+  return o;
+}
+
+TEST_F(RetargetTest, IdenticalRigsRetargetToTheIdentity) {
+  Retargeter r(source_, source_, MakeRetargetMap(*source_, {}, *source_, {}), NoContacts());
+  EXPECT_DOUBLE_EQ(r.scale(), 1.0);
+  double worst = 0.0, worst_root = 0.0;
+  for (size_t f = 0; f < motion_.size(); ++f) {
+    const Pose& out = r.Retarget(motion_[f]);
+    if (f < 5) continue;  // the warm start settles from the cold first frame
+    worst = std::max(worst, MaxRotationDifferenceDeg(out, motion_[f]));
+    worst_root = std::max(worst_root, (out.translation[0] - motion_[f].translation[0]).norm());
+  }
+  EXPECT_LT(worst, 2.0);
+  EXPECT_LT(worst_root, 0.005);
+}
+
+TEST_F(RetargetTest, AUniformlyScaledRigGetsTheSameJointAngles) {
+  const auto big = Scaled(*source_, 1.25);
+  Retargeter r(source_, big, MakeRetargetMap(*source_, {}, *big, {}), NoContacts());
+  EXPECT_NEAR(r.scale(), 1.25, 1e-9);
+  double worst = 0.0, worst_root = 0.0;
+  for (size_t f = 0; f < motion_.size(); ++f) {
+    const Pose& out = r.Retarget(motion_[f]);
+    if (f < 5) continue;
+    worst = std::max(worst, MaxRotationDifferenceDeg(out, motion_[f]));
+    worst_root = std::max(worst_root, (out.translation[0] - 1.25 * motion_[f].translation[0]).norm());
+  }
+  EXPECT_LT(worst, 2.0);
+  EXPECT_LT(worst_root, 0.01);
+}
+
+TEST_F(RetargetTest, APlantedFootDoesNotSlide) {
+  // A character with longer legs but the same torso: scaled positions alone would not
+  // keep its feet still.
+  std::vector<Joint> joints(source_->joints().begin(), source_->joints().end());
+  for (Joint& j : joints)
+    if (j.name.find("Leg") != std::string::npos || j.name.find("Foot") != std::string::npos) j.offset *= 1.3;
+  const auto leggy = std::make_shared<const Skeleton>(std::move(joints));
+  Retargeter r(source_, leggy, MakeRetargetMap(*source_, {}, *leggy, {}), RetargetOptions{});
+  const int ankle = leggy->FindJoint("LeftFoot")->value;
+  Vec3 start = Vec3::Zero();
+  double worst_slide = 0.0;
+  int contacts = 0;
+  bool was = false;
+  for (const Pose& p : motion_) {
+    r.Retarget(p);
+    const bool planted = r.summary().planted[0];
+    const Vec3 ankle_at = r.kinematics().p_WJ[static_cast<size_t>(ankle)];
+    if (planted && !was) {
+      start = ankle_at;
+      ++contacts;
+    }
+    if (planted) worst_slide = std::max(worst_slide, Vec3(ankle_at - start).cwiseProduct(Vec3(1, 0, 1)).norm());
+    was = planted;
+  }
+  EXPECT_GE(contacts, 2);  // a 3 s walk plants each foot more than once
+  EXPECT_LT(worst_slide, 0.005);
+}
+
+TEST_F(RetargetTest, TheMapReportsWhatMatchedAndRefusesUnknownOverrides) {
+  const RetargetMap map = MakeRetargetMap(*source_, {}, *source_, {});
+  EXPECT_NE(map.report.find("hand_l: LeftHand -> LeftHand (position)"), std::string::npos) << map.report;
+  EXPECT_NE(map.report.find("chest:"), std::string::npos) << map.report;
+  EXPECT_THROW(MakeRetargetMap(*source_, {}, *source_, {}, {{"hand_l", "NoSuchJoint"}}), std::invalid_argument);
+  EXPECT_THROW(MakeRetargetMap(*source_, {}, *source_, {}, {{"tail", "Hips"}}), std::invalid_argument);
+}
+
+TEST_F(RetargetTest, ARetargetedFrameAllocatesNothing) {
+  const auto big = Scaled(*source_, 0.8);
+  Retargeter r(source_, big, MakeRetargetMap(*source_, {}, *big, {}), RetargetOptions{});
+  for (size_t f = 0; f < 10; ++f) r.Retarget(motion_[f]);
+  testing::ScopedAllocationCounter counter;
+  for (size_t f = 10; f < 60; ++f) r.Retarget(motion_[f]);
+  EXPECT_EQ(counter.count(), 0u);
+}
+
+}  // namespace
+}  // namespace mocapd
