@@ -79,6 +79,7 @@ void RetargetOptions::Validate() const {
   require(max_iterations >= 1 && max_iterations <= 100, "max_iterations", "in [1, 100]");
   require(contact_height_m >= 0 && contact_speed_m_s >= 0, "contact_height_m / contact_speed_m_s", ">= 0");
   require(release_frames >= 1, "release_frames", ">= 1");
+  require(contact_weight_gain >= 1, "contact_weight_gain", ">= 1");
 }
 
 Retargeter::Retargeter(std::shared_ptr<const Skeleton> source, std::shared_ptr<const Skeleton> target, RetargetMap map,
@@ -145,6 +146,7 @@ Retargeter::Retargeter(std::shared_ptr<const Skeleton> source, std::shared_ptr<c
   markers_ = std::make_unique<MarkerSet>(*target_, std::move(defs));
   state_ = IkState(*target_, *markers_);
   weights_ = region_weight;
+  base_weights_ = region_weight;
   goals_.assign(weights_.size(), Vec3::Zero());
   source_origin_before_.assign(static_cast<size_t>(source_->num_joints()), Vec3::Zero());
   ik_.max_iterations = options_.max_iterations;
@@ -179,6 +181,10 @@ void Retargeter::ComputeGoals(bool predict) {
       // A foot in contact keeps its horizontal place: every point of that foot moves by
       // the same correction, so the foot still rolls heel to toe but does not slide.
       goal = bone.foot_side < 0 ? tracked : Vec3(tracked + foot_correction_[static_cast<size_t>(bone.foot_side)]);
+      // A planted foot outweighs the rest, so that the lock holds against other pulls.
+      weights_[static_cast<size_t>(p.marker)] =
+          base_weights_[static_cast<size_t>(p.marker)] *
+          (bone.foot_side >= 0 && planted_[static_cast<size_t>(bone.foot_side)] ? options_.contact_weight_gain : 1.0);
     } else {
       // Where the lever point belongs: from the target joint's origin along the actor's
       // bone axis, then out along the actor's normal -- zero residual exactly when the
@@ -219,7 +225,12 @@ const Pose& Retargeter::Retarget(const Pose& source_pose) {
     if (ankle < 0) continue;
     Vec3 reference = scale_ * source_fk_.p_WJ[static_cast<size_t>(ankle)];
     reference.y() = 0.0;
-    if (planted_now[sd] && !planted_[sd]) lock_[sd] = reference + foot_correction_[sd];  // touch-down
+    if (planted_now[sd] && !planted_[sd]) {
+      // Touch-down: the character's foot stays where it is now (horizontally).
+      const int held = map_.target_ankles[sd];
+      lock_[sd] = held >= 0 ? state_.kinematics().p_WJ[static_cast<size_t>(held)] : Vec3(reference + foot_correction_[sd]);
+      lock_[sd].y() = 0.0;
+    }
     if (planted_now[sd]) {
       foot_correction_[sd] = lock_[sd] - reference;
       release_correction_[sd] = foot_correction_[sd];
@@ -229,13 +240,12 @@ const Pose& Retargeter::Retarget(const Pose& source_pose) {
       foot_correction_[sd] = (1.0 - blend) * release_correction_[sd];
     }
   }
-  ComputeGoals(/*predict=*/frames_ > 0);
-
   for (int side = 0; side < 2; ++side) {
     const auto s = static_cast<size_t>(side);
     since_release_[s] = planted_now[s] ? 0 : planted_[s] ? 0 : since_release_[s] + 1;
   }
   planted_ = planted_now;
+  ComputeGoals(/*predict=*/frames_ > 0);
   summary_.ik = SolveIk(*target_, *markers_, ik_, goals_, weights_, &state_);
   for (int pass = 0; pass < options_.anchor_passes; ++pass) {
     ComputeGoals(false);

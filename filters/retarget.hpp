@@ -48,6 +48,7 @@ struct RetargetMap {
   double source_leg_length_m = 1.0;  ///< Hip to floor in the rest pose.
   double target_leg_length_m = 1.0;
   std::array<int, 2> source_ankles{-1, -1};  ///< Per side, for contact detection.
+  std::array<int, 2> target_ankles{-1, -1};  ///< Per side: where a planted foot is held.
   std::string report;  ///< Human-readable: what matched what, what was left at rest.
 };
 
@@ -70,6 +71,7 @@ struct RetargetOptions {
   double contact_height_m = 0.04;
   double contact_speed_m_s = 0.3;
   int release_frames = 8;  ///< A lifted foot eases from its lock back onto tracking.
+  double contact_weight_gain = 4.0;  ///< A planted foot's points weigh this much more.
   int anchor_passes = 0;  ///< Extra solves per frame re-anchoring the normals on the new pose.
   int first_frame_passes = 20;  ///< Re-anchoring solves on the first frame (after a reset).
   /// Throws std::invalid_argument naming the field.
@@ -127,7 +129,7 @@ class Retargeter {
   KinematicsWorkspace source_fk_;
   std::vector<Vec3> goals_;
   std::vector<Vec3> source_origin_before_;  ///< The actor's joint origins last frame.
-  std::vector<double> weights_;
+  std::vector<double> weights_, base_weights_;
   // Contacts per side.
   std::array<bool, 2> planted_{false, false};
   std::array<int, 2> since_release_{1 << 20, 1 << 20};

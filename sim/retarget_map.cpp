@@ -79,6 +79,7 @@ RetargetMap MakeRetargetMap(const Skeleton& source, std::span<const BvhEndSite> 
   map.source_leg_length_m = RootHeight(source, source_rest, source_end_sites, map.source_root);
   map.target_leg_length_m = RootHeight(target, target_rest, target_end_sites, map.target_root);
   map.source_ankles = {source_roles.joint_of_role.at("foot_l"), source_roles.joint_of_role.at("foot_r")};
+  map.target_ankles = {target_roles.joint_of_role.at("foot_l"), target_roles.joint_of_role.at("foot_r")};
   std::set<int> covered;
   std::string matched, missing;
   for (const RoleSpec& spec : kRoles) {
