@@ -50,6 +50,10 @@ int main(int argc, char** argv) {
   proc_cmd->add_option("--out-c3d", proc.output_c3d, "Cleaned markers to write (C3D; untouched samples are kept bit for bit)");
   proc_cmd->add_option("--lookahead", proc.lookahead, "Frames of lookahead K (delay)")->check(CLI::Range(0, 1000))->capture_default_str();
   proc_cmd->add_option("--report", proc.report_json, "Write the summary as JSON");
+  proc_cmd->add_option("--retarget", proc.retarget_bvh, "Also retarget onto this character (BVH: hierarchy and rest pose)")->check(CLI::ExistingFile);
+  proc_cmd->add_option("--out-character-bvh", proc.output_character_bvh, "The retargeted character's motion (BVH)");
+  std::vector<std::string> joint_map_args;
+  proc_cmd->add_option("--joint-map", joint_map_args, "Retarget overrides ROLE=JOINT (e.g. hand_l=L_Wrist), comma-separated")->delimiter(',');
 
   std::string run_config = "config/mocapd.toml";
   std::string log_level = "info";
@@ -74,6 +78,12 @@ int main(int argc, char** argv) {
       return daemon.Stats().Balanced() ? 0 : 3;
     }
     if (*proc_cmd) {
+      for (const std::string& pair : joint_map_args) {
+        const size_t eq = pair.find('=');
+        if (eq == std::string::npos || eq == 0 || eq + 1 == pair.size())
+          throw std::invalid_argument("--joint-map: expected ROLE=JOINT, got '" + pair + "'");
+        proc.joint_map[pair.substr(0, eq)] = pair.substr(eq + 1);
+      }
       proc.progress = ::isatty(STDOUT_FILENO) != 0;
       mocapd::RunProcessCommand(proc, std::cout);
       return 0;

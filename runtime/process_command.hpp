@@ -6,6 +6,7 @@
 
 #include <nlohmann/json_fwd.hpp>
 #include <ostream>
+#include <map>
 #include <string>
 
 #include "filters/cleanup_pipeline.hpp"
@@ -20,6 +21,9 @@ struct ProcessCommandOptions {
   std::string report_json;  ///< Empty: not written.
   int lookahead = 12;
   bool progress = false;  ///< Draw a progress bar (on a terminal).
+  std::string retarget_bvh;           ///< Character to retarget onto (its hierarchy and rest pose); empty: none.
+  std::string output_character_bvh;   ///< With retarget_bvh: the character's motion.
+  std::map<std::string, std::string> joint_map;  ///< Retarget overrides: role -> character joint.
 };
 
 struct ProcessSummary {
@@ -28,6 +32,7 @@ struct ProcessSummary {
   int matched_markers = 0;
   CleanupCounters counters;
   double mean_us = 0.0, p50_us = 0.0, p99_us = 0.0, max_us = 0.0;  ///< Per-frame pipeline time.
+  double retarget_p50_us = 0.0, retarget_p99_us = 0.0;             ///< Per-frame retarget time, if any.
 };
 
 /// Runs the command, printing progress and the summary to out. Throws std::runtime_error

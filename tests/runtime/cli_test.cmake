@@ -52,6 +52,24 @@ string(JSON solved_frames GET "${OUT}" frames)
 if(NOT solved_frames EQUAL 600)
   message(FATAL_ERROR "the solved BVH has ${solved_frames} frames, expected 600")
 endif()
+# Retargeting onto a character: a 1.2x humanoid written as BVH by synth, its rest pose
+# and hierarchy taken from the file; the character's motion lines up frame for frame.
+run(${MOCAP_SIM} synth --humanoid walk --seconds 1 --out ${WORK_DIR}/char_markers.c3d --truth-bvh ${WORK_DIR}/character.bvh)
+run(${MOCAPD} process --subject ${WORK_DIR}/synthetic.toml --in ${WORK_DIR}/bad.c3d --out-bvh ${WORK_DIR}/solved2.bvh
+    --retarget ${WORK_DIR}/character.bvh --out-character-bvh ${WORK_DIR}/character_out.bvh --joint-map head=Head)
+if(NOT OUT MATCHES "retarget map: 21 bones matched" OR NOT OUT MATCHES "hand_l: LeftHand -> LeftHand")
+  message(FATAL_ERROR "process --retarget did not report the joint map:\n${OUT}")
+endif()
+run(${MOCAP_SIM} info ${WORK_DIR}/character_out.bvh --json)
+string(JSON character_frames GET "${OUT}" frames)
+if(NOT character_frames EQUAL 600)
+  message(FATAL_ERROR "the character BVH has ${character_frames} frames, expected 600")
+endif()
+execute_process(COMMAND ${MOCAPD} process --subject ${WORK_DIR}/synthetic.toml --in ${WORK_DIR}/bad.c3d --out-bvh ${WORK_DIR}/x.bvh
+                        --retarget ${WORK_DIR}/character.bvh --joint-map hand_l=NoSuchJoint RESULT_VARIABLE rc ERROR_VARIABLE err)
+if(NOT rc EQUAL 1 OR NOT err MATCHES "no joint 'NoSuchJoint'")
+  message(FATAL_ERROR "a bad joint map: rc=${rc} err=${err}")
+endif()
 # Bad input gets a clear error and a non-zero exit, not a crash.
 file(WRITE ${WORK_DIR}/broken.c3d "not a c3d file")
 execute_process(COMMAND ${MOCAP_SIM} info ${WORK_DIR}/broken.c3d RESULT_VARIABLE rc ERROR_VARIABLE err)
