@@ -3,6 +3,7 @@
 
 #include <cmath>
 #include <filesystem>
+#include <map>
 #include <fstream>
 #include <set>
 #include <sstream>
@@ -10,6 +11,8 @@
 #include <toml++/toml.h>
 
 #include "protocol/messages.hpp"
+#include "sim/bvh.hpp"
+#include "sim/retarget_map.hpp"
 
 namespace mocapd {
 namespace {
@@ -168,7 +171,9 @@ std::string SubjectFingerprint(const SubjectConfig& s, const DaemonConfig& c) {
     << o.disagreement_rotation_rad << ' ' << o.residual_floor_m << ' ' << o.residual_scale_factor << ' ' << o.spike_m << ' '
     << o.rigid_tolerance_m << ' ' << o.swap_margin_m << ' ' << o.swap_search_m << ' ' << o.relabel_swaps << ' ' << o.frozen_frames << ' '
     << o.fallen_frames << ' ' << o.fallen_residual_m << ' ' << o.small_gap_frames << ' ' << o.small_track_frames << ' ' << o.max_trim_frames
-    << ' ' << c.max_gap_frames << ' ' << c.restart_backjump_frames << ' ' << c.publish_cleaned_markers << ' ' << c.publish_global_transforms;
+    << ' ' << c.max_gap_frames << ' ' << c.restart_backjump_frames << ' ' << c.publish_cleaned_markers << ' ' << c.publish_global_transforms
+    << '\n' << s.character_path << ' ' << s.character_map.report << ' ' << s.retarget.damping << ' ' << s.retarget.contact_height_m << ' '
+    << s.retarget.contact_speed_m_s << ' ' << s.retarget.release_frames << ' ' << s.retarget.points_per_bone;
   return f.str();
 }
 
@@ -238,6 +243,17 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
   ReadDetectors(pipeline.Sub("detectors"), &defaults);
   pipeline.RejectUnknown();
 
+  RetargetOptions retarget;
+  {
+    TableReader r = top.Sub("retarget");
+    retarget.damping = r.Number("damping", retarget.damping, 0, 10);
+    retarget.contact_height_m = r.Number("contact_height_mm", retarget.contact_height_m * 1e3, 0, 1000) * 1e-3;
+    retarget.contact_speed_m_s = r.Number("contact_speed_m_s", retarget.contact_speed_m_s, 0, 100);
+    retarget.release_frames = r.Integer("release_frames", retarget.release_frames, 1, 10000);
+    retarget.points_per_bone = r.Integer("points_per_bone", retarget.points_per_bone, 1, 32);
+    r.RejectUnknown();
+  }
+
   const toml::node* subjects = top.Find("subject");
   if (subjects == nullptr) top.Fail(nullptr, "subject", "no [[subject]] tables: name at least one subject to solve");
   const toml::array* list = subjects->as_array();
@@ -259,6 +275,17 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
     s.cleanup = defaults;
     s.cleanup.rate_hz = s.rate_hz;
     s.cleanup.lookahead = t.Integer("lookahead", defaults.lookahead, 0, 1000);
+    s.character_path = t.String("character", "");
+    if (!s.character_path.empty() && std::filesystem::path(s.character_path).is_relative())
+      s.character_path = (std::filesystem::path(base_dir) / s.character_path).lexically_normal().string();
+    std::map<std::string, std::string> joint_map;
+    if (const toml::node* jm = t.Find("character_joint_map")) {
+      if (!jm->is_table()) t.Fail(jm, "character_joint_map", "expected a table of role = \"joint\"");
+      for (const auto& [role, joint] : *jm->as_table()) {
+        if (!joint.is_string()) t.Fail(&joint, "character_joint_map." + std::string(role.str()), "expected a joint name");
+        joint_map[std::string(role.str())] = *joint.value<std::string>();
+      }
+    }
     t.RejectUnknown();
     try {
       s.model = ReadSubjectModel(s.model_path);
@@ -272,6 +299,21 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
       s.cleanup.Validate();
     } catch (const std::exception& e) {
       t.Fail(nullptr, "pipeline", e.what());
+    }
+    s.retarget = retarget;
+    s.retarget.rate_hz = s.rate_hz;
+    if (!s.character_path.empty()) {
+      try {
+        const BvhTake character = ReadBvh(s.character_path);
+        s.character = std::make_shared<const Skeleton>(character.skeleton);
+        s.character_map = MakeRetargetMap(*s.model.skeleton, {}, *s.character, character.end_sites, joint_map);
+      } catch (const std::exception& e) {
+        t.Fail(table->get("character"), "character", e.what());
+      }
+      if (s.character->num_joints() > static_cast<int>(protocol::kMaxJoints))
+        t.Fail(table->get("character"), "character", "more joints than the wire protocol carries");
+    } else if (!joint_map.empty()) {
+      t.Fail(table->get("character_joint_map"), "character_joint_map", "given without a character");
     }
     c.subjects.push_back(std::move(s));
   }

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "filters/cleanup_pipeline.hpp"
+#include "filters/retarget.hpp"
 #include "sim/subject_file.hpp"
 
 namespace mocapd {
@@ -22,6 +23,11 @@ struct SubjectConfig {
   double rate_hz = 120.0;
   CleanupOptions cleanup;  ///< Pipeline options (rate, lookahead, window, thresholds).
   SubjectModel model;      ///< Loaded from model_path.
+  // Retargeting (optional): the character this actor drives, published beside it.
+  std::string character_path;  ///< BVH; empty: no retargeting.
+  std::shared_ptr<const Skeleton> character;
+  RetargetMap character_map;
+  RetargetOptions retarget;
 };
 
 struct DaemonConfig {

@@ -90,8 +90,34 @@ SubjectRunner::SubjectRunner(const SubjectConfig& config, const DaemonConfig& da
   cleaned_message_.status.resize(markers);
   cleaned_message_.reason.resize(markers);
   status_message_.subject = name_;
+  if (config.character) {
+    retargeter_ = std::make_unique<Retargeter>(config.model.skeleton, config.character, config.character_map, config.retarget);
+    const Skeleton& c = *config.character;
+    character_topic_ = Topic("character", config.name);
+    character_message_.subject = name_;
+    character_message_.model_hash = protocol::SkeletonHash(c);
+    character_message_.rotations.resize(static_cast<size_t>(c.num_joints()));
+    if (publish_globals_) {
+      character_message_.global_rotations.resize(static_cast<size_t>(c.num_joints()));
+      character_message_.global_positions.resize(static_cast<size_t>(c.num_joints()));
+    }
+    // The character's description: its joints (it carries no markers).
+    protocol::SubjectDescriptionMessage& d = character_description_;
+    d.subject = name_;
+    d.marker_set_hash = 0;
+    d.skeleton_hash = character_message_.model_hash;
+    d.rate_hz = static_cast<float>(config.rate_hz);
+    d.lookahead_frames = static_cast<uint16_t>(config.cleanup.lookahead);
+    for (const Joint& j : c.joints()) {
+      d.joint_names.push_back(j.name);
+      d.joint_parents.push_back(static_cast<int16_t>(j.parent.is_valid() ? j.parent.value : -1));
+      d.rest_offsets.push_back(j.offset);
+      d.rest_rotations.push_back(j.rest_rotation);
+    }
+  }
   // The largest message this runner encodes, so encoding never grows the buffer.
-  buffer_.reserve(256 + 64 * markers + 128 * joints);
+  const size_t character_joints = config.character ? static_cast<size_t>(config.character->num_joints()) : 0;
+  buffer_.reserve(256 + 64 * markers + 128 * std::max(joints, character_joints));
 }
 
 uint64_t SubjectRunner::pending() const { return static_cast<uint64_t>(pushed_ - published_); }
@@ -153,6 +179,7 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
 void SubjectRunner::Resynchronise(OutputSink& sink) {
   Flush(sink);
   pipeline_.Reset();
+  if (retargeter_) retargeter_->Reset();
   pushed_ = published_ = 0;
   started_ = false;
   ++counters_.restarts;
@@ -161,6 +188,7 @@ void SubjectRunner::Resynchronise(OutputSink& sink) {
 void SubjectRunner::EndOfStream(OutputSink& sink) {
   Flush(sink);
   pipeline_.Reset();
+  if (retargeter_) retargeter_->Reset();
   pushed_ = published_ = 0;
   started_ = false;
   ++counters_.ends_of_stream;
@@ -224,6 +252,27 @@ void SubjectRunner::Publish(int64_t trigger_receive_ns, OutputSink& sink) {
     protocol::EncodeCleanedMarkers(c, &buffer_);
     sink.Send(cleaned_topic_, buffer_);
   }
+  if (retargeter_) {
+    const Pose& character = retargeter_->Retarget(out.pose);
+    protocol::SkeletonFrameMessage& c = character_message_;
+    c.frame_number = stamp.frame_number;
+    c.capture_time_ns = stamp.capture_ns;
+    c.publish_time_ns = publish_ns;
+    c.status = static_cast<uint8_t>(retargeter_->summary().ik.status);
+    c.subject_state = state_;
+    c.residual_m = std::isfinite(retargeter_->summary().ik.rms_residual_m) ? static_cast<float>(retargeter_->summary().ik.rms_residual_m) : 0.0f;
+    c.root_translation = character.translation[0];
+    for (size_t j = 0; j < c.rotations.size(); ++j) c.rotations[j] = character.rotation[j];
+    if (publish_globals_) {
+      const KinematicsWorkspace& k = retargeter_->kinematics();
+      for (size_t j = 0; j < c.rotations.size(); ++j) {
+        c.global_rotations[j] = Quat(k.R_WJ[j]);
+        c.global_positions[j] = k.p_WJ[j];
+      }
+    }
+    protocol::EncodeSkeletonFrame(c, &buffer_);
+    sink.Send(character_topic_, buffer_);
+  }
   if (trigger_receive_ns >= 0) counters_.processing.Add(static_cast<double>(SteadyNs() - trigger_receive_ns) * 1e-9);
 }
 
@@ -238,6 +287,10 @@ bool SubjectRunner::CheckStall(int64_t now_ns, int64_t timeout_ns, OutputSink& s
 void SubjectRunner::PublishDescription(OutputSink& sink) {
   protocol::EncodeSubjectDescription(description_, &buffer_);
   sink.Send(description_topic_, buffer_);
+  if (retargeter_) {
+    protocol::EncodeSubjectDescription(character_description_, &buffer_);
+    sink.Send(character_topic_, buffer_);
+  }
 }
 
 void SubjectRunner::PublishStatus(int64_t now_ns, OutputSink& sink) {

@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "filters/cleanup_pipeline.hpp"
+#include "filters/retarget.hpp"
 #include "protocol/messages.hpp"
 #include "runtime/daemon_config.hpp"
 
@@ -143,6 +144,11 @@ class SubjectRunner {
   protocol::SkeletonFrameMessage skeleton_message_;
   protocol::CleanedMarkersMessage cleaned_message_;
   protocol::SubjectStatusMessage status_message_;
+  // Retargeting onto the subject's character, when configured.
+  std::unique_ptr<Retargeter> retargeter_;
+  protocol::SkeletonFrameMessage character_message_;
+  protocol::SubjectDescriptionMessage character_description_;
+  std::string character_topic_;
   std::vector<uint8_t> buffer_;
   std::string skeleton_topic_, cleaned_topic_, description_topic_, status_topic_;
 };

@@ -7,6 +7,8 @@
 #include <fstream>
 #include <sstream>
 
+#include "sim/bvh.hpp"
+#include "sim/humanoid.hpp"
 #include "sim/humanoid_subject.hpp"
 #include "tests/support/test_takes.hpp"
 
@@ -98,6 +100,27 @@ TEST(DaemonConfigTest, NonLoopbackBindsMustBeAskedFor) {
   EXPECT_TRUE(IsLocalEndpoint("ipc:///tmp/x"));
   EXPECT_TRUE(IsLocalEndpoint("tcp://[::1]:5"));
   EXPECT_FALSE(IsLocalEndpoint("tcp://*:5"));
+}
+
+TEST(DaemonConfigTest, ASubjectCanDriveACharacterFromABvh) {
+  const std::string dir = testing::TempDir("config_character");
+  const Skeleton humanoid = MakeHumanoidSkeleton(2.1);  // an ogre-sized character
+  WriteBvh(dir + "/ogre.bvh", MakeBvhTake(humanoid, {RestPose(humanoid)}, 1.0 / 120.0, "cm"));
+  const std::string with = std::string(kMinimal) + "character = \"" + dir + "/ogre.bvh\"\ncharacter_joint_map = { head = \"Head\" }\n" +
+                           "[retarget]\ndamping = 0.05\ncontact_speed_m_s = 0.2\n";
+  const DaemonConfig c = ParseDaemonConfig(with, "t.toml", MOCAPD_CONFIG_DIR);
+  ASSERT_TRUE(c.subjects[0].character);
+  EXPECT_EQ(c.subjects[0].character->num_joints(), humanoid.num_joints());
+  EXPECT_NEAR(c.subjects[0].character_map.target_leg_length_m / c.subjects[0].character_map.source_leg_length_m, 2.1 / 1.75, 0.01);
+  EXPECT_DOUBLE_EQ(c.subjects[0].retarget.damping, 0.05);
+  EXPECT_DOUBLE_EQ(c.subjects[0].retarget.contact_speed_m_s, 0.2);
+  const std::string missing = ErrorOf(std::string(kMinimal) + "character = \"" + dir + "/nope.bvh\"\n");
+  EXPECT_NE(missing.find("test.toml:5: field 'subject[0].character':"), std::string::npos) << missing;
+  const std::string bad_map =
+      ErrorOf(std::string(kMinimal) + "character = \"" + dir + "/ogre.bvh\"\ncharacter_joint_map = { hand_l = \"Paw\" }\n");
+  EXPECT_NE(bad_map.find("the character has no joint 'Paw'"), std::string::npos) << bad_map;
+  EXPECT_NE(ErrorOf(std::string(kMinimal) + "character_joint_map = { head = \"Head\" }\n").find("given without a character"),
+            std::string::npos);
 }
 
 TEST(DaemonConfigTest, ThresholdsAndOverridesReachThePipelineOptions) {

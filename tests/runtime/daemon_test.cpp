@@ -21,6 +21,7 @@
 #include "filters/pose_error.hpp"
 #include "sim/corruption.hpp"
 #include "sim/humanoid_subject.hpp"
+#include "sim/retarget_map.hpp"
 #include "sim/take_frames.hpp"
 #include "tests/support/test_takes.hpp"
 
@@ -111,6 +112,8 @@ class Subscriber {
   std::map<std::string, std::vector<protocol::SkeletonFrameMessage>> skeletons;
   std::map<std::string, std::vector<protocol::CleanedMarkersMessage>> cleaned;
   std::map<std::string, protocol::SubjectDescriptionMessage> descriptions;
+  std::map<std::string, std::vector<protocol::SkeletonFrameMessage>> characters;
+  std::map<std::string, protocol::SubjectDescriptionMessage> character_descriptions;
   int statuses = 0;
   int undecodable = 0;
 
@@ -139,6 +142,16 @@ class Subscriber {
           descriptions[m.subject] = m;
         } else if (t.starts_with("status/")) {
           ++statuses;
+        } else if (t.starts_with("character/")) {
+          protocol::SkeletonFrameMessage m;
+          protocol::SubjectDescriptionMessage d;
+          if (protocol::DecodeSkeletonFrame(bytes, &m) == protocol::DecodeStatus::kOk) {
+            characters[m.subject].push_back(std::move(m));
+          } else if (protocol::DecodeSubjectDescription(bytes, &d) == protocol::DecodeStatus::kOk) {
+            character_descriptions[d.subject] = d;
+          } else {
+            ++undecodable;
+          }
         }
       }
     }
@@ -471,6 +484,41 @@ TEST(DaemonTest, ASubscriberThatNeverReadsDoesNotSlowTheDataPlane) {
   EXPECT_TRUE(WaitForStats(*daemon, [&](const DaemonStats& s) { return s.published_total() == static_cast<uint64_t>(f.take.num_frames); }));
   daemon.Stop();
   EXPECT_TRUE(daemon->Stats().Balanced());
+}
+
+TEST(DaemonTest, ARetargetedCharacterIsPublishedBesideTheActor) {
+  const testing::HumanoidFixture f = testing::MakeHumanoidFixture("walk", 2.0, 120.0);
+  zmq::context_t context;
+  DaemonConfig config = TestConfig("inproc://char-in", "inproc://char-out", 4);
+  SubjectConfig& s = config.subjects[0];
+  std::vector<Joint> joints(s.model.skeleton->joints().begin(), s.model.skeleton->joints().end());
+  for (Joint& j : joints) j.offset *= 1.2;  // a taller character
+  s.character = std::make_shared<const Skeleton>(std::move(joints));
+  s.character_map = MakeRetargetMap(*s.model.skeleton, {}, *s.character, {});
+  RunningDaemon daemon(context, config);
+  Subscriber sub(context, "inproc://char-out");
+  ASSERT_TRUE(sub.WaitConnected());
+  Sender sender(context, "inproc://char-in", f.take, MakeHumanoidSubject("actor1"), zmq::socket_type::push);
+  for (int t = 0; t < f.take.num_frames; ++t) sender.Send(t, static_cast<uint64_t>(t));
+  ASSERT_TRUE(WaitForStats(*daemon, [&](const DaemonStats& st) { return st.messages_in == static_cast<uint64_t>(f.take.num_frames); }));
+  daemon.Stop();
+  ASSERT_TRUE(sub.WaitFor([&] { return sub.characters["actor1"].size() == static_cast<size_t>(f.take.num_frames); }));
+  std::lock_guard lock(sub.mutex);
+  const auto& characters = sub.characters["actor1"];
+  const auto& actors = sub.skeletons["actor1"];
+  ASSERT_EQ(actors.size(), characters.size());
+  EXPECT_EQ(characters[0].model_hash, protocol::SkeletonHash(*s.character));
+  ASSERT_EQ(sub.character_descriptions.count("actor1"), 1u);
+  EXPECT_EQ(sub.character_descriptions["actor1"].skeleton_hash, characters[0].model_hash);
+  // A uniformly taller character: the same joint angles, the root 1.2x as far.
+  double worst_deg = 0.0;
+  for (size_t k = 30; k < characters.size(); ++k) {
+    EXPECT_EQ(characters[k].frame_number, actors[k].frame_number);
+    for (size_t j = 0; j < characters[k].rotations.size(); ++j)
+      worst_deg = std::max(worst_deg, characters[k].rotations[j].angularDistance(actors[k].rotations[j]) * 180.0 / M_PI);
+    EXPECT_LT((characters[k].root_translation - 1.2 * actors[k].root_translation).norm(), 0.03);
+  }
+  EXPECT_LT(worst_deg, 10.0);  // planted feet are held, so not exactly the actor's angles
 }
 
 std::pair<int, std::string> HttpGet(int port, const std::string& target) {

@@ -91,7 +91,10 @@ TEST(ProcessCommandTest, RefusesATakeWithoutTheSubjectsMarkers) {
   other.rate_hz = 60;
   other.Allocate(10);
   WriteC3d(dir + "/take.c3d", other);
-  ProcessCommandOptions options{dir + "/actor.toml", dir + "/take.c3d", dir + "/o.bvh", "", "", 12, false};
+  ProcessCommandOptions options;
+  options.subject = dir + "/actor.toml";
+  options.input_c3d = dir + "/take.c3d";
+  options.output_bvh = dir + "/o.bvh";
   std::ostringstream out;
   EXPECT_THROW(RunProcessCommand(options, out), std::invalid_argument);
 }
