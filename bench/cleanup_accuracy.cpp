@@ -190,8 +190,9 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
     // with the reason's first letter, x unrecoverable; truth C if it was corrupted).
     for (const auto& [f, j] : s.pop_frames) {
       std::printf("pop %s K=%d frame %d joint %s:", take.name.c_str(), lookahead, f, skeleton->joint(j).name.c_str());
+      const int parent = skeleton->joint(j).parent.value;
       for (int m = 0; m < take.markers->num_markers(); ++m) {
-        if (take.markers->primary_joint(m) != j) continue;
+        if (take.markers->primary_joint(m) != j && take.markers->primary_joint(m) != parent) continue;
         std::printf(" %s[", take.markers->marker(m).name.c_str());
         for (int g = std::max(0, f - 6); g <= std::min<int>(f + 2, static_cast<int>(reasons.size()) - 1); ++g) {
           const MarkerStatus st = statuses[static_cast<size_t>(g)][static_cast<size_t>(m)];
