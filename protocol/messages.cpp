@@ -60,6 +60,12 @@ DecodeStatus ReadSubject(ByteReader& r, std::string* subject) {
   return DecodeStatus::kOk;
 }
 
+// Every message starts with the header and the subject name.
+DecodeStatus ReadPrelude(ByteReader& r, MessageType type, std::string* subject) {
+  if (const DecodeStatus s = ReadHeader(r, type); s != DecodeStatus::kOk) return s;
+  return ReadSubject(r, subject);
+}
+
 bool Finite(float v) { return std::isfinite(v); }
 
 void WriteQuat(ByteWriter& w, const Quat& q) {
@@ -185,8 +191,7 @@ void EncodeMarkerFrame(const MarkerFrameMessage& m, std::vector<uint8_t>* out) {
 
 DecodeStatus DecodeMarkerFrame(std::span<const uint8_t> bytes, MarkerFrameMessage* m) {
   ByteReader r(bytes);
-  if (const DecodeStatus s = ReadHeader(r, MessageType::kMarkerFrame); s != DecodeStatus::kOk) return s;
-  if (const DecodeStatus s = ReadSubject(r, &m->subject); s != DecodeStatus::kOk) return s;
+  if (const DecodeStatus s = ReadPrelude(r, MessageType::kMarkerFrame, &m->subject); s != DecodeStatus::kOk) return s;
   uint16_t count = 0, reserved = 0;
   if (!r.ReadU64(&m->model_hash) || !r.ReadU64(&m->frame_number) || !r.ReadU64(&m->capture_time_ns) || !r.ReadF32(&m->rate_hz) ||
       !r.ReadU16(&count) || !r.ReadU16(&reserved))
@@ -240,8 +245,7 @@ void EncodeSkeletonFrame(const SkeletonFrameMessage& m, std::vector<uint8_t>* ou
 
 DecodeStatus DecodeSkeletonFrame(std::span<const uint8_t> bytes, SkeletonFrameMessage* m) {
   ByteReader r(bytes);
-  if (const DecodeStatus s = ReadHeader(r, MessageType::kSkeletonFrame); s != DecodeStatus::kOk) return s;
-  if (const DecodeStatus s = ReadSubject(r, &m->subject); s != DecodeStatus::kOk) return s;
+  if (const DecodeStatus s = ReadPrelude(r, MessageType::kSkeletonFrame, &m->subject); s != DecodeStatus::kOk) return s;
   uint8_t state = 0;
   uint16_t flags = 0, count = 0, reserved = 0;
   if (!r.ReadU64(&m->model_hash) || !r.ReadU64(&m->frame_number) || !r.ReadU64(&m->capture_time_ns) || !r.ReadU64(&m->publish_time_ns) ||
@@ -313,8 +317,7 @@ void EncodeSubjectDescription(const SubjectDescriptionMessage& m, std::vector<ui
 
 DecodeStatus DecodeSubjectDescription(std::span<const uint8_t> bytes, SubjectDescriptionMessage* m) {
   ByteReader r(bytes);
-  if (const DecodeStatus s = ReadHeader(r, MessageType::kSubjectDescription); s != DecodeStatus::kOk) return s;
-  if (const DecodeStatus s = ReadSubject(r, &m->subject); s != DecodeStatus::kOk) return s;
+  if (const DecodeStatus s = ReadPrelude(r, MessageType::kSubjectDescription, &m->subject); s != DecodeStatus::kOk) return s;
   uint16_t markers = 0, joints = 0, reserved = 0;
   if (!r.ReadU64(&m->marker_set_hash) || !r.ReadU64(&m->skeleton_hash) || !r.ReadF32(&m->rate_hz) || !r.ReadU16(&m->lookahead_frames) ||
       !r.ReadU16(&markers) || !r.ReadU16(&joints) || !r.ReadU16(&reserved))
@@ -369,8 +372,7 @@ void EncodeCleanedMarkers(const CleanedMarkersMessage& m, std::vector<uint8_t>* 
 
 DecodeStatus DecodeCleanedMarkers(std::span<const uint8_t> bytes, CleanedMarkersMessage* m) {
   ByteReader r(bytes);
-  if (const DecodeStatus s = ReadHeader(r, MessageType::kCleanedMarkers); s != DecodeStatus::kOk) return s;
-  if (const DecodeStatus s = ReadSubject(r, &m->subject); s != DecodeStatus::kOk) return s;
+  if (const DecodeStatus s = ReadPrelude(r, MessageType::kCleanedMarkers, &m->subject); s != DecodeStatus::kOk) return s;
   uint16_t count = 0, reserved = 0;
   if (!r.ReadU64(&m->model_hash) || !r.ReadU64(&m->frame_number) || !r.ReadU64(&m->capture_time_ns) || !r.ReadU64(&m->publish_time_ns) ||
       !r.ReadU16(&count) || !r.ReadU16(&reserved))
@@ -408,8 +410,7 @@ void EncodeSubjectStatus(const SubjectStatusMessage& m, std::vector<uint8_t>* ou
 
 DecodeStatus DecodeSubjectStatus(std::span<const uint8_t> bytes, SubjectStatusMessage* m) {
   ByteReader r(bytes);
-  if (const DecodeStatus s = ReadHeader(r, MessageType::kSubjectStatus); s != DecodeStatus::kOk) return s;
-  if (const DecodeStatus s = ReadSubject(r, &m->subject); s != DecodeStatus::kOk) return s;
+  if (const DecodeStatus s = ReadPrelude(r, MessageType::kSubjectStatus, &m->subject); s != DecodeStatus::kOk) return s;
   uint8_t state = 0, reserved8 = 0;
   uint16_t reserved16 = 0;
   if (!r.ReadU8(&state) || !r.ReadU8(&reserved8) || !r.ReadU16(&reserved16) || !r.ReadU64(&m->last_frame_number) ||
@@ -432,8 +433,7 @@ void EncodeEndOfStream(const EndOfStreamMessage& m, std::vector<uint8_t>* out) {
 
 DecodeStatus DecodeEndOfStream(std::span<const uint8_t> bytes, EndOfStreamMessage* m) {
   ByteReader r(bytes);
-  if (const DecodeStatus s = ReadHeader(r, MessageType::kEndOfStream); s != DecodeStatus::kOk) return s;
-  if (const DecodeStatus s = ReadSubject(r, &m->subject); s != DecodeStatus::kOk) return s;
+  if (const DecodeStatus s = ReadPrelude(r, MessageType::kEndOfStream, &m->subject); s != DecodeStatus::kOk) return s;
   if (!r.ReadU64(&m->last_frame_number)) return DecodeStatus::kTooShort;
   if (r.remaining() != 0) return DecodeStatus::kSizeMismatch;
   return DecodeStatus::kOk;
