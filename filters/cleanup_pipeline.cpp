@@ -30,6 +30,7 @@ struct CleanupPipeline::MarkerTrack {
   Vec3 offset_velocity = Vec3::Zero();  // ... and its per-frame change
   Vec3 output = Vec3::Zero();           // last published X- ...
   Vec3 output_velocity = Vec3::Zero();  // ... and its per-frame change
+  double weight = 1.0;                  // last final-solve weight
 };
 
 const char* to_string(MaskReason reason) {
@@ -97,6 +98,7 @@ void CleanupOptions::Validate() const {
   require(trim_slope_m > 0.0, "trim_slope_m", "> 0");
   require(max_trim_frames >= 0, "max_trim_frames", ">= 0");
   require(max_offset_velocity_m > 0.0, "max_offset_velocity_m", "> 0");
+  require(fill_weight_ramp > 0.0 && std::isfinite(fill_weight_ramp), "fill_weight_ramp", "> 0");
   require(repaired_weight >= 0.0 && repaired_weight <= 1.0, "repaired_weight", "0..1");
   require(interpolated_weight >= 0.0 && interpolated_weight <= 1.0, "interpolated_weight", "0..1");
   naive_ik.Validate();
@@ -154,6 +156,7 @@ CleanupPipeline::CleanupPipeline(std::shared_ptr<const Skeleton> skeleton, std::
   out_.markers.assign(m, Vec3::Constant(kNaN));
   out_.status.assign(m, MarkerStatus::kUnrecoverable);
   out_.reason.assign(m, MaskReason::kNone);
+  out_.weight.assign(m, 0.0);
   out_.pose = RestPose(*skeleton_);
 }
 
@@ -520,10 +523,17 @@ void CleanupPipeline::Publish(int64_t tau, int64_t newest) {
     out_.markers[m] = x;
     out_.status[m] = status;
     out_.reason[m] = status == MarkerStatus::kObserved ? MaskReason::kNone : reason;
-    weights_[m] = status == MarkerStatus::kObserved || s.relabelled[m] ? 1.0
-                  : status == MarkerStatus::kUnrecoverable   ? 0.0
-                  : interpolated                             ? options_.interpolated_weight
-                                                             : options_.repaired_weight;
+    double weight = status == MarkerStatus::kObserved || s.relabelled[m] ? 1.0
+                    : status == MarkerStatus::kUnrecoverable   ? 0.0
+                    : interpolated                             ? options_.interpolated_weight
+                                                               : options_.repaired_weight;
+    // A fill handed from a guess (one-sided, weak) to an interpolation (strong) gains
+    // weight gradually, so the final solve does not snap to it in one frame.
+    if (options_.fill_weight_ramp > 1.0 && status == MarkerStatus::kRepaired && weight > track.weight)
+      weight = std::min(weight, std::max(track.weight, options_.repaired_weight) * options_.fill_weight_ramp);
+    track.weight = weight;
+    weights_[m] = weight;
+    out_.weight[m] = weight;
     ++counters_.samples_out;
     if (status == MarkerStatus::kRepaired) ++counters_.repaired_by[static_cast<size_t>(reason)];
     if (status == MarkerStatus::kUnrecoverable) ++counters_.unrecoverable;

@@ -217,6 +217,34 @@ TEST_F(CleanupPipelineTest, ReturningMarkerBlendsInWithoutAPop) {
   EXPECT_EQ(out[460].markers[static_cast<size_t>(m)], Sample(460, m));  // the returning sample itself is untouched
 }
 
+TEST_F(CleanupPipelineTest, AFillGainsFinalSolveWeightGradually) {
+  // A long gap: first one-sided fills (weak), then, once the return is in the lookahead,
+  // interpolated fills (strong). The weight must climb by at most fill_weight_ramp per
+  // frame, never jump from a guess's to data's.
+  const int m = Marker("LSHN1");
+  for (int f = 300; f < 420; ++f) Sample(f, m) = Vec3::Constant(kNaN);
+  CleanupOptions options;
+  const auto out = Run(options);
+  const auto um = static_cast<size_t>(m);
+  EXPECT_DOUBLE_EQ(out[330].weight[um], options.repaired_weight);  // one-sided, mid-gap
+  EXPECT_DOUBLE_EQ(out[299].weight[um], 1.0);                      // observed
+  bool reached_full = false;
+  for (int f = 301; f < 430; ++f) {
+    const double before = out[static_cast<size_t>(f - 1)].weight[um], now = out[static_cast<size_t>(f)].weight[um];
+    if (out[static_cast<size_t>(f)].status[um] == MarkerStatus::kRepaired) {
+      EXPECT_LE(now, before * options.fill_weight_ramp + 1e-12) << f;
+    }
+    reached_full |= out[static_cast<size_t>(f)].status[um] == MarkerStatus::kRepaired && now > 0.5;
+  }
+  EXPECT_TRUE(reached_full);  // the interpolation near the return does get its weight
+  options.fill_weight_ramp = 1.0;  // without the ramp the weight jumps
+  const auto jumpy = Run(options);
+  double biggest_jump = 0.0;
+  for (int f = 301; f < 420; ++f)
+    biggest_jump = std::max(biggest_jump, jumpy[static_cast<size_t>(f)].weight[um] / jumpy[static_cast<size_t>(f - 1)].weight[um]);
+  EXPECT_GT(biggest_jump, 10.0);
+}
+
 TEST_F(CleanupPipelineTest, MarkerNeverSeenIsUnrecoverableNotInvented) {
   const int m = Marker("LTOE1");
   for (auto& frame : frames_) frame[static_cast<size_t>(m)] = Vec3::Constant(kNaN);
