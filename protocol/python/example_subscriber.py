@@ -33,12 +33,13 @@ def main():
     socket = context.socket(zmq.SUB)
     socket.setsockopt(zmq.RCVHWM, 0)
     suffix = args.subject + "/" if args.subject else ""
-    for kind in ("skeleton/", "subject/", "status/"):
+    for kind in ("skeleton/", "subject/", "status/", "character/"):
         socket.setsockopt(zmq.SUBSCRIBE, (kind + suffix).encode())
     socket.connect(args.endpoint)
 
     joints = {}  # subject -> joint names, from its description
     frames = {}  # subject -> list of frame numbers received
+    character_frames = {}  # subject -> frames of the character it drives (retargeting)
     errors = 0
     start = time.monotonic()
     last_print = 0.0
@@ -56,6 +57,13 @@ def main():
             except ValueError as e:
                 errors += 1
                 print(f"undecodable message on {topic!r}: {e}", file=sys.stderr)
+                continue
+            if topic.startswith(b"character/"):
+                # A subject's retargeted character: its skeleton frames and description.
+                if kind == "skeleton_frame":
+                    character_frames.setdefault(message["subject"], []).append(message["frame"])
+                elif kind == "subject_description" and not args.quiet and message["subject"] not in character_frames:
+                    print(f"subject {message['subject']} drives a character with {len(message['joints'])} joints")
                 continue
             if kind == "subject_description":
                 if message["subject"] not in joints and not args.quiet:
@@ -83,6 +91,8 @@ def main():
         gaps = sum(1 for a, b in zip(numbers, numbers[1:]) if b != a + 1)
         print(f"summary: {subject}: {len(numbers)} skeleton frames, frames {numbers[0]}..{numbers[-1]}, "
               f"{gaps} discontinuities, {len(joints.get(subject, []))} joints described")
+    for subject, numbers in sorted(character_frames.items()):
+        print(f"summary: {subject}: {len(numbers)} character frames")
     print(f"summary: {total} skeleton frames, {errors} undecodable messages")
     return 0 if errors == 0 and (args.frames == 0 or total >= args.frames) else 1
 
