@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <stdexcept>
 #include <string>
 
@@ -99,6 +100,7 @@ void CleanupOptions::Validate() const {
   require(max_trim_frames >= 0, "max_trim_frames", ">= 0");
   require(max_offset_velocity_m > 0.0, "max_offset_velocity_m", "> 0");
   require(fill_weight_ramp > 0.0 && std::isfinite(fill_weight_ramp), "fill_weight_ramp", "> 0");
+  require(guessed_joint_temporal_scale > 0.0 && std::isfinite(guessed_joint_temporal_scale), "guessed_joint_temporal_scale", "> 0");
   require(repaired_weight >= 0.0 && repaired_weight <= 1.0, "repaired_weight", "0..1");
   require(interpolated_weight >= 0.0 && interpolated_weight <= 1.0, "interpolated_weight", "0..1");
   naive_ik.Validate();
@@ -537,6 +539,14 @@ void CleanupPipeline::Publish(int64_t tau, int64_t newest) {
     ++counters_.samples_out;
     if (status == MarkerStatus::kRepaired) ++counters_.repaired_by[static_cast<size_t>(reason)];
     if (status == MarkerStatus::kUnrecoverable) ++counters_.unrecoverable;
+  }
+  // A joint whose markers are all guesses this frame (one-sided fills, or still ramping
+  // up) is held closer to its own predicted motion than to those guesses.
+  for (int j = 0; j < skeleton_->num_joints(); ++j) {
+    const auto& joint_markers = markers_of_joint_[static_cast<size_t>(j)];
+    bool guessed = !joint_markers.empty();
+    for (int mk : joint_markers) guessed = guessed && weights_[static_cast<size_t>(mk)] < 0.5;
+    final_.SetTemporalScale(*skeleton_, j, guessed ? options_.guessed_joint_temporal_scale : 1.0);
   }
   out_.final_solve = SolveIk(*skeleton_, *markers_, options_.final_ik, out_.markers, weights_, &final_);
   CountSolve(out_.final_solve);

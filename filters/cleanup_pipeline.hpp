@@ -96,6 +96,11 @@ struct CleanupOptions {
   /// Measured on the 12 Bandai takes x 2 seeds, K = 12: medium pops 91 -> 78, 3.08 ->
   /// 2.91 deg; heavy 431 -> 375 pops, 6.64 -> 6.28 deg.
   double fill_weight_ramp = 1.5;
+  /// The final solve's temporal prior on a joint whose markers are all guesses this frame
+  /// is this many times stronger. Measured (Bandai, 2 seeds, K = 12): medium pops 78 ->
+  /// 74, 2.91 -> 2.83 deg; heavy 375 -> 341, 6.28 -> 6.07 deg; 10 and more trade position
+  /// accuracy for fewer pops.
+  double guessed_joint_temporal_scale = 5.0;
   // Solves.
   IkOptions naive_ik;   ///< Y: plain least squares.
   IkOptions robust_ik;  ///< Y^: Huber (huber_delta_m = 4 mm, weak velocity prediction by default).
