@@ -89,7 +89,6 @@ Scores Run(const bench::BenchTake& take, std::shared_ptr<const Skeleton> charact
   env("MOCAPD_EXP_ROOT_WEIGHT", &options.root_weight);
   env("MOCAPD_EXP_CONTACT_GAIN", &options.contact_weight_gain);
   if (const char* v = std::getenv("MOCAPD_EXP_ITERS")) options.max_iterations = std::atoi(v);
-  if (const char* v = std::getenv("MOCAPD_EXP_PASSES")) options.anchor_passes = std::atoi(v);
   Retargeter retargeter(source, character, map, options);
   const HumanoidRoles sr = MatchHumanoidRoles(*source), tr = MatchHumanoidRoles(*character);
   std::vector<std::pair<int, int>> effectors;

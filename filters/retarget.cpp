@@ -152,8 +152,6 @@ Retargeter::Retargeter(std::shared_ptr<const Skeleton> source, std::shared_ptr<c
   ik_.max_iterations = options_.max_iterations;
   ik_.temporal_weight = options_.damping * options_.damping;
   ik_.min_markers = 1;
-  refine_ik_ = ik_;
-  refine_ik_.predict_constant_velocity = false;
   settle_ik_ = ik_;
   settle_ik_.max_iterations = 10;
   settle_ik_.temporal_weight = 0.0;
@@ -247,10 +245,6 @@ const Pose& Retargeter::Retarget(const Pose& source_pose) {
   planted_ = planted_now;
   ComputeGoals(/*predict=*/frames_ > 0);
   summary_.ik = SolveIk(*target_, *markers_, ik_, goals_, weights_, &state_);
-  for (int pass = 0; pass < options_.anchor_passes; ++pass) {
-    ComputeGoals(false);
-    summary_.ik = SolveIk(*target_, *markers_, refine_ik_, goals_, weights_, &state_);
-  }
   if (frames_ == 0) {
     // The first frame starts from the rest pose, where the normal anchors are wrong:
     // re-anchor on each solution until the pose settles (once, not per frame).

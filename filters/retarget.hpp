@@ -75,7 +75,6 @@ struct RetargetOptions {
   double contact_speed_m_s = 0.15;
   int release_frames = 8;  ///< A lifted foot eases from its lock back onto tracking.
   double contact_weight_gain = 10.0;  ///< A planted foot's points weigh this much more.
-  int anchor_passes = 0;  ///< Extra solves per frame re-anchoring the normals on the new pose.
   int first_frame_passes = 20;  ///< Re-anchoring solves on the first frame (after a reset).
   /// Throws std::invalid_argument naming the field.
   void Validate() const;
@@ -127,7 +126,7 @@ class Retargeter {
   std::vector<SurfacePoint> points_;
   std::unique_ptr<MarkerSet> markers_;  ///< Virtual markers on the target.
   int root_marker_ = -1;
-  IkOptions ik_, refine_ik_, settle_ik_;
+  IkOptions ik_, settle_ik_;
   IkState state_;
   KinematicsWorkspace source_fk_;
   std::vector<Vec3> goals_;

@@ -73,7 +73,7 @@ struct SubjectCounters {
 
 class SubjectRunner {
  public:
-  /// config must outlive nothing: the runner copies what it needs.
+  /// Copies what it needs from the configs; they need not outlive the runner.
   SubjectRunner(const SubjectConfig& config, const DaemonConfig& daemon);
 
   const std::string& name() const { return name_; }

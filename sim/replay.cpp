@@ -464,8 +464,7 @@ ReplayReport RunRecordingReplay(const Recording& recording, const std::string& d
     ++i;
     return true;
   };
-  ReplayOptions options = o;
-  ReplayReport report = RunSchedule(logs, 0, false, produce, nullptr, nullptr, rate_hz > 0 ? 1.0 / rate_hz : 1.0 / 120.0, options);
+  ReplayReport report = RunSchedule(logs, 0, false, produce, nullptr, nullptr, rate_hz > 0 ? 1.0 / rate_hz : 1.0 / 120.0, o);
   report.source = description;
   report.rate_hz = rate_hz;
   return report;

@@ -64,7 +64,13 @@ def main(mocapd, mocap_sim, config_dir, work):
         assert subscriber.returncode == 0, "the example subscriber did not decode the stream"
         assert "summary: actor1: 600 skeleton frames, frames 0..599, 0 discontinuities, 21 joints described" in sub_out, sub_out
 
+        # The daemon's statistics snapshot is refreshed every 20 ms: wait for the last
+        # messages (the end of stream) to show before asserting on the counts.
+        deadline = time.monotonic() + 5.0
         m = metrics(ports[2])
+        while m[("mocapd_messages_received_total", ())] < 601 and time.monotonic() < deadline:
+            time.sleep(0.05)
+            m = metrics(ports[2])
         actor = (("subject", "actor1"),)
         assert m[("mocapd_frames_published_total", actor)] == 600, m
         assert m[("mocapd_messages_received_total", ())] == 601  # 600 frames + end of stream
