@@ -7,6 +7,7 @@
 // the cleaned-marker RMSE on corrupted samples (mm), the jerk ratio against the truth and
 // the number of pops (a joint moving > 2 cm per frame beyond the truth's own motion).
 // Usage: cleanup_accuracy [--seeds N] [--severity light|medium|heavy]... [--lookahead K (ours only)] [--explain-pops] [TAKE.bvh ...]
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -196,10 +197,15 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
         std::printf(" %s[", take.markers->marker(m).name.c_str());
         for (int g = std::max(0, f - 6); g <= std::min<int>(f + 2, static_cast<int>(reasons.size()) - 1); ++g) {
           const MarkerStatus st = statuses[static_cast<size_t>(g)][static_cast<size_t>(m)];
-          const char c = st == MarkerStatus::kObserved ? 'o' : st == MarkerStatus::kUnrecoverable ? 'x'
-                                                                                                   : to_string(reasons[static_cast<size_t>(g)][static_cast<size_t>(m)])[0];
+          char c = st == MarkerStatus::kObserved ? 'o' : st == MarkerStatus::kUnrecoverable ? 'x'
+                                                                                             : to_string(reasons[static_cast<size_t>(g)][static_cast<size_t>(m)])[0];
+          if (bad.at(g, m) != CorruptionKind::kNone) c = static_cast<char>(std::toupper(c));
           std::printf("%c%s", g == f ? '|' : c, g == f ? std::string(1, c).c_str() : "");
         }
+        // The injected truth over the same frames: . fine, g gap, s swap, p pop, z frozen, f fallen off.
+        std::printf("/");
+        for (int g = std::max(0, f - 6); g <= std::min<int>(f + 2, static_cast<int>(reasons.size()) - 1); ++g)
+          std::printf("%c", ".gspzf"[static_cast<int>(bad.at(g, m))]);
         std::printf("]");
       }
       std::printf("\n");

@@ -23,7 +23,10 @@ struct CleanupPipeline::Slot {
 struct CleanupPipeline::MarkerTrack {
   double residual_scale = 0.0;  // running robust residual scale, metres
   int residual_run = 0;         // consecutive residual outliers
-  int frozen_run = 0;
+  int64_t still_since = -1;          // first frame of the current still run (-1: none)
+  Vec3 still_anchor = Vec3::Zero();  // where the marker came to rest ...
+  Vec3 still_reference = Vec3::Zero();  // ... and its reference then
+  bool frozen = false;                  // excluded from the robust solve while it stays put
   bool fallen = false;  // excluded from the robust solve until it fits again
   bool has_published = false;
   int64_t last_observed = -1;  // frame of the last published observed sample
@@ -89,8 +92,8 @@ void CleanupOptions::Validate() const {
   require(spike_m > 0.0, "spike_m", "> 0");
   require(rigid_tolerance_m > 0.0, "rigid_tolerance_m", "> 0");
   require(swap_margin_m >= 0.0, "swap_margin_m", ">= 0");
-  require(frozen_motion_m >= 0.0 && frozen_reference_motion_m > frozen_motion_m, "frozen_reference_motion_m",
-          "> frozen_motion_m >= 0");
+  require(frozen_radius_m > 0.0 && frozen_reference_motion_m > frozen_radius_m, "frozen_reference_motion_m",
+          "> frozen_radius_m > 0");
   require(frozen_frames >= 1, "frozen_frames", ">= 1");
   require(fallen_frames >= 1, "fallen_frames", ">= 1");
   require(fallen_residual_m > 0.0, "fallen_residual_m", "> 0");
@@ -198,7 +201,7 @@ bool CleanupPipeline::Push(std::span<const Vec3> p_WM) {
   // Y^: robust, without markers that are standing still while the body moves or have
   // come off. Markers flagged only by a modest residual stay in (the Huber loss bounds
   // their pull): excluding them would let the reference drift away and keep them out.
-  for (size_t m = 0; m < m_count; ++m) weights_[m] = s.valid[m] && tracks_[m].frozen_run == 0 && !tracks_[m].fallen ? 1.0 : 0.0;
+  for (size_t m = 0; m < m_count; ++m) weights_[m] = s.valid[m] && !tracks_[m].frozen && !tracks_[m].fallen ? 1.0 : 0.0;
   CountSolve(SolveIk(*skeleton_, *markers_, options_.robust_ik, s.raw, weights_, &robust_));
   const auto predicted = robust_.predicted_markers();
   std::copy(predicted.begin(), predicted.end(), s.reference.begin());
@@ -354,10 +357,21 @@ void CleanupPipeline::Detect(int64_t t) {
     }
   }
 
+  // The reference moving away from a still marker only convicts it if the segment's
+  // motion is seen: another marker on the same joint fits its reference. (A planted
+  // foot's markers stay still while a reference with no foot data drifts.)
+  auto has_fitting_neighbour = [&](size_t m) {
+    for (int other : markers_of_joint_[static_cast<size_t>(markers_->primary_joint(static_cast<int>(m)))]) {
+      const auto o = static_cast<size_t>(other);
+      if (o != m && s.valid[o] && !tracks_[o].frozen && residual[o].norm() <= threshold(o)) return true;
+    }
+    return false;
+  };
   for (size_t m = 0; m < m_count; ++m) {
     MarkerTrack& track = tracks_[m];
     if (!s.valid[m]) {
-      track.frozen_run = 0;
+      track.still_since = -1;
+      track.frozen = false;
       continue;
     }
     const double r = residual[m].norm();
@@ -376,28 +390,30 @@ void CleanupPipeline::Detect(int64_t t) {
       // The running scale learns from good samples only (clipped at the threshold).
       track.residual_scale += alpha * (r - track.residual_scale);
     }
-    if (!has_previous || !prev.valid[m]) {
-      track.frozen_run = 0;
-      continue;
+    // Frozen: at rest (within a radius, so jitter is not motion) while the reference
+    // moves away; the run starts over wherever the marker leaves the radius.
+    if (track.still_since < 0 || (s.raw[m] - track.still_anchor).norm() > options_.frozen_radius_m) {
+      track.still_since = t;
+      track.still_anchor = s.raw[m];
+      track.still_reference = s.reference[m];
+      track.frozen = false;
+    } else if (t - track.still_since + 1 >= options_.frozen_frames &&
+               (s.reference[m] - track.still_reference).norm() > options_.frozen_reference_motion_m &&
+               has_fitting_neighbour(m)) {
+      track.frozen = true;
     }
+    if (track.frozen) {
+      // Still and far from its reference for long is the more specific diagnosis.
+      for (int64_t f = std::max(next_out_, track.still_since); f <= t; ++f)
+        if (slot(f).valid[m] && slot(f).mask[m] != MaskReason::kFallenOff) slot(f).mask[m] = MaskReason::kFrozen;
+    }
+    if (!has_previous || !prev.valid[m]) continue;
     // Spikes: this frame's displacement disagrees with the reference's, from a sample
     // that was itself fine (so the return from a pop is not a spike).
     const Vec3 moved = s.raw[m] - prev.raw[m];
     const Vec3 reference_moved = s.reference[m] - prev.reference[m];
     if (prev.mask[m] == MaskReason::kNone && s.mask[m] == MaskReason::kNone && (moved - reference_moved).norm() > options_.spike_m)
       s.mask[m] = MaskReason::kSpike;
-    // Frozen: still while the body moves.
-    if (moved.norm() < options_.frozen_motion_m && reference_moved.norm() > options_.frozen_reference_motion_m) {
-      ++track.frozen_run;
-    } else if (moved.norm() >= options_.frozen_motion_m) {
-      track.frozen_run = 0;
-    }
-    if (track.frozen_run >= options_.frozen_frames) {
-      // Still and far from its reference for long is the more specific diagnosis.
-      const int64_t first = std::max(next_out_, t - track.frozen_run + 1);
-      for (int64_t f = first; f <= t; ++f)
-        if (slot(f).valid[m] && slot(f).mask[m] != MaskReason::kFallenOff) slot(f).mask[m] = MaskReason::kFrozen;
-    }
   }
 
   // Rigid segments: two markers on one joint that changed their distance; blame the one
