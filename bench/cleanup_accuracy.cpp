@@ -29,7 +29,12 @@ namespace {
 struct Scores {
   double pos_cm = 0, rot_deg = 0, marker_rmse_mm = 0, jerk_ratio = 0;
   int pops = 0;
-  std::vector<std::pair<int, int>> pop_frames;  ///< (frame, joint) of each pop's worst joint
+  struct Pop {
+    int frame, joint;
+    double excess_m;  // the joint's motion beyond the truth's
+  };
+  std::vector<Pop> pop_frames;  ///< each pop's worst joint
+  std::vector<std::vector<Vec3>> estimated_joints, true_joints;  ///< per frame (for --explain-pops)
   double p50_us = 0, p99_us = 0;
 };
 
@@ -59,6 +64,8 @@ class Scorer {
       }
     }
     s.jerk_ratio = jerk_t > 0 ? jerk_e / jerk_t : 0;
+    s.estimated_joints = est_p;
+    s.true_joints = tru_p;
     for (size_t f = 1; f < est_p.size(); ++f) {
       double worst = 0.02;
       int worst_joint = -1;
@@ -71,7 +78,7 @@ class Scorer {
       }
       if (worst_joint >= 0) {
         ++s.pops;
-        s.pop_frames.emplace_back(static_cast<int>(f), worst_joint);
+        s.pop_frames.push_back({static_cast<int>(f), worst_joint, worst});
       }
     }
     return s;
@@ -155,6 +162,7 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
   if (const char* v = std::getenv("MOCAPD_EXP_FINAL_ITERS")) options.final_ik.max_iterations = std::atoi(v);
   if (const char* v = std::getenv("MOCAPD_EXP_NAIVE_ITERS")) options.naive_ik.max_iterations = std::atoi(v);
   if (const char* v = std::getenv("MOCAPD_EXP_ROBUST_ITERS")) options.robust_ik.max_iterations = std::atoi(v);
+  if (const char* v = std::getenv("MOCAPD_EXP_FILL_ACCEL")) options.fill_reference_acceleration_mps2 = std::atof(v);
   CleanupPipeline pipeline(skeleton, take.markers, options);
   Scorer scorer(*skeleton, take.motion);
   std::vector<Vec3> obs(static_cast<size_t>(take.markers->num_markers()));
@@ -163,11 +171,15 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
   long n = 0;
   std::vector<std::vector<MaskReason>> reasons;  // per published frame (for --explain-pops)
   std::vector<std::vector<MarkerStatus>> statuses;
+  std::vector<std::vector<Vec3>> published;
+  std::vector<std::vector<double>> weights;
   auto collect = [&]() {
     const CleanFrame& o = pipeline.output();
     if (g_explain_pops) {
       reasons.push_back(o.reason);
       statuses.push_back(o.status);
+      published.push_back(o.markers);
+      weights.push_back(o.weight);
     }
     scorer.Add(static_cast<int>(o.frame), o.pose);
     for (size_t m = 0; m < obs.size(); ++m) {
@@ -189,8 +201,13 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
   if (g_explain_pops) {
     // Each pop: the joint, and what its markers were around it (o observed, r repaired
     // with the reason's first letter, x unrecoverable; truth C if it was corrupted).
-    for (const auto& [f, j] : s.pop_frames) {
-      std::printf("pop %s K=%d frame %d joint %s:", take.name.c_str(), lookahead, f, skeleton->joint(j).name.c_str());
+    if (!s.pop_frames.empty())
+      for (const CorruptionEvent& e : bad.events)
+        if (e.kind == CorruptionKind::kSwap)
+          std::printf("swap %s frames %d-%d: %s <-> %s\n", take.name.c_str(), e.first_frame, e.last_frame,
+                      take.markers->marker(e.marker).name.c_str(), take.markers->marker(e.other).name.c_str());
+    for (const auto& [f, j, excess] : s.pop_frames) {
+      std::printf("pop %s K=%d frame %d joint %s +%.1fcm:", take.name.c_str(), lookahead, f, skeleton->joint(j).name.c_str(), excess * 100);
       const int parent = skeleton->joint(j).parent.value;
       for (int m = 0; m < take.markers->num_markers(); ++m) {
         if (take.markers->primary_joint(m) != j && take.markers->primary_joint(m) != parent) continue;
@@ -209,6 +226,20 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
         std::printf("]");
       }
       std::printf("\n");
+      // Frame by frame around it: the joint's step (estimate / truth, cm) and each of its
+      // markers' published step (cm) and final-solve weight.
+      for (int g = std::max(1, f - 4); g <= std::min<int>(f + 1, static_cast<int>(published.size()) - 1); ++g) {
+        const auto ug = static_cast<size_t>(g), uj = static_cast<size_t>(j);
+        std::printf("    %d joint %.1f/%.1f", g, (s.estimated_joints[ug][uj] - s.estimated_joints[ug - 1][uj]).norm() * 100,
+                    (s.true_joints[ug][uj] - s.true_joints[ug - 1][uj]).norm() * 100);
+        for (int m = 0; m < take.markers->num_markers(); ++m) {
+          if (take.markers->primary_joint(m) != j && take.markers->primary_joint(m) != parent) continue;
+          const auto um = static_cast<size_t>(m);
+          std::printf(" %s %.1f w%.2f", take.markers->marker(m).name.c_str(), (published[ug][um] - published[ug - 1][um]).norm() * 100,
+                      weights[ug][um]);
+        }
+        std::printf("\n");
+      }
     }
   }
   s.marker_rmse_mm = n > 0 ? std::sqrt(sq / static_cast<double>(n)) * 1e3 : 0;

@@ -34,6 +34,7 @@ struct CleanupPipeline::MarkerTrack {
   Vec3 offset_velocity = Vec3::Zero();  // ... and its per-frame change
   Vec3 output = Vec3::Zero();           // last published X- ...
   Vec3 output_velocity = Vec3::Zero();  // ... and its per-frame change
+  Vec3 reference_velocity = Vec3::Zero();  // X^'s per-frame change, snaps taken out
   double weight = 1.0;                  // last final-solve weight
 };
 
@@ -102,6 +103,8 @@ void CleanupOptions::Validate() const {
   require(trim_slope_m > 0.0, "trim_slope_m", "> 0");
   require(max_trim_frames >= 0, "max_trim_frames", ">= 0");
   require(max_offset_velocity_m > 0.0, "max_offset_velocity_m", "> 0");
+  require(fill_reference_acceleration_mps2 >= 0.0 && std::isfinite(fill_reference_acceleration_mps2),
+          "fill_reference_acceleration_mps2", ">= 0");
   require(fill_weight_ramp > 0.0 && std::isfinite(fill_weight_ramp), "fill_weight_ramp", "> 0");
   require(guessed_joint_temporal_scale > 0.0 && std::isfinite(guessed_joint_temporal_scale), "guessed_joint_temporal_scale", "> 0");
   require(repaired_weight >= 0.0 && repaired_weight <= 1.0, "repaired_weight", "0..1");
@@ -462,6 +465,24 @@ void CleanupPipeline::Publish(int64_t tau, int64_t newest) {
   Slot& s = slot(tau);
   const auto m_count = static_cast<size_t>(markers_->num_markers());
   const double max_v = options_.max_offset_velocity_m;
+  const double dt = 1.0 / options_.rate_hz;
+  const double max_reference_step_change = options_.fill_reference_acceleration_mps2 * dt * dt;
+  const bool has_reference_before = tau > 0 && slot(tau - 1).frame == tau - 1;
+  // The part of X^'s path over frames from..to that is snapping rather than moving (its
+  // per-frame change beyond the acceleration limit), summed; `velocity` comes in as the
+  // snap-free reference velocity at from - 1 and leaves as the one at `to`.
+  auto reference_snap = [&](size_t m, int64_t from, int64_t to, Vec3* velocity) {
+    Vec3 snap = Vec3::Zero();
+    if (max_reference_step_change <= 0.0 || !has_reference_before) return snap;
+    for (int64_t g = from; g <= to; ++g) {
+      const Vec3 step = slot(g).reference[m] - slot(g - 1).reference[m];
+      const Vec3 change = step - *velocity;
+      const Vec3 excess = change - ClampNorm(change, max_reference_step_change);
+      snap += excess;
+      *velocity = step - excess;
+    }
+    return snap;
+  };
   out_.frame = tau;
   for (size_t m = 0; m < m_count; ++m) {
     MarkerTrack& track = tracks_[m];
@@ -480,6 +501,7 @@ void CleanupPipeline::Publish(int64_t tau, int64_t newest) {
       track.offset_velocity = track.has_published ? Vec3(offset - track.offset) : Vec3::Zero();
       track.offset = offset;
       track.output_velocity = track.has_published ? Vec3(x - track.output) : Vec3::Zero();
+      track.reference_velocity = has_reference_before ? Vec3(ref - slot(tau - 1).reference[m]) : Vec3::Zero();
       track.last_observed = tau;
     } else {
       int64_t end = -1;  // the returning track, if the lookahead shows it
@@ -514,22 +536,31 @@ void CleanupPipeline::Publish(int64_t tau, int64_t newest) {
       } else {
         // Offset onto the reference path, from the last published offset and velocity
         // to the returning track's (two-sided), or easing to a constant (one-sided).
+        // Both ends are taken against X^ with its snaps taken out, so a reference that
+        // jumps (this segment's other markers re-entering its solve) moves no fill.
         HermiteSegment h;
         h.p0 = track.offset;
         h.m0 = ClampNorm(track.offset_velocity, max_v);
+        Vec3 velocity = track.reference_velocity;
+        const Vec3 snap_now = reference_snap(m, tau, tau, &velocity);
+        const Vec3 reference_velocity_now = velocity;
         if (end >= 0) {
           interpolated = true;
           const Slot& e = slot(end);
-          h.p1 = e.raw[m] - e.reference[m];
-          h.m1 = end_slope_known ? ClampNorm((slot(end + 1).raw[m] - slot(end + 1).reference[m]) - h.p1, max_v) : Vec3::Zero();
+          const Vec3 snap_at_end = snap_now + reference_snap(m, tau + 1, end, &velocity);
+          h.p1 = e.raw[m] - (e.reference[m] - snap_at_end);
+          h.m1 = end_slope_known ? ClampNorm((slot(end + 1).raw[m] - slot(end + 1).reference[m]) - (e.raw[m] - e.reference[m]), max_v)
+                                 : Vec3::Zero();
           h.length = static_cast<double>(end - tau + 1);
         } else {
           h.p1 = h.p0;
           h.m1 = Vec3::Zero();
           h.length = static_cast<double>(options_.lookahead + 1);
         }
-        track.offset = h.Value(1.0);
+        x = ref - snap_now + h.Value(1.0);
+        track.offset = x - ref;
         track.offset_velocity = h.Derivative(1.0);
+        track.reference_velocity = reference_velocity_now;
         x = ref + track.offset;
         track.output_velocity = x - track.output;
       }
