@@ -163,6 +163,7 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
   if (const char* v = std::getenv("MOCAPD_EXP_NAIVE_ITERS")) options.naive_ik.max_iterations = std::atoi(v);
   if (const char* v = std::getenv("MOCAPD_EXP_ROBUST_ITERS")) options.robust_ik.max_iterations = std::atoi(v);
   if (const char* v = std::getenv("MOCAPD_EXP_FILL_ACCEL")) options.fill_reference_acceleration_mps2 = std::atof(v);
+  if (const char* v = std::getenv("MOCAPD_EXP_SNAP_RELEASE")) options.fill_snap_release = std::atof(v);
   CleanupPipeline pipeline(skeleton, take.markers, options);
   Scorer scorer(*skeleton, take.motion);
   std::vector<Vec3> obs(static_cast<size_t>(take.markers->num_markers()));

@@ -35,6 +35,7 @@ struct CleanupPipeline::MarkerTrack {
   Vec3 output = Vec3::Zero();           // last published X- ...
   Vec3 output_velocity = Vec3::Zero();  // ... and its per-frame change
   Vec3 reference_velocity = Vec3::Zero();  // X^'s per-frame change, snaps taken out
+  Vec3 held_snap = Vec3::Zero();  // snaps a one-sided fill has not followed yet
   double weight = 1.0;                  // last final-solve weight
 };
 
@@ -103,6 +104,7 @@ void CleanupOptions::Validate() const {
   require(trim_slope_m > 0.0, "trim_slope_m", "> 0");
   require(max_trim_frames >= 0, "max_trim_frames", ">= 0");
   require(max_offset_velocity_m > 0.0, "max_offset_velocity_m", "> 0");
+  require(fill_snap_release >= 0.0 && fill_snap_release <= 1.0, "fill_snap_release", "0..1");
   require(fill_reference_acceleration_mps2 >= 0.0 && std::isfinite(fill_reference_acceleration_mps2),
           "fill_reference_acceleration_mps2", ">= 0");
   require(fill_weight_ramp > 0.0 && std::isfinite(fill_weight_ramp), "fill_weight_ramp", "> 0");
@@ -502,6 +504,7 @@ void CleanupPipeline::Publish(int64_t tau, int64_t newest) {
       track.offset = offset;
       track.output_velocity = track.has_published ? Vec3(x - track.output) : Vec3::Zero();
       track.reference_velocity = has_reference_before ? Vec3(ref - slot(tau - 1).reference[m]) : Vec3::Zero();
+      track.held_snap.setZero();
       track.last_observed = tau;
     } else {
       int64_t end = -1;  // the returning track, if the lookahead shows it
@@ -558,6 +561,16 @@ void CleanupPipeline::Publish(int64_t tau, int64_t newest) {
           h.length = static_cast<double>(options_.lookahead + 1);
         }
         x = ref - snap_now + h.Value(1.0);
+        if (end < 0) {
+          // A held snap is taken up a little each frame: a reference that kept up a real
+          // fast motion is followed again, with no jump.
+          track.held_snap += snap_now;
+          const Vec3 released = options_.fill_snap_release * track.held_snap;
+          track.held_snap -= released;
+          x += released;
+        } else {
+          track.held_snap.setZero();
+        }
         track.offset = x - ref;
         track.offset_velocity = h.Derivative(1.0);
         track.reference_velocity = reference_velocity_now;
