@@ -28,6 +28,7 @@ struct CleanupPipeline::MarkerTrack {
   Vec3 still_reference = Vec3::Zero();  // ... and its reference then
   bool frozen = false;                  // excluded from the robust solve while it stays put
   bool fallen = false;  // excluded from the robust solve until it fits again
+  bool stray = false;   // far off for a while: excluded until it fits again
   bool has_published = false;
   int64_t last_observed = -1;  // frame of the last published observed sample
   Vec3 offset = Vec3::Zero();  // last published X- - X^ ...
@@ -97,6 +98,8 @@ void CleanupOptions::Validate() const {
   require(frozen_radius_m > 0.0 && frozen_reference_motion_m > frozen_radius_m, "frozen_reference_motion_m",
           "> frozen_radius_m > 0");
   require(frozen_frames >= 1, "frozen_frames", ">= 1");
+  require(stray_frames >= 1, "stray_frames", ">= 1");
+  require(stray_residual_m > 0.0, "stray_residual_m", "> 0");
   require(fallen_frames >= 1, "fallen_frames", ">= 1");
   require(fallen_residual_m > 0.0, "fallen_residual_m", "> 0");
   require(small_gap_frames >= 0, "small_gap_frames", ">= 0");
@@ -203,10 +206,11 @@ bool CleanupPipeline::Push(std::span<const Vec3> p_WM) {
     s.mask[m] = valid ? MaskReason::kNone : MaskReason::kMissing;
   }
   RelabelSwaps(t);
-  // Y^: robust, without markers that are standing still while the body moves or have
-  // come off. Markers flagged only by a modest residual stay in (the Huber loss bounds
-  // their pull): excluding them would let the reference drift away and keep them out.
-  for (size_t m = 0; m < m_count; ++m) weights_[m] = s.valid[m] && !tracks_[m].frozen && !tracks_[m].fallen ? 1.0 : 0.0;
+  // Y^: robust, without markers that are standing still while the body moves, have come
+  // off, or have strayed far for a while. Markers flagged only by a modest residual stay
+  // in (the Huber loss bounds their pull): excluding them would let the reference drift
+  // away and keep them out.
+  for (size_t m = 0; m < m_count; ++m) weights_[m] = s.valid[m] && !tracks_[m].frozen && !tracks_[m].fallen && !tracks_[m].stray ? 1.0 : 0.0;
   CountSolve(SolveIk(*skeleton_, *markers_, options_.robust_ik, s.raw, weights_, &robust_));
   const auto predicted = robust_.predicted_markers();
   std::copy(predicted.begin(), predicted.end(), s.reference.begin());
@@ -389,9 +393,11 @@ void CleanupPipeline::Detect(int64_t t) {
         track.fallen = true;
         s.mask[m] = MaskReason::kFallenOff;
       }
+      if (track.residual_run >= options_.stray_frames && r > options_.stray_residual_m) track.stray = true;
     } else {
       track.residual_run = 0;
       track.fallen = false;
+      track.stray = false;
       // The running scale learns from good samples only (clipped at the threshold).
       track.residual_scale += alpha * (r - track.residual_scale);
     }

@@ -146,6 +146,8 @@ void ReadDetectors(TableReader t, CleanupOptions* o) {
   o->swap_search_m = t.Number("swap_search_mm", o->swap_search_m / kMm, 1, 2000) * kMm;
   o->relabel_swaps = t.Bool("relabel_swaps", o->relabel_swaps);
   o->frozen_frames = t.Integer("frozen_frames", o->frozen_frames, 2, 10000);
+  o->stray_frames = t.Integer("stray_frames", o->stray_frames, 1, 100000);
+  o->stray_residual_m = t.Number("stray_residual_mm", o->stray_residual_m / kMm, 1, 10000) * kMm;
   o->fallen_frames = t.Integer("fallen_frames", o->fallen_frames, 2, 100000);
   o->fallen_residual_m = t.Number("fallen_residual_mm", o->fallen_residual_m / kMm, 1, 10000) * kMm;
   o->small_gap_frames = t.Integer("small_gap_frames", o->small_gap_frames, 0, 1000);
@@ -170,7 +172,7 @@ std::string SubjectFingerprint(const SubjectConfig& s, const DaemonConfig& c) {
     << s.name << ' ' << s.rate_hz << ' ' << o.lookahead << ' ' << o.window << ' ' << o.disagreement_position_m << ' '
     << o.disagreement_rotation_rad << ' ' << o.residual_floor_m << ' ' << o.residual_scale_factor << ' ' << o.spike_m << ' '
     << o.rigid_tolerance_m << ' ' << o.swap_margin_m << ' ' << o.swap_search_m << ' ' << o.relabel_swaps << ' ' << o.frozen_frames << ' '
-    << o.fallen_frames << ' ' << o.fallen_residual_m << ' ' << o.small_gap_frames << ' ' << o.small_track_frames << ' ' << o.max_trim_frames
+    << o.stray_frames << ' ' << o.stray_residual_m << ' ' << o.fallen_frames << ' ' << o.fallen_residual_m << ' ' << o.small_gap_frames << ' ' << o.small_track_frames << ' ' << o.max_trim_frames
     << ' ' << c.max_gap_frames << ' ' << c.restart_backjump_frames << ' ' << c.publish_cleaned_markers << ' ' << c.publish_global_transforms
     << '\n' << s.character_path << ' ' << s.character_map.report << ' ' << s.retarget.damping << ' ' << s.retarget.contact_height_m << ' '
     << s.retarget.contact_speed_m_s << ' ' << s.retarget.release_frames << ' ' << s.retarget.points_per_bone;

@@ -331,6 +331,27 @@ TEST_F(CleanupPipelineTest, MarkerNeverSeenIsUnrecoverableNotInvented) {
   EXPECT_EQ(counters_.unrecoverable, static_cast<int64_t>(frames_.size()));
 }
 
+TEST_F(CleanupPipelineTest, StraySampleLeavesTheReferenceOfAnOccludedSegment) {
+  // The foot is occluded and RTOE1 carries another marker's track 50 cm away (a swap
+  // whose partner is hidden). Kept in the robust solve, it drags the guessed foot's
+  // reference after it until RTOE2, which is fine, no longer fits and is thrown out too.
+  const int stray = Marker("RTOE1"), good = Marker("RTOE2");
+  for (int f = 300; f < 420; ++f) {
+    Sample(f, stray) += Vec3(0.0, 0.5, 0.0);
+    for (const char* name : {"RFOT1", "RFOT2", "RFOT3"}) Sample(f, Marker(name)) = Vec3::Constant(kNaN);
+  }
+  auto good_marker_rejected = [&](int stray_frames) {
+    CleanupOptions options;
+    options.stray_frames = stray_frames;
+    const auto out = Run(options);
+    int rejected = 0;
+    for (int f = 330; f < 420; ++f) rejected += out[static_cast<size_t>(f)].status[static_cast<size_t>(good)] != MarkerStatus::kObserved;
+    return rejected;
+  };
+  EXPECT_LT(good_marker_rejected(CleanupOptions{}.stray_frames), 5);  // measured 0 of 90 frames
+  EXPECT_GT(good_marker_rejected(100000), 20);                       // without the rule: 90
+}
+
 TEST_F(CleanupPipelineTest, SolvedSkeletonStaysAccurateThroughRepairs) {
   for (int f = 200; f < 320; ++f) Sample(f, Marker("LHND1")) = Vec3::Constant(kNaN);
   for (int f = 500; f < 503; ++f) Sample(f, Marker("RSHN2")) += Vec3(0.3, 0.0, 0.0);
