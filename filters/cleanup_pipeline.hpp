@@ -201,6 +201,7 @@ class CleanupPipeline {
   IkState naive_, robust_, final_;
   std::vector<double> weights_;
   std::vector<Vec3> scratch_;
+  std::vector<uint8_t> marker_flags_;  ///< per-marker scratch of CleanMask
   CleanFrame out_;
   CleanupCounters counters_;
   bool naive_solved_ = false;  ///< Y was solved for the newest frame.
