@@ -322,6 +322,24 @@ TEST_F(CleanupPipelineTest, AFillGainsFinalSolveWeightGradually) {
   EXPECT_GT(biggest_jump, 10.0);
 }
 
+TEST_F(CleanupPipelineTest, ReturningMarkerEasesIntoTheSkeletonWithoutLookahead) {
+  // K = 0: the return cannot be seen coming, so the marker goes from a guess straight to
+  // data. Its sample is published exactly as captured, but its final-solve weight climbs
+  // from the guess's at most fill_weight_ramp per frame, so the skeleton eases over.
+  const int m = Marker("LSHN1");
+  for (int f = 300; f < 420; ++f) Sample(f, m) = Vec3::Constant(kNaN);
+  CleanupOptions options;
+  options.lookahead = 0;
+  const auto out = Run(options);
+  const auto um = static_cast<size_t>(m);
+  ASSERT_EQ(out[420].status[um], MarkerStatus::kObserved);
+  EXPECT_EQ(out[420].markers[um], Sample(420, m));
+  EXPECT_LE(out[420].weight[um], options.repaired_weight * options.fill_weight_ramp + 1e-12);
+  for (int f = 421; f < 440; ++f)
+    EXPECT_LE(out[static_cast<size_t>(f)].weight[um], out[static_cast<size_t>(f - 1)].weight[um] * options.fill_weight_ramp + 1e-12) << f;
+  EXPECT_DOUBLE_EQ(out[450].weight[um], 1.0);
+}
+
 TEST_F(CleanupPipelineTest, MarkerNeverSeenIsUnrecoverableNotInvented) {
   const int m = Marker("LTOE1");
   for (auto& frame : frames_) frame[static_cast<size_t>(m)] = Vec3::Constant(kNaN);
