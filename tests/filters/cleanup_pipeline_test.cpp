@@ -10,6 +10,7 @@
 #include <string>
 
 #include "filters/pose_error.hpp"
+#include "sim/synthesis.hpp"
 #include "tests/support/allocation_counter.hpp"
 #include "tests/support/test_takes.hpp"
 
@@ -368,6 +369,30 @@ TEST_F(CleanupPipelineTest, StraySampleLeavesTheReferenceOfAnOccludedSegment) {
   };
   EXPECT_LT(good_marker_rejected(CleanupOptions{}.stray_frames), 5);  // measured 0 of 90 frames
   EXPECT_GT(good_marker_rejected(100000), 20);                       // without the rule: 90
+}
+
+TEST_F(CleanupPipelineTest, ArmThatMovedWhileOccludedIsReacquired) {
+  // While the whole left arm is occluded the shoulder turns 90 degrees and the elbow
+  // bends 150 more: its markers come back far from the reference's guess (they would be
+  // outliers and, after 12 frames, strays, if judged one by one). They agree with each
+  // other, so the reference must come round to them and publish them as observed.
+  std::vector<Pose> bent = fixture_.motion;
+  const auto shoulder = static_cast<size_t>(fixture_.skeleton->FindJoint("LeftArm")->value);
+  const auto elbow = static_cast<size_t>(fixture_.skeleton->FindJoint("LeftForeArm")->value);
+  for (size_t f = 300; f < bent.size(); ++f) {
+    bent[f].rotation[shoulder] = bent[f].rotation[shoulder] * Quat(Eigen::AngleAxisd(M_PI / 2, Vec3::UnitX()));
+    bent[f].rotation[elbow] = bent[f].rotation[elbow] * Quat(Eigen::AngleAxisd(150.0 * M_PI / 180.0, Vec3::UnitZ()));
+  }
+  const C3dTake moved = SynthesizeMarkers(*fixture_.skeleton, *fixture_.markers, bent, 120.0);
+  const char* arm[] = {"LUPA1", "LUPA2", "LUPA3", "LELB", "LFRM1", "LFRM2", "LHND1", "LHND2", "LHND3"};
+  ASSERT_GT((moved.at(330, Marker("LHND1")) - Truth(330, Marker("LHND1"))).norm(), 0.3);  // far from the old path
+  for (int f = 250; f < static_cast<int>(frames_.size()); ++f)
+    for (const char* name : arm) Sample(f, Marker(name)) = f < 330 ? Vec3::Constant(kNaN) : moved.at(f, Marker(name));
+  const auto out = Run(CleanupOptions{});
+  int observed = 0;
+  for (int f = 360; f < 500; ++f)
+    for (const char* name : arm) observed += out[static_cast<size_t>(f)].status[static_cast<size_t>(Marker(name))] == MarkerStatus::kObserved;
+  EXPECT_GT(observed, 9 * 140 * 95 / 100);
 }
 
 TEST_F(CleanupPipelineTest, SolvedSkeletonStaysAccurateThroughRepairs) {
