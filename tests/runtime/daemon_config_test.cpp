@@ -125,7 +125,7 @@ TEST(DaemonConfigTest, ASubjectCanDriveACharacterFromABvh) {
 
 TEST(DaemonConfigTest, ThresholdsAndOverridesReachThePipelineOptions) {
   const DaemonConfig c = ParseDaemonConfig(std::string(kMinimal) + "lookahead = 3\nrate_hz = 240\n[pipeline.detectors]\nspike_mm = 45\n"
-                                                                     "disagreement_rotation_deg = 20\n[pipeline]\nwindow = 60\n",
+                                                                     "disagreement_rotation_deg = 20\nstray_residual_mm = 150\nstray_frames = 24\n[pipeline]\nwindow = 60\n",
                                            "t.toml", MOCAPD_CONFIG_DIR);
   const CleanupOptions& o = c.subjects[0].cleanup;
   EXPECT_EQ(o.lookahead, 3);
@@ -133,6 +133,8 @@ TEST(DaemonConfigTest, ThresholdsAndOverridesReachThePipelineOptions) {
   EXPECT_DOUBLE_EQ(o.spike_m, 0.045);
   EXPECT_NEAR(o.disagreement_rotation_rad, 20.0 * M_PI / 180.0, 1e-12);
   EXPECT_EQ(o.window, 60);
+  EXPECT_DOUBLE_EQ(o.stray_residual_m, 0.15);
+  EXPECT_EQ(o.stray_frames, 24);
 }
 
 }  // namespace
