@@ -597,7 +597,6 @@ void CleanupPipeline::Publish(int64_t tau, int64_t newest) {
         track.offset = x - ref;
         track.offset_velocity = h.Derivative(1.0);
         track.reference_velocity = reference_velocity_now;
-        x = ref + track.offset;
         track.output_velocity = x - track.output;
       }
     }
