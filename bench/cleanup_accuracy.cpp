@@ -15,6 +15,7 @@
 #include <cstring>
 #include <map>
 #include <string>
+#include <utility>
 
 #include "bench/bench_takes.hpp"
 #include "filters/cleanup_pipeline.hpp"
@@ -64,8 +65,6 @@ class Scorer {
       }
     }
     s.jerk_ratio = jerk_t > 0 ? jerk_e / jerk_t : 0;
-    s.estimated_joints = est_p;
-    s.true_joints = tru_p;
     for (size_t f = 1; f < est_p.size(); ++f) {
       double worst = 0.02;
       int worst_joint = -1;
@@ -81,6 +80,8 @@ class Scorer {
         s.pop_frames.push_back({static_cast<int>(f), worst_joint, worst});
       }
     }
+    s.estimated_joints = std::move(est_p);
+    s.true_joints = std::move(tru_p);
     return s;
   }
 
@@ -204,8 +205,9 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
   while (pipeline.Flush()) collect();
   Scores s = scorer.Finish();
   if (g_explain_pops) {
-    // Each pop: the joint, and what its markers were around it (o observed, r repaired
-    // with the reason's first letter, x unrecoverable; truth C if it was corrupted).
+    // Each pop: the joint, and what its markers were around it (o observed, repaired as
+    // the reason's first letter, x unrecoverable; upper case where the injector had
+    // corrupted the sample).
     if (!s.pop_frames.empty())
       for (const CorruptionEvent& e : bad.events)
         if (e.kind == CorruptionKind::kSwap)
