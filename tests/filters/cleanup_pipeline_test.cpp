@@ -38,6 +38,11 @@ class CleanupPipelineTest : public ::testing::Test {
     counters_ = dut.counters();
     return out;
   }
+  // How much further a published marker moved into frame f than the truth did, metres.
+  double ExtraStep(const std::vector<CleanFrame>& out, int f, int m) const {
+    const auto uf = static_cast<size_t>(f), um = static_cast<size_t>(m);
+    return (out[uf].markers[um] - out[uf - 1].markers[um]).norm() - (Truth(f, m) - Truth(f - 1, m)).norm();
+  }
   // RFOT2 stuck where it was at frame 699 for 60 frames, with Gaussian jitter of sigma
   // metres, the other detectors blind: how many of those frames come out as frozen.
   int FramesFoundFrozen(double jitter_sigma) {
@@ -244,10 +249,7 @@ TEST_F(CleanupPipelineTest, ReturningMarkerBlendsInWithoutAPop) {
   for (int f = 460; f < static_cast<int>(frames_.size()); ++f) Sample(f, m) -= Vec3(0.009, 0.0, 0.0);
   const auto out = Run(options);
   double worst_extra_step = 0.0;
-  for (int f = 440; f < 470; ++f) {
-    const double step = (out[static_cast<size_t>(f)].markers[static_cast<size_t>(m)] - out[static_cast<size_t>(f - 1)].markers[static_cast<size_t>(m)]).norm();
-    worst_extra_step = std::max(worst_extra_step, step - (Truth(f, m) - Truth(f - 1, m)).norm());
-  }
+  for (int f = 440; f < 470; ++f) worst_extra_step = std::max(worst_extra_step, ExtraStep(out, f, m));
   EXPECT_LT(worst_extra_step, 0.008);
   EXPECT_EQ(out[460].status[static_cast<size_t>(m)], MarkerStatus::kObserved);
   EXPECT_EQ(out[460].markers[static_cast<size_t>(m)], Sample(460, m));  // the returning sample itself is untouched
@@ -265,13 +267,8 @@ TEST_F(CleanupPipelineTest, FillsRideThroughAReferenceThatSnapsBack) {
       if (f < 480 || std::string(name).rfind("LTOE", 0) != 0) Sample(f, Marker(name)) = Vec3::Constant(kNaN);
   const auto out = Run(CleanupOptions{});
   double worst_extra_step = 0.0;
-  for (int f = 301; f < 510; ++f) {
-    for (const char* name : leg) {
-      const auto m = static_cast<size_t>(Marker(name));
-      const double step = (out[static_cast<size_t>(f)].markers[m] - out[static_cast<size_t>(f - 1)].markers[m]).norm();
-      worst_extra_step = std::max(worst_extra_step, step - (Truth(f, static_cast<int>(m)) - Truth(f - 1, static_cast<int>(m))).norm());
-    }
-  }
+  for (int f = 301; f < 510; ++f)
+    for (const char* name : leg) worst_extra_step = std::max(worst_extra_step, ExtraStep(out, f, Marker(name)));
   EXPECT_LT(worst_extra_step, 0.035);
 }
 
