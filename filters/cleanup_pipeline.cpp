@@ -173,6 +173,8 @@ CleanupPipeline::CleanupPipeline(std::shared_ptr<const Skeleton> skeleton, std::
   }
   weights_.assign(m, 0.0);
   marker_flags_.assign(m, 0);
+  swap_candidates_.reserve(m);
+  candidate_previous_.assign(m, Vec3::Zero());
   scratch_.assign(m, Vec3::Zero());  // per-marker residuals of the newest frame
   out_.markers.assign(m, Vec3::Constant(kNaN));
   out_.status.assign(m, MarkerStatus::kUnrecoverable);
@@ -295,13 +297,24 @@ void CleanupPipeline::RelabelSwaps(int64_t t) {
   const bool has_two_before = t > 1 && slot(t - 2).frame == t - 2;
   if (has_previous && has_two_before) {
     const Slot& prev2 = slot(t - 2);
+    // Only markers whose last two samples were fine can be predicted; gathering them and
+    // their positions first keeps the pair search to a tight loop over few markers.
+    swap_candidates_.clear();
     for (size_t i = 0; i < m_count; ++i) {
-      // Predictions only from samples that were themselves fine.
-      if (!s.valid[i] || prev.mask[i] != MaskReason::kNone || prev2.mask[i] != MaskReason::kNone || s.relabelled[i]) continue;
+      if (!s.valid[i] || prev.mask[i] != MaskReason::kNone || prev2.mask[i] != MaskReason::kNone) continue;
+      swap_candidates_.push_back(static_cast<int>(i));
+      candidate_previous_[swap_candidates_.size() - 1] = prev.raw[i];
+    }
+    const size_t n = swap_candidates_.size();
+    const double search_sq = options_.swap_search_m * options_.swap_search_m;
+    for (size_t a = 0; a < n; ++a) {
+      const auto i = static_cast<size_t>(swap_candidates_[a]);
+      if (s.relabelled[i]) continue;
       const Vec3 predicted_i = 2.0 * prev.raw[i] - prev2.raw[i];
-      for (size_t j = i + 1; j < m_count; ++j) {
-        if (!s.valid[j] || prev.mask[j] != MaskReason::kNone || prev2.mask[j] != MaskReason::kNone || s.relabelled[j]) continue;
-        if ((prev.raw[i] - prev.raw[j]).squaredNorm() > options_.swap_search_m * options_.swap_search_m) continue;
+      for (size_t b = a + 1; b < n; ++b) {
+        if ((candidate_previous_[a] - candidate_previous_[b]).squaredNorm() > search_sq) continue;
+        const auto j = static_cast<size_t>(swap_candidates_[b]);
+        if (s.relabelled[j]) continue;
         const Vec3 predicted_j = 2.0 * prev.raw[j] - prev2.raw[j];
         const double straight = (s.raw[i] - predicted_i).norm() + (s.raw[j] - predicted_j).norm();
         const double crossed = (s.raw[j] - predicted_i).norm() + (s.raw[i] - predicted_j).norm();

@@ -202,6 +202,8 @@ class CleanupPipeline {
   std::vector<double> weights_;
   std::vector<Vec3> scratch_;
   std::vector<uint8_t> marker_flags_;  ///< per-marker scratch of CleanMask
+  std::vector<int> swap_candidates_;       ///< RelabelSwaps scratch: markers predictable from fine samples...
+  std::vector<Vec3> candidate_previous_;  ///< ...and their previous positions, packed
   CleanFrame out_;
   CleanupCounters counters_;
   bool naive_solved_ = false;  ///< Y was solved for the newest frame.
