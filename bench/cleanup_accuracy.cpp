@@ -6,7 +6,7 @@
 // Reports the solved skeleton's mean global joint position (cm) and rotation (deg) error,
 // the cleaned-marker RMSE on corrupted samples (mm), the jerk ratio against the truth and
 // the number of pops (a joint moving > 2 cm per frame beyond the truth's own motion).
-// Usage: cleanup_accuracy [--seeds N] [--severity light|medium|heavy]... [--lookahead K (ours only)] [--explain-pops] [TAKE.bvh ...]
+// Usage: cleanup_accuracy [--seeds N] [--severity light|medium|heavy]... [--lookahead K (ours only)] [--explain-pops] [--trace TAKE:FROM:TO:MARKER,...] [TAKE.bvh ...]
 #include <cctype>
 #include <chrono>
 #include <cmath>
@@ -14,6 +14,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <map>
+#include <sstream>
 #include <string>
 #include <utility>
 
@@ -150,6 +151,23 @@ Scores SolveBaseline(const bench::BenchTake& take, const C3dTake& markers) {
 }
 
 bool g_explain_pops = false;
+struct Trace {
+  std::string take;  ///< a substring of the take's name; empty: no trace
+  int from = 0, to = -1;
+  std::vector<std::string> markers;
+} g_trace;
+
+// Parses TAKE:FROM:TO:MARKER,MARKER...
+bool ParseTrace(const std::string& spec, Trace* trace) {
+  std::istringstream in(spec);
+  std::string from, to, markers;
+  if (!std::getline(in, trace->take, ':') || !std::getline(in, from, ':') || !std::getline(in, to, ':') || !std::getline(in, markers)) return false;
+  trace->from = std::atoi(from.c_str());
+  trace->to = std::atoi(to.c_str());
+  std::istringstream names(markers);
+  for (std::string name; std::getline(names, name, ',');) trace->markers.push_back(name);
+  return !trace->take.empty() && !trace->markers.empty();
+}
 
 Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const C3dTake& clean, int lookahead) {
   const auto skeleton = std::make_shared<const Skeleton>(take.bvh.skeleton);
@@ -204,6 +222,24 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
   }
   while (pipeline.Flush()) collect();
   Scores s = scorer.Finish();
+  if (g_trace.take.empty() ? false : take.name.find(g_trace.take) != std::string::npos) {
+    // Frame by frame: each traced marker's published status (as in --explain-pops) with
+    // the injected truth, its error against the clean take (cm) and final-solve weight.
+    for (int g = g_trace.from; g <= g_trace.to && g < static_cast<int>(published.size()); ++g) {
+      std::printf("trace %d", g);
+      for (const std::string& name : g_trace.markers) {
+        const auto found = take.markers->FindMarker(name);
+        if (!found) continue;
+        const int m = found->value;
+        const auto ug = static_cast<size_t>(g), um = static_cast<size_t>(m);
+        const MarkerStatus st = statuses[ug][um];
+        const char c = st == MarkerStatus::kObserved ? 'o' : st == MarkerStatus::kUnrecoverable ? 'x' : to_string(reasons[ug][um])[0];
+        std::printf(" %s %c%c e%.1f w%.2f", name.c_str(), c, ".gspzf"[static_cast<int>(bad.at(g, m))],
+                    (published[ug][um] - clean.at(g, m)).norm() * 100, weights[ug][um]);
+      }
+      std::printf("\n");
+    }
+  }
   if (g_explain_pops) {
     // Each pop: the joint, and what its markers were around it (o observed, repaired as
     // the reason's first letter, x unrecoverable; upper case where the injector had
@@ -264,6 +300,13 @@ int main(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) {
     if (std::strcmp(argv[i], "--seeds") == 0 && i + 1 < argc) seeds = std::atoi(argv[++i]);
     else if (std::strcmp(argv[i], "--explain-pops") == 0) g_explain_pops = true;
+    else if (std::strcmp(argv[i], "--trace") == 0 && i + 1 < argc) {
+      if (!ParseTrace(argv[++i], &g_trace)) {
+        std::fprintf(stderr, "--trace expects TAKE:FROM:TO:MARKER[,MARKER...], got '%s'\n", argv[i]);
+        return 1;
+      }
+      g_explain_pops = true;  // the trace reads what --explain-pops keeps
+    }
     else if (std::strcmp(argv[i], "--lookahead") == 0 && i + 1 < argc) only_lookahead = std::atoi(argv[++i]);
     else if (std::strcmp(argv[i], "--severity") == 0 && i + 1 < argc) severities.emplace_back(argv[++i]);
     else paths.emplace_back(argv[i]);
