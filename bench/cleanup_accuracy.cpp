@@ -183,6 +183,7 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
   if (const char* v = std::getenv("MOCAPD_EXP_ROBUST_ITERS")) options.robust_ik.max_iterations = std::atoi(v);
   if (const char* v = std::getenv("MOCAPD_EXP_FILL_ACCEL")) options.fill_reference_acceleration_mps2 = std::atof(v);
   if (const char* v = std::getenv("MOCAPD_EXP_SNAP_RELEASE")) options.fill_snap_release = std::atof(v);
+  if (const char* v = std::getenv("MOCAPD_EXP_CATCHUP")) options.return_catchup_m = std::atof(v);
   if (const char* v = std::getenv("MOCAPD_EXP_WEIGHT_RAMP")) options.fill_weight_ramp = std::atof(v);
   if (const char* v = std::getenv("MOCAPD_EXP_GUESSED_SCALE")) options.guessed_joint_temporal_scale = std::atof(v);
   if (const char* v = std::getenv("MOCAPD_EXP_STRAY_FRAMES")) options.stray_frames = std::atoi(v);

@@ -38,6 +38,9 @@ struct CleanupPipeline::MarkerTrack {
   Vec3 reference_velocity = Vec3::Zero();  // X^'s per-frame change, snaps taken out
   Vec3 held_snap = Vec3::Zero();  // snaps a one-sided fill has not followed yet
   double weight = 1.0;                  // last final-solve weight
+  bool catching_up = false;             // the final solve's target is still closing on X-
+  Vec3 solve_target = Vec3::Zero();     // what the final solve saw last ...
+  Vec3 solve_target_velocity = Vec3::Zero();  // ... and its per-frame change
 };
 
 const char* to_string(MaskReason reason) {
@@ -114,6 +117,7 @@ void CleanupOptions::Validate() const {
   require(trim_slope_m > 0.0, "trim_slope_m", "> 0");
   require(max_trim_frames >= 0, "max_trim_frames", ">= 0");
   require(max_offset_velocity_m > 0.0, "max_offset_velocity_m", "> 0");
+  require(return_catchup_m >= 0.0, "return_catchup_m", ">= 0");
   require(fill_snap_release >= 0.0 && fill_snap_release <= 1.0, "fill_snap_release", "0..1");
   require(fill_reference_acceleration_mps2 >= 0.0 && std::isfinite(fill_reference_acceleration_mps2),
           "fill_reference_acceleration_mps2", ">= 0");
@@ -175,6 +179,7 @@ CleanupPipeline::CleanupPipeline(std::shared_ptr<const Skeleton> skeleton, std::
   marker_flags_.assign(m, 0);
   swap_candidates_.reserve(m);
   candidate_previous_.assign(m, Vec3::Zero());
+  solve_targets_.assign(m, Vec3::Constant(kNaN));
   scratch_.assign(m, Vec3::Zero());  // per-marker residuals of the newest frame
   out_.markers.assign(m, Vec3::Constant(kNaN));
   out_.status.assign(m, MarkerStatus::kUnrecoverable);
@@ -522,8 +527,13 @@ void CleanupPipeline::Publish(int64_t tau, int64_t newest) {
     return snap;
   };
   out_.frame = tau;
+  const double catchup = options_.return_catchup_m;
   for (size_t m = 0; m < m_count; ++m) {
     MarkerTrack& track = tracks_[m];
+    const bool had_published = track.has_published;
+    const bool previous_observed = track.last_observed == tau - 1;
+    const Vec3 previous_output = track.output;
+    const Vec3 previous_output_velocity = track.output_velocity;
     const Vec3& ref = s.reference[m];
     Vec3 x = Vec3::Constant(kNaN);
     MarkerStatus status = MarkerStatus::kRepaired;
@@ -613,6 +623,34 @@ void CleanupPipeline::Publish(int64_t tau, int64_t newest) {
         track.output_velocity = x - track.output;
       }
     }
+    // A sample that comes back away from where its fill had it (no lookahead saw the
+    // return coming) is published as it is, but the final solve fits a target that
+    // starts where the skeleton had the marker last frame and closes on the sample by at
+    // most return_catchup_m per frame on top of the marker's own motion, whatever the
+    // marker's status meanwhile, until it arrives. Starting from the skeleton, the target
+    // can have full weight at once.
+    Vec3 solve_x = x;
+    bool first_catchup = false;
+    if (catchup > 0.0 && status == MarkerStatus::kObserved && had_published && !previous_observed && !track.catching_up) {
+      track.catching_up = true;
+      track.solve_target = final_.has_solution() ? final_.predicted_markers()[m] : previous_output;
+      track.solve_target_velocity = previous_output_velocity;
+      first_catchup = true;
+    }
+    if (track.catching_up) {
+      if (status == MarkerStatus::kUnrecoverable) {
+        track.catching_up = false;
+      } else {
+        const Vec3 motion = first_catchup ? track.solve_target_velocity : Vec3(x - previous_output);
+        const Vec3 predicted = track.solve_target + motion;
+        const Vec3 next = predicted + ClampNorm(x - predicted, catchup);
+        track.solve_target_velocity = next - track.solve_target;
+        track.solve_target = next;
+        solve_x = next;
+        if ((x - next).squaredNorm() < 1e-8) track.catching_up = false;
+      }
+    }
+    solve_targets_[m] = solve_x;
     if (status != MarkerStatus::kUnrecoverable) {
       track.output = x;
       track.has_published = true;
@@ -624,12 +662,10 @@ void CleanupPipeline::Publish(int64_t tau, int64_t newest) {
                     : status == MarkerStatus::kUnrecoverable   ? 0.0
                     : interpolated                             ? options_.interpolated_weight
                                                                : options_.repaired_weight;
-    // A sample handed from a guess (a one-sided fill, weak) to data (an interpolation or
-    // the marker itself returning) gains weight gradually, so the final solve does not
-    // snap to it in one frame. The sample is published as it is; only the skeleton eases
-    // in (with a short lookahead a returning segment cannot be blended beforehand:
-    // medium K = 0 pops 42 -> 20, K = 4 33 -> 16, at +0.04-0.07 deg).
-    if (options_.fill_weight_ramp > 1.0 && status != MarkerStatus::kUnrecoverable && weight > track.weight)
+    // A sample handed from a guess (a one-sided fill, weak) to data (an interpolation,
+    // or the marker itself returning without a catch-up target) gains weight gradually,
+    // so the final solve does not snap to it in one frame.
+    if (options_.fill_weight_ramp > 1.0 && status != MarkerStatus::kUnrecoverable && weight > track.weight && !track.catching_up)
       weight = std::min(weight, std::max(track.weight, options_.repaired_weight) * options_.fill_weight_ramp);
     track.weight = weight;
     weights_[m] = weight;
@@ -646,7 +682,7 @@ void CleanupPipeline::Publish(int64_t tau, int64_t newest) {
     for (int mk : joint_markers) guessed = guessed && weights_[static_cast<size_t>(mk)] < 0.5;
     final_.SetTemporalScale(*skeleton_, j, guessed ? options_.guessed_joint_temporal_scale : 1.0);
   }
-  out_.final_solve = SolveIk(*skeleton_, *markers_, options_.final_ik, out_.markers, weights_, &final_);
+  out_.final_solve = SolveIk(*skeleton_, *markers_, options_.final_ik, solve_targets_, weights_, &final_);
   CountSolve(out_.final_solve);
   out_.pose = final_.pose();
   ++counters_.frames_out;
