@@ -151,6 +151,14 @@ Scores SolveBaseline(const bench::BenchTake& take, const C3dTake& markers) {
 }
 
 bool g_explain_pops = false;
+
+// One letter per repair reason for --explain-pops and --trace: m missing, d disagreement,
+// r residual, k spike, i rigid distance, w swap, z frozen, f fallen off, l small track,
+// t trimmed.
+char ReasonLetter(MaskReason reason) {
+  static constexpr char kLetters[kMaskReasonCount + 1] = "-mdrkiwzflt";
+  return kLetters[static_cast<size_t>(reason)];
+}
 struct Trace {
   std::string take;  ///< a substring of the take's name; empty: no trace
   int from = 0, to = -1;
@@ -184,6 +192,8 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
   if (const char* v = std::getenv("MOCAPD_EXP_FILL_ACCEL")) options.fill_reference_acceleration_mps2 = std::atof(v);
   if (const char* v = std::getenv("MOCAPD_EXP_SNAP_RELEASE")) options.fill_snap_release = std::atof(v);
   if (const char* v = std::getenv("MOCAPD_EXP_CATCHUP")) options.return_catchup_m = std::atof(v);
+  if (const char* v = std::getenv("MOCAPD_EXP_SMALL_TRACK")) options.small_track_frames = std::atoi(v);
+  if (const char* v = std::getenv("MOCAPD_EXP_TRIM")) options.max_trim_frames = std::atoi(v);
   if (const char* v = std::getenv("MOCAPD_EXP_WEIGHT_RAMP")) options.fill_weight_ramp = std::atof(v);
   if (const char* v = std::getenv("MOCAPD_EXP_GUESSED_SCALE")) options.guessed_joint_temporal_scale = std::atof(v);
   if (const char* v = std::getenv("MOCAPD_EXP_STRAY_FRAMES")) options.stray_frames = std::atoi(v);
@@ -234,7 +244,7 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
         const int m = found->value;
         const auto ug = static_cast<size_t>(g), um = static_cast<size_t>(m);
         const MarkerStatus st = statuses[ug][um];
-        const char c = st == MarkerStatus::kObserved ? 'o' : st == MarkerStatus::kUnrecoverable ? 'x' : to_string(reasons[ug][um])[0];
+        const char c = st == MarkerStatus::kObserved ? 'o' : st == MarkerStatus::kUnrecoverable ? 'x' : ReasonLetter(reasons[ug][um]);
         std::printf(" %s %c%c e%.1f w%.2f", name.c_str(), c, ".gspzf"[static_cast<int>(bad.at(g, m))],
                     (published[ug][um] - clean.at(g, m)).norm() * 100, weights[ug][um]);
       }
@@ -243,8 +253,8 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
   }
   if (g_explain_pops) {
     // Each pop: the joint, and what its markers were around it (o observed, repaired as
-    // the reason's first letter, x unrecoverable; upper case where the injector had
-    // corrupted the sample).
+    // the reason's letter, x unrecoverable; upper case where the injector had corrupted
+    // the sample).
     if (!s.pop_frames.empty())
       for (const CorruptionEvent& e : bad.events)
         if (e.kind == CorruptionKind::kSwap)
@@ -259,7 +269,7 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
         for (int g = std::max(0, f - 6); g <= std::min<int>(f + 2, static_cast<int>(reasons.size()) - 1); ++g) {
           const MarkerStatus st = statuses[static_cast<size_t>(g)][static_cast<size_t>(m)];
           char c = st == MarkerStatus::kObserved ? 'o' : st == MarkerStatus::kUnrecoverable ? 'x'
-                                                                                             : to_string(reasons[static_cast<size_t>(g)][static_cast<size_t>(m)])[0];
+                                                                                             : ReasonLetter(reasons[static_cast<size_t>(g)][static_cast<size_t>(m)]);
           if (bad.at(g, m) != CorruptionKind::kNone) c = static_cast<char>(std::toupper(c));
           std::printf("%c%s", g == f ? '|' : c, g == f ? std::string(1, c).c_str() : "");
         }
