@@ -258,7 +258,10 @@ TEST_P(DaemonTransportTest, EveryFrameOfACorruptedTakeComesOutSolved) {
   EXPECT_TRUE(stats.Balanced());
   EXPECT_EQ(stats.published_total(), static_cast<uint64_t>(frames));
   EXPECT_EQ(stats.dropped_total(), 0u);
-  ASSERT_TRUE(sub.WaitFor([&] { return sub.skeletons["actor1"].size() == static_cast<size_t>(frames); }));
+  // A frame's cleaned markers follow its skeleton on the socket: wait for both streams.
+  ASSERT_TRUE(sub.WaitFor([&] {
+    return sub.skeletons["actor1"].size() == static_cast<size_t>(frames) && sub.cleaned["actor1"].size() == static_cast<size_t>(frames);
+  }));
   std::lock_guard lock(sub.mutex);
   const auto& skeletons = sub.skeletons["actor1"];
   for (int t = 0; t < frames; ++t) ASSERT_EQ(skeletons[static_cast<size_t>(t)].frame_number, static_cast<uint64_t>(t));
@@ -502,7 +505,10 @@ TEST(DaemonTest, ARetargetedCharacterIsPublishedBesideTheActor) {
   for (int t = 0; t < f.take.num_frames; ++t) sender.Send(t, static_cast<uint64_t>(t));
   ASSERT_TRUE(WaitForStats(*daemon, [&](const DaemonStats& st) { return st.messages_in == static_cast<uint64_t>(f.take.num_frames); }));
   daemon.Stop();
-  ASSERT_TRUE(sub.WaitFor([&] { return sub.characters["actor1"].size() == static_cast<size_t>(f.take.num_frames); }));
+  ASSERT_TRUE(sub.WaitFor([&] {
+    const auto frames = static_cast<size_t>(f.take.num_frames);
+    return sub.characters["actor1"].size() == frames && sub.skeletons["actor1"].size() == frames;
+  }));
   std::lock_guard lock(sub.mutex);
   const auto& characters = sub.characters["actor1"];
   const auto& actors = sub.skeletons["actor1"];
