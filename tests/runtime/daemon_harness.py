@@ -7,6 +7,8 @@ import subprocess
 import time
 import urllib.request
 
+from prometheus_client.parser import text_string_to_metric_families
+
 
 def free_ports(n):
     sockets = [socket.socket() for _ in range(n)]
@@ -23,11 +25,33 @@ def http_get(port, path):
         return r.status, r.read().decode()
 
 
+def metrics(port):
+    """The daemon's /metrics, parsed by a real Prometheus parser: {(sample name, sorted labels): value}."""
+    _, text = http_get(port, "/metrics")
+    values = {}
+    for family in text_string_to_metric_families(text):
+        for sample in family.samples:
+            values[(sample.name, tuple(sorted(sample.labels.items())))] = sample.value
+    return values
+
+
+def wait_for_metric(port, name, labels, at_least, timeout_s=5.0):
+    """Polls /metrics until a sample reaches a value: the daemon refreshes its statistics
+    snapshot every 20 ms, so the newest messages show a little after they arrived."""
+    deadline = time.monotonic() + timeout_s
+    m = metrics(port)
+    while m.get((name, labels), 0) < at_least and time.monotonic() < deadline:
+        time.sleep(0.05)
+        m = metrics(port)
+    return m
+
+
 class Daemon:
     """`mocapd run` on fresh loopback ports with the demo subject; logs to WORK/mocapd.log."""
 
     def __init__(self, mocapd, config_dir, work, lookahead=12, subjects=("actor1",), rate_hz=120.0):
         os.makedirs(work, exist_ok=True)
+        self.lookahead = lookahead
         self.input_port, self.output_port, self.http_port = free_ports(3)
         self.input = f"tcp://127.0.0.1:{self.input_port}"
         self.output = f"tcp://127.0.0.1:{self.output_port}"

@@ -12,21 +12,10 @@ import subprocess
 import sys
 import time
 
-from prometheus_client.parser import text_string_to_metric_families
-
-from daemon_harness import Daemon, http_get as get
+from daemon_harness import Daemon, http_get as get, wait_for_metric
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 SUBSCRIBER = os.path.join(HERE, "..", "..", "protocol", "python", "example_subscriber.py")
-
-
-def metrics(port):
-    _, text = get(port, "/metrics")
-    values = {}
-    for family in text_string_to_metric_families(text):
-        for sample in family.samples:
-            values[(sample.name, tuple(sorted(sample.labels.items())))] = sample.value
-    return values
 
 
 def main(mocapd, mocap_sim, config_dir, work):
@@ -64,13 +53,8 @@ def main(mocapd, mocap_sim, config_dir, work):
         assert subscriber.returncode == 0, "the example subscriber did not decode the stream"
         assert "summary: actor1: 600 skeleton frames, frames 0..599, 0 discontinuities, 21 joints described" in sub_out, sub_out
 
-        # The daemon's statistics snapshot is refreshed every 20 ms: wait for the last
-        # messages (the end of stream) to show before asserting on the counts.
-        deadline = time.monotonic() + 5.0
-        m = metrics(ports[2])
-        while m[("mocapd_messages_received_total", ())] < 601 and time.monotonic() < deadline:
-            time.sleep(0.05)
-            m = metrics(ports[2])
+        # Wait for the last messages (the end of stream) to show before asserting on the counts.
+        m = wait_for_metric(ports[2], "mocapd_messages_received_total", (), 601)
         actor = (("subject", "actor1"),)
         assert m[("mocapd_frames_published_total", actor)] == 600, m
         assert m[("mocapd_messages_received_total", ())] == 601  # 600 frames + end of stream
