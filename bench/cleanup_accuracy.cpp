@@ -151,6 +151,7 @@ Scores SolveBaseline(const bench::BenchTake& take, const C3dTake& markers) {
 }
 
 bool g_explain_pops = false;
+int g_explain_back = std::getenv("MOCAPD_EXPLAIN_BACK") ? std::atoi(std::getenv("MOCAPD_EXPLAIN_BACK")) : 4;
 
 // One letter per repair reason for --explain-pops and --trace: m missing, d disagreement,
 // r residual, k spike, i rigid distance, w swap, z frozen, f fallen off, l small track,
@@ -191,11 +192,13 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
   if (const char* v = std::getenv("MOCAPD_EXP_ROBUST_ITERS")) options.robust_ik.max_iterations = std::atoi(v);
   if (const char* v = std::getenv("MOCAPD_EXP_FILL_ACCEL")) options.fill_reference_acceleration_mps2 = std::atof(v);
   if (const char* v = std::getenv("MOCAPD_EXP_SNAP_RELEASE")) options.fill_snap_release = std::atof(v);
-  if (const char* v = std::getenv("MOCAPD_EXP_CATCHUP")) options.return_catchup_m = std::atof(v);
+  if (const char* v = std::getenv("MOCAPD_EXP_CATCHUP")) options.data_catchup_m = std::atof(v);
+  if (const char* v = std::getenv("MOCAPD_EXP_MOTION_ACCEL")) options.data_motion_acceleration_m = std::atof(v);
+  if (const char* v = std::getenv("MOCAPD_EXP_ANCHOR")) options.fill_anchor_radius_m = std::atof(v);
+  if (const char* v = std::getenv("MOCAPD_EXP_ANCHOR_ITERS")) options.anchor_ik.max_iterations = std::atoi(v);
   if (const char* v = std::getenv("MOCAPD_EXP_SMALL_TRACK")) options.small_track_frames = std::atoi(v);
   if (const char* v = std::getenv("MOCAPD_EXP_TRIM")) options.max_trim_frames = std::atoi(v);
   if (const char* v = std::getenv("MOCAPD_EXP_WEIGHT_RAMP")) options.fill_weight_ramp = std::atof(v);
-  if (const char* v = std::getenv("MOCAPD_EXP_GUESSED_SCALE")) options.guessed_joint_temporal_scale = std::atof(v);
   if (const char* v = std::getenv("MOCAPD_EXP_STRAY_FRAMES")) options.stray_frames = std::atoi(v);
   if (const char* v = std::getenv("MOCAPD_EXP_STRAY_M")) options.stray_residual_m = std::atof(v);
   CleanupPipeline pipeline(skeleton, take.markers, options);
@@ -282,7 +285,7 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
       std::printf("\n");
       // Frame by frame around it: the joint's step (estimate / truth, cm) and each of its
       // markers' published step (cm) and final-solve weight.
-      for (int g = std::max(1, f - 4); g <= std::min<int>(f + 1, static_cast<int>(published.size()) - 1); ++g) {
+      for (int g = std::max(1, f - g_explain_back); g <= std::min<int>(f + 1, static_cast<int>(published.size()) - 1); ++g) {
         const auto ug = static_cast<size_t>(g), uj = static_cast<size_t>(j);
         std::printf("    %d joint %.1f/%.1f", g, (s.estimated_joints[ug][uj] - s.estimated_joints[ug - 1][uj]).norm() * 100,
                     (s.true_joints[ug][uj] - s.true_joints[ug - 1][uj]).norm() * 100);

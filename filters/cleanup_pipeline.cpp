@@ -38,9 +38,8 @@ struct CleanupPipeline::MarkerTrack {
   Vec3 reference_velocity = Vec3::Zero();  // X^'s per-frame change, snaps taken out
   Vec3 held_snap = Vec3::Zero();  // snaps a one-sided fill has not followed yet
   double weight = 1.0;                  // last final-solve weight
-  bool catching_up = false;             // the final solve's target is still closing on X-
-  Vec3 solve_target = Vec3::Zero();     // what the final solve saw last ...
-  Vec3 solve_target_velocity = Vec3::Zero();  // ... and its per-frame change
+  bool catching_up = false;          // the final solve's target is still closing on the sample
+  Vec3 data_motion = Vec3::Zero();   // the sample's motion as the catch-up last took it
 };
 
 const char* to_string(MaskReason reason) {
@@ -88,6 +87,10 @@ CleanupOptions::CleanupOptions() {
   // iterations drop from 9 to 6, which is what the per-frame p99 is made of.
   final_ik.max_iterations = 2;
   naive_ik.max_iterations = 1;
+  // The anchor starts from last frame's final pose, so one iteration reaches it (measured:
+  // the same errors and pops as two).
+  anchor_ik = final_ik;
+  anchor_ik.max_iterations = 1;
 }
 
 void CleanupOptions::Validate() const {
@@ -117,17 +120,19 @@ void CleanupOptions::Validate() const {
   require(trim_slope_m > 0.0, "trim_slope_m", "> 0");
   require(max_trim_frames >= 0, "max_trim_frames", ">= 0");
   require(max_offset_velocity_m > 0.0, "max_offset_velocity_m", "> 0");
-  require(return_catchup_m >= 0.0, "return_catchup_m", ">= 0");
+  require(data_catchup_m >= 0.0, "data_catchup_m", ">= 0");
+  require(data_motion_acceleration_m > 0.0, "data_motion_acceleration_m", "> 0");
+  require(fill_anchor_radius_m >= 0.0, "fill_anchor_radius_m", ">= 0");
   require(fill_snap_release >= 0.0 && fill_snap_release <= 1.0, "fill_snap_release", "0..1");
   require(fill_reference_acceleration_mps2 >= 0.0 && std::isfinite(fill_reference_acceleration_mps2),
           "fill_reference_acceleration_mps2", ">= 0");
   require(fill_weight_ramp > 0.0 && std::isfinite(fill_weight_ramp), "fill_weight_ramp", "> 0");
-  require(guessed_joint_temporal_scale > 0.0 && std::isfinite(guessed_joint_temporal_scale), "guessed_joint_temporal_scale", "> 0");
   require(repaired_weight >= 0.0 && repaired_weight <= 1.0, "repaired_weight", "0..1");
   require(interpolated_weight >= 0.0 && interpolated_weight <= 1.0, "interpolated_weight", "0..1");
   naive_ik.Validate();
   robust_ik.Validate();
   final_ik.Validate();
+  anchor_ik.Validate();
 }
 
 namespace {
@@ -144,7 +149,8 @@ CleanupPipeline::CleanupPipeline(std::shared_ptr<const Skeleton> skeleton, std::
       options_(options),
       naive_(*skeleton_, *markers_),
       robust_(*skeleton_, *markers_),
-      final_(*skeleton_, *markers_) {
+      final_(*skeleton_, *markers_),
+      anchor_(*skeleton_, *markers_) {
   options_.Validate();
   const auto m = static_cast<size_t>(markers_->num_markers());
   // The frames being published (t - K), the lookahead up to t, and two frames before for
@@ -176,6 +182,7 @@ CleanupPipeline::CleanupPipeline(std::shared_ptr<const Skeleton> skeleton, std::
     }
   }
   weights_.assign(m, 0.0);
+  anchor_weights_.assign(m, 0.0);
   marker_flags_.assign(m, 0);
   swap_candidates_.reserve(m);
   candidate_previous_.assign(m, Vec3::Zero());
@@ -504,6 +511,27 @@ void CleanupPipeline::CleanMask(int64_t t) {
   }
 }
 
+// Where the skeleton goes on the samples it can trust alone (captured, fitted, full
+// weight), with the joints nothing trustworthy shows held where they were: the anchor.
+// A repaired sample may pull the skeleton at most fill_anchor_radius_m from the anchor.
+// A fill is a guess, and a guess may jump (its reference re-acquiring a segment, an
+// interpolation bending onto a returning track); the anchor moves only with real data,
+// so how far a guess can take the skeleton in one frame is bounded.
+void CleanupPipeline::AnchorRepairs(const Slot& s) {
+  const auto m_count = static_cast<size_t>(markers_->num_markers());
+  for (size_t m = 0; m < m_count; ++m)
+    anchor_weights_[m] = s.mask[m] == MaskReason::kNone && !tracks_[m].catching_up && weights_[m] >= 1.0 ? 1.0 : 0.0;
+  anchor_.Reset(final_.pose());
+  const IkSummary summary = SolveIk(*skeleton_, *markers_, options_.anchor_ik, solve_targets_, anchor_weights_, &anchor_);
+  CountSolve(summary);
+  // Too few trusted samples to solve: the anchor is last frame's skeleton.
+  const auto anchor = summary.status == IkStatus::kTooFewMarkers ? final_.predicted_markers() : anchor_.predicted_markers();
+  for (size_t m = 0; m < m_count; ++m) {
+    if (anchor_weights_[m] > 0.0 || weights_[m] <= 0.0 || tracks_[m].catching_up) continue;
+    solve_targets_[m] = anchor[m] + ClampNorm(Vec3(solve_targets_[m] - anchor[m]), options_.fill_anchor_radius_m);
+  }
+}
+
 void CleanupPipeline::Publish(int64_t tau, int64_t newest) {
   Slot& s = slot(tau);
   const auto m_count = static_cast<size_t>(markers_->num_markers());
@@ -527,13 +555,11 @@ void CleanupPipeline::Publish(int64_t tau, int64_t newest) {
     return snap;
   };
   out_.frame = tau;
-  const double catchup = options_.return_catchup_m;
+  const double catchup = options_.data_catchup_m;
   for (size_t m = 0; m < m_count; ++m) {
     MarkerTrack& track = tracks_[m];
-    const bool had_published = track.has_published;
-    const bool previous_observed = track.last_observed == tau - 1;
+    const bool previous_data = track.last_observed == tau - 1;  // x at tau - 1 was a captured sample
     const Vec3 previous_output = track.output;
-    const Vec3 previous_output_velocity = track.output_velocity;
     const Vec3& ref = s.reference[m];
     Vec3 x = Vec3::Constant(kNaN);
     MarkerStatus status = MarkerStatus::kRepaired;
@@ -623,31 +649,25 @@ void CleanupPipeline::Publish(int64_t tau, int64_t newest) {
         track.output_velocity = x - track.output;
       }
     }
-    // A sample that comes back away from where its fill had it (no lookahead saw the
-    // return coming) is published as it is, but the final solve fits a target that
-    // starts where the skeleton had the marker last frame and closes on the sample by at
-    // most return_catchup_m per frame on top of the marker's own motion, whatever the
-    // marker's status meanwhile, until it arrives. Starting from the skeleton, the target
-    // can have full weight at once.
+    // The final solve never takes a captured sample at one bound: it fits a target that
+    // starts where the skeleton had the marker last frame, moves with the sample's own
+    // motion (changing by at most data_motion_acceleration_m per frame, so a swap or pop
+    // the detectors missed is not taken for motion) and closes on the sample by at most
+    // data_catchup_m per frame. A sample the skeleton already fits is its own target; one
+    // that returns away from where the skeleton had it (after a gap, a swap, a repair the
+    // lookahead did not see the end of) is reached without a pop, and at full weight.
     Vec3 solve_x = x;
-    bool first_catchup = false;
-    if (catchup > 0.0 && status == MarkerStatus::kObserved && had_published && !previous_observed && !track.catching_up) {
-      track.catching_up = true;
-      track.solve_target = final_.has_solution() ? final_.predicted_markers()[m] : previous_output;
-      track.solve_target_velocity = previous_output_velocity;
-      first_catchup = true;
-    }
-    if (track.catching_up) {
-      if (status == MarkerStatus::kUnrecoverable) {
-        track.catching_up = false;
-      } else {
-        const Vec3 motion = first_catchup ? track.solve_target_velocity : Vec3(x - previous_output);
-        const Vec3 predicted = track.solve_target + motion;
-        const Vec3 next = predicted + ClampNorm(x - predicted, catchup);
-        track.solve_target_velocity = next - track.solve_target;
-        track.solve_target = next;
-        solve_x = next;
-        if ((x - next).squaredNorm() < 1e-8) track.catching_up = false;
+    const bool data = s.mask[m] == MaskReason::kNone;  // x is a captured sample, relabelled or not
+    const bool eased = data && catchup > 0.0 && final_.has_solution();
+    track.catching_up = false;
+    if (eased) {
+      Vec3 motion = Vec3::Zero();  // unknown on a sample's first frame back
+      if (previous_data) motion = track.data_motion + ClampNorm(Vec3(x - previous_output - track.data_motion), options_.data_motion_acceleration_m);
+      track.data_motion = motion;
+      const Vec3 from = final_.predicted_markers()[m] + motion;
+      if ((x - from).norm() > catchup) {
+        solve_x = from + ClampNorm(Vec3(x - from), catchup);
+        track.catching_up = true;
       }
     }
     solve_targets_[m] = solve_x;
@@ -658,14 +678,14 @@ void CleanupPipeline::Publish(int64_t tau, int64_t newest) {
     out_.markers[m] = x;
     out_.status[m] = status;
     out_.reason[m] = status == MarkerStatus::kObserved ? MaskReason::kNone : reason;
-    double weight = status == MarkerStatus::kObserved || s.relabelled[m] ? 1.0
+    double weight = data                                       ? 1.0
                     : status == MarkerStatus::kUnrecoverable   ? 0.0
                     : interpolated                             ? options_.interpolated_weight
                                                                : options_.repaired_weight;
     // A sample handed from a guess (a one-sided fill, weak) to data (an interpolation,
-    // or the marker itself returning without a catch-up target) gains weight gradually,
-    // so the final solve does not snap to it in one frame.
-    if (options_.fill_weight_ramp > 1.0 && status != MarkerStatus::kUnrecoverable && weight > track.weight && !track.catching_up)
+    // or a captured sample when the catch-up is off) gains weight gradually, so the final
+    // solve does not snap to it in one frame.
+    if (options_.fill_weight_ramp > 1.0 && status != MarkerStatus::kUnrecoverable && weight > track.weight && !eased)
       weight = std::min(weight, std::max(track.weight, options_.repaired_weight) * options_.fill_weight_ramp);
     track.weight = weight;
     weights_[m] = weight;
@@ -674,14 +694,7 @@ void CleanupPipeline::Publish(int64_t tau, int64_t newest) {
     if (status == MarkerStatus::kRepaired) ++counters_.repaired_by[static_cast<size_t>(reason)];
     if (status == MarkerStatus::kUnrecoverable) ++counters_.unrecoverable;
   }
-  // A joint whose markers are all guesses this frame (one-sided fills, or still ramping
-  // up) is held closer to its own predicted motion than to those guesses.
-  for (int j = 0; j < skeleton_->num_joints(); ++j) {
-    const auto& joint_markers = markers_of_joint_[static_cast<size_t>(j)];
-    bool guessed = !joint_markers.empty();
-    for (int mk : joint_markers) guessed = guessed && weights_[static_cast<size_t>(mk)] < 0.5;
-    final_.SetTemporalScale(*skeleton_, j, guessed ? options_.guessed_joint_temporal_scale : 1.0);
-  }
+  if (options_.fill_anchor_radius_m > 0.0 && final_.has_solution()) AnchorRepairs(s);
   out_.final_solve = SolveIk(*skeleton_, *markers_, options_.final_ik, solve_targets_, weights_, &final_);
   CountSolve(out_.final_solve);
   out_.pose = final_.pose();

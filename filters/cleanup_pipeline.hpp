@@ -124,25 +124,27 @@ struct CleanupOptions {
   /// Measured on the 12 Bandai takes x 2 seeds, K = 12: medium pops 91 -> 78, 3.08 ->
   /// 2.91 deg; heavy 431 -> 375 pops, 6.64 -> 6.28 deg.
   double fill_weight_ramp = 1.5;
-  /// A returning sample the lookahead did not see coming (K = 0, or a gap longer than K
-  /// whose fill had drifted) is fitted by the final solve through a target that starts
-  /// where the skeleton had the marker and closes on the sample by at most this much per
-  /// frame beyond the marker's own motion (m; 0: the weight ramp alone); the sample is
-  /// published untouched. Measured (12 Bandai takes x 2 seeds, K = 0 / 4 / 12): medium
-  /// pops 20 / 16 / 8 -> 9 / 15 / 8, heavy 98 / 98 / 68 -> 49 / 74 / 61, rotation error
-  /// medium +0.01 / -0.02 / 0 deg, heavy -0.08 / -0.05 / 0 deg. 3 mm: heavy 64 / 71 / 62;
-  /// 7 mm: medium 10 / 16 / 8, heavy 64 / 77 / 62; starting from the fill instead of the
-  /// skeleton, with the weight ramp, 1 cm: medium 15 / 16 / 8, heavy 77 / 98 / 68.
-  double return_catchup_m = 0.005;
-  /// The final solve's temporal prior on a joint whose markers are all guesses this frame
-  /// is this many times stronger. Measured (Bandai, 2 seeds, K = 12): medium pops 78 ->
-  /// 74, 2.91 -> 2.83 deg; heavy 375 -> 341, 6.28 -> 6.07 deg; 10 and more trade position
-  /// accuracy for fewer pops.
-  double guessed_joint_temporal_scale = 5.0;
+  /// The final solve fits a captured sample through a target that starts where the
+  /// skeleton had the marker last frame, moves with the sample's own motion and closes
+  /// on it by at most this much per frame (m; 0: the sample itself, its weight ramped
+  /// like a fill's). The sample is published untouched. A fitted sample is its own
+  /// target; one that comes back away from the skeleton (after a gap, a swap, a repair
+  /// whose end the lookahead did not see) is reached without a pop.
+  double data_catchup_m = 0.005;
+  /// The sample's motion that the catch-up target follows may change by at most this
+  /// much per frame (m; 1.5 cm at 120 Hz is 216 m/s^2, past a punch): a swap or pop the
+  /// detectors missed is a jump, not motion, and is closed on at data_catchup_m.
+  double data_motion_acceleration_m = 0.015;
+  /// A repaired sample pulls the skeleton at most this far (m) from the anchor: the pose
+  /// the trusted samples alone give (captured, fitted, at full weight), with the joints
+  /// none of them shows held as they were last frame. A fill is a guess and a guess can
+  /// jump; the anchor moves with real data only. 0 disables (no anchor solve).
+  double fill_anchor_radius_m = 0.01;
   // Solves.
   IkOptions naive_ik;   ///< Y: plain least squares.
   IkOptions robust_ik;  ///< Y^: Huber (huber_delta_m = 4 mm, weak velocity prediction by default).
   IkOptions final_ik;   ///< Y-: decaying velocity prediction, so joints without data come to rest.
+  IkOptions anchor_ik;  ///< The anchor (see fill_anchor_radius_m): one iteration from last frame's Y-.
   CleanupOptions();
   /// Throws std::invalid_argument naming the field if an option is out of range.
   void Validate() const;
@@ -201,6 +203,7 @@ class CleanupPipeline {
   void Detect(int64_t t);
   void CleanMask(int64_t t);
   void Publish(int64_t tau, int64_t newest);
+  void AnchorRepairs(const Slot& s);
   Slot& slot(int64_t frame);
 
   std::shared_ptr<const Skeleton> skeleton_;
@@ -211,8 +214,8 @@ class CleanupPipeline {
   std::vector<std::pair<int, int>> rigid_pairs_;
   std::vector<double> rigid_distance_;
   std::vector<std::vector<int>> markers_of_joint_;
-  IkState naive_, robust_, final_;
-  std::vector<double> weights_;
+  IkState naive_, robust_, final_, anchor_;
+  std::vector<double> weights_, anchor_weights_;
   std::vector<Vec3> scratch_;
   std::vector<uint8_t> marker_flags_;  ///< per-marker scratch of CleanMask
   std::vector<int> swap_candidates_;       ///< RelabelSwaps scratch: markers predictable from fine samples...

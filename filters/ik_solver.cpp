@@ -72,9 +72,9 @@ double MarkerCost(const MarkerSet& markers, const IkOptions& options, std::span<
 // taken so far this frame, rest_error the rest-pose deviation at the warm start, both
 // per DOF (zero on translations). To first order x = q (-) q_prior and
 // rest_error + x = q (-) q_rest, which saves two logarithms per joint per evaluation.
-double PriorCost(double temporal_weight, double rest_weight, const Eigen::VectorXd& temporal_mask, const Eigen::VectorXd& mask,
-                 const Eigen::VectorXd& rest_error, const Eigen::VectorXd& x) {
-  return 0.5 * (temporal_weight * (temporal_mask.array() * x.array().square()).sum() +
+double PriorCost(double temporal_weight, double rest_weight, const Eigen::VectorXd& mask, const Eigen::VectorXd& rest_error,
+                 const Eigen::VectorXd& x) {
+  return 0.5 * (temporal_weight * (mask.array() * x.array().square()).sum() +
                 rest_weight * (mask.array() * (rest_error + x).array().square()).sum());
 }
 
@@ -539,7 +539,6 @@ IkState::IkState(const Skeleton& skeleton, const MarkerSet& markers)
       trial_total_(dq_),
       rest_error_(dq_),
       prior_mask_(dq_),
-      temporal_mask_(dq_),
       prior_h_(dq_),
       prior_g_(dq_),
       local_step_(dq_) {
@@ -551,7 +550,6 @@ IkState::IkState(const Skeleton& skeleton, const MarkerSet& markers)
     if (type == JointType::kBall) prior_mask_.segment<3>(k).setOnes();
     if (type == JointType::kFree) prior_mask_.segment<3>(k + 3).setOnes();
   }
-  temporal_mask_ = prior_mask_;
   for (JointBlock& blk : blocks_) {
     blk.Q.setZero();
     blk.BB.setZero();
@@ -577,12 +575,6 @@ IkState::IkState(const Skeleton& skeleton, const MarkerSet& markers)
 }
 
 void IkState::Reset() { history_ = 0; }
-
-void IkState::SetTemporalScale(const Skeleton& skeleton, int joint, double scale) {
-  const int k = skeleton.dof_offset(joint);
-  const int n = DofCount(skeleton.joint(joint).type);
-  for (int i = 0; i < n; ++i) temporal_mask_[k + i] = scale * prior_mask_[k + i];
-}
 
 void IkState::Reset(const Pose& pose) {
   pose_ = pose;
@@ -647,10 +639,10 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
   s.step_total_.setZero();
   // The warm start of a cold solve is only the aligned rest pose: nothing to stay near.
   const double at = summary.cold_start ? 0.0 : options.temporal_weight, ar = options.rest_weight;
-  s.prior_h_ = at * s.temporal_mask_ + ar * s.prior_mask_;
+  s.prior_h_ = (at + ar) * s.prior_mask_;
 
   double cost = MarkerCost(markers, options, observed, weights, s.ws_, s.predicted_) +
-                PriorCost(at, ar, s.temporal_mask_, s.prior_mask_, s.rest_error_, s.step_total_);
+                PriorCost(at, ar, s.prior_mask_, s.rest_error_, s.step_total_);
   summary.initial_cost = cost;
   double damping = options.initial_damping;
   // A cold start is far from the answer: the warm-start tolerance would stop it early,
@@ -667,7 +659,7 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
     // including a retry after a rejected step, starts from freshly accumulated blocks.
     ClearBlocks(&s.blocks_);
     AccumulateMarkers(markers, options, observed, weights, s.predicted_, s.ws_, &s.blocks_);
-    s.prior_g_ = -(at * s.step_total_.cwiseProduct(s.temporal_mask_) + ar * (s.rest_error_ + s.step_total_).cwiseProduct(s.prior_mask_));
+    s.prior_g_ = -(at * s.step_total_ + ar * (s.rest_error_ + s.step_total_)).cwiseProduct(s.prior_mask_);
     if (!ComputeStep(skeleton, damping, s.prior_h_, s.prior_g_, s.ws_, &s.blocks_, &s.dq_)) {
       summary.status = IkStatus::kNumericalFailure;
       break;
@@ -680,7 +672,7 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
     ForwardKinematics(skeleton, s.trial_, &s.trial_ws_);
     s.trial_total_ = s.step_total_ + s.dq_;
     const double trial_cost = MarkerCost(markers, options, observed, weights, s.trial_ws_, s.trial_predicted_) +
-                              PriorCost(at, ar, s.temporal_mask_, s.prior_mask_, s.rest_error_, s.trial_total_);
+                              PriorCost(at, ar, s.prior_mask_, s.rest_error_, s.trial_total_);
     const double step_size = s.dq_.cwiseAbs().maxCoeff();
     if (std::isfinite(trial_cost) && trial_cost <= cost) {
       std::swap(s.pose_, s.trial_);

@@ -77,9 +77,6 @@ class IkState {
   void Reset();
   /// Seeds the next solve with this pose as if it were the previous solution.
   void Reset(const Pose& pose);
-  /// Scales the temporal prior on one joint's rotation (1 by default): a joint whose
-  /// data is only a guess can be held closer to its predicted motion. Does not allocate.
-  void SetTemporalScale(const Skeleton& skeleton, int joint, double scale);
 
   /// Per-joint elimination storage: the 6x6 quadratic in the joint's world twist and
   /// the blocks that blended (joint + parent) markers add.
@@ -107,7 +104,7 @@ class IkState {
   KinematicsWorkspace ws_, trial_ws_;
   std::vector<Vec3> predicted_, trial_predicted_, rest_markers_;
   std::vector<JointBlock> blocks_;
-  Eigen::VectorXd dq_, step_total_, trial_total_, rest_error_, prior_mask_, temporal_mask_, prior_h_, prior_g_, local_step_;
+  Eigen::VectorXd dq_, step_total_, trial_total_, rest_error_, prior_mask_, prior_h_, prior_g_, local_step_;
   int first_free_joint_ = -1;
 };
 

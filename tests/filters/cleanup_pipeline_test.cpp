@@ -43,6 +43,39 @@ class CleanupPipelineTest : public ::testing::Test {
     const auto uf = static_cast<size_t>(f), um = static_cast<size_t>(m);
     return (out[uf].markers[um] - out[uf - 1].markers[um]).norm() - (Truth(f, m) - Truth(f - 1, m)).norm();
   }
+  // How much further a joint of the published skeleton moved in one frame than it did in
+  // `truth`, at worst over frames [from, to), metres.
+  double WorstExtraJointStep(const std::vector<CleanFrame>& out, const std::vector<Pose>& truth, const char* joint_name, int from,
+                             int to) const {
+    const auto joint = static_cast<size_t>(fixture_.skeleton->FindJoint(joint_name)->value);
+    KinematicsWorkspace t(*fixture_.skeleton), t_before(*fixture_.skeleton), e(*fixture_.skeleton), e_before(*fixture_.skeleton);
+    double worst = 0.0;
+    for (int f = from; f < to; ++f) {
+      const auto uf = static_cast<size_t>(f);
+      ForwardKinematics(*fixture_.skeleton, truth[uf - 1], &t_before);
+      ForwardKinematics(*fixture_.skeleton, truth[uf], &t);
+      ForwardKinematics(*fixture_.skeleton, out[uf - 1].pose, &e_before);
+      ForwardKinematics(*fixture_.skeleton, out[uf].pose, &e);
+      worst = std::max(worst, (e.p_WJ[joint] - e_before.p_WJ[joint]).norm() - (t.p_WJ[joint] - t_before.p_WJ[joint]).norm());
+    }
+    return worst;
+  }
+  static constexpr const char* kLeftForearm[] = {"LFRM1", "LFRM2", "LHND1", "LHND2", "LHND3"};
+  // From frame 300 the left elbow bends a further 90 degrees over 100 frames while the
+  // forearm and hand markers are occluded; they come back at frame 420 on the bent arm.
+  // Returns the bent motion (the truth).
+  std::vector<Pose> BendElbowWhileForearmIsOccluded() {
+    std::vector<Pose> bent = fixture_.motion;
+    const auto elbow = static_cast<size_t>(fixture_.skeleton->FindJoint("LeftForeArm")->value);
+    for (size_t f = 300; f < bent.size(); ++f) {
+      const double bend = M_PI / 2 * std::min(1.0, static_cast<double>(f - 300) / 100.0);
+      bent[f].rotation[elbow] = bent[f].rotation[elbow] * Quat(Eigen::AngleAxisd(bend, Vec3::UnitZ()));
+    }
+    const C3dTake moved = SynthesizeMarkers(*fixture_.skeleton, *fixture_.markers, bent, 120.0);
+    for (int f = 300; f < static_cast<int>(frames_.size()); ++f)
+      for (const char* name : kLeftForearm) Sample(f, Marker(name)) = f < 420 ? Vec3::Constant(kNaN) : moved.at(f, Marker(name));
+    return bent;
+  }
   // RFOT2 stuck where it was at frame 699 for 60 frames, with Gaussian jitter of sigma
   // metres, the other detectors blind: how many of those frames come out as frozen.
   int FramesFoundFrozen(double jitter_sigma) {
@@ -328,7 +361,7 @@ TEST_F(CleanupPipelineTest, ReturningMarkerEasesIntoTheSkeletonWithoutLookahead)
   for (int f = 300; f < 420; ++f) Sample(f, m) = Vec3::Constant(kNaN);
   CleanupOptions options;
   options.lookahead = 0;
-  options.return_catchup_m = 0.0;
+  options.data_catchup_m = 0.0;
   const auto out = Run(options);
   const auto um = static_cast<size_t>(m);
   ASSERT_EQ(out[420].status[um], MarkerStatus::kObserved);
@@ -344,44 +377,58 @@ TEST_F(CleanupPipelineTest, ForearmThatBentWhileOccludedIsCaughtUpWithoutAPop) {
   // the reference holds the old angle, so the fills are far off when the markers come
   // back. They are published as captured, and the skeleton's hand must close the gap
   // over several frames, not in a jump.
-  std::vector<Pose> bent = fixture_.motion;
-  const auto elbow = static_cast<size_t>(fixture_.skeleton->FindJoint("LeftForeArm")->value);
-  const auto hand = static_cast<size_t>(fixture_.skeleton->FindJoint("LeftHand")->value);
-  for (size_t f = 300; f < bent.size(); ++f) {
-    const double bend = M_PI / 2 * std::min(1.0, static_cast<double>(f - 300) / 100.0);
-    bent[f].rotation[elbow] = bent[f].rotation[elbow] * Quat(Eigen::AngleAxisd(bend, Vec3::UnitZ()));
-  }
-  const C3dTake moved = SynthesizeMarkers(*fixture_.skeleton, *fixture_.markers, bent, 120.0);
-  const char* forearm[] = {"LFRM1", "LFRM2", "LHND1", "LHND2", "LHND3"};
-  for (int f = 300; f < static_cast<int>(frames_.size()); ++f)
-    for (const char* name : forearm) Sample(f, Marker(name)) = f < 420 ? Vec3::Constant(kNaN) : moved.at(f, Marker(name));
+  const std::vector<Pose> bent = BendElbowWhileForearmIsOccluded();
   auto worst_extra_hand_step = [&](double catchup) {
     CleanupOptions options;
     options.lookahead = 0;
-    options.return_catchup_m = catchup;
-    const auto out = Run(options);
-    KinematicsWorkspace truth(*fixture_.skeleton), truth_before(*fixture_.skeleton), est(*fixture_.skeleton), est_before(*fixture_.skeleton);
-    double worst = 0.0;
-    for (int f = 400; f < 520; ++f) {
-      const auto uf = static_cast<size_t>(f);
-      ForwardKinematics(*fixture_.skeleton, bent[uf - 1], &truth_before);
-      ForwardKinematics(*fixture_.skeleton, bent[uf], &truth);
-      ForwardKinematics(*fixture_.skeleton, out[uf - 1].pose, &est_before);
-      ForwardKinematics(*fixture_.skeleton, out[uf].pose, &est);
-      worst = std::max(worst, (est.p_WJ[hand] - est_before.p_WJ[hand]).norm() - (truth.p_WJ[hand] - truth_before.p_WJ[hand]).norm());
-    }
-    return worst;
+    options.data_catchup_m = catchup;
+    return WorstExtraJointStep(Run(options), bent, "LeftHand", 400, 520);
   };
-  EXPECT_LT(worst_extra_hand_step(CleanupOptions{}.return_catchup_m), 0.02);
+  EXPECT_LT(worst_extra_hand_step(CleanupOptions{}.data_catchup_m), 0.02);
   EXPECT_GT(worst_extra_hand_step(0.0), 0.03);  // the weight ramp alone: measured 0.22 m
   CleanupOptions options;
   options.lookahead = 0;
   const auto out = Run(options);
-  for (const char* name : forearm) {
+  for (const char* name : kLeftForearm) {
     const auto um = static_cast<size_t>(Marker(name));
     EXPECT_EQ(out[420].status[um], MarkerStatus::kObserved) << name;
     EXPECT_EQ(out[420].markers[um], Sample(420, Marker(name))) << name;  // published as captured
   }
+}
+
+TEST_F(CleanupPipelineTest, CapturedJumpTheDetectorsMissIsClosedOnNotFollowed) {
+  // From frame 300 every left-hand marker is 10 cm off (a slipped cluster, or a swap no
+  // detector caught: they are all blind here). The samples are published as captured,
+  // but a jump is not motion: the skeleton's hand closes on them over several frames.
+  for (int f = 300; f < static_cast<int>(frames_.size()); ++f)
+    for (const char* name : {"LHND1", "LHND2", "LHND3"}) Sample(f, Marker(name)) += Vec3(0.1, 0.0, 0.0);
+  auto worst_extra_hand_step = [&](double motion_acceleration) {
+    CleanupOptions options = Blind();
+    options.lookahead = 0;
+    options.data_motion_acceleration_m = motion_acceleration;
+    const auto out = Run(options);
+    EXPECT_EQ(out[300].markers[static_cast<size_t>(Marker("LHND1"))], Sample(300, Marker("LHND1")));
+    return WorstExtraJointStep(out, fixture_.motion, "LeftHand", 290, 340);
+  };
+  EXPECT_LT(worst_extra_hand_step(CleanupOptions{}.data_motion_acceleration_m), 0.02);  // measured 0.3 cm
+  EXPECT_GT(worst_extra_hand_step(1.0), 0.04);  // the jump taken as motion: measured 4.6 cm
+}
+
+TEST_F(CleanupPipelineTest, GuessesPullTheSkeletonNoFurtherThanTheAnchorAllows) {
+  // K = 12. While the forearm and hand are occluded the elbow bends a further 90 degrees;
+  // the lookahead sees them come back far from the reference's guess, and the
+  // interpolated fills bend onto the returning tracks within 12 frames, much faster than
+  // the arm moves. The skeleton may follow those guesses only within the anchor's
+  // radius of the pose the trusted samples give.
+  const std::vector<Pose> bent = BendElbowWhileForearmIsOccluded();
+  auto worst_extra_hand_step = [&](double radius) {
+    CleanupOptions options;
+    options.fill_anchor_radius_m = radius;
+    return WorstExtraJointStep(Run(options), bent, "LeftHand", 380, 520);
+  };
+  const double anchored = worst_extra_hand_step(CleanupOptions{}.fill_anchor_radius_m), free = worst_extra_hand_step(0.0);
+  EXPECT_LT(anchored, 0.02) << free;  // measured 1.1 cm
+  EXPECT_GT(free, 0.03) << anchored;   // measured 5.6 cm
 }
 
 TEST_F(CleanupPipelineTest, MarkerNeverSeenIsUnrecoverableNotInvented) {
