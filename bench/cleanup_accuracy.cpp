@@ -196,6 +196,7 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
   if (const char* v = std::getenv("MOCAPD_EXP_MOTION_ACCEL")) options.data_motion_acceleration_m = std::atof(v);
   if (const char* v = std::getenv("MOCAPD_EXP_ANCHOR")) options.fill_anchor_radius_m = std::atof(v);
   if (const char* v = std::getenv("MOCAPD_EXP_ANCHOR_ITERS")) options.anchor_ik.max_iterations = std::atoi(v);
+  if (const char* v = std::getenv("MOCAPD_EXP_HOLD_LIMBS")) options.anchor_holds_unseen_limbs = std::atoi(v) != 0;
   if (const char* v = std::getenv("MOCAPD_EXP_SMALL_TRACK")) options.small_track_frames = std::atoi(v);
   if (const char* v = std::getenv("MOCAPD_EXP_TRIM")) options.max_trim_frames = std::atoi(v);
   if (const char* v = std::getenv("MOCAPD_EXP_WEIGHT_RAMP")) options.fill_weight_ramp = std::atof(v);

@@ -136,10 +136,14 @@ struct CleanupOptions {
   /// detectors missed is a jump, not motion, and is closed on at data_catchup_m.
   double data_motion_acceleration_m = 0.015;
   /// A repaired sample pulls the skeleton at most this far (m) from the anchor: the pose
-  /// the trusted samples alone give (captured, fitted, at full weight), with the joints
-  /// none of them shows held as they were last frame. A fill is a guess and a guess can
+  /// the trusted samples alone give (captured, fitted, at full weight), started from last
+  /// frame's skeleton. A fill is a guess and a guess can
   /// jump; the anchor moves with real data only. 0 disables (no anchor solve).
   double fill_anchor_radius_m = 0.01;
+  /// In the anchor, a limb with no trusted sample on it or below keeps its world
+  /// orientation (its parent carries it along without swinging it); false: it keeps its
+  /// orientation relative to its parent.
+  bool anchor_holds_unseen_limbs = true;
   // Solves.
   IkOptions naive_ik;   ///< Y: plain least squares.
   IkOptions robust_ik;  ///< Y^: Huber (huber_delta_m = 4 mm, weak velocity prediction by default).
@@ -204,6 +208,7 @@ class CleanupPipeline {
   void CleanMask(int64_t t);
   void Publish(int64_t tau, int64_t newest);
   void AnchorRepairs(const Slot& s);
+  bool HoldUnseenLimbs();
   Slot& slot(int64_t frame);
 
   std::shared_ptr<const Skeleton> skeleton_;
@@ -216,6 +221,10 @@ class CleanupPipeline {
   std::vector<std::vector<int>> markers_of_joint_;
   IkState naive_, robust_, final_, anchor_;
   std::vector<double> weights_, anchor_weights_;
+  std::vector<uint8_t> limb_seen_;      ///< per joint: a trusted sample on it or below (HoldUnseenLimbs)
+  Pose held_pose_;                      ///< the anchor with its unseen limbs held in the world...
+  KinematicsWorkspace held_kinematics_;
+  std::vector<Vec3> held_markers_;      ///< ...and its markers
   std::vector<Vec3> scratch_;
   std::vector<uint8_t> marker_flags_;  ///< per-marker scratch of CleanMask
   std::vector<int> swap_candidates_;       ///< RelabelSwaps scratch: markers predictable from fine samples...

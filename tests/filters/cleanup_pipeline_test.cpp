@@ -431,6 +431,35 @@ TEST_F(CleanupPipelineTest, GuessesPullTheSkeletonNoFurtherThanTheAnchorAllows) 
   EXPECT_GT(free, 0.03) << anchored;   // measured 5.6 cm
 }
 
+TEST_F(CleanupPipelineTest, UnseenLowerLegIsNotSwungByItsTurningThigh) {
+  // From frame 300 the left thigh turns 60 degrees in 20 frames while the knee turns back
+  // as much: the shin and foot keep their world orientation (a planted lower leg under a
+  // turning thigh), and all their markers are occluded. Held relative to the thigh, the
+  // guessed shin would swing the foot with it.
+  std::vector<Pose> turned = fixture_.motion;
+  const auto hip = static_cast<size_t>(fixture_.skeleton->FindJoint("LeftUpLeg")->value);
+  const auto knee = static_cast<size_t>(fixture_.skeleton->FindJoint("LeftLeg")->value);
+  for (size_t f = 300; f < turned.size(); ++f) {
+    const Quat turn(Eigen::AngleAxisd(M_PI / 3 * std::min(1.0, static_cast<double>(f - 300) / 20.0), Vec3::UnitX()));
+    turned[f].rotation[hip] = turned[f].rotation[hip] * turn;
+    turned[f].rotation[knee] = turn.inverse() * turned[f].rotation[knee];
+  }
+  const C3dTake moved = SynthesizeMarkers(*fixture_.skeleton, *fixture_.markers, turned, 120.0);
+  for (int f = 0; f < static_cast<int>(frames_.size()); ++f)
+    for (int m = 0; m < fixture_.markers->num_markers(); ++m) Sample(f, m) = moved.at(f, m);
+  for (int f = 280; f < 420; ++f)
+    for (const char* name : {"LKNE", "LSHN1", "LSHN2", "LFOT1", "LFOT2", "LFOT3", "LTOE1", "LTOE2"}) Sample(f, Marker(name)) = Vec3::Constant(kNaN);
+  auto worst_extra_ankle_step = [&](bool hold) {
+    CleanupOptions options;
+    options.lookahead = 0;
+    options.anchor_holds_unseen_limbs = hold;
+    return WorstExtraJointStep(Run(options), turned, "LeftFoot", 290, 330);
+  };
+  const double held = worst_extra_ankle_step(true), swung = worst_extra_ankle_step(false);
+  EXPECT_LT(held, 0.01) << swung;  // measured 0.4 cm
+  EXPECT_GT(swung, 0.02) << held;  // measured 3.4 cm
+}
+
 TEST_F(CleanupPipelineTest, MarkerNeverSeenIsUnrecoverableNotInvented) {
   const int m = Marker("LTOE1");
   for (auto& frame : frames_) frame[static_cast<size_t>(m)] = Vec3::Constant(kNaN);
