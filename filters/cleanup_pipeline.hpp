@@ -17,10 +17,12 @@
 //    is taken without its snaps (accelerations beyond a human limb's), so a guessed
 //    segment snapping back to returning markers moves no fill; short gaps between
 //    observed samples get a plain Hermite on the raw path;
-//  - the final solve Y- on the repaired markers, warm-started; a sample that returns away
-//    from where its fill had it (the lookahead did not see the return coming) enters it
-//    through a catch-up target that starts at the skeleton's marker and closes on the
-//    sample at a bounded speed, so the skeleton does not pop.
+//  - the final solve Y- on the repaired markers, warm-started, made pop-free by bounding
+//    how fast anything can move the skeleton beyond real motion: a captured sample is
+//    fitted through a target that starts at the skeleton's marker, follows the sample's
+//    own (acceleration-limited) motion and closes on it at a few mm per frame; a repaired
+//    sample may pull the skeleton only a few mm from the anchor, the pose the trusted
+//    samples alone give with every unseen limb keeping its world orientation.
 // Samples that were fine are published exactly as they came in. Memory is fixed at
 // construction (a ring of K + 3 frames and per-marker running statistics over an
 // exponential window of W frames); Push and Flush never allocate.
