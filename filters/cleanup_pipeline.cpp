@@ -541,9 +541,9 @@ void CleanupPipeline::AnchorRepairs(const Slot& s) {
 // hand) keeps in the anchor the world orientation it had last frame: its parent carries
 // its root along but does not swing it. A limb held relative to its parent turns with
 // it, and a trusted thigh turning over an occluded, planted lower leg then swung the
-// guessed foot 2-3 cm a frame faster than the real one (12 Bandai takes x 2 seeds,
-// medium: pops K = 0 / 4 / 12 4 / 2 / 1 -> 0 / 0 / 0, heavy 11 / 10 / 8 -> 3 / 3 / 5,
-// errors unchanged). Returns false when every limb is seen (the anchor stands as solved).
+// guessed foot 2-3 cm a frame faster than the real one (12 Bandai takes x 2 seeds, with
+// a 1 cm anchor radius: medium pops K = 0 / 4 / 12 4 / 2 / 1 -> 0 / 0 / 0, heavy
+// 11 / 10 / 8 -> 3 / 3 / 5, errors unchanged). Returns false when every limb is seen (the anchor stands as solved).
 bool CleanupPipeline::HoldUnseenLimbs() {
   const int joints = skeleton_->num_joints();
   std::fill(limb_seen_.begin(), limb_seen_.end(), 0);
