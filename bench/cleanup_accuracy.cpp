@@ -7,6 +7,8 @@
 // the cleaned-marker RMSE on corrupted samples (mm), the jerk ratio against the truth and
 // the number of pops (a joint moving > 2 cm per frame beyond the truth's own motion).
 // Usage: cleanup_accuracy [--seeds N] [--severity light|medium|heavy]... [--lookahead K (ours only)] [--explain-pops] [--trace TAKE:FROM:TO:MARKER,...] [TAKE.bvh ...]
+// MOCAPD_EXPLAIN_BACK=N shows N frames before each pop (default 4); MOCAPD_EXP_<FIELD>
+// variables override a few options for experiments (see RunPipeline).
 #include <cctype>
 #include <chrono>
 #include <cmath>

@@ -139,8 +139,8 @@ struct CleanupOptions {
   double data_motion_acceleration_m = 0.015;
   /// A repaired sample pulls the skeleton at most this far (m) from the anchor: the pose
   /// the trusted samples alone give (captured, fitted, at full weight), started from last
-  /// frame's skeleton. A fill is a guess and a guess can
-  /// jump; the anchor moves with real data only. 0 disables (no anchor solve).
+  /// frame's skeleton. A fill is a guess and a guess can jump; the anchor moves with real
+  /// data only. 0 disables (no anchor solve).
   /// Measured (12 Bandai takes x 5 seeds, K = 0 / 4 / 12): 1 cm: medium 0 / 0 / 0 pops,
   /// 2.51 / 2.51 / 2.48 deg, heavy 14 / 14 / 15 pops, 5.18 / 5.15 / 5.10 deg; 5 mm: medium
   /// 0 / 0 / 1, heavy 11 / 10 / 12, 5.03 / 4.99 / 4.92 deg; 2 mm: medium 0 / 0 / 2 (2.0
