@@ -6,12 +6,15 @@
 // Reports the solved skeleton's mean global joint position (cm) and rotation (deg) error,
 // the cleaned-marker RMSE on corrupted samples (mm), the jerk ratio against the truth and
 // the number of pops (a joint moving > 2 cm per frame beyond the truth's own motion).
-// Usage: cleanup_accuracy [--seeds N] [--severity light|medium|heavy]... [--lookahead K (ours only)] [--explain-pops] [--trace TAKE:FROM:TO:MARKER,...] [TAKE.bvh ...]
+// Usage: cleanup_accuracy [--seeds N] [--severity light|medium|heavy]... [--lookahead K (ours only)] [--explain-pops] [--trace TAKE:FROM:TO:MARKER,...] [--digest] [TAKE.bvh ...]
+// --digest prints, per row of ours, a hash of every published bit (markers, status,
+// reasons, weights, poses): a change meant to alter no arithmetic must keep it.
 // MOCAPD_EXPLAIN_BACK=N shows N frames before each pop (default 4); MOCAPD_EXP_<FIELD>
 // variables override a few options for experiments (see RunPipeline).
 #include <cctype>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -40,6 +43,7 @@ struct Scores {
   std::vector<Pop> pop_frames;  ///< each pop's worst joint
   std::vector<std::vector<Vec3>> estimated_joints, true_joints;  ///< per frame (for --explain-pops)
   double p50_us = 0, p99_us = 0;
+  uint64_t digest = 0;  ///< FNV-1a over every published frame (--digest)
 };
 
 // Accumulates a solved take against the truth.
@@ -153,6 +157,18 @@ Scores SolveBaseline(const bench::BenchTake& take, const C3dTake& markers) {
 }
 
 bool g_explain_pops = false;
+bool g_digest = false;
+
+// FNV-1a over raw bytes: a refactoring that claims to change no arithmetic must leave
+// every published bit, and so this digest, as it was.
+void Digest(uint64_t* h, const void* data, size_t bytes) {
+  const auto* p = static_cast<const unsigned char*>(data);
+  for (size_t i = 0; i < bytes; ++i) *h = (*h ^ p[i]) * 1099511628211ull;
+}
+template <typename T>
+void DigestVector(uint64_t* h, const std::vector<T>& v) {
+  Digest(h, v.data(), v.size() * sizeof(T));
+}
 int g_explain_back = std::getenv("MOCAPD_EXPLAIN_BACK") ? std::atoi(std::getenv("MOCAPD_EXPLAIN_BACK")) : 4;
 
 // One letter per repair reason for --explain-pops and --trace: m missing, d disagreement,
@@ -214,8 +230,17 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
   std::vector<std::vector<MarkerStatus>> statuses;
   std::vector<std::vector<Vec3>> published;
   std::vector<std::vector<double>> weights;
+  uint64_t digest = 14695981039346656037ull;
   auto collect = [&]() {
     const CleanFrame& o = pipeline.output();
+    if (g_digest) {
+      DigestVector(&digest, o.markers);
+      DigestVector(&digest, o.status);
+      DigestVector(&digest, o.reason);
+      DigestVector(&digest, o.weight);
+      DigestVector(&digest, o.pose.rotation);
+      DigestVector(&digest, o.pose.translation);
+    }
     if (g_explain_pops) {
       reasons.push_back(o.reason);
       statuses.push_back(o.status);
@@ -305,6 +330,7 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
   s.marker_rmse_mm = n > 0 ? std::sqrt(sq / static_cast<double>(n)) * 1e3 : 0;
   s.p50_us = Quantile(times, 0.5);
   s.p99_us = Quantile(times, 0.99);
+  s.digest = digest;
   return s;
 }
 
@@ -317,6 +343,7 @@ int main(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) {
     if (std::strcmp(argv[i], "--seeds") == 0 && i + 1 < argc) seeds = std::atoi(argv[++i]);
     else if (std::strcmp(argv[i], "--explain-pops") == 0) g_explain_pops = true;
+    else if (std::strcmp(argv[i], "--digest") == 0) g_digest = true;
     else if (std::strcmp(argv[i], "--trace") == 0 && i + 1 < argc) {
       if (!ParseTrace(argv[++i], &g_trace)) {
         std::fprintf(stderr, "--trace expects TAKE:FROM:TO:MARKER[,MARKER...], got '%s'\n", argv[i]);
@@ -358,7 +385,9 @@ int main(int argc, char** argv) {
       const auto& v = results[method];
       if (v.empty()) continue;
       Scores mean;
+      uint64_t digest = 14695981039346656037ull;
       for (const Scores& s : v) {
+        Digest(&digest, &s.digest, sizeof(s.digest));
         mean.pos_cm += s.pos_cm / v.size();
         mean.rot_deg += s.rot_deg / v.size();
         mean.marker_rmse_mm += s.marker_rmse_mm / v.size();
@@ -375,6 +404,7 @@ int main(int argc, char** argv) {
       }
       std::printf("| %s | %s | %.2f | %.2f | %s | %.2f | %d | %s |\n", severity_name.c_str(), method, mean.pos_cm, mean.rot_deg, rmse,
                   mean.jerk_ratio, mean.pops, timing);
+      if (g_digest && ours) std::printf("digest %s %s: %016llx\n", severity_name.c_str(), method, static_cast<unsigned long long>(digest));
       std::fflush(stdout);
     }
   }
