@@ -6,7 +6,7 @@
 #include <filesystem>
 
 #include "sim/humanoid.hpp"
-#include "sim/marker_layout.hpp"
+#include "formats/marker_layout.hpp"
 #include "sim/synthesis.hpp"
 
 namespace mocapd::bench {

@@ -7,7 +7,7 @@
 #include <vector>
 
 #include "filters/marker_model.hpp"
-#include "sim/bvh.hpp"
+#include "formats/bvh.hpp"
 
 namespace mocapd::bench {
 

@@ -15,7 +15,7 @@
 #include "filters/ik_solver.hpp"
 #include "filters/pose_error.hpp"
 #include "sim/synthesis.hpp"
-#include "sim/take_frames.hpp"
+#include "formats/take_frames.hpp"
 
 using namespace mocapd;
 

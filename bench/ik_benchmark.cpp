@@ -10,7 +10,7 @@
 #include "filters/ik_solver.hpp"
 #include "filters/pose_error.hpp"
 #include "sim/synthesis.hpp"
-#include "sim/take_frames.hpp"
+#include "formats/take_frames.hpp"
 
 namespace mocapd::bench {
 namespace {

@@ -15,7 +15,7 @@
 #include "filters/pose_error.hpp"
 #include "sim/corruption.hpp"
 #include "sim/synthesis.hpp"
-#include "sim/take_frames.hpp"
+#include "formats/take_frames.hpp"
 
 namespace mocapd::bench {
 namespace {

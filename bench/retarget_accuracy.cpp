@@ -17,8 +17,8 @@
 #include "bench/bench_takes.hpp"
 #include "filters/pose_error.hpp"
 #include "filters/retarget.hpp"
-#include "sim/marker_layout.hpp"
-#include "sim/retarget_map.hpp"
+#include "formats/marker_layout.hpp"
+#include "formats/retarget_map.hpp"
 
 using namespace mocapd;
 

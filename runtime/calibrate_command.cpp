@@ -6,10 +6,10 @@
 #include <filesystem>
 #include <stdexcept>
 
-#include "sim/bvh.hpp"
-#include "sim/c3d.hpp"
-#include "sim/subject_file.hpp"
-#include "sim/synthesis.hpp"
+#include "formats/bvh.hpp"
+#include "formats/c3d.hpp"
+#include "formats/subject_file.hpp"
+#include "filters/resample.hpp"
 
 namespace mocapd {
 

@@ -8,106 +8,14 @@
 #include <set>
 #include <sstream>
 #include <stdexcept>
-#include <toml++/toml.h>
 
 #include "protocol/messages.hpp"
-#include "sim/bvh.hpp"
-#include "sim/retarget_map.hpp"
+#include "formats/bvh.hpp"
+#include "formats/retarget_map.hpp"
+#include "formats/toml_reader.hpp"
 
 namespace mocapd {
 namespace {
-
-// Reads typed fields from one table, remembering which keys it was asked for so that
-// anything else (a typo, a field from another version) is reported instead of ignored.
-class TableReader {
- public:
-  TableReader(const toml::table& table, std::string path, std::string source)
-      : table_(table), path_(std::move(path)), source_(std::move(source)) {}
-
-  [[noreturn]] void Fail(const toml::node* node, const std::string& key, const std::string& what) const {
-    const auto line = node != nullptr ? node->source().begin.line : table_.source().begin.line;
-    const std::string field = path_.empty() ? key : path_ + "." + key;
-    throw std::runtime_error(source_ + ":" + std::to_string(line) + ": field '" + field + "': " + what);
-  }
-
-  const toml::node* Find(const std::string& key) {
-    known_.insert(key);
-    return table_.get(key);
-  }
-
-  double Number(const std::string& key, double fallback, double min, double max) {
-    const toml::node* node = Find(key);
-    if (node == nullptr) return fallback;
-    const auto v = node->value<double>();
-    if (!v || !node->is_number()) Fail(node, key, "expected a number");
-    if (!std::isfinite(*v) || *v < min || *v > max) Fail(node, key, "must be in [" + Str(min) + ", " + Str(max) + "], got " + Str(*v));
-    return *v;
-  }
-
-  int Integer(const std::string& key, int fallback, int min, int max) {
-    const toml::node* node = Find(key);
-    if (node == nullptr) return fallback;
-    const auto v = node->value<int64_t>();
-    if (!v || !node->is_integer()) Fail(node, key, "expected an integer");
-    if (*v < min || *v > max) Fail(node, key, "must be in [" + std::to_string(min) + ", " + std::to_string(max) + "], got " + std::to_string(*v));
-    return static_cast<int>(*v);
-  }
-
-  bool Bool(const std::string& key, bool fallback) {
-    const toml::node* node = Find(key);
-    if (node == nullptr) return fallback;
-    if (!node->is_boolean()) Fail(node, key, "expected true or false");
-    return *node->value<bool>();
-  }
-
-  std::string String(const std::string& key, const std::string& fallback, bool required = false) {
-    const toml::node* node = Find(key);
-    if (node == nullptr) {
-      if (required) Fail(nullptr, key, "missing");
-      return fallback;
-    }
-    if (!node->is_string()) Fail(node, key, "expected a string");
-    return *node->value<std::string>();
-  }
-
-  std::string Choice(const std::string& key, const std::string& fallback, std::initializer_list<const char*> choices) {
-    const std::string v = String(key, fallback);
-    std::string list;
-    for (const char* c : choices) {
-      if (v == c) return v;
-      list += (list.empty() ? "" : " | ") + std::string(c);
-    }
-    Fail(table_.get(key), key, "expected " + list + ", got '" + v + "'");
-  }
-
-  /// A sub-table; an absent one reads as empty (all defaults).
-  TableReader Sub(const std::string& key) {
-    const toml::node* node = Find(key);
-    if (node != nullptr && !node->is_table()) Fail(node, key, "expected a table [" + Join(key) + "]");
-    return TableReader(node != nullptr ? *node->as_table() : kEmpty, Join(key), source_);
-  }
-
-  /// Every key present must have been asked for.
-  void RejectUnknown() const {
-    for (const auto& [key, node] : table_)
-      if (known_.count(std::string(key.str())) == 0) Fail(&node, std::string(key.str()), "unknown field");
-  }
-
-  const std::string& source() const { return source_; }
-
- private:
-  std::string Join(const std::string& key) const { return path_.empty() ? key : path_ + "." + key; }
-  static std::string Str(double v) {
-    std::ostringstream s;
-    s << v;
-    return s.str();
-  }
-  static inline const toml::table kEmpty{};
-  const toml::table& table_;
-  std::string path_;
-  std::string source_;
-  std::set<std::string> known_;
-};
 
 // "tcp://HOST:PORT": host and port; other transports have no host.
 bool SplitTcp(const std::string& endpoint, std::string* host, std::string* port) {
@@ -123,7 +31,7 @@ bool SplitTcp(const std::string& endpoint, std::string* host, std::string* port)
 
 bool IsLoopbackHost(const std::string& host) { return host == "127.0.0.1" || host == "localhost" || host == "::1"; }
 
-std::string Endpoint(TableReader& t, const std::string& key, const std::string& fallback) {
+std::string Endpoint(TomlTable& t, const std::string& key, const std::string& fallback) {
   const std::string e = t.String(key, fallback);
   std::string host, port;
   const bool ok = e.rfind("ipc://", 0) == 0 ? e.size() > 6
@@ -133,7 +41,7 @@ std::string Endpoint(TableReader& t, const std::string& key, const std::string& 
   return e;
 }
 
-void ReadDetectors(TableReader t, CleanupOptions* o) {
+void ReadDetectors(TomlTable t, CleanupOptions* o) {
   constexpr double kMm = 1e-3;
   constexpr double kDeg = M_PI / 180.0;
   o->disagreement_position_m = t.Number("disagreement_position_mm", o->disagreement_position_m / kMm, 1, 1000) * kMm;
@@ -186,19 +94,14 @@ bool IsLocalEndpoint(const std::string& endpoint) {
 }
 
 DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& source_name, const std::string& base_dir) {
-  toml::table root;
-  try {
-    root = toml::parse(text, source_name);
-  } catch (const toml::parse_error& e) {
-    throw std::runtime_error(source_name + ":" + std::to_string(e.source().begin.line) + ": " + std::string(e.description()));
-  }
+  const toml::table root = ParseToml(text, source_name);
   DaemonConfig c;
   c.source = source_name;
-  TableReader top(root, "", source_name);
+  TomlTable top(root, "", source_name);
   const int version = top.Integer("format_version", 0, 1, 1);
   if (version != 1) top.Fail(nullptr, "format_version", "missing (this daemon reads version 1)");
 
-  TableReader input = top.Sub("input");
+  TomlTable input = top.Table("input");
   c.input_endpoint = Endpoint(input, "endpoint", c.input_endpoint);
   c.input_pattern = input.Choice("pattern", "sub", {"sub", "pull"}) == "sub" ? InputPattern::kSub : InputPattern::kPull;
   c.subscribe_all = input.Choice("subscribe", "subjects", {"subjects", "all"}) == "all";
@@ -206,14 +109,14 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
   c.max_message_bytes = static_cast<size_t>(input.Integer("max_message_bytes", static_cast<int>(c.max_message_bytes), 64, 64 << 20));
   input.RejectUnknown();
 
-  TableReader output = top.Sub("output");
+  TomlTable output = top.Table("output");
   c.output_endpoint = Endpoint(output, "endpoint", c.output_endpoint);
   c.send_high_water_mark = output.Integer("send_high_water_mark", c.send_high_water_mark, 1, 10'000'000);
   c.publish_cleaned_markers = output.Bool("cleaned_markers", c.publish_cleaned_markers);
   c.publish_global_transforms = output.Bool("global_transforms", c.publish_global_transforms);
   output.RejectUnknown();
 
-  TableReader control = top.Sub("control");
+  TomlTable control = top.Table("control");
   c.http_enabled = control.Bool("http", c.http_enabled);
   c.http_address = control.String("http_address", c.http_address);
   c.http_port = control.Integer("http_port", c.http_port, 0, 65535);
@@ -224,7 +127,7 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
   control.RejectUnknown();
   // Anything reachable from other machines must be asked for: a stage network is shared.
   if (!c.allow_remote) {
-    TableReader in = top.Sub("input"), out = top.Sub("output"), ctl = top.Sub("control");
+    TomlTable in = top.Table("input"), out = top.Table("output"), ctl = top.Table("control");
     if (c.input_pattern == InputPattern::kPull && !IsLocalEndpoint(c.input_endpoint))
       in.Fail(root["input"]["endpoint"].node(), "endpoint", "binds a non-loopback address; set control.allow_remote = true to allow it");
     if (!IsLocalEndpoint(c.output_endpoint))
@@ -233,21 +136,21 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
       ctl.Fail(root["control"]["http_address"].node(), "http_address", "is not loopback; set control.allow_remote = true to allow it");
   }
 
-  TableReader frames = top.Sub("frames");
+  TomlTable frames = top.Table("frames");
   c.max_gap_frames = frames.Integer("max_gap_frames", c.max_gap_frames, 0, 100000);
   c.restart_backjump_frames = frames.Integer("restart_backjump_frames", c.restart_backjump_frames, 1, 1'000'000);
   frames.RejectUnknown();
 
   CleanupOptions defaults;
-  TableReader pipeline = top.Sub("pipeline");
+  TomlTable pipeline = top.Table("pipeline");
   defaults.lookahead = pipeline.Integer("lookahead", defaults.lookahead, 0, 1000);
   defaults.window = pipeline.Integer("window", defaults.window, 2, 100000);
-  ReadDetectors(pipeline.Sub("detectors"), &defaults);
+  ReadDetectors(pipeline.Table("detectors"), &defaults);
   pipeline.RejectUnknown();
 
   RetargetOptions retarget;
   {
-    TableReader r = top.Sub("retarget");
+    TomlTable r = top.Table("retarget");
     retarget.damping = r.Number("damping", retarget.damping, 0, 10);
     retarget.contact_height_m = r.Number("contact_height_mm", retarget.contact_height_m * 1e3, 0, 1000) * 1e-3;
     retarget.contact_speed_m_s = r.Number("contact_speed_m_s", retarget.contact_speed_m_s, 0, 100);
@@ -256,15 +159,9 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
     r.RejectUnknown();
   }
 
-  const toml::node* subjects = top.Find("subject");
-  if (subjects == nullptr) top.Fail(nullptr, "subject", "no [[subject]] tables: name at least one subject to solve");
-  const toml::array* list = subjects->as_array();
-  if (list == nullptr || list->empty()) top.Fail(subjects, "subject", "expected [[subject]] tables");
-  for (size_t i = 0; i < list->size(); ++i) {
-    const toml::table* table = (*list)[i].as_table();
-    const std::string path = "subject[" + std::to_string(i) + "]";
-    if (table == nullptr) top.Fail(&(*list)[i], path, "expected a table");
-    TableReader t(*table, path, source_name);
+  if (!top.Has("subject")) top.Fail(nullptr, "subject", "no [[subject]] tables: name at least one subject to solve");
+  for (TomlTable& t : top.Tables("subject", /*required=*/true)) {
+    const toml::table* table = &t.table();
     SubjectConfig s;
     s.name = t.String("name", "", true);
     if (s.name.empty() || s.name.size() > protocol::kMaxSubjectName || s.name.find_first_of("/ \t\n") != std::string::npos)
@@ -280,14 +177,7 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
     s.character_path = t.String("character", "");
     if (!s.character_path.empty() && std::filesystem::path(s.character_path).is_relative())
       s.character_path = (std::filesystem::path(base_dir) / s.character_path).lexically_normal().string();
-    std::map<std::string, std::string> joint_map;
-    if (const toml::node* jm = t.Find("character_joint_map")) {
-      if (!jm->is_table()) t.Fail(jm, "character_joint_map", "expected a table of role = \"joint\"");
-      for (const auto& [role, joint] : *jm->as_table()) {
-        if (!joint.is_string()) t.Fail(&joint, "character_joint_map." + std::string(role.str()), "expected a joint name");
-        joint_map[std::string(role.str())] = *joint.value<std::string>();
-      }
-    }
+    const std::map<std::string, std::string> joint_map = t.StringMap("character_joint_map");
     t.RejectUnknown();
     try {
       s.model = ReadSubjectModel(s.model_path);

@@ -11,7 +11,7 @@
 
 #include "filters/cleanup_pipeline.hpp"
 #include "filters/retarget.hpp"
-#include "sim/subject_file.hpp"
+#include "formats/subject_file.hpp"
 
 namespace mocapd {
 

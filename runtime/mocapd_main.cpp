@@ -11,7 +11,7 @@
 
 #include "runtime/calibrate_command.hpp"
 #include "runtime/daemon.hpp"
-#include "runtime/demo_command.hpp"
+#include "sim/demo_command.hpp"
 #include "runtime/process_command.hpp"
 
 #include <unistd.h>

@@ -7,11 +7,11 @@
 #include <nlohmann/json.hpp>
 
 #include "filters/pose_error.hpp"
-#include "sim/bvh.hpp"
-#include "sim/c3d.hpp"
-#include "sim/subject_file.hpp"
-#include "sim/retarget_map.hpp"
-#include "sim/take_frames.hpp"
+#include "formats/bvh.hpp"
+#include "formats/c3d.hpp"
+#include "formats/subject_file.hpp"
+#include "formats/retarget_map.hpp"
+#include "formats/take_frames.hpp"
 
 namespace mocapd {
 

@@ -13,7 +13,7 @@
 #include <nlohmann/json_fwd.hpp>
 
 #include "filters/marker_model.hpp"
-#include "sim/c3d.hpp"
+#include "formats/c3d.hpp"
 
 namespace mocapd {
 

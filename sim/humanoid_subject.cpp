@@ -2,7 +2,7 @@
 #include "sim/humanoid_subject.hpp"
 
 #include "sim/humanoid.hpp"
-#include "sim/marker_layout.hpp"
+#include "formats/marker_layout.hpp"
 
 namespace mocapd {
 

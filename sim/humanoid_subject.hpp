@@ -5,7 +5,7 @@
 
 #include <string>
 
-#include "sim/subject_file.hpp"
+#include "formats/subject_file.hpp"
 
 namespace mocapd {
 

@@ -12,14 +12,14 @@
 #include <atomic>
 #include <csignal>
 
-#include "sim/bvh.hpp"
-#include "sim/c3d.hpp"
+#include "formats/bvh.hpp"
+#include "formats/c3d.hpp"
 #include "sim/corruption.hpp"
 #include "sim/humanoid.hpp"
 #include "sim/recording.hpp"
 #include "sim/replay.hpp"
-#include "sim/marker_layout.hpp"
-#include "sim/subject_file.hpp"
+#include "formats/marker_layout.hpp"
+#include "formats/subject_file.hpp"
 #include "sim/synthesis.hpp"
 #include "sim/take_info.hpp"
 

@@ -15,15 +15,15 @@
 
 #include "filters/pose_error.hpp"
 #include "protocol/messages.hpp"
-#include "sim/bvh.hpp"
+#include "formats/bvh.hpp"
 #include "sim/corruption.hpp"
 #include "sim/humanoid.hpp"
 #include "sim/humanoid_subject.hpp"
-#include "sim/marker_layout.hpp"
+#include "formats/marker_layout.hpp"
 #include "sim/recording.hpp"
-#include "sim/subject_file.hpp"
+#include "formats/subject_file.hpp"
 #include "sim/synthesis.hpp"
-#include "sim/take_frames.hpp"
+#include "formats/take_frames.hpp"
 
 namespace mocapd {
 namespace {

@@ -18,7 +18,7 @@
 #include <vector>
 
 #include "filters/marker_model.hpp"
-#include "sim/c3d.hpp"
+#include "formats/c3d.hpp"
 
 namespace mocapd {
 

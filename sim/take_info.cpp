@@ -6,8 +6,8 @@
 #include <nlohmann/json.hpp>
 #include <stdexcept>
 
-#include "sim/bvh.hpp"
-#include "sim/c3d.hpp"
+#include "formats/bvh.hpp"
+#include "formats/c3d.hpp"
 
 namespace mocapd {
 

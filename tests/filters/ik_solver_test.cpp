@@ -8,7 +8,7 @@
 
 #include "filters/pose_error.hpp"
 #include "filters/rotation.hpp"
-#include "sim/take_frames.hpp"
+#include "formats/take_frames.hpp"
 #include "tests/support/allocation_counter.hpp"
 #include "tests/support/test_takes.hpp"
 

@@ -3,7 +3,7 @@
 #include <cstdint>
 #include <string>
 
-#include "sim/bvh.hpp"
+#include "formats/bvh.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   try {

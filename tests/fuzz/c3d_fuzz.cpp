@@ -3,7 +3,7 @@
 #include <cstdint>
 #include <span>
 
-#include "sim/c3d.hpp"
+#include "formats/c3d.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   try {

@@ -11,8 +11,8 @@
 #include <string>
 #include <vector>
 
-#include "sim/bvh.hpp"
-#include "sim/c3d.hpp"
+#include "formats/bvh.hpp"
+#include "formats/c3d.hpp"
 #include "protocol/messages.hpp"
 #include "sim/humanoid.hpp"
 

@@ -5,9 +5,9 @@
 
 #include <sstream>
 
-#include "sim/bvh.hpp"
+#include "formats/bvh.hpp"
 #include "sim/humanoid.hpp"
-#include "sim/subject_file.hpp"
+#include "formats/subject_file.hpp"
 #include "sim/synthesis.hpp"
 #include "tests/support/test_takes.hpp"
 

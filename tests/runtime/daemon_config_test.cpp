@@ -7,7 +7,7 @@
 #include <fstream>
 #include <sstream>
 
-#include "sim/bvh.hpp"
+#include "formats/bvh.hpp"
 #include "sim/humanoid.hpp"
 #include "sim/humanoid_subject.hpp"
 #include "tests/support/test_takes.hpp"

@@ -21,8 +21,8 @@
 #include "filters/pose_error.hpp"
 #include "sim/corruption.hpp"
 #include "sim/humanoid_subject.hpp"
-#include "sim/retarget_map.hpp"
-#include "sim/take_frames.hpp"
+#include "formats/retarget_map.hpp"
+#include "formats/take_frames.hpp"
 #include "tests/support/test_takes.hpp"
 
 namespace mocapd {

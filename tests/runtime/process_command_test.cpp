@@ -8,10 +8,10 @@
 #include <sstream>
 
 #include "filters/pose_error.hpp"
-#include "sim/bvh.hpp"
-#include "sim/c3d.hpp"
+#include "formats/bvh.hpp"
+#include "formats/c3d.hpp"
 #include "sim/corruption.hpp"
-#include "sim/subject_file.hpp"
+#include "formats/subject_file.hpp"
 #include "tests/support/test_takes.hpp"
 
 namespace mocapd {

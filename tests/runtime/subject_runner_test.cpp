@@ -6,7 +6,7 @@
 #include <gtest/gtest.h>
 
 #include "sim/humanoid_subject.hpp"
-#include "sim/take_frames.hpp"
+#include "formats/take_frames.hpp"
 #include "tests/support/allocation_counter.hpp"
 #include "tests/support/test_takes.hpp"
 

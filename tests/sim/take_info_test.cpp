@@ -5,7 +5,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "sim/c3d.hpp"
+#include "formats/c3d.hpp"
 #include "tests/support/test_takes.hpp"
 
 namespace mocapd {

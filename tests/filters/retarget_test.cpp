@@ -6,7 +6,7 @@
 #include <gtest/gtest.h>
 
 #include "sim/humanoid.hpp"
-#include "sim/retarget_map.hpp"
+#include "formats/retarget_map.hpp"
 #include "tests/support/allocation_counter.hpp"
 
 namespace mocapd {

@@ -1,6 +1,6 @@
 // Tests for the BVH reader and writer: channel orders, joint typing, end sites, units,
 // round trips and clear errors for malformed files.
-#include "sim/bvh.hpp"
+#include "formats/bvh.hpp"
 
 #include <gtest/gtest.h>
 

@@ -8,7 +8,7 @@
 
 #include "filters/marker_model.hpp"
 #include "protocol/messages.hpp"
-#include "sim/c3d.hpp"
+#include "formats/c3d.hpp"
 
 namespace mocapd {
 

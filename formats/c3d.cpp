@@ -1,6 +1,6 @@
 // C3D reader and writer. The reader trusts nothing: every count and offset in the file
 // is checked against the buffer before use, and errors name the section and byte offset.
-#include "sim/c3d.hpp"
+#include "formats/c3d.hpp"
 
 #include <algorithm>
 #include <cmath>

@@ -1,5 +1,5 @@
 // BVH parser and writer.
-#include "sim/bvh.hpp"
+#include "formats/bvh.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -8,7 +8,7 @@
 #include <sstream>
 
 #include "filters/rotation.hpp"
-#include "sim/c3d.hpp"
+#include "formats/c3d.hpp"
 
 namespace mocapd {
 namespace {

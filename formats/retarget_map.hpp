@@ -9,7 +9,7 @@
 #include <string>
 
 #include "filters/retarget.hpp"
-#include "sim/bvh.hpp"
+#include "formats/bvh.hpp"
 
 namespace mocapd {
 

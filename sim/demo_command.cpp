@@ -1,5 +1,5 @@
 // `mocapd demo` implementation.
-#include "runtime/demo_command.hpp"
+#include "sim/demo_command.hpp"
 
 #include <chrono>
 #include <cstdio>
@@ -9,9 +9,9 @@
 #include "filters/ik_solver.hpp"
 #include "filters/pose_error.hpp"
 #include "sim/humanoid.hpp"
-#include "sim/marker_layout.hpp"
+#include "formats/marker_layout.hpp"
 #include "sim/synthesis.hpp"
-#include "sim/take_frames.hpp"
+#include "formats/take_frames.hpp"
 
 namespace mocapd {
 

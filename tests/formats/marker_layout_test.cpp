@@ -1,6 +1,6 @@
 // Tests for humanoid segment matching across naming schemes and the default layout's
 // production-like properties.
-#include "sim/marker_layout.hpp"
+#include "formats/marker_layout.hpp"
 
 #include <gtest/gtest.h>
 
@@ -138,7 +138,8 @@ TEST(MarkerLayoutTest, ReadsLayoutFilesAndReportsBadFields) {
     ReadMarkerLayout(dir + "/bad.toml");
     FAIL();
   } catch (const std::runtime_error& e) {
-    EXPECT_NE(std::string(e.what()).find("bad.toml:1: marker field 'radius_m'"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("bad.toml:4: field 'marker[0].radius_m': must be in [0, 0.999], got 3"), std::string::npos)
+        << e.what();
   }
   try {
     ReadMarkerLayout(dir + "/syntax.toml");
@@ -146,6 +147,25 @@ TEST(MarkerLayoutTest, ReadsLayoutFilesAndReportsBadFields) {
   } catch (const std::runtime_error& e) {
     EXPECT_NE(std::string(e.what()).find("syntax.toml:1"), std::string::npos) << e.what();
   }
+}
+
+// A typo or a wrong type in a layout must stop the reader, never turn into a default.
+TEST(MarkerLayoutTest, UnknownKeysAndWrongTypesNameFileLineAndField) {
+  const std::string dir = testing::TempDir("layout_strict");
+  std::ofstream(dir + "/typo.toml") << "[[marker]]\nname = \"A\"\nsegment = \"thigh_l\"\nradius = 0.06\n";
+  std::ofstream(dir + "/type.toml") << "[[marker]]\nname = \"A\"\nsegment = \"thigh_l\"\n\n[[marker]]\nname = \"B\"\nsegment = \"Head\"\nalong = \"0.4\"\n";
+  std::ofstream(dir + "/top.toml") << "version = 3\n[[marker]]\nname = \"A\"\nsegment = \"thigh_l\"\n";
+  auto error_of = [&](const std::string& file) {
+    try {
+      ReadMarkerLayout(dir + "/" + file);
+    } catch (const std::runtime_error& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_EQ(error_of("typo.toml"), dir + "/typo.toml:4: field 'marker[0].radius': unknown field");
+  EXPECT_EQ(error_of("type.toml"), dir + "/type.toml:8: field 'marker[1].along': expected a number");
+  EXPECT_EQ(error_of("top.toml"), dir + "/top.toml:1: field 'version': unknown field");
 }
 
 }  // namespace

@@ -1,12 +1,13 @@
 // Humanoid segment matching and marker placement.
-#include "sim/marker_layout.hpp"
+#include "formats/marker_layout.hpp"
+
+#include "formats/toml_reader.hpp"
 
 #include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
-#include <toml++/toml.h>
 
 namespace mocapd {
 namespace {
@@ -171,40 +172,23 @@ std::vector<LayoutMarker> DefaultMarkerLayout() {
 }
 
 std::vector<LayoutMarker> ReadMarkerLayout(const std::string& path) {
-  toml::table root;
-  try {
-    root = toml::parse_file(path);
-  } catch (const toml::parse_error& e) {
-    std::ostringstream msg;
-    msg << path << ":" << e.source().begin.line << ": " << e.description();
-    throw std::runtime_error(msg.str());
-  }
-  const toml::array* markers = root["marker"].as_array();
-  if (markers == nullptr || markers->empty()) throw std::runtime_error(path + ": expected one or more [[marker]] tables");
+  const toml::table root = ReadTomlFile(path);
+  TomlTable top(root, "", path);
   std::vector<LayoutMarker> layout;
-  for (const toml::node& node : *markers) {
-    const toml::table* t = node.as_table();
-    const auto line = node.source().begin.line;
-    auto fail = [&](const std::string& field, const std::string& what) {
-      throw std::runtime_error(path + ":" + std::to_string(line) + ": marker field '" + field + "': " + what);
-    };
-    if (t == nullptr) fail("marker", "expected a table");
+  for (TomlTable& t : top.Tables("marker", /*required=*/true)) {
     LayoutMarker m;
-    auto name = (*t)["name"].value<std::string>();
-    auto segment = (*t)["segment"].value<std::string>();
-    if (!name || name->empty()) fail("name", "missing or not a string");
-    if (!segment || segment->empty()) fail("segment", "missing or not a string");
-    m.name = *name;
-    m.segment = *segment;
-    m.along = (*t)["along"].value_or(0.5);
-    m.angle_deg = (*t)["angle_deg"].value_or(0.0);
-    m.radius_m = (*t)["radius_m"].value_or(0.05);
-    m.parent_weight = (*t)["parent_weight"].value_or(0.0);
-    if (!(m.radius_m >= 0.0 && m.radius_m < 1.0)) fail("radius_m", "expected 0 <= radius_m < 1");
-    if (!(m.parent_weight >= 0.0 && m.parent_weight < 1.0)) fail("parent_weight", "expected 0 <= parent_weight < 1");
-    if (!std::isfinite(m.along) || !std::isfinite(m.angle_deg)) fail("along", "expected finite numbers");
+    m.name = t.String("name", "", /*required=*/true);
+    m.segment = t.String("segment", "", /*required=*/true);
+    if (m.name.empty()) t.Fail(t.Find("name"), "name", "empty");
+    if (m.segment.empty()) t.Fail(t.Find("segment"), "segment", "empty");
+    m.along = t.Number("along", m.along, -10.0, 10.0);
+    m.angle_deg = t.Number("angle_deg", m.angle_deg, -3600.0, 3600.0);
+    m.radius_m = t.Number("radius_m", m.radius_m, 0.0, 0.999);
+    m.parent_weight = t.Number("parent_weight", m.parent_weight, 0.0, 0.999);
+    t.RejectUnknown();
     layout.push_back(m);
   }
+  top.RejectUnknown();
   return layout;
 }
 

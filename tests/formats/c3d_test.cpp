@@ -1,7 +1,7 @@
 // Tests for the C3D reader and writer: exact round trips in every processor format and
 // storage, labels beyond 255 points, model outputs, missing samples, and clear errors
 // (never a crash) for truncated or corrupt files.
-#include "sim/c3d.hpp"
+#include "formats/c3d.hpp"
 
 #include <gtest/gtest.h>
 

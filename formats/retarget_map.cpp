@@ -1,11 +1,11 @@
 // Role matching between an actor's and a character's skeletons.
-#include "sim/retarget_map.hpp"
+#include "formats/retarget_map.hpp"
 
 #include <algorithm>
 #include <set>
 #include <stdexcept>
 
-#include "sim/marker_layout.hpp"
+#include "formats/marker_layout.hpp"
 
 namespace mocapd {
 namespace {

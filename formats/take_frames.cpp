@@ -1,5 +1,5 @@
 // Marker-to-label mapping for recorded takes.
-#include "sim/take_frames.hpp"
+#include "formats/take_frames.hpp"
 
 #include <stdexcept>
 
