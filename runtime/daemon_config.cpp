@@ -8,6 +8,8 @@
 #include <set>
 #include <sstream>
 #include <stdexcept>
+#include <type_traits>
+#include <variant>
 
 #include "protocol/messages.hpp"
 #include "formats/bvh.hpp"
@@ -41,27 +43,30 @@ std::string Endpoint(TomlTable& t, const std::string& key, const std::string& fa
   return e;
 }
 
-void ReadDetectors(TomlTable t, CleanupOptions* o) {
-  constexpr double kMm = 1e-3;
-  constexpr double kDeg = M_PI / 180.0;
-  o->disagreement_position_m = t.Number("disagreement_position_mm", o->disagreement_position_m / kMm, 1, 1000) * kMm;
-  o->disagreement_rotation_rad = t.Number("disagreement_rotation_deg", o->disagreement_rotation_rad / kDeg, 1, 180) * kDeg;
-  o->residual_floor_m = t.Number("residual_floor_mm", o->residual_floor_m / kMm, 0.1, 1000) * kMm;
-  o->residual_scale_factor = t.Number("residual_scale_factor", o->residual_scale_factor, 1, 100);
-  o->spike_m = t.Number("spike_mm", o->spike_m / kMm, 1, 1000) * kMm;
-  o->rigid_tolerance_m = t.Number("rigid_tolerance_mm", o->rigid_tolerance_m / kMm, 1, 1000) * kMm;
-  o->swap_margin_m = t.Number("swap_margin_mm", o->swap_margin_m / kMm, 0, 1000) * kMm;
-  o->swap_search_m = t.Number("swap_search_mm", o->swap_search_m / kMm, 1, 2000) * kMm;
-  o->relabel_swaps = t.Bool("relabel_swaps", o->relabel_swaps);
-  o->frozen_frames = t.Integer("frozen_frames", o->frozen_frames, 2, 10000);
-  o->stray_frames = t.Integer("stray_frames", o->stray_frames, 1, 100000);
-  o->stray_residual_m = t.Number("stray_residual_mm", o->stray_residual_m / kMm, 1, 10000) * kMm;
-  o->fallen_frames = t.Integer("fallen_frames", o->fallen_frames, 2, 100000);
-  o->fallen_residual_m = t.Number("fallen_residual_mm", o->fallen_residual_m / kMm, 1, 10000) * kMm;
-  o->small_gap_frames = t.Integer("small_gap_frames", o->small_gap_frames, 0, 1000);
-  o->small_track_frames = t.Integer("small_track_frames", o->small_track_frames, 0, 1000);
-  o->max_trim_frames = t.Integer("max_trim_frames", o->max_trim_frames, 0, 1000);
-  t.RejectUnknown();
+// Reads every cleanup option a config may set (CleanupOptionFields: the one place their
+// names, units and bounds are written) from its section's table.
+void ReadCleanupOptions(TomlTable& table, const std::string& section, CleanupOptions* o) {
+  for (const CleanupOptionField& f : CleanupOptionFields()) {
+    if (f.section == nullptr || section != f.section) continue;
+    std::visit(
+        [&](auto member) {
+          using T = std::remove_reference_t<decltype(o->*member)>;
+          if constexpr (std::is_same_v<T, bool>) {
+            o->*member = table.Bool(f.key, o->*member);
+          } else if constexpr (std::is_same_v<T, int>) {
+            o->*member = table.Integer(f.key, o->*member, static_cast<int>(f.min), static_cast<int>(f.max));
+          } else if (const auto v = table.OptionalNumber(f.key, f.min, f.max)) {
+            o->*member = *v * f.to_si;
+          }
+        },
+        f.member);
+  }
+}
+
+const CleanupOptionField& OptionField(const char* name) {
+  for (const CleanupOptionField& f : CleanupOptionFields())
+    if (std::string(f.name) == name) return f;
+  throw std::logic_error(std::string("no cleanup option ") + name);
 }
 
 }  // namespace
@@ -73,17 +78,16 @@ const SubjectConfig* DaemonConfig::FindSubject(const std::string& name) const {
 }
 
 std::string SubjectFingerprint(const SubjectConfig& s, const DaemonConfig& c) {
-  const CleanupOptions& o = s.cleanup;
   std::ostringstream f;
   f.precision(17);
-  f << FormatSubjectModel(s.model) << '\n'
-    << s.name << ' ' << s.rate_hz << ' ' << o.lookahead << ' ' << o.window << ' ' << o.disagreement_position_m << ' '
-    << o.disagreement_rotation_rad << ' ' << o.residual_floor_m << ' ' << o.residual_scale_factor << ' ' << o.spike_m << ' '
-    << o.rigid_tolerance_m << ' ' << o.swap_margin_m << ' ' << o.swap_search_m << ' ' << o.relabel_swaps << ' ' << o.frozen_frames << ' '
-    << o.stray_frames << ' ' << o.stray_residual_m << ' ' << o.fallen_frames << ' ' << o.fallen_residual_m << ' ' << o.small_gap_frames << ' ' << o.small_track_frames << ' ' << o.max_trim_frames
-    << ' ' << c.max_gap_frames << ' ' << c.restart_backjump_frames << ' ' << c.publish_cleaned_markers << ' ' << c.publish_global_transforms
-    << '\n' << s.character_path << ' ' << s.character_map.report << ' ' << s.retarget.damping << ' ' << s.retarget.contact_height_m << ' '
-    << s.retarget.contact_speed_m_s << ' ' << s.retarget.release_frames << ' ' << s.retarget.points_per_bone;
+  f << FormatSubjectModel(s.model) << '\n' << s.name << ' ' << s.rate_hz;
+  for (const CleanupOptionField& field : CleanupOptionFields())
+    std::visit([&](auto member) { f << ' ' << s.cleanup.*member; }, field.member);
+  f << ' ' << c.max_gap_frames << ' ' << c.restart_backjump_frames << ' ' << c.publish_cleaned_markers << ' '
+    << c.publish_global_transforms << '\n'
+    << s.character_path << ' ' << s.character_map.report << ' ' << s.retarget.damping << ' '
+    << s.retarget.contact_height_m << ' ' << s.retarget.contact_speed_m_s << ' ' << s.retarget.release_frames << ' '
+    << s.retarget.points_per_bone;
   return f.str();
 }
 
@@ -143,9 +147,10 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
 
   CleanupOptions defaults;
   TomlTable pipeline = top.Table("pipeline");
-  defaults.lookahead = pipeline.Integer("lookahead", defaults.lookahead, 0, 1000);
-  defaults.window = pipeline.Integer("window", defaults.window, 2, 100000);
-  ReadDetectors(pipeline.Table("detectors"), &defaults);
+  ReadCleanupOptions(pipeline, "pipeline", &defaults);
+  TomlTable detectors = pipeline.Table("detectors");
+  ReadCleanupOptions(detectors, "pipeline.detectors", &defaults);
+  detectors.RejectUnknown();
   pipeline.RejectUnknown();
 
   RetargetOptions retarget;
@@ -173,7 +178,9 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
     s.rate_hz = t.Number("rate_hz", s.rate_hz, 1, 2000);
     s.cleanup = defaults;
     s.cleanup.rate_hz = s.rate_hz;
-    s.cleanup.lookahead = t.Integer("lookahead", defaults.lookahead, 0, 1000);
+    const CleanupOptionField& lookahead = OptionField("lookahead");
+    s.cleanup.lookahead =
+        t.Integer("lookahead", defaults.lookahead, static_cast<int>(lookahead.min), static_cast<int>(lookahead.max));
     s.character_path = t.String("character", "");
     if (!s.character_path.empty() && std::filesystem::path(s.character_path).is_relative())
       s.character_path = (std::filesystem::path(base_dir) / s.character_path).lexically_normal().string();

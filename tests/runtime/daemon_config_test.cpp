@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "formats/bvh.hpp"
+#include "formats/toml_reader.hpp"
 #include "sim/humanoid.hpp"
 #include "sim/humanoid_subject.hpp"
 #include "tests/support/test_takes.hpp"
@@ -68,7 +69,7 @@ TEST(DaemonConfigTest, ErrorsNameFileLineAndField) {
   EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[input]\npattern = \"push\"\n"), "test.toml:6: field 'input.pattern': expected sub | pull, got 'push'");
   EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[control]\nwatchdog_timeout_s = \"1s\"\n"), "test.toml:6: field 'control.watchdog_timeout_s': expected a number");
   EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[pipeline.detectors]\nspike_mm = 0.0\n"),
-            "test.toml:6: field 'pipeline.detectors.spike_mm': must be in [1, 1000], got 0");
+            "test.toml:6: field 'pipeline.detectors.spike_mm': must be in [1, 100000], got 0");
   EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[output]\nendpoint = \"udp://x\"\n"),
             "test.toml:5: field 'output.endpoint': expected tcp://HOST:PORT, ipc://PATH or inproc://NAME, got 'udp://x'");
   EXPECT_NE(ErrorOf("format_version = 1\n").find("field 'subject': no [[subject]] tables"), std::string::npos);
@@ -135,6 +136,24 @@ TEST(DaemonConfigTest, ThresholdsAndOverridesReachThePipelineOptions) {
   EXPECT_EQ(o.window, 60);
   EXPECT_DOUBLE_EQ(o.stray_residual_m, 0.15);
   EXPECT_EQ(o.stray_frames, 24);
+}
+
+// config/mocapd.toml promises that its values are the defaults: every cleanup option a
+// config may set must be written there, with the value the code uses.
+TEST(DaemonConfigTest, ShippedConfigDocumentsEveryCleanupOptionAtItsDefault) {
+  const toml::table doc = ReadTomlFile(std::string(MOCAPD_CONFIG_DIR) + "/mocapd.toml");
+  const CleanupOptions defaults;
+  int documented = 0;
+  for (const CleanupOptionField& f : CleanupOptionFields()) {
+    if (f.section == nullptr) continue;
+    const toml::node* node = doc.at_path(std::string(f.section) + "." + f.key).node();
+    ASSERT_NE(node, nullptr) << f.section << "." << f.key << " is not in config/mocapd.toml";
+    const double code = std::visit([&](auto member) { return static_cast<double>(defaults.*member); }, f.member);
+    const double file = node->is_boolean() ? (*node->value<bool>() ? 1.0 : 0.0) : *node->value<double>() * f.to_si;
+    EXPECT_NEAR(file, code, 1e-12 * std::max(1.0, std::abs(code))) << f.section << "." << f.key;
+    ++documented;
+  }
+  EXPECT_GT(documented, 10);
 }
 
 }  // namespace

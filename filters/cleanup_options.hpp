@@ -1,0 +1,110 @@
+// The cleanup pipeline's options: one struct, and one table of every scalar option with
+// its bounds (and, for those a config file may set, its name, unit and section), from
+// which Validate, the daemon's config reader and its reload fingerprint are all derived.
+// How each default was measured is in bench/README.md ("Why the cleanup's defaults").
+#pragma once
+
+#include <cmath>
+#include <span>
+#include <variant>
+
+#include "filters/ik_solver.hpp"
+
+namespace mocapd {
+
+struct CleanupOptions {
+  double rate_hz = 120.0;
+  int lookahead = 12;  ///< K: frames of delay; 0 allowed.
+  int window = 120;    ///< W: time constant, in frames, of the running statistics.
+
+  // Detection (filters/outlier_detector.hpp).
+  double disagreement_position_m = 0.10;                   ///< Delta P max (thesis: 10 cm).
+  double disagreement_rotation_rad = 30.0 * M_PI / 180.0;  ///< Delta R max (thesis: 30 deg).
+  /// Of the markers on a disagreeing joint, only those further than this from X^ are
+  /// marked: the naive solve is pulled by a few bad markers, their neighbours are innocent.
+  double disagreement_residual_m = 0.01;
+  double residual_floor_m = 0.012;     ///< Residuals below this are never outliers.
+  double residual_scale_factor = 5.0;  ///< Threshold = max(floor, factor x running residual scale).
+  double spike_m = 0.03;               ///< Per-frame displacement differing from the reference's by more.
+  double rigid_tolerance_m = 0.03;     ///< Distance change between two markers on one rigid segment.
+  double swap_margin_m = 0.01;         ///< A swap must explain the data better by at least this.
+  double swap_search_m = 0.15;         ///< Only markers this close in the previous frame can swap.
+  bool relabel_swaps = true;           ///< Swap the labels back instead of filling both.
+  /// Frozen: a marker staying within this distance of where it came to rest (wide enough
+  /// for capture jitter, which a per-frame motion test mistakes for motion)...
+  double frozen_radius_m = 0.015;
+  double frozen_reference_motion_m = 0.04;  ///< ...while its reference moves on this far...
+  int frozen_frames = 6;                    ///< ...and for at least this many frames.
+  /// A residual outlier this far off for stray_frames in a row leaves the robust solve
+  /// until it fits again: a swapped or stray sample on a segment whose neighbours are
+  /// occluded would otherwise drag the reference, and the segment's good markers, along.
+  double stray_residual_m = 0.20;
+  int stray_frames = 12;
+  int fallen_frames = 60;           ///< Residual outliers this long in a row...
+  double fallen_residual_m = 0.10;  ///< ...and this far off: fallen off (excluded from Y^).
+  // Mask clean-up, bounded by the lookahead.
+  int small_gap_frames = 5;     ///< Gaps up to this long between observed samples: plain Hermite.
+  int small_track_frames = 10;  ///< Observed runs up to this long between gaps are dropped.
+  double trim_slope_m = 0.01;   ///< A returning track is trimmed while its per-frame slope differs more.
+  int max_trim_frames = 6;
+
+  // Repair (filters/gap_repair.hpp).
+  double max_offset_velocity_m = 0.01;  ///< Clamp on boundary offset velocities, m per frame.
+  /// A fill follows its reference's path only up to this acceleration (m/s^2); beyond it
+  /// the reference is snapping (a segment re-entering its solve), not moving. 0 disables.
+  double fill_reference_acceleration_mps2 = 75.0;
+  /// The fraction of the snaps a one-sided fill has not followed that it takes up each
+  /// frame, so a reference that really moved fast is caught up smoothly.
+  double fill_snap_release = 0.1;
+
+  // Final solve (filters/final_solve.hpp).
+  /// Weight of a one-sided repair in the final solve (observed samples weigh 1): it is
+  /// the reference's guess, which the solve's own priors already hold.
+  double repaired_weight = 0.01;
+  /// Weight of a sample filled between two known ends: an interpolation of real data,
+  /// and what keeps the skeleton from jumping when a segment's markers come back.
+  double interpolated_weight = 1.0;
+  /// A repaired sample's weight may grow by at most this factor per frame (<= 1: no limit).
+  double fill_weight_ramp = 1.5;
+  /// A captured sample is fitted through a target that starts at the skeleton's marker,
+  /// moves with the sample's own motion and closes on it by at most this much per frame
+  /// (m; 0: the sample itself, its weight ramped like a fill's): a sample that comes back
+  /// away from the skeleton is reached without a pop.
+  double data_catchup_m = 0.005;
+  /// The sample's motion that the catch-up target follows may change by at most this
+  /// much per frame (m): a swap or pop the detectors missed is a jump, not motion.
+  double data_motion_acceleration_m = 0.015;
+  /// A repaired sample pulls the skeleton at most this far (m) from the anchor, the pose
+  /// the trusted samples alone give: a fill is a guess, and a guess can jump. 0: no anchor.
+  double fill_anchor_radius_m = 0.002;
+  /// In the anchor, a limb with no trusted sample on it or below keeps its world
+  /// orientation (its parent carries it along without swinging it).
+  bool anchor_holds_unseen_limbs = true;
+
+  // Solves.
+  IkOptions naive_ik;   ///< Y: plain least squares.
+  IkOptions robust_ik;  ///< Y^: Huber (4 mm), weak velocity prediction.
+  IkOptions final_ik;   ///< Y-: decaying velocity prediction, so joints without data come to rest.
+  IkOptions anchor_ik;  ///< The anchor (see fill_anchor_radius_m): one iteration from last frame's Y-.
+  CleanupOptions();
+  /// Throws std::invalid_argument naming the field, its bounds and the value if an
+  /// option is out of range (the bounds of CleanupOptionFields()).
+  void Validate() const;
+};
+
+/// One scalar option of CleanupOptions: its bounds and how a config file names it. The
+/// key carries the unit a person writes (spike_mm); a value in that unit times to_si is
+/// the option's value (SI: m, rad, s).
+struct CleanupOptionField {
+  const char* name;     ///< The C++ member's name.
+  const char* section;  ///< Config table ("pipeline", "pipeline.detectors"); nullptr: not in config files.
+  const char* key;      ///< Config key, with its unit suffix.
+  double to_si;         ///< Key's unit -> SI.
+  double min, max;      ///< Bounds, in the key's unit.
+  std::variant<double CleanupOptions::*, int CleanupOptions::*, bool CleanupOptions::*> member;
+};
+
+/// Every scalar option, in declaration order. The one place their bounds are written.
+std::span<const CleanupOptionField> CleanupOptionFields();
+
+}  // namespace mocapd

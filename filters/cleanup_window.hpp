@@ -1,0 +1,113 @@
+// What the cleanup's stages share: why a sample was masked, what was published for it,
+// the window of buffered frames (the K-frame lookahead plus the frames before it that
+// slopes and trajectory continuity need), and the counters every stage adds to.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "filters/ik_solver.hpp"
+
+namespace mocapd {
+
+/// Why a sample was masked. kNone: fine.
+enum class MaskReason : uint8_t {
+  kNone,
+  kMissing,
+  kDisagreement,
+  kResidual,
+  kSpike,
+  kRigidDistance,
+  kSwap,
+  kFrozen,
+  kFallenOff,
+  kSmallTrack,
+  kTrimmed,
+};
+inline constexpr int kMaskReasonCount = 11;
+const char* to_string(MaskReason reason);
+
+enum class MarkerStatus : uint8_t {
+  kObserved,       ///< Published exactly as captured.
+  kRepaired,       ///< Filled or relabelled; the reason says which detector.
+  kUnrecoverable,  ///< No data to repair from (never seen yet): not published.
+};
+const char* to_string(MarkerStatus status);
+
+/// Where a published sample came from, which sets its weight in the final solve.
+enum class SampleSource : uint8_t {
+  kCaptured,      ///< The capture's sample (relabelled or not).
+  kInterpolated,  ///< Filled between two known ends (a short gap, a gap whose end is in the lookahead).
+  kExtrapolated,  ///< Filled from one side only: a guess on the reference.
+  kNone,          ///< Unrecoverable: nothing published.
+};
+
+/// One published frame.
+struct CleanFrame {
+  int64_t frame = -1;
+  std::vector<Vec3> markers;  ///< X-: repaired positions (NaN where unrecoverable), metres.
+  std::vector<MarkerStatus> status;
+  std::vector<MaskReason> reason;    ///< Why a repaired sample was repaired (kNone if observed).
+  std::vector<SampleSource> source;  ///< Where each sample came from.
+  std::vector<double> weight;        ///< Each marker's weight in the final solve.
+  Pose pose;                         ///< Y-: the final solve.
+  IkSummary final_solve;
+};
+
+struct CleanupCounters {
+  int64_t frames_in = 0;
+  int64_t frames_out = 0;
+  int64_t samples_out = 0;
+  std::array<int64_t, kMaskReasonCount> repaired_by{};  ///< Published repaired samples, per reason.
+  int64_t unrecoverable = 0;
+  int64_t swaps_relabelled = 0;
+  int64_t cold_starts = 0;       ///< IK solves that started cold.
+  int64_t solve_failures = 0;    ///< IK solves that reported a numerical failure.
+  int64_t solve_iterations = 0;  ///< LM iterations over all solves.
+  void CountSolve(const IkSummary& summary) {
+    cold_starts += summary.cold_start;
+    solve_failures += summary.status == IkStatus::kNumericalFailure;
+    solve_iterations += summary.iterations;
+  }
+};
+
+/// One buffered frame; every vector has one entry per marker.
+struct WindowFrame {
+  int64_t frame = -1;           ///< -1: the slot holds no frame.
+  std::vector<Vec3> raw;        ///< As captured (metres), after swap relabelling; NaN where missing.
+  std::vector<uint8_t> valid;   ///< A sample was captured.
+  std::vector<uint8_t> relabelled;
+  std::vector<MaskReason> mask;
+  std::vector<Vec3> reference;  ///< X^ = LBS(Y^), metres.
+};
+
+/// A ring of frames addressed by frame number, allocated once.
+class CleanupWindow {
+ public:
+  CleanupWindow(int markers, int capacity) : frames_(static_cast<size_t>(capacity)) {
+    const auto m = static_cast<size_t>(markers);
+    for (WindowFrame& f : frames_) {
+      f.raw.assign(m, Vec3::Constant(kNaN));
+      f.valid.assign(m, 0);
+      f.relabelled.assign(m, 0);
+      f.mask.assign(m, MaskReason::kMissing);
+      f.reference.assign(m, Vec3::Zero());
+    }
+  }
+  /// The slot of frame number `frame` (>= 0), whichever frame it holds now.
+  WindowFrame& at(int64_t frame) { return frames_[Index(frame)]; }
+  const WindowFrame& at(int64_t frame) const { return frames_[Index(frame)]; }
+  /// True if the window holds exactly this frame.
+  bool Holds(int64_t frame) const { return frame >= 0 && at(frame).frame == frame; }
+  /// Forgets every frame.
+  void Clear() {
+    for (WindowFrame& f : frames_) f.frame = -1;
+  }
+
+ private:
+  size_t Index(int64_t frame) const { return static_cast<size_t>(frame % static_cast<int64_t>(frames_.size())); }
+  std::vector<WindowFrame> frames_;
+};
+
+}  // namespace mocapd

@@ -1,0 +1,147 @@
+// Catch-up targets, weights, the anchor and the final solve (see the header).
+#include "filters/final_solve.hpp"
+
+#include <algorithm>
+
+namespace mocapd {
+namespace {
+
+Vec3 ClampNorm(const Vec3& v, double max_norm) {
+  const double n = v.norm();
+  return n > max_norm ? Vec3(v * (max_norm / n)) : v;
+}
+
+}  // namespace
+
+FinalSolve::FinalSolve(const Skeleton& skeleton, const MarkerSet& markers, const CleanupOptions& options)
+    : skeleton_(skeleton),
+      markers_(markers),
+      options_(options),
+      final_(skeleton, markers),
+      anchor_(skeleton, markers),
+      held_kinematics_(skeleton) {
+  const auto m = static_cast<size_t>(markers_.num_markers());
+  tracks_.assign(m, Track{});
+  weights_.assign(m, 0.0);
+  anchor_weights_.assign(m, 0.0);
+  solve_targets_.assign(m, Vec3::Constant(kNaN));
+  limb_seen_.assign(static_cast<size_t>(skeleton_.num_joints()), 0);
+  held_pose_ = RestPose(skeleton_);
+  held_markers_.assign(m, Vec3::Zero());
+}
+
+void FinalSolve::Reset() {
+  std::fill(tracks_.begin(), tracks_.end(), Track{});
+  final_.Reset();
+}
+
+void FinalSolve::Solve(CleanFrame* frame, CleanupCounters* counters) {
+  const int64_t tau = frame->frame;
+  const double catchup = options_.data_catchup_m;
+  for (size_t m = 0; m < tracks_.size(); ++m) {
+    Track& track = tracks_[m];
+    const Vec3& x = frame->markers[m];
+    const MarkerStatus status = frame->status[m];
+    const bool data = frame->source[m] == SampleSource::kCaptured;
+    // The final solve never takes a captured sample at one bound: it fits a target that
+    // starts where the skeleton had the marker last frame, moves with the sample's own
+    // motion (changing by at most data_motion_acceleration_m per frame, so a swap or pop
+    // the detectors missed is not taken for motion) and closes on the sample by at most
+    // data_catchup_m per frame. A sample the skeleton already fits is its own target; one
+    // that returns away from where the skeleton had it is reached without a pop, and at
+    // full weight.
+    Vec3 solve_x = x;
+    const bool eased = data && catchup > 0.0 && final_.has_solution();
+    track.catching_up = false;
+    if (eased) {
+      Vec3 motion = Vec3::Zero();  // unknown on a sample's first frame back
+      if (track.last_captured == tau - 1)
+        motion = track.data_motion +
+                 ClampNorm(Vec3(x - track.output - track.data_motion), options_.data_motion_acceleration_m);
+      track.data_motion = motion;
+      const Vec3 from = final_.predicted_markers()[m] + motion;
+      if ((x - from).norm() > catchup) {
+        solve_x = from + ClampNorm(Vec3(x - from), catchup);
+        track.catching_up = true;
+      }
+    }
+    solve_targets_[m] = solve_x;
+    if (status != MarkerStatus::kUnrecoverable) track.output = x;
+    if (data) track.last_captured = tau;
+    double weight = data                                       ? 1.0
+                    : status == MarkerStatus::kUnrecoverable   ? 0.0
+                    : frame->source[m] == SampleSource::kInterpolated ? options_.interpolated_weight
+                                                               : options_.repaired_weight;
+    // A sample handed from a guess (a one-sided fill, weak) to data (an interpolation,
+    // or a captured sample when the catch-up is off) gains weight gradually, so the final
+    // solve does not snap to it in one frame.
+    if (options_.fill_weight_ramp > 1.0 && status != MarkerStatus::kUnrecoverable && weight > track.weight && !eased)
+      weight = std::min(weight, std::max(track.weight, options_.repaired_weight) * options_.fill_weight_ramp);
+    track.weight = weight;
+    weights_[m] = weight;
+    frame->weight[m] = weight;
+  }
+  if (options_.fill_anchor_radius_m > 0.0 && final_.has_solution()) AnchorRepairs(*frame, counters);
+  frame->final_solve = SolveIk(skeleton_, markers_, options_.final_ik, solve_targets_, weights_, &final_);
+  counters->CountSolve(frame->final_solve);
+  frame->pose = final_.pose();
+}
+
+// Where the skeleton goes on the samples it can trust alone (captured, fitted, full
+// weight): the anchor. A repaired sample may pull the skeleton at most
+// fill_anchor_radius_m from it. A fill is a guess, and a guess may jump (its reference
+// re-acquiring a segment, an interpolation bending onto a returning track); the anchor
+// moves only with real data, so how far a guess can take the skeleton in one frame is
+// bounded.
+void FinalSolve::AnchorRepairs(const CleanFrame& frame, CleanupCounters* counters) {
+  const size_t m_count = tracks_.size();
+  for (size_t m = 0; m < m_count; ++m)
+    anchor_weights_[m] =
+        frame.source[m] == SampleSource::kCaptured && !tracks_[m].catching_up && weights_[m] >= 1.0 ? 1.0 : 0.0;
+  anchor_.Reset(final_.pose());
+  const IkSummary summary = SolveIk(skeleton_, markers_, options_.anchor_ik, solve_targets_, anchor_weights_, &anchor_);
+  counters->CountSolve(summary);
+  // Too few trusted samples to solve: the anchor is last frame's skeleton.
+  std::span<const Vec3> anchor =
+      summary.status == IkStatus::kTooFewMarkers ? final_.predicted_markers() : anchor_.predicted_markers();
+  if (summary.status != IkStatus::kTooFewMarkers && options_.anchor_holds_unseen_limbs && HoldUnseenLimbs())
+    anchor = held_markers_;
+  for (size_t m = 0; m < m_count; ++m) {
+    if (anchor_weights_[m] > 0.0 || weights_[m] <= 0.0 || tracks_[m].catching_up) continue;
+    solve_targets_[m] = anchor[m] + ClampNorm(Vec3(solve_targets_[m] - anchor[m]), options_.fill_anchor_radius_m);
+  }
+}
+
+// A limb with no trusted sample on it or below it (a lower leg and foot, a forearm and
+// hand) keeps in the anchor the world orientation it had last frame: its parent carries
+// its root along but does not swing it. A limb held relative to its parent turns with
+// it, and a trusted thigh turning over an occluded, planted lower leg then swung the
+// guessed foot 2-3 cm a frame faster than the real one (bench/README.md). Returns false
+// when every limb is seen (the anchor stands as solved).
+bool FinalSolve::HoldUnseenLimbs() {
+  const int joints = skeleton_.num_joints();
+  std::fill(limb_seen_.begin(), limb_seen_.end(), 0);
+  for (int m = 0; m < markers_.num_markers(); ++m)
+    if (anchor_weights_[static_cast<size_t>(m)] > 0.0) limb_seen_[static_cast<size_t>(markers_.primary_joint(m))] = 1;
+  for (int j = joints - 1; j > 0; --j)  // parents come first: children fold into them
+    if (limb_seen_[static_cast<size_t>(j)]) limb_seen_[static_cast<size_t>(skeleton_.joint(j).parent.value)] = 1;
+  const KinematicsWorkspace& now = anchor_.kinematics();
+  const KinematicsWorkspace& before = final_.kinematics();
+  bool held = false;
+  for (int j = 1; j < joints; ++j) {
+    const auto uj = static_cast<size_t>(j);
+    const int parent = skeleton_.joint(j).parent.value;
+    // Only a ball joint can take any orientation; the root of an unseen limb is an
+    // unseen joint under a seen one.
+    if (parent < 0 || limb_seen_[uj] || !limb_seen_[static_cast<size_t>(parent)] || skeleton_.joint(j).type != JointType::kBall) continue;
+    if (!held) held_pose_ = anchor_.pose();
+    held_pose_.rotation[uj] = Quat(now.R_WJ[static_cast<size_t>(parent)].transpose() * before.R_WJ[uj]);
+    held = true;
+  }
+  if (!held) return false;
+  ForwardKinematics(skeleton_, held_pose_, &held_kinematics_);
+  EvaluateMarkers(markers_, held_kinematics_, held_markers_);
+  return true;
+}
+
+}  // namespace mocapd

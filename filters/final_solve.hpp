@@ -1,0 +1,59 @@
+// The final solve, the last stage of the cleanup: the skeleton Y- fitted to the frame's
+// published samples, warm-started, and made pop-free by bounding how fast anything can
+// move the skeleton beyond real motion:
+//  - a captured sample is fitted through a target that starts where the skeleton had the
+//    marker last frame, follows the sample's own (acceleration-limited) motion and closes
+//    on it at a few mm per frame, so a sample that returns away from the skeleton (after
+//    a gap, a swap, a repair whose end the lookahead did not see) is reached, not jumped to;
+//  - a repaired sample weighs by where it came from (interpolated between known ends:
+//    much; extrapolated from one side: little), its weight grows gradually, and it may
+//    pull the skeleton only a few mm from the anchor: the pose the trusted samples alone
+//    give, with every limb that has no trusted sample keeping its world orientation.
+// Per-marker state is sized at construction; Solve never allocates.
+#pragma once
+
+#include <vector>
+
+#include "filters/cleanup_options.hpp"
+#include "filters/cleanup_window.hpp"
+
+namespace mocapd {
+
+class FinalSolve {
+ public:
+  /// The options must be valid (CleanupOptions::Validate); skeleton and markers must
+  /// outlive the solver.
+  FinalSolve(const Skeleton& skeleton, const MarkerSet& markers, const CleanupOptions& options);
+
+  /// Solves the frame whose markers, status and source the repair filled (frames in
+  /// order); writes its weight, pose and final_solve. Never allocates or throws.
+  void Solve(CleanFrame* frame, CleanupCounters* counters);
+  /// Forgets all state (a capture restart).
+  void Reset();
+
+ private:
+  struct Track {
+    double weight = 1.0;               // last final-solve weight
+    bool catching_up = false;          // the target is still closing on the sample
+    Vec3 data_motion = Vec3::Zero();   // the sample's motion as the catch-up last took it
+    Vec3 output = Vec3::Zero();        // last published sample ...
+    int64_t last_captured = -1;        // ... and the frame of the last captured one
+  };
+
+  void AnchorRepairs(const CleanFrame& frame, CleanupCounters* counters);
+  bool HoldUnseenLimbs();
+
+  const Skeleton& skeleton_;
+  const MarkerSet& markers_;
+  const CleanupOptions options_;
+  IkState final_, anchor_;
+  std::vector<Track> tracks_;
+  std::vector<double> weights_, anchor_weights_;
+  std::vector<Vec3> solve_targets_;      // what the solve fits: X-, captured samples eased in
+  std::vector<uint8_t> limb_seen_;       // per joint: a trusted sample on it or below
+  Pose held_pose_;                       // the anchor with its unseen limbs held in the world...
+  KinematicsWorkspace held_kinematics_;
+  std::vector<Vec3> held_markers_;       // ...and its markers
+};
+
+}  // namespace mocapd

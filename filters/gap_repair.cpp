@@ -1,0 +1,156 @@
+// Hermite repair of masked samples onto the reference path (see the header).
+#include "filters/gap_repair.hpp"
+
+#include <algorithm>
+
+#include "filters/hermite.hpp"
+
+namespace mocapd {
+namespace {
+
+Vec3 ClampNorm(const Vec3& v, double max_norm) {
+  const double n = v.norm();
+  return n > max_norm ? Vec3(v * (max_norm / n)) : v;
+}
+
+}  // namespace
+
+GapRepair::GapRepair(int markers, const CleanupOptions& options)
+    : options_(options), tracks_(static_cast<size_t>(markers)) {}
+
+void GapRepair::Reset() { std::fill(tracks_.begin(), tracks_.end(), Track{}); }
+
+void GapRepair::Repair(const CleanupWindow& window, int64_t tau, int64_t newest, CleanFrame* out,
+                       CleanupCounters* counters) {
+  const WindowFrame& s = window.at(tau);
+  const double max_v = options_.max_offset_velocity_m;
+  const double dt = 1.0 / options_.rate_hz;
+  const double max_reference_step_change = options_.fill_reference_acceleration_mps2 * dt * dt;
+  const bool has_reference_before = window.Holds(tau - 1);
+  // The part of X^'s path over frames from..to that is snapping rather than moving (its
+  // per-frame change beyond the acceleration limit), summed; `velocity` comes in as the
+  // snap-free reference velocity at from - 1 and leaves as the one at `to`.
+  auto reference_snap = [&](size_t m, int64_t from, int64_t to, Vec3* velocity) {
+    Vec3 snap = Vec3::Zero();
+    if (max_reference_step_change <= 0.0 || !has_reference_before) return snap;
+    for (int64_t g = from; g <= to; ++g) {
+      const Vec3 step = window.at(g).reference[m] - window.at(g - 1).reference[m];
+      const Vec3 change = step - *velocity;
+      const Vec3 excess = change - ClampNorm(change, max_reference_step_change);
+      snap += excess;
+      *velocity = step - excess;
+    }
+    return snap;
+  };
+  for (size_t m = 0; m < tracks_.size(); ++m) {
+    Track& track = tracks_[m];
+    const Vec3& ref = s.reference[m];
+    Vec3 x = Vec3::Constant(kNaN);
+    MarkerStatus status = MarkerStatus::kRepaired;
+    MaskReason reason = s.mask[m];
+    bool interpolated = false;  // filled between two known ends
+    // Each branch leaves x and the track's offset / velocities for the next frame.
+    if (reason == MaskReason::kNone) {
+      // Observed (or relabelled): published exactly as it is.
+      x = s.raw[m];
+      if (s.relabelled[m]) reason = MaskReason::kSwap;
+      status = s.relabelled[m] ? MarkerStatus::kRepaired : MarkerStatus::kObserved;
+      const Vec3 offset = x - ref;
+      track.offset_velocity = track.has_published ? Vec3(offset - track.offset) : Vec3::Zero();
+      track.offset = offset;
+      track.output_velocity = track.has_published ? Vec3(x - track.output) : Vec3::Zero();
+      track.reference_velocity = has_reference_before ? Vec3(ref - window.at(tau - 1).reference[m]) : Vec3::Zero();
+      track.held_snap.setZero();
+      track.last_observed = tau;
+    } else {
+      int64_t end = -1;  // the returning track, if the lookahead shows it
+      for (int64_t f = tau + 1; f <= newest; ++f) {
+        if (window.at(f).mask[m] == MaskReason::kNone) {
+          end = f;
+          break;
+        }
+      }
+      const bool end_slope_known = end >= 0 && end + 1 <= newest && window.at(end + 1).mask[m] == MaskReason::kNone;
+      if (!track.has_published) {
+        if (end < 0) {
+          status = MarkerStatus::kUnrecoverable;  // never seen: nothing to repair from
+        } else {
+          // Nothing before the gap: ride the reference at the returning track's offset.
+          track.offset = window.at(end).raw[m] - window.at(end).reference[m];
+          track.offset_velocity = Vec3::Zero();
+          x = ref + track.offset;
+          track.output_velocity = Vec3::Zero();
+        }
+      } else if (end >= 0 && track.last_observed == tau - 1 && end - tau <= options_.small_gap_frames) {
+        interpolated = true;
+        // A short gap right after an observed sample: a plain Hermite on the raw path.
+        const HermiteSegment h{
+            track.output, track.output_velocity, window.at(end).raw[m],
+            end_slope_known ? Vec3(window.at(end + 1).raw[m] - window.at(end).raw[m]) : track.output_velocity,
+            static_cast<double>(end - tau + 1)};
+        x = h.Value(1.0);
+        track.output_velocity = h.Derivative(1.0);
+        const Vec3 offset = x - ref;
+        track.offset_velocity = offset - track.offset;
+        track.offset = offset;
+      } else {
+        // Offset onto the reference path, from the last published offset and velocity
+        // to the returning track's (two-sided), or easing to a constant (one-sided).
+        // Both ends are taken against X^ with its snaps taken out, so a reference that
+        // jumps (this segment's other markers re-entering its solve) moves no fill.
+        HermiteSegment h;
+        h.p0 = track.offset;
+        h.m0 = ClampNorm(track.offset_velocity, max_v);
+        Vec3 velocity = track.reference_velocity;
+        const Vec3 snap_now = reference_snap(m, tau, tau, &velocity);
+        const Vec3 reference_velocity_now = velocity;
+        if (end >= 0) {
+          interpolated = true;
+          const WindowFrame& e = window.at(end);
+          const Vec3 snap_at_end = snap_now + reference_snap(m, tau + 1, end, &velocity);
+          h.p1 = e.raw[m] - (e.reference[m] - snap_at_end);
+          h.m1 = end_slope_known ? ClampNorm((window.at(end + 1).raw[m] - window.at(end + 1).reference[m]) -
+                                                 (e.raw[m] - e.reference[m]),
+                                             max_v)
+                                 : Vec3::Zero();
+          h.length = static_cast<double>(end - tau + 1);
+        } else {
+          h.p1 = h.p0;
+          h.m1 = Vec3::Zero();
+          h.length = static_cast<double>(options_.lookahead + 1);
+        }
+        x = ref - snap_now + h.Value(1.0);
+        if (end < 0) {
+          // A held snap is taken up a little each frame: a reference that kept up a real
+          // fast motion is followed again, with no jump.
+          track.held_snap += snap_now;
+          const Vec3 released = options_.fill_snap_release * track.held_snap;
+          track.held_snap -= released;
+          x += released;
+        } else {
+          track.held_snap.setZero();
+        }
+        track.offset = x - ref;
+        track.offset_velocity = h.Derivative(1.0);
+        track.reference_velocity = reference_velocity_now;
+        track.output_velocity = x - track.output;
+      }
+    }
+    if (status != MarkerStatus::kUnrecoverable) {
+      track.output = x;
+      track.has_published = true;
+    }
+    out->markers[m] = x;
+    out->status[m] = status;
+    out->reason[m] = status == MarkerStatus::kObserved ? MaskReason::kNone : reason;
+    out->source[m] = s.mask[m] == MaskReason::kNone        ? SampleSource::kCaptured
+                     : status == MarkerStatus::kUnrecoverable ? SampleSource::kNone
+                     : interpolated                           ? SampleSource::kInterpolated
+                                                              : SampleSource::kExtrapolated;
+    ++counters->samples_out;
+    if (status == MarkerStatus::kRepaired) ++counters->repaired_by[static_cast<size_t>(reason)];
+    if (status == MarkerStatus::kUnrecoverable) ++counters->unrecoverable;
+  }
+}
+
+}  // namespace mocapd

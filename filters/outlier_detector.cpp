@@ -1,0 +1,325 @@
+// Swap relabelling, the two reference solves, the detectors and the mask clean-up.
+#include "filters/outlier_detector.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace mocapd {
+
+OutlierDetector::OutlierDetector(const Skeleton& skeleton, const MarkerSet& markers, const CleanupOptions& options)
+    : skeleton_(skeleton), markers_(markers), options_(options), naive_(skeleton, markers), robust_(skeleton, markers) {
+  const auto m = static_cast<size_t>(markers_.num_markers());
+  tracks_.assign(m, FreshTrack());
+  markers_of_joint_.assign(static_cast<size_t>(skeleton_.num_joints()), {});
+  for (int i = 0; i < markers_.num_markers(); ++i) {
+    const MarkerDefinition& d = markers_.marker(i);
+    for (int k = 0; k < d.num_attachments; ++k)
+      markers_of_joint_[static_cast<size_t>(d.attachments[static_cast<size_t>(k)].joint)].push_back(i);
+  }
+  // Markers rigidly on the same joint keep their distance.
+  for (int i = 0; i < markers_.num_markers(); ++i) {
+    for (int j = i + 1; j < markers_.num_markers(); ++j) {
+      const MarkerDefinition& a = markers_.marker(i);
+      const MarkerDefinition& b = markers_.marker(j);
+      if (a.num_attachments != 1 || b.num_attachments != 1 || a.attachments[0].joint != b.attachments[0].joint) continue;
+      rigid_pairs_.emplace_back(i, j);
+      rigid_distance_.push_back((a.attachments[0].offset - b.attachments[0].offset).norm());
+    }
+  }
+  weights_.assign(m, 0.0);
+  residual_.assign(m, Vec3::Zero());
+  marker_flags_.assign(m, 0);
+  swap_candidates_.reserve(m);
+  candidate_previous_.assign(m, Vec3::Zero());
+}
+
+OutlierDetector::Track OutlierDetector::FreshTrack() const {
+  Track t;
+  t.residual_scale = options_.residual_floor_m / options_.residual_scale_factor;
+  return t;
+}
+
+void OutlierDetector::Reset() {
+  std::fill(tracks_.begin(), tracks_.end(), FreshTrack());
+  naive_.Reset();
+  naive_fresh_ = false;
+  robust_.Reset();
+}
+
+void OutlierDetector::Process(CleanupWindow& window, int64_t t, int64_t first_unpublished, CleanupCounters* counters) {
+  RelabelSwaps(window, t, counters);
+  SolveReferences(window.at(t), counters);
+  Detect(window, t, first_unpublished, counters);
+  CleanMask(window, t, first_unpublished);
+}
+
+void OutlierDetector::SolveReferences(WindowFrame& s, CleanupCounters* counters) {
+  const auto m_count = static_cast<size_t>(markers_.num_markers());
+  // Y^: robust, without markers that are standing still while the body moves, have come
+  // off, or have strayed far for a while. Markers flagged only by a modest residual stay
+  // in (the Huber loss bounds their pull): excluding them would let the reference drift
+  // away and keep them out.
+  for (size_t m = 0; m < m_count; ++m)
+    weights_[m] = s.valid[m] && !tracks_[m].frozen && !tracks_[m].fallen && !tracks_[m].stray ? 1.0 : 0.0;
+  counters->CountSolve(SolveIk(skeleton_, markers_, options_.robust_ik, s.raw, weights_, &robust_));
+  const auto predicted = robust_.predicted_markers();
+  std::copy(predicted.begin(), predicted.end(), s.reference.begin());
+  // Y: the markers as they are. Disagreement can only mark markers further than
+  // disagreement_residual_m from X^, so on frames with none the naive solve is skipped
+  // (and re-seeded from Y^ when next needed): about a third of the per-frame work.
+  naive_solved_ = false;
+  for (size_t m = 0; m < m_count && !naive_solved_; ++m)
+    naive_solved_ = s.valid[m] && (s.raw[m] - s.reference[m]).norm() > options_.disagreement_residual_m;
+  if (naive_solved_) {
+    if (!naive_fresh_) naive_.Reset(robust_.pose());
+    for (size_t m = 0; m < m_count; ++m) weights_[m] = s.valid[m] ? 1.0 : 0.0;
+    counters->CountSolve(SolveIk(skeleton_, markers_, options_.naive_ik, s.raw, weights_, &naive_));
+  }
+  naive_fresh_ = naive_solved_;
+}
+
+// Relabels swapped pairs before the frame is solved, so the reference is computed from
+// the corrected labels.
+void OutlierDetector::RelabelSwaps(CleanupWindow& window, int64_t t, CleanupCounters* counters) {
+  WindowFrame& s = window.at(t);
+  const bool has_previous = t > 0 && window.at(t - 1).frame == t - 1;
+  const WindowFrame& prev = window.at(t - 1 >= 0 ? t - 1 : 0);
+  const auto m_count = static_cast<size_t>(markers_.num_markers());
+  // Model distance between two markers rigidly on the same joint.
+  auto RigidDistance = [&](size_t a, size_t b) {
+    return (markers_.marker(static_cast<int>(a)).attachments[0].offset - markers_.marker(static_cast<int>(b)).attachments[0].offset).norm();
+  };
+  // Swaps first: a relabelled pair is fine for every other detector. Within one rigid
+  // segment the layout's distances identify each marker: a pair whose exchanged labels
+  // fit the distances to the segment's other markers clearly better is relabelled.
+  for (size_t k = 0; k < rigid_pairs_.size(); ++k) {
+    const auto i = static_cast<size_t>(rigid_pairs_[k].first);
+    const auto j = static_cast<size_t>(rigid_pairs_[k].second);
+    if (!s.valid[i] || !s.valid[j] || s.relabelled[i] || s.relabelled[j]) continue;
+    double straight = 0.0, crossed = 0.0;
+    int witnesses = 0;
+    for (int other : markers_of_joint_[static_cast<size_t>(markers_.primary_joint(static_cast<int>(i)))]) {
+      const auto o = static_cast<size_t>(other);
+      if (o == i || o == j || !s.valid[o] || markers_.marker(other).num_attachments != 1) continue;
+      const double di = (s.raw[i] - s.raw[o]).norm(), dj = (s.raw[j] - s.raw[o]).norm();
+      const double mi = RigidDistance(i, o), mj = RigidDistance(j, o);
+      straight += std::abs(di - mi) + std::abs(dj - mj);
+      crossed += std::abs(dj - mi) + std::abs(di - mj);
+      ++witnesses;
+    }
+    if (witnesses == 0 || crossed + options_.swap_margin_m * witnesses >= straight) continue;
+    std::swap(s.raw[i], s.raw[j]);
+    s.relabelled[i] = s.relabelled[j] = 1;
+    ++counters->swaps_relabelled;
+  }
+  // Across segments, trajectory
+  // continuity decides most of them: each marker's sample is compared with its own
+  // constant-velocity prediction, and a pair whose crossed assignment fits clearly better
+  // is relabelled. A swap the reference can absorb (two of three markers on a segment)
+  // is still a jump in both trajectories.
+  const bool has_two_before = t > 1 && window.at(t - 2).frame == t - 2;
+  if (has_previous && has_two_before) {
+    const WindowFrame& prev2 = window.at(t - 2);
+    // Only markers whose last two samples were fine can be predicted; gathering them and
+    // their positions first keeps the pair search to a tight loop over few markers.
+    swap_candidates_.clear();
+    for (size_t i = 0; i < m_count; ++i) {
+      if (!s.valid[i] || prev.mask[i] != MaskReason::kNone || prev2.mask[i] != MaskReason::kNone) continue;
+      swap_candidates_.push_back(static_cast<int>(i));
+      candidate_previous_[swap_candidates_.size() - 1] = prev.raw[i];
+    }
+    const size_t n = swap_candidates_.size();
+    const double search_sq = options_.swap_search_m * options_.swap_search_m;
+    for (size_t a = 0; a < n; ++a) {
+      const auto i = static_cast<size_t>(swap_candidates_[a]);
+      if (s.relabelled[i]) continue;
+      const Vec3 predicted_i = 2.0 * prev.raw[i] - prev2.raw[i];
+      for (size_t b = a + 1; b < n; ++b) {
+        if ((candidate_previous_[a] - candidate_previous_[b]).squaredNorm() > search_sq) continue;
+        const auto j = static_cast<size_t>(swap_candidates_[b]);
+        if (s.relabelled[j]) continue;
+        const Vec3 predicted_j = 2.0 * prev.raw[j] - prev2.raw[j];
+        const double straight = (s.raw[i] - predicted_i).norm() + (s.raw[j] - predicted_j).norm();
+        const double crossed = (s.raw[j] - predicted_i).norm() + (s.raw[i] - predicted_j).norm();
+        if (crossed + options_.swap_margin_m >= straight) continue;
+        // The reference (last frame's, this frame's is not solved yet) must not disagree:
+        // a wrong relabel would otherwise persist, since the next frame is predicted from
+        // the relabelled one.
+        if ((s.raw[j] - prev.reference[i]).norm() + (s.raw[i] - prev.reference[j]).norm() >
+            (s.raw[i] - prev.reference[i]).norm() + (s.raw[j] - prev.reference[j]).norm())
+          continue;
+        std::swap(s.raw[i], s.raw[j]);
+        s.relabelled[i] = s.relabelled[j] = 1;
+        ++counters->swaps_relabelled;
+        break;
+      }
+    }
+  }
+}
+
+void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unpublished, CleanupCounters* counters) {
+  WindowFrame& s = window.at(t);
+  const bool has_previous = t > 0 && window.at(t - 1).frame == t - 1;
+  const WindowFrame& prev = window.at(t - 1 >= 0 ? t - 1 : 0);
+  const auto m_count = static_cast<size_t>(markers_.num_markers());
+  const double alpha = 2.0 / (options_.window + 1.0);
+
+  // Residuals against X^ and each marker's adaptive threshold.
+  auto threshold = [&](size_t m) {
+    return std::max(options_.residual_floor_m, options_.residual_scale_factor * tracks_[m].residual_scale);
+  };
+  std::span<Vec3> residual(residual_.data(), m_count);
+  for (size_t m = 0; m < m_count; ++m) residual[m] = s.valid[m] ? Vec3(s.raw[m] - s.reference[m]) : Vec3::Zero();
+
+  // The rest: a pair that each fit the other's reference position.
+  for (size_t i = 0; i < m_count; ++i) {
+    if (!s.valid[i] || residual[i].norm() <= threshold(i)) continue;
+    for (size_t j = i + 1; j < m_count; ++j) {
+      if (!s.valid[j] || residual[j].norm() <= threshold(j)) continue;
+      const double crossed_i = (s.raw[i] - s.reference[j]).norm();  // i's sample fits j
+      const double crossed_j = (s.raw[j] - s.reference[i]).norm();
+      if (crossed_i > threshold(j) || crossed_j > threshold(i)) continue;
+      if (crossed_i + crossed_j + options_.swap_margin_m >= residual[i].norm() + residual[j].norm()) continue;
+      if (options_.relabel_swaps) {
+        std::swap(s.raw[i], s.raw[j]);
+        s.relabelled[i] = s.relabelled[j] = 1;
+        residual[i] = s.raw[i] - s.reference[i];
+        residual[j] = s.raw[j] - s.reference[j];
+        ++counters->swaps_relabelled;
+      } else {
+        s.mask[i] = s.mask[j] = MaskReason::kSwap;
+      }
+      break;
+    }
+  }
+
+  // Kinematic disagreement: a joint whose naive and robust solutions differ too much
+  // marks every marker skinned to it.
+  const KinematicsWorkspace& naive = naive_.kinematics();
+  const KinematicsWorkspace& robust = robust_.kinematics();
+  for (int j = 0; naive_solved_ && j < skeleton_.num_joints(); ++j) {
+    if (skeleton_.joint(j).type == JointType::kFixed) continue;
+    const auto uj = static_cast<size_t>(j);
+    const double dp = (naive.p_WJ[uj] - robust.p_WJ[uj]).norm();
+    const double cos_angle = std::clamp(0.5 * ((naive.R_WJ[uj].transpose() * robust.R_WJ[uj]).trace() - 1.0), -1.0, 1.0);
+    if (dp <= options_.disagreement_position_m && std::acos(cos_angle) <= options_.disagreement_rotation_rad) continue;
+    for (int m : markers_of_joint_[uj]) {
+      const auto um = static_cast<size_t>(m);
+      if (s.valid[um] && s.mask[um] == MaskReason::kNone && !s.relabelled[um] && residual[um].norm() > options_.disagreement_residual_m)
+        s.mask[um] = MaskReason::kDisagreement;
+    }
+  }
+
+  // The reference moving away from a still marker only convicts it if the segment's
+  // motion is seen: another marker on the same joint fits its reference. (A planted
+  // foot's markers stay still while a reference with no foot data drifts.)
+  auto has_fitting_neighbour = [&](size_t m) {
+    for (int other : markers_of_joint_[static_cast<size_t>(markers_.primary_joint(static_cast<int>(m)))]) {
+      const auto o = static_cast<size_t>(other);
+      if (o != m && s.valid[o] && !tracks_[o].frozen && residual[o].norm() <= threshold(o)) return true;
+    }
+    return false;
+  };
+  for (size_t m = 0; m < m_count; ++m) {
+    Track& track = tracks_[m];
+    if (!s.valid[m]) {
+      track.still_since = -1;
+      track.frozen = false;
+      continue;
+    }
+    const double r = residual[m].norm();
+    const double thr = threshold(m);
+    if (r > thr) {
+      ++track.residual_run;
+      if (s.mask[m] == MaskReason::kNone || s.mask[m] == MaskReason::kDisagreement) s.mask[m] = MaskReason::kResidual;
+      // Fallen off: far from where it belongs (not a reference a few cm off) for long.
+      if (track.residual_run >= options_.fallen_frames && r > options_.fallen_residual_m) {
+        track.fallen = true;
+        s.mask[m] = MaskReason::kFallenOff;
+      }
+      if (track.residual_run >= options_.stray_frames && r > options_.stray_residual_m) track.stray = true;
+    } else {
+      track.residual_run = 0;
+      track.fallen = false;
+      track.stray = false;
+      // The running scale learns from good samples only (clipped at the threshold).
+      track.residual_scale += alpha * (r - track.residual_scale);
+    }
+    // Frozen: at rest (within a radius, so jitter is not motion) while the reference
+    // moves away; the run starts over wherever the marker leaves the radius.
+    if (track.still_since < 0 || (s.raw[m] - track.still_anchor).norm() > options_.frozen_radius_m) {
+      track.still_since = t;
+      track.still_anchor = s.raw[m];
+      track.still_reference = s.reference[m];
+      track.frozen = false;
+    } else if (t - track.still_since + 1 >= options_.frozen_frames &&
+               (s.reference[m] - track.still_reference).norm() > options_.frozen_reference_motion_m &&
+               has_fitting_neighbour(m)) {
+      track.frozen = true;
+    }
+    if (track.frozen) {
+      // Still and far from its reference for long is the more specific diagnosis.
+      for (int64_t f = std::max(first_unpublished, track.still_since); f <= t; ++f)
+        if (window.at(f).valid[m] && window.at(f).mask[m] != MaskReason::kFallenOff) window.at(f).mask[m] = MaskReason::kFrozen;
+    }
+    if (!has_previous || !prev.valid[m]) continue;
+    // Spikes: this frame's displacement disagrees with the reference's, from a sample
+    // that was itself fine (so the return from a pop is not a spike).
+    const Vec3 moved = s.raw[m] - prev.raw[m];
+    const Vec3 reference_moved = s.reference[m] - prev.reference[m];
+    if (prev.mask[m] == MaskReason::kNone && s.mask[m] == MaskReason::kNone && (moved - reference_moved).norm() > options_.spike_m)
+      s.mask[m] = MaskReason::kSpike;
+  }
+
+  // Rigid segments: two markers on one joint that changed their distance; blame the one
+  // that fits the reference worse.
+  for (size_t k = 0; k < rigid_pairs_.size(); ++k) {
+    const auto i = static_cast<size_t>(rigid_pairs_[k].first);
+    const auto j = static_cast<size_t>(rigid_pairs_[k].second);
+    if (!s.valid[i] || !s.valid[j] || s.mask[i] != MaskReason::kNone || s.mask[j] != MaskReason::kNone) continue;
+    if (std::abs((s.raw[i] - s.raw[j]).norm() - rigid_distance_[k]) <= options_.rigid_tolerance_m) continue;
+    s.mask[residual[i].norm() >= residual[j].norm() ? i : j] = MaskReason::kRigidDistance;
+  }
+}
+
+void OutlierDetector::CleanMask(CleanupWindow& window, int64_t t, int64_t first_unpublished) {
+  const auto m_count = static_cast<size_t>(markers_.num_markers());
+  const int64_t first = std::max<int64_t>(first_unpublished, 0);
+  auto good = [&](int64_t f, size_t m) { return window.at(f).mask[m] == MaskReason::kNone; };
+  // Most markers are fine over the whole window: neither rule can touch them, and one
+  // pass over the window's masks finds them (the per-marker walks below are the costly
+  // part).
+  std::fill(marker_flags_.begin(), marker_flags_.end(), 0);
+  for (int64_t f = std::max<int64_t>(first - 1, 0); f <= t; ++f) {
+    const std::vector<MaskReason>& mask = window.at(f).mask;
+    for (size_t m = 0; m < m_count; ++m) marker_flags_[m] |= mask[m] != MaskReason::kNone;
+  }
+  for (size_t m = 0; m < m_count; ++m) {
+    if (!marker_flags_[m]) continue;
+    // Trim returning tracks whose slope disagrees with the reference's, frame by frame.
+    for (int64_t g = first; g + 1 <= t; ++g) {
+      if (g == 0 || good(g - 1, m) || !good(g, m)) continue;
+      if (g - 1 < first - 1) continue;
+      for (int n = 0; n < options_.max_trim_frames && g + 1 <= t && good(g, m) && good(g + 1, m); ++n, ++g) {
+        const WindowFrame& a = window.at(g);
+        const WindowFrame& b = window.at(g + 1);
+        const Vec3 slope = (b.raw[m] - a.raw[m]) - (b.reference[m] - a.reference[m]);
+        if (slope.norm() <= options_.trim_slope_m) break;
+        window.at(g).mask[m] = MaskReason::kTrimmed;
+      }
+    }
+    // Small tracks: a short observed run with a gap on both sides, all still unpublished.
+    int64_t run_start = -1;
+    for (int64_t f = first; f <= t; ++f) {
+      if (good(f, m)) {
+        if (run_start < 0) run_start = f;
+        continue;
+      }
+      if (run_start > first && !good(run_start - 1, m) && f - run_start <= options_.small_track_frames)
+        for (int64_t g = run_start; g < f; ++g) window.at(g).mask[m] = MaskReason::kSmallTrack;
+      run_start = -1;
+    }
+  }
+}
+
+}  // namespace mocapd

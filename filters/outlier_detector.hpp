@@ -1,0 +1,82 @@
+// Outlier detection, the first stage of the cleanup (Perepichka 2020, ch. 3, streamed):
+// for the newest frame of the window it
+//  - relabels swapped pairs (rigid-segment distances, trajectory continuity, and a pair
+//    that each fit the other's reference position);
+//  - solves the robust reference Y^ (Huber IRLS, temporal prior, frozen / fallen-off /
+//    stray markers excluded) and writes X^ = LBS(Y^) into the window, and the naive Y
+//    (plain IK on the markers as they are) on frames where some sample is off X^;
+//  - marks bad samples with a reason: missing, kinematic disagreement of Y and Y^ per
+//    joint mapped to markers through skin weights, residual against X^ beyond an adaptive
+//    threshold, velocity spikes against the reference, rigid-segment distance violations,
+//    frozen and fallen-off markers;
+//  - cleans the mask over the unpublished frames: returning tracks are trimmed until
+//    their slope agrees with the reference's, and short tracks between gaps are dropped.
+// Per-marker state is sized at construction; Process never allocates.
+#pragma once
+
+#include <memory>
+#include <utility>
+#include <vector>
+
+#include "filters/cleanup_options.hpp"
+#include "filters/cleanup_window.hpp"
+
+namespace mocapd {
+
+class OutlierDetector {
+ public:
+  /// The options must be valid (CleanupOptions::Validate); skeleton and markers must
+  /// outlive the detector.
+  OutlierDetector(const Skeleton& skeleton, const MarkerSet& markers, const CleanupOptions& options);
+
+  /// Processes frame t, the newest in the window (its raw samples and validity filled):
+  /// relabels swaps in it, solves Y^ (filling its reference) and Y, writes its mask, and
+  /// cleans the masks of frames [first_unpublished, t]. Never allocates or throws.
+  void Process(CleanupWindow& window, int64_t t, int64_t first_unpublished, CleanupCounters* counters);
+  /// Forgets all state (a capture restart).
+  void Reset();
+
+  /// Y^ after the last Process.
+  const IkState& reference() const { return robust_; }
+  /// True if marker m is kept out of Y^ (frozen, fallen off or stray).
+  bool excluded(int m) const {
+    const Track& t = tracks_[static_cast<size_t>(m)];
+    return t.frozen || t.fallen || t.stray;
+  }
+
+ private:
+  struct Track {
+    double residual_scale = 0.0;          // running robust residual scale, metres
+    int residual_run = 0;                 // consecutive residual outliers
+    int64_t still_since = -1;             // first frame of the current still run (-1: none)
+    Vec3 still_anchor = Vec3::Zero();     // where the marker came to rest ...
+    Vec3 still_reference = Vec3::Zero();  // ... and its reference then
+    bool frozen = false;                  // excluded from Y^ while it stays put
+    bool fallen = false;                  // excluded from Y^ until it fits again
+    bool stray = false;                   // far off for a while: excluded until it fits again
+  };
+
+  void RelabelSwaps(CleanupWindow& window, int64_t t, CleanupCounters* counters);
+  void SolveReferences(WindowFrame& s, CleanupCounters* counters);
+  void Detect(CleanupWindow& window, int64_t t, int64_t first_unpublished, CleanupCounters* counters);
+  void CleanMask(CleanupWindow& window, int64_t t, int64_t first_unpublished);
+  Track FreshTrack() const;
+
+  const Skeleton& skeleton_;
+  const MarkerSet& markers_;
+  const CleanupOptions options_;
+  IkState naive_, robust_;
+  bool naive_solved_ = false;  // Y was solved for the newest frame
+  bool naive_fresh_ = false;   // Y's warm start is the previous frame's solution
+  std::vector<Track> tracks_;
+  std::vector<std::pair<int, int>> rigid_pairs_;  // markers rigidly on one joint...
+  std::vector<double> rigid_distance_;            // ...and their distance in the model
+  std::vector<std::vector<int>> markers_of_joint_;
+  std::vector<double> weights_;
+  std::vector<Vec3> residual_;             // per marker, of the newest frame
+  std::vector<uint8_t> marker_flags_;      // CleanMask scratch
+  std::vector<int> swap_candidates_;       // RelabelSwaps scratch: markers predictable from fine samples...
+  std::vector<Vec3> candidate_previous_;   // ...and their previous positions, packed
+};
+
+}  // namespace mocapd

@@ -1,0 +1,209 @@
+// Tests for the final solve: catch-up targets, weight ramps, the anchor and its held
+// limbs, so that nothing moves the published skeleton faster than real motion.
+#include "filters/final_solve.hpp"
+
+#include <gtest/gtest.h>
+
+#include "tests/filters/cleanup_fixture.hpp"
+#include "filters/pose_error.hpp"
+
+namespace mocapd {
+namespace {
+
+class FinalSolveTest : public CleanupFixture {};
+
+TEST_F(FinalSolveTest, AFillGainsFinalSolveWeightGradually) {
+  // A long gap: first one-sided fills (weak), then, once the return is in the lookahead,
+  // interpolated fills (strong). The weight must climb by at most fill_weight_ramp per
+  // frame, never jump from a guess's to data's.
+  const int m = Marker("LSHN1");
+  for (int f = 300; f < 420; ++f) Sample(f, m) = Vec3::Constant(kNaN);
+  CleanupOptions options;
+  const auto out = Run(options);
+  const auto um = static_cast<size_t>(m);
+  EXPECT_DOUBLE_EQ(out[330].weight[um], options.repaired_weight);  // one-sided, mid-gap
+  EXPECT_DOUBLE_EQ(out[299].weight[um], 1.0);                      // observed
+  bool reached_full = false;
+  for (int f = 301; f < 430; ++f) {
+    const double before = out[static_cast<size_t>(f - 1)].weight[um], now = out[static_cast<size_t>(f)].weight[um];
+    if (out[static_cast<size_t>(f)].status[um] == MarkerStatus::kRepaired) {
+      EXPECT_LE(now, before * options.fill_weight_ramp + 1e-12) << f;
+    }
+    reached_full |= out[static_cast<size_t>(f)].status[um] == MarkerStatus::kRepaired && now > 0.5;
+  }
+  EXPECT_TRUE(reached_full);  // the interpolation near the return does get its weight
+  options.fill_weight_ramp = 1.0;  // without the ramp the weight jumps
+  const auto jumpy = Run(options);
+  double biggest_jump = 0.0;
+  for (int f = 301; f < 420; ++f)
+    biggest_jump = std::max(biggest_jump, jumpy[static_cast<size_t>(f)].weight[um] / jumpy[static_cast<size_t>(f - 1)].weight[um]);
+  EXPECT_GT(biggest_jump, 10.0);
+}
+
+TEST_F(FinalSolveTest, ReturningMarkerEasesIntoTheSkeletonWithoutLookahead) {
+  // K = 0 without a catch-up target: the return cannot be seen coming, so the marker goes
+  // from a guess straight to data. Its sample is published exactly as captured, but its
+  // final-solve weight climbs from the guess's at most fill_weight_ramp per frame, so the
+  // skeleton eases over.
+  const int m = Marker("LSHN1");
+  for (int f = 300; f < 420; ++f) Sample(f, m) = Vec3::Constant(kNaN);
+  CleanupOptions options;
+  options.lookahead = 0;
+  options.data_catchup_m = 0.0;
+  const auto out = Run(options);
+  const auto um = static_cast<size_t>(m);
+  ASSERT_EQ(out[420].status[um], MarkerStatus::kObserved);
+  EXPECT_EQ(out[420].markers[um], Sample(420, m));
+  EXPECT_LE(out[420].weight[um], options.repaired_weight * options.fill_weight_ramp + 1e-12);
+  for (int f = 421; f < 440; ++f)
+    EXPECT_LE(out[static_cast<size_t>(f)].weight[um], out[static_cast<size_t>(f - 1)].weight[um] * options.fill_weight_ramp + 1e-12) << f;
+  EXPECT_DOUBLE_EQ(out[450].weight[um], 1.0);
+}
+
+TEST_F(FinalSolveTest, ForearmThatBentWhileOccludedIsCaughtUpWithoutAPop) {
+  // K = 0. While the forearm and hand are occluded the elbow bends a further 90 degrees:
+  // the reference holds the old angle, so the fills are far off when the markers come
+  // back. They are published as captured, and the skeleton's hand must close the gap
+  // over several frames, not in a jump.
+  const std::vector<Pose> bent = BendElbowWhileForearmIsOccluded();
+  auto worst_extra_hand_step = [&](double catchup) {
+    CleanupOptions options;
+    options.lookahead = 0;
+    options.data_catchup_m = catchup;
+    return WorstExtraJointStep(Run(options), bent, "LeftHand", 400, 520);
+  };
+  EXPECT_LT(worst_extra_hand_step(CleanupOptions{}.data_catchup_m), 0.02);
+  EXPECT_GT(worst_extra_hand_step(0.0), 0.03);  // the weight ramp alone: measured 0.22 m
+  CleanupOptions options;
+  options.lookahead = 0;
+  const auto out = Run(options);
+  for (const char* name : kLeftForearm) {
+    const auto um = static_cast<size_t>(Marker(name));
+    EXPECT_EQ(out[420].status[um], MarkerStatus::kObserved) << name;
+    EXPECT_EQ(out[420].markers[um], Sample(420, Marker(name))) << name;  // published as captured
+  }
+}
+
+TEST_F(FinalSolveTest, CapturedJumpTheDetectorsMissIsClosedOnNotFollowed) {
+  // From frame 300 every left-hand marker is 10 cm off (a slipped cluster, or a swap no
+  // detector caught: they are all blind here). The samples are published as captured,
+  // but a jump is not motion: the skeleton's hand closes on them over several frames.
+  for (int f = 300; f < static_cast<int>(frames_.size()); ++f)
+    for (const char* name : {"LHND1", "LHND2", "LHND3"}) Sample(f, Marker(name)) += Vec3(0.1, 0.0, 0.0);
+  auto worst_extra_hand_step = [&](double motion_acceleration) {
+    CleanupOptions options = Blind();
+    options.lookahead = 0;
+    options.data_motion_acceleration_m = motion_acceleration;
+    const auto out = Run(options);
+    EXPECT_EQ(out[300].markers[static_cast<size_t>(Marker("LHND1"))], Sample(300, Marker("LHND1")));
+    return WorstExtraJointStep(out, fixture_.motion, "LeftHand", 290, 340);
+  };
+  EXPECT_LT(worst_extra_hand_step(CleanupOptions{}.data_motion_acceleration_m), 0.02);  // measured 0.3 cm
+  EXPECT_GT(worst_extra_hand_step(1.0), 0.04);  // the jump taken as motion: measured 4.6 cm
+}
+
+TEST_F(FinalSolveTest, GuessesPullTheSkeletonNoFurtherThanTheAnchorAllows) {
+  // K = 12. While the forearm and hand are occluded the elbow bends a further 90 degrees;
+  // the lookahead sees them come back far from the reference's guess, and the
+  // interpolated fills bend onto the returning tracks within 12 frames, much faster than
+  // the arm moves. The skeleton may follow those guesses only within the anchor's
+  // radius of the pose the trusted samples give.
+  const std::vector<Pose> bent = BendElbowWhileForearmIsOccluded();
+  auto worst_extra_hand_step = [&](double radius) {
+    CleanupOptions options;
+    options.fill_anchor_radius_m = radius;
+    return WorstExtraJointStep(Run(options), bent, "LeftHand", 380, 520);
+  };
+  const double anchored = worst_extra_hand_step(CleanupOptions{}.fill_anchor_radius_m), free = worst_extra_hand_step(0.0);
+  EXPECT_LT(anchored, 0.02) << free;  // measured 1.1 cm
+  EXPECT_GT(free, 0.03) << anchored;   // measured 5.6 cm
+}
+
+TEST_F(FinalSolveTest, UnseenLowerLegIsNotSwungByItsTurningThigh) {
+  // From frame 300 the left thigh turns 60 degrees in 20 frames while the knee turns back
+  // as much: the shin and foot keep their world orientation (a planted lower leg under a
+  // turning thigh), and all their markers are occluded. Held relative to the thigh, the
+  // guessed shin would swing the foot with it.
+  std::vector<Pose> turned = fixture_.motion;
+  const auto hip = static_cast<size_t>(fixture_.skeleton->FindJoint("LeftUpLeg")->value);
+  const auto knee = static_cast<size_t>(fixture_.skeleton->FindJoint("LeftLeg")->value);
+  for (size_t f = 300; f < turned.size(); ++f) {
+    const Quat turn(Eigen::AngleAxisd(M_PI / 3 * std::min(1.0, static_cast<double>(f - 300) / 20.0), Vec3::UnitX()));
+    turned[f].rotation[hip] = turned[f].rotation[hip] * turn;
+    turned[f].rotation[knee] = turn.inverse() * turned[f].rotation[knee];
+  }
+  const C3dTake moved = SynthesizeMarkers(*fixture_.skeleton, *fixture_.markers, turned, 120.0);
+  for (int f = 0; f < static_cast<int>(frames_.size()); ++f)
+    for (int m = 0; m < fixture_.markers->num_markers(); ++m) Sample(f, m) = moved.at(f, m);
+  for (int f = 280; f < 420; ++f)
+    for (const char* name : {"LKNE", "LSHN1", "LSHN2", "LFOT1", "LFOT2", "LFOT3", "LTOE1", "LTOE2"}) Sample(f, Marker(name)) = Vec3::Constant(kNaN);
+  auto worst_extra_ankle_step = [&](bool hold) {
+    CleanupOptions options;
+    options.lookahead = 0;
+    options.anchor_holds_unseen_limbs = hold;
+    return WorstExtraJointStep(Run(options), turned, "LeftFoot", 290, 330);
+  };
+  const double held = worst_extra_ankle_step(true), swung = worst_extra_ankle_step(false);
+  EXPECT_LT(held, 0.01) << swung;  // measured 0.4 cm
+  EXPECT_GT(swung, 0.02) << held;  // measured 3.4 cm
+}
+
+// The final solve alone, on frames whose every sample the repair marked captured.
+class FinalSolveAloneTest : public CleanupFixture {
+ protected:
+  CleanFrame Frame(int t) const {
+    CleanFrame f;
+    f.frame = t;
+    const auto m = static_cast<size_t>(fixture_.markers->num_markers());
+    f.markers = frames_[static_cast<size_t>(t)];
+    f.status.assign(m, MarkerStatus::kObserved);
+    f.reason.assign(m, MaskReason::kNone);
+    f.source.assign(m, SampleSource::kCaptured);
+    f.weight.assign(m, 0.0);
+    f.pose = RestPose(*fixture_.skeleton);
+    return f;
+  }
+};
+
+TEST_F(FinalSolveAloneTest, CapturedSamplesWeighFullyAndTheSkeletonFitsThem) {
+  FinalSolve dut(*fixture_.skeleton, *fixture_.markers, CleanupOptions{});
+  CleanupCounters counters;
+  PoseErrorAccumulator errors(*fixture_.skeleton);
+  KinematicsWorkspace truth(*fixture_.skeleton), solved(*fixture_.skeleton);
+  for (int t = 0; t < 200; ++t) {
+    CleanFrame f = Frame(t);
+    dut.Solve(&f, &counters);
+    for (double w : f.weight) ASSERT_EQ(w, 1.0);
+    if (t < 20) continue;  // the cold start settles
+    ForwardKinematics(*fixture_.skeleton, fixture_.motion[static_cast<size_t>(t)], &truth);
+    ForwardKinematics(*fixture_.skeleton, f.pose, &solved);
+    errors.Add(truth, solved);
+  }
+  EXPECT_LT(errors.mean_position_error_m(), 0.002);
+  EXPECT_EQ(counters.solve_failures, 0);
+}
+
+TEST_F(FinalSolveAloneTest, WeightsFollowWhereTheSampleCameFrom) {
+  CleanupOptions options;
+  FinalSolve dut(*fixture_.skeleton, *fixture_.markers, options);
+  CleanupCounters counters;
+  for (int t = 0; t < 10; ++t) {
+    CleanFrame f = Frame(t);
+    dut.Solve(&f, &counters);
+  }
+  CleanFrame f = Frame(10);
+  f.status[0] = MarkerStatus::kUnrecoverable;
+  f.source[0] = SampleSource::kNone;
+  f.markers[0] = Vec3::Constant(kNaN);
+  f.status[1] = f.status[2] = MarkerStatus::kRepaired;
+  f.source[1] = SampleSource::kExtrapolated;
+  f.source[2] = SampleSource::kInterpolated;
+  dut.Solve(&f, &counters);
+  EXPECT_EQ(f.weight[0], 0.0);
+  EXPECT_EQ(f.weight[1], options.repaired_weight);
+  EXPECT_EQ(f.weight[2], options.interpolated_weight);
+  EXPECT_TRUE(f.pose.rotation[1].coeffs().allFinite());
+}
+
+}  // namespace
+}  // namespace mocapd

@@ -1,0 +1,238 @@
+// Tests for outlier detection: each detector on a hand-made case (with the others made
+// blind where they would catch it first), swap relabelling, the rules that keep frozen,
+// fallen-off and stray samples out of the reference, and the detector driven alone.
+#include "filters/outlier_detector.hpp"
+
+#include <gtest/gtest.h>
+
+#include "tests/filters/cleanup_fixture.hpp"
+#include "tests/support/allocation_counter.hpp"
+
+namespace mocapd {
+namespace {
+
+class OutlierDetectorTest : public CleanupFixture {};
+
+TEST_F(OutlierDetectorTest, ResidualDetectorCatchesAPop) {
+  const int m = Marker("HED2");
+  for (int f = 500; f < 502; ++f) Sample(f, m) += Vec3(0.0, 0.25, 0.0);
+  CleanupOptions options = Blind();
+  options.residual_floor_m = 0.012;
+  const auto out = Run(options);
+  for (int f = 500; f < 502; ++f) {
+    EXPECT_EQ(out[static_cast<size_t>(f)].reason[static_cast<size_t>(m)], MaskReason::kResidual);
+    EXPECT_LT((out[static_cast<size_t>(f)].markers[static_cast<size_t>(m)] - Truth(f, m)).norm(), 0.005);
+  }
+  EXPECT_EQ(out[499].status[static_cast<size_t>(m)], MarkerStatus::kObserved);
+  EXPECT_EQ(out[502].status[static_cast<size_t>(m)], MarkerStatus::kObserved);
+}
+
+TEST_F(OutlierDetectorTest, SpikeDetectorCatchesAOneFrameJump) {
+  const int m = Marker("LSHN1");
+  Sample(600, m) += Vec3(0.06, 0.0, 0.0);
+  CleanupOptions options = Blind();
+  options.spike_m = 0.03;
+  const auto out = Run(options);
+  EXPECT_EQ(out[600].reason[static_cast<size_t>(m)], MaskReason::kSpike);
+  EXPECT_EQ(out[601].status[static_cast<size_t>(m)], MarkerStatus::kObserved);  // the return is not a spike
+}
+
+TEST_F(OutlierDetectorTest, RigidDistanceDetectorBlamesTheMarkerThatMoved) {
+  const int m = Marker("PEL2");
+  for (int f = 400; f < 410; ++f) Sample(f, m) += Vec3(0.0, 0.0, 0.05);
+  CleanupOptions options = Blind();
+  options.rigid_tolerance_m = 0.03;
+  const auto out = Run(options);
+  for (int f = 400; f < 410; ++f) EXPECT_EQ(out[static_cast<size_t>(f)].reason[static_cast<size_t>(m)], MaskReason::kRigidDistance) << f;
+  for (int f = 400; f < 410; ++f)
+    EXPECT_EQ(out[static_cast<size_t>(f)].status[static_cast<size_t>(Marker("PEL1"))], MarkerStatus::kObserved);
+}
+
+TEST_F(OutlierDetectorTest, DisagreementDetectorMarksTheJointsMarkers) {
+  // Two of the head's four markers displaced: the naive solve turns the head toward them,
+  // the robust one does not; the displaced markers, skinned to the head, are marked.
+  const int a = Marker("HED1"), b = Marker("HED3");
+  for (int f = 300; f < 320; ++f) {
+    Sample(f, a) += Vec3(0.0, 0.3, 0.0);
+    Sample(f, b) += Vec3(0.0, 0.3, 0.0);
+  }
+  CleanupOptions options = Blind();
+  options.disagreement_position_m = 0.05;
+  options.disagreement_rotation_rad = 10.0 * M_PI / 180.0;
+  const auto out = Run(options);
+  int marked = 0;
+  for (int f = 300; f < 320; ++f)
+    marked += out[static_cast<size_t>(f)].reason[static_cast<size_t>(a)] == MaskReason::kDisagreement;
+  EXPECT_GT(marked, 10);
+  EXPECT_EQ(out[310].status[static_cast<size_t>(Marker("HED2"))], MarkerStatus::kObserved);
+  EXPECT_EQ(out[290].status[static_cast<size_t>(a)], MarkerStatus::kObserved);
+}
+
+TEST_F(OutlierDetectorTest, SwapOnOneSegmentIsRelabelledExactly) {
+  const int a = Marker("LHND1"), b = Marker("LHND2");
+  for (int f = 300; f < 360; ++f) std::swap(Sample(f, a), Sample(f, b));
+  const auto out = Run(CleanupOptions{});
+  for (int f = 300; f < 360; ++f) {
+    EXPECT_EQ(out[static_cast<size_t>(f)].reason[static_cast<size_t>(a)], MaskReason::kSwap) << f;
+    EXPECT_EQ(out[static_cast<size_t>(f)].markers[static_cast<size_t>(a)], Truth(f, a)) << f;
+    EXPECT_EQ(out[static_cast<size_t>(f)].markers[static_cast<size_t>(b)], Truth(f, b)) << f;
+  }
+  EXPECT_EQ(out[360].status[static_cast<size_t>(a)], MarkerStatus::kObserved);
+}
+
+TEST_F(OutlierDetectorTest, SwapAcrossSegmentsIsCaughtByContinuity) {
+  // Two markers on different segments, swapped from a frame where they pass close.
+  const int a = Marker("LELB"), b = Marker("LUPA3");
+  int start = -1;
+  for (int f = 50; f < 900 && start < 0; ++f)
+    if ((Truth(f, a) - Truth(f, b)).norm() < 0.12) start = f;
+  ASSERT_GE(start, 0);
+  for (int f = start; f < start + 40; ++f) std::swap(Sample(f, a), Sample(f, b));
+  const auto out = Run(CleanupOptions{});
+  int right = 0;
+  for (int f = start; f < start + 40; ++f) right += (out[static_cast<size_t>(f)].markers[static_cast<size_t>(a)] - Truth(f, a)).norm() < 0.01;
+  EXPECT_GE(right, 36);
+}
+
+TEST_F(OutlierDetectorTest, FrozenMarkerIsDetected) {
+  EXPECT_GT(FramesFoundFrozen(0.0), 40);
+}
+
+TEST_F(OutlierDetectorTest, FrozenMarkerUnderCaptureJitterIsDetected) {
+  // A stuck marker still jitters by the capture's noise: millimetres per frame, more
+  // than any per-frame "no motion" threshold allows.
+  EXPECT_GT(FramesFoundFrozen(0.002), 40);
+}
+
+TEST_F(OutlierDetectorTest, StillMarkerIsNotFrozenWhenNoOtherMarkerShowsItsSegmentMoving) {
+  // The foot's other markers are occluded: the reference's foot is a guess, so a marker
+  // that stays put (a planted foot) may not be blamed for the guess moving away.
+  const int m = Marker("RFOT2");
+  for (int f = 700; f < 760; ++f) {
+    Sample(f, m) = Truth(699, m);
+    Sample(f, Marker("RFOT1")) = Vec3::Constant(kNaN);
+    Sample(f, Marker("RFOT3")) = Vec3::Constant(kNaN);
+  }
+  CleanupOptions options = Blind();
+  options.frozen_frames = 6;
+  const auto out = Run(options);
+  for (int f = 700; f < 760; ++f) EXPECT_NE(out[static_cast<size_t>(f)].reason[static_cast<size_t>(m)], MaskReason::kFrozen) << f;
+}
+
+TEST_F(OutlierDetectorTest, FallenOffMarkerIsClassifiedAndExcluded) {
+  const int m = Marker("RUPA2");
+  for (int f = 300; f < static_cast<int>(frames_.size()); ++f) Sample(f, m) = Vec3(Truth(299, m).x(), 0.0, Truth(299, m).z());
+  const auto out = Run(CleanupOptions{});
+  // At first it is only a marker that stopped (frozen) or fits badly (residual); lying
+  // far off for long makes it fallen off.
+  const MaskReason first = out[300].reason[static_cast<size_t>(m)];
+  EXPECT_TRUE(first == MaskReason::kFrozen || first == MaskReason::kResidual) << to_string(first);
+  EXPECT_EQ(out[500].reason[static_cast<size_t>(m)], MaskReason::kFallenOff);
+  EXPECT_LT((out[800].markers[static_cast<size_t>(m)] - Truth(800, m)).norm(), 0.02);
+}
+
+TEST_F(OutlierDetectorTest, StraySampleLeavesTheReferenceOfAnOccludedSegment) {
+  // The foot is occluded and RTOE1 carries another marker's track 50 cm away (a swap
+  // whose partner is hidden). Kept in the robust solve, it drags the guessed foot's
+  // reference after it until RTOE2, which is fine, no longer fits and is thrown out too.
+  const int stray = Marker("RTOE1"), good = Marker("RTOE2");
+  for (int f = 300; f < 420; ++f) {
+    Sample(f, stray) += Vec3(0.0, 0.5, 0.0);
+    for (const char* name : {"RFOT1", "RFOT2", "RFOT3"}) Sample(f, Marker(name)) = Vec3::Constant(kNaN);
+  }
+  auto good_marker_rejected = [&](int stray_frames) {
+    CleanupOptions options;
+    options.stray_frames = stray_frames;
+    const auto out = Run(options);
+    int rejected = 0;
+    for (int f = 330; f < 420; ++f) rejected += out[static_cast<size_t>(f)].status[static_cast<size_t>(good)] != MarkerStatus::kObserved;
+    return rejected;
+  };
+  EXPECT_LT(good_marker_rejected(CleanupOptions{}.stray_frames), 5);  // measured 0 of 90 frames
+  EXPECT_GT(good_marker_rejected(100000), 20);                       // without the rule: 90
+}
+
+TEST_F(OutlierDetectorTest, ArmThatMovedWhileOccludedIsReacquired) {
+  // While the whole left arm is occluded the shoulder turns 90 degrees and the elbow
+  // bends 150 more: its markers come back far from the reference's guess (they would be
+  // outliers and, after 12 frames, strays, if judged one by one). They agree with each
+  // other, so the reference must come round to them and publish them as observed.
+  std::vector<Pose> bent = fixture_.motion;
+  const auto shoulder = static_cast<size_t>(fixture_.skeleton->FindJoint("LeftArm")->value);
+  const auto elbow = static_cast<size_t>(fixture_.skeleton->FindJoint("LeftForeArm")->value);
+  for (size_t f = 300; f < bent.size(); ++f) {
+    bent[f].rotation[shoulder] = bent[f].rotation[shoulder] * Quat(Eigen::AngleAxisd(M_PI / 2, Vec3::UnitX()));
+    bent[f].rotation[elbow] = bent[f].rotation[elbow] * Quat(Eigen::AngleAxisd(150.0 * M_PI / 180.0, Vec3::UnitZ()));
+  }
+  const C3dTake moved = SynthesizeMarkers(*fixture_.skeleton, *fixture_.markers, bent, 120.0);
+  const char* arm[] = {"LUPA1", "LUPA2", "LUPA3", "LELB", "LFRM1", "LFRM2", "LHND1", "LHND2", "LHND3"};
+  ASSERT_GT((moved.at(330, Marker("LHND1")) - Truth(330, Marker("LHND1"))).norm(), 0.3);  // far from the old path
+  for (int f = 250; f < static_cast<int>(frames_.size()); ++f)
+    for (const char* name : arm) Sample(f, Marker(name)) = f < 330 ? Vec3::Constant(kNaN) : moved.at(f, Marker(name));
+  const auto out = Run(CleanupOptions{});
+  int observed = 0;
+  for (int f = 360; f < 500; ++f)
+    for (const char* name : arm) observed += out[static_cast<size_t>(f)].status[static_cast<size_t>(Marker(name))] == MarkerStatus::kObserved;
+  EXPECT_GT(observed, 9 * 140 * 95 / 100);
+}
+
+// The detector alone, as the pipeline drives it: each frame filled into the window, then
+// Process with the first frame still unpublished K frames back.
+class OutlierDetectorAloneTest : public CleanupFixture {
+ protected:
+  static constexpr int kLookahead = 4;
+  OutlierDetectorAloneTest()
+      : window_(fixture_.markers->num_markers(), kLookahead + 3), dut_(*fixture_.skeleton, *fixture_.markers, options_) {}
+  void Feed(int t) {
+    WindowFrame& s = window_.at(t);
+    s.frame = t;
+    for (size_t m = 0; m < s.raw.size(); ++m) {
+      const Vec3& p = frames_[static_cast<size_t>(t)][m];
+      s.valid[m] = p.allFinite();
+      s.raw[m] = p;
+      s.relabelled[m] = 0;
+      s.mask[m] = s.valid[m] ? MaskReason::kNone : MaskReason::kMissing;
+    }
+    dut_.Process(window_, t, std::max(0, t - kLookahead), &counters_);
+  }
+  CleanupOptions options_;
+  CleanupWindow window_;
+  OutlierDetector dut_;
+};
+
+TEST_F(OutlierDetectorAloneTest, MasksAPopAndWritesTheReferenceOfTheNewestFrame) {
+  const int pop = Marker("HED2");
+  Sample(300, pop) += Vec3(0.0, 0.25, 0.0);
+  for (int t = 0; t <= 300; ++t) Feed(t);
+  const WindowFrame& s = window_.at(300);
+  EXPECT_NE(s.mask[static_cast<size_t>(pop)], MaskReason::kNone);
+  int fine = 0;
+  for (int m = 0; m < fixture_.markers->num_markers(); ++m) {
+    if (m == pop) continue;
+    fine += s.mask[static_cast<size_t>(m)] == MaskReason::kNone;
+    EXPECT_LT((s.reference[static_cast<size_t>(m)] - Truth(300, m)).norm(), 0.01) << m;  // X^ is not pulled by the pop
+  }
+  EXPECT_EQ(fine, fixture_.markers->num_markers() - 1);
+  EXPECT_GT(counters_.solve_iterations, 0);
+}
+
+TEST_F(OutlierDetectorAloneTest, AFallenMarkerLeavesTheReferenceUntilReset) {
+  const int m = Marker("LTHI1");
+  for (int t = 100; t < 300; ++t) Sample(t, m) = Vec3(1.0, 0.0, 1.0);  // lying on the floor
+  for (int t = 0; t < 300; ++t) Feed(t);
+  EXPECT_TRUE(dut_.excluded(m));
+  EXPECT_EQ(window_.at(299).mask[static_cast<size_t>(m)], MaskReason::kFallenOff);
+  dut_.Reset();
+  EXPECT_FALSE(dut_.excluded(m));
+}
+
+TEST_F(OutlierDetectorAloneTest, ProcessAllocatesNothingAfterWarmUp) {
+  for (int t = 100; t < 160; ++t) Sample(t, Marker("HED1")) = Vec3::Constant(kNaN);
+  for (int t = 0; t < 60; ++t) Feed(t);
+  testing::ScopedAllocationCounter counter;
+  for (int t = 60; t < 300; ++t) Feed(t);
+  EXPECT_EQ(counter.count(), 0u);
+}
+
+}  // namespace
+}  // namespace mocapd
