@@ -1,0 +1,48 @@
+// The replay's report: frames sent, received, lost, duplicated and late; end-to-end and
+// processing latency percentiles; accuracy against the truth when it is known; as a
+// table for a person, JSON for a program, and an SVG latency histogram.
+#pragma once
+
+#include <cstdint>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+namespace mocapd {
+
+struct LatencySummary {
+  size_t count = 0;
+  double p50_ms = 0, p90_ms = 0, p99_ms = 0, p999_ms = 0, max_ms = 0, mean_ms = 0;
+};
+
+struct ReplayReport {
+  std::string source;
+  double rate_hz = 0.0;
+  int subjects = 0;
+  bool listened = false;      ///< The daemon's output was measured (--from given).
+  int lookahead = 0;          ///< K, from the daemon's subject description.
+  uint64_t frames_sent = 0;   ///< Over all subjects.
+  uint64_t frames_received = 0;
+  uint64_t frames_lost = 0;   ///< Sent, never received.
+  uint64_t frames_duplicated = 0;
+  uint64_t frames_late = 0;   ///< Processing latency over one frame period.
+  double send_seconds = 0.0;  ///< Wall time spent sending.
+  double throughput_fps = 0.0;  ///< Skeleton frames received per second while sending.
+  LatencySummary end_to_end;
+  LatencySummary processing;
+  std::vector<double> processing_ms;  ///< Every frame's, for the histogram.
+  bool has_truth = false;
+  double mean_position_error_cm = 0.0;
+  double mean_rotation_error_deg = 0.0;
+  double max_position_error_cm = 0.0;
+  nlohmann::json ToJson() const;
+  std::string FormatTable() const;
+};
+
+/// Percentiles, mean and max of latencies in milliseconds (all zero when empty).
+LatencySummary SummariseLatencies(std::vector<double> ms);
+
+/// An SVG histogram of processing latencies (log-spaced bins), for a person to look at.
+std::string LatencyHistogramSvg(const std::vector<double>& latencies_ms, const std::string& title);
+
+}  // namespace mocapd

@@ -1,0 +1,279 @@
+// Sending, receiving and measuring for the replay (see the header).
+#include "sim/replay_schedule.hpp"
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <optional>
+#include <stdexcept>
+#include <thread>
+#include <zmq.hpp>
+
+#include "filters/pose_error.hpp"
+#include "protocol/messages.hpp"
+
+namespace mocapd::replay {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+// The output socket (PUB-bind, or PUSH-connect) and, when the daemon's output is
+// measured, the SUB socket on it.
+struct Sockets {
+  zmq::context_t context;
+  zmq::socket_t out;
+  std::optional<zmq::socket_t> in;
+};
+
+void OpenSockets(const ReplayOptions& o, Sockets* s) {
+  s->out = zmq::socket_t(s->context, o.push ? zmq::socket_type::push : zmq::socket_type::xpub);
+  s->out.set(zmq::sockopt::sndhwm, 0);  // never drop a frame on our side
+  s->out.set(zmq::sockopt::linger, 2000);
+  try {
+    if (o.push) s->out.connect(o.to);
+    else s->out.bind(o.to);
+  } catch (const zmq::error_t& e) {
+    throw std::runtime_error("replay: cannot " + std::string(o.push ? "connect to " : "bind ") + o.to + ": " + e.what());
+  }
+  if (o.from.empty()) return;
+  s->in.emplace(s->context, zmq::socket_type::sub);
+  s->in->set(zmq::sockopt::rcvhwm, 0);
+  s->in->set(zmq::sockopt::subscribe, "skeleton/");
+  s->in->set(zmq::sockopt::subscribe, "subject/");
+  s->in->connect(o.from);
+}
+
+// Waits until the daemon subscribed to every subject's topic (PUB) and described every
+// subject (when listening); returns the lookahead the descriptions give.
+int WaitForDaemon(Sockets& s, const std::vector<SubjectLog>& logs, const ScheduleSetup& setup, const ReplayOptions& o) {
+  int lookahead = 0;
+  const int64_t deadline = SteadyNs() + static_cast<int64_t>(o.connect_timeout_s * 1e9);
+  std::vector<bool> subscribed(logs.size(), o.push), described(logs.size(), !s.in.has_value());
+  auto all = [](const std::vector<bool>& v) { return std::all_of(v.begin(), v.end(), [](bool b) { return b; }); };
+  while (!(all(subscribed) && all(described))) {
+    if (SteadyNs() > deadline) {
+      for (size_t k = 0; k < logs.size(); ++k) {
+        if (!subscribed[k])
+          throw std::runtime_error("replay: nothing subscribed to " + logs[k].topic + " on " + o.to + " within " +
+                                   std::to_string(o.connect_timeout_s) + " s (is the daemon running with subject '" +
+                                   logs[k].name + "'?)");
+        if (!described[k])
+          throw std::runtime_error("replay: no description of subject '" + logs[k].name + "' from " + o.from +
+                                   " within " + std::to_string(o.connect_timeout_s) +
+                                   " s (is the daemon publishing there, with that subject?)");
+      }
+    }
+    std::vector<zmq::pollitem_t> items = {{s.out.handle(), 0, ZMQ_POLLIN, 0}};
+    if (s.in) items.push_back({s.in->handle(), 0, ZMQ_POLLIN, 0});
+    zmq::poll(items.data(), items.size(), std::chrono::milliseconds(20));
+    zmq::message_t m;
+    // An XPUB hears each subscription as a message: 1, then the topic prefix.
+    while (!o.push && s.out.recv(m, zmq::recv_flags::dontwait)) {
+      const std::string sub = m.to_string();
+      if (sub.empty() || sub[0] != 1) continue;
+      for (size_t k = 0; k < logs.size(); ++k)
+        if (logs[k].topic.starts_with(sub.substr(1))) subscribed[k] = true;
+    }
+    while (s.in && s.in->recv(m, zmq::recv_flags::dontwait)) {
+      zmq::message_t body;
+      if (!m.more() || !s.in->recv(body)) continue;
+      protocol::SubjectDescriptionMessage d;
+      if (!m.to_string().starts_with("subject/") ||
+          protocol::DecodeSubjectDescription({static_cast<const uint8_t*>(body.data()), body.size()}, &d) !=
+              protocol::DecodeStatus::kOk)
+        continue;
+      for (size_t k = 0; k < logs.size(); ++k) {
+        if (logs[k].name != d.subject) continue;
+        if (setup.check_hash && d.marker_set_hash != setup.marker_hash)
+          throw std::runtime_error("replay: the daemon's subject '" + d.subject +
+                                   "' has another marker set than this take's (model hash mismatch)");
+        described[k] = true;
+        lookahead = d.lookahead_frames;
+      }
+    }
+  }
+  return lookahead;
+}
+
+// A thread that stamps each skeleton frame on arrival and scores it against the truth.
+class SkeletonReceiver {
+ public:
+  SkeletonReceiver(zmq::socket_t& in, std::vector<SubjectLog>& logs, const ScheduleSetup& setup)
+      : in_(in), logs_(logs), setup_(setup) {
+    if (setup_.skeleton != nullptr) accuracy_.emplace(*setup_.skeleton);
+    thread_ = std::thread([this] { Run(); });
+  }
+  ~SkeletonReceiver() { Stop(); }
+  SkeletonReceiver(const SkeletonReceiver&) = delete;
+  SkeletonReceiver& operator=(const SkeletonReceiver&) = delete;
+
+  void Stop() {
+    running_ = false;
+    if (thread_.joinable()) thread_.join();
+  }
+  uint64_t received() const { return received_.load(); }
+  uint64_t duplicated() const { return duplicated_.load(); }
+  /// Valid after Stop().
+  const std::optional<PoseErrorAccumulator>& accuracy() const { return accuracy_; }
+
+ private:
+  void Run() {
+    zmq::pollitem_t item = {in_.handle(), 0, ZMQ_POLLIN, 0};
+    protocol::SkeletonFrameMessage message;
+    std::optional<KinematicsWorkspace> solved_fk, truth_fk;
+    Pose solved, scratch;
+    const Skeleton* skeleton = setup_.skeleton;
+    if (skeleton != nullptr) {
+      solved_fk.emplace(*skeleton);
+      truth_fk.emplace(*skeleton);
+      solved = RestPose(*skeleton);
+    }
+    zmq::message_t topic, body;
+    while (running_.load()) {
+      zmq::poll(&item, 1, std::chrono::milliseconds(5));
+      while (in_.recv(topic, zmq::recv_flags::dontwait)) {
+        if (!topic.more() || !in_.recv(body)) continue;
+        const int64_t now = SteadyNs();
+        if (!topic.to_string().starts_with("skeleton/")) continue;
+        if (protocol::DecodeSkeletonFrame({static_cast<const uint8_t*>(body.data()), body.size()}, &message) !=
+            protocol::DecodeStatus::kOk)
+          continue;
+        size_t k = 0;
+        while (k < logs_.size() && logs_[k].name != message.subject) ++k;
+        if (k == logs_.size()) continue;
+        const auto slot = logs_[k].received_ns.find(message.frame_number);
+        if (slot == logs_[k].received_ns.end()) continue;  // not one we sent (inserted by the daemon)
+        if (slot->second != 0) {
+          ++duplicated_;
+          continue;
+        }
+        slot->second = now;
+        ++received_;
+        const Pose* expected = setup_.truth ? setup_.truth(k, message.frame_number, &scratch) : nullptr;
+        if (expected == nullptr || static_cast<int>(message.rotations.size()) != skeleton->num_joints()) continue;
+        for (size_t j = 0; j < message.rotations.size(); ++j) solved.rotation[j] = message.rotations[j].normalized();
+        solved.translation[0] = message.root_translation;
+        ForwardKinematics(*skeleton, solved, &*solved_fk);
+        ForwardKinematics(*skeleton, *expected, &*truth_fk);
+        accuracy_->Add(*truth_fk, *solved_fk);
+      }
+    }
+  }
+
+  zmq::socket_t& in_;
+  std::vector<SubjectLog>& logs_;
+  const ScheduleSetup& setup_;
+  std::optional<PoseErrorAccumulator> accuracy_;
+  std::atomic<bool> running_{true};
+  std::atomic<uint64_t> received_{0}, duplicated_{0};
+  std::thread thread_;
+};
+
+// Sends everything the producer makes, each message at its due time; returns the number
+// of marker frames sent. Prints a status line about every second.
+uint64_t SendAll(zmq::socket_t& out, std::vector<SubjectLog>& logs, const FrameProducer& produce,
+                 const SkeletonReceiver* receiver, const ReplayOptions& o, int64_t start) {
+  std::vector<uint8_t> bytes;
+  Outgoing next;
+  int64_t next_status = start + 1'000'000'000;
+  uint64_t sent = 0;
+  while (!(o.stop != nullptr && o.stop->load()) && produce(&next, &bytes)) {
+    if (next.due_ns >= 0) std::this_thread::sleep_until(Clock::time_point(std::chrono::nanoseconds(start + next.due_ns)));
+    SubjectLog& log = logs[next.subject];
+    const int64_t now = SteadyNs();
+    log.sent.push_back({next.frame_number, now, next.end_of_stream});
+    out.send(zmq::buffer(log.topic), zmq::send_flags::sndmore);
+    out.send(zmq::buffer(bytes), zmq::send_flags::none);
+    if (!next.end_of_stream) ++sent;
+    if (o.on_status && now >= next_status) {
+      char line[160];
+      std::snprintf(line, sizeof(line), "t=%6.1fs  sent %8llu frames  received %8llu skeletons",
+                    static_cast<double>(now - start) * 1e-9, static_cast<unsigned long long>(sent),
+                    static_cast<unsigned long long>(receiver != nullptr ? receiver->received() : 0));
+      o.on_status(line);
+      next_status += 1'000'000'000;
+    }
+  }
+  return sent;
+}
+
+// End-to-end latency (sent -> skeleton) and processing latency (the message that let the
+// frame out -> skeleton) from the logs, into the report.
+void MeasureLatencies(const std::vector<SubjectLog>& logs, double frame_period_s, ReplayReport* report) {
+  std::vector<double> e2e;
+  e2e.reserve(report->frames_sent);
+  report->processing_ms.reserve(report->frames_sent);
+  const auto K = static_cast<uint64_t>(report->lookahead);
+  for (const SubjectLog& log : logs) {
+    for (size_t i = 0; i < log.sent.size(); ++i) {
+      const SubjectLog::Sent& s = log.sent[i];
+      if (s.end_of_stream) continue;
+      const int64_t got = log.received_ns.at(s.frame_number);
+      if (got == 0) continue;
+      e2e.push_back(static_cast<double>(got - s.sent_ns) * 1e-6);
+      // What let this frame out: the first later frame numbered at least K on (the
+      // daemon fills numbers that never came), or the end of its stream.
+      int64_t trigger_ns = 0;
+      for (size_t j = i; j < log.sent.size(); ++j) {
+        const SubjectLog::Sent& later = log.sent[j];
+        if (later.end_of_stream || later.frame_number < s.frame_number || later.frame_number >= s.frame_number + K) {
+          if (later.end_of_stream || later.frame_number >= s.frame_number + K) trigger_ns = later.sent_ns;
+          break;
+        }
+      }
+      if (trigger_ns == 0) continue;
+      const double ms = static_cast<double>(got - trigger_ns) * 1e-6;
+      report->processing_ms.push_back(ms);
+      if (ms * 1e-3 > frame_period_s) ++report->frames_late;
+    }
+  }
+  report->end_to_end = SummariseLatencies(e2e);
+  report->processing = SummariseLatencies(report->processing_ms);
+}
+
+}  // namespace
+
+int64_t SteadyNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch()).count();
+}
+
+ReplayReport RunSchedule(std::vector<SubjectLog>& logs, const FrameProducer& produce, const ScheduleSetup& setup,
+                         const ReplayOptions& o) {
+  Sockets sockets;
+  OpenSockets(o, &sockets);
+  ReplayReport report;
+  report.subjects = static_cast<int>(logs.size());
+  report.lookahead = WaitForDaemon(sockets, logs, setup, o);
+
+  std::optional<SkeletonReceiver> receiver;
+  if (sockets.in) receiver.emplace(*sockets.in, logs, setup);
+  const int64_t start = SteadyNs();
+  const uint64_t sent = SendAll(sockets.out, logs, produce, receiver ? &*receiver : nullptr, o, start);
+  report.frames_sent = sent;
+  report.send_seconds = static_cast<double>(SteadyNs() - start) * 1e-9;
+  if (!receiver) return report;
+  report.listened = true;
+  const int64_t drain_deadline = SteadyNs() + static_cast<int64_t>(o.drain_timeout_s * 1e9);
+  while (receiver->received() < sent && SteadyNs() < drain_deadline)
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  receiver->Stop();
+
+  report.frames_received = receiver->received();
+  report.frames_duplicated = receiver->duplicated();
+  report.frames_lost = sent - std::min<uint64_t>(sent, report.frames_received);
+  MeasureLatencies(logs, setup.frame_period_s, &report);
+  report.throughput_fps =
+      report.send_seconds > 0 ? static_cast<double>(report.frames_received) / report.send_seconds : 0.0;
+  const auto& accuracy = receiver->accuracy();
+  if (accuracy && accuracy->frames() > 0) {
+    report.has_truth = true;
+    report.mean_position_error_cm = accuracy->mean_position_error_m() * 100.0;
+    report.max_position_error_cm = accuracy->max_position_error_m() * 100.0;
+    report.mean_rotation_error_deg = accuracy->mean_rotation_error_rad() * 180.0 / M_PI;
+  }
+  return report;
+}
+
+}  // namespace mocapd::replay

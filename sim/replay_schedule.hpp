@@ -1,0 +1,65 @@
+// The replay's schedule: sends what a producer makes (marker frames and ends of stream,
+// each with its due time) over ZeroMQ, paced by the steady clock, while a receiver thread
+// stamps every skeleton that comes back and scores it against the truth; then turns the
+// stamps into the latency report. Shared by the take replay and the recording replay.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "filters/skeleton.hpp"
+#include "sim/replay.hpp"
+
+namespace mocapd::replay {
+
+/// One message to send, produced in order by a FrameProducer.
+struct Outgoing {
+  size_t subject = 0;
+  uint64_t frame_number = 0;
+  bool end_of_stream = false;
+  int64_t due_ns = 0;  ///< Since the start; < 0: as soon as possible.
+};
+
+/// Per subject: every message sent (in send order) and when each frame's skeleton came back.
+struct SubjectLog {
+  std::string name;
+  std::string topic;
+  Vec3 offset = Vec3::Zero();  ///< Where this actor stands (takes: for the truth).
+  struct Sent {
+    uint64_t frame_number;
+    int64_t sent_ns;
+    bool end_of_stream;
+  };
+  std::vector<Sent> sent;
+  /// Frame number -> arrival (0: not yet); holds every frame number that will be sent,
+  /// inserted before the run so the receiver thread never changes its shape.
+  std::unordered_map<uint64_t, int64_t> received_ns;
+};
+
+/// Encodes the next message into bytes; false when there is nothing more to send.
+using FrameProducer = std::function<bool(Outgoing*, std::vector<uint8_t>*)>;
+/// The truth for a received skeleton frame, or nullptr when unknown.
+using TruthLookup = std::function<const Pose*(size_t subject, uint64_t frame_number, Pose* scratch)>;
+
+/// What a schedule needs beyond its producer.
+struct ScheduleSetup {
+  uint64_t marker_hash = 0;
+  bool check_hash = false;             ///< Refuse a daemon whose subject has another marker set.
+  TruthLookup truth;                   ///< May be empty.
+  const Skeleton* skeleton = nullptr;  ///< The truth's skeleton (nullptr: no accuracy).
+  double frame_period_s = 1.0 / 120.0;  ///< A frame later than this is "late".
+};
+
+/// Runs the schedule: handshake with the daemon (it subscribed to every subject's topic
+/// and described every subject), send, drain, report. Throws std::runtime_error naming
+/// the endpoint when the handshake times out or a socket cannot be set up.
+ReplayReport RunSchedule(std::vector<SubjectLog>& logs, const FrameProducer& produce, const ScheduleSetup& setup,
+                         const ReplayOptions& options);
+
+/// Steady-clock time, ns.
+int64_t SteadyNs();
+
+}  // namespace mocapd::replay
