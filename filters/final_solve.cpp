@@ -4,15 +4,6 @@
 #include <algorithm>
 
 namespace mocapd {
-namespace {
-
-Vec3 ClampNorm(const Vec3& v, double max_norm) {
-  const double n = v.norm();
-  return n > max_norm ? Vec3(v * (max_norm / n)) : v;
-}
-
-}  // namespace
-
 FinalSolve::FinalSolve(const Skeleton& skeleton, const MarkerSet& markers, const CleanupOptions& options)
     : skeleton_(skeleton),
       markers_(markers),

@@ -6,15 +6,6 @@
 #include "filters/hermite.hpp"
 
 namespace mocapd {
-namespace {
-
-Vec3 ClampNorm(const Vec3& v, double max_norm) {
-  const double n = v.norm();
-  return n > max_norm ? Vec3(v * (max_norm / n)) : v;
-}
-
-}  // namespace
-
 GapRepair::GapRepair(int markers, const CleanupOptions& options)
     : options_(options), tracks_(static_cast<size_t>(markers)) {}
 

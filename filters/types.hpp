@@ -34,4 +34,10 @@ using Mat6 = Eigen::Matrix<double, 6, 6>;
 
 inline constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
+/// v scaled down to length max_norm if it is longer.
+inline Vec3 ClampNorm(const Vec3& v, double max_norm) {
+  const double n = v.norm();
+  return n > max_norm ? Vec3(v * (max_norm / n)) : v;
+}
+
 }  // namespace mocapd
