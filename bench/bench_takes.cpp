@@ -5,16 +5,17 @@
 #include <cstdlib>
 #include <filesystem>
 
-#include "sim/humanoid.hpp"
 #include "formats/marker_layout.hpp"
+#include "sim/humanoid.hpp"
 #include "sim/synthesis.hpp"
 
 namespace mocapd::bench {
 
 std::vector<std::string> SharedBvhTakes() {
   const char* env = std::getenv("MOCAPD_SHARED_DATA");
-  const std::filesystem::path data = env != nullptr ? std::filesystem::path(env)
-                                                    : std::filesystem::path(MOCAPD_SOURCE_DIR) / ".." / "shared" / "data";
+  const std::filesystem::path data =
+      env != nullptr ? std::filesystem::path(env)
+                     : std::filesystem::path(MOCAPD_SOURCE_DIR) / ".." / "shared" / "data";
   std::vector<std::string> out;
   const auto dir = data / "bandai-namco-1";
   if (!std::filesystem::is_directory(dir)) return out;
@@ -37,8 +38,8 @@ BenchTake LoadBenchTake(const std::string& bvh_path, double rate_hz) {
   }
   take.motion = ResampleMotion(take.bvh.skeleton, take.bvh.frames, take.bvh.rate_hz(), rate_hz);
   take.markers = std::make_shared<const MarkerSet>(
-      take.bvh.skeleton,
-      PlaceMarkers(take.bvh.skeleton, MatchHumanoidRoles(take.bvh.skeleton), DefaultMarkerLayout(), take.bvh.end_sites));
+      take.bvh.skeleton, PlaceMarkers(take.bvh.skeleton, MatchHumanoidRoles(take.bvh.skeleton),
+                                      DefaultMarkerLayout(), take.bvh.end_sites));
   return take;
 }
 

@@ -13,8 +13,8 @@ namespace mocapd::bench {
 
 struct BenchTake {
   std::string name;
-  BvhTake bvh;                              ///< As read (or generated).
-  std::vector<Pose> motion;                 ///< Resampled to the benchmark rate.
+  BvhTake bvh;                               ///< As read (or generated).
+  std::vector<Pose> motion;                  ///< Resampled to the benchmark rate.
   std::shared_ptr<const MarkerSet> markers;  ///< Default layout on the take's skeleton.
 };
 

@@ -6,7 +6,8 @@
 // Reports the solved skeleton's mean global joint position (cm) and rotation (deg) error,
 // the cleaned-marker RMSE on corrupted samples (mm), the jerk ratio against the truth and
 // the number of pops (a joint moving > 2 cm per frame beyond the truth's own motion).
-// Usage: cleanup_accuracy [--seeds N] [--severity light|medium|heavy]... [--lookahead K (ours only)] [--explain-pops] [--trace TAKE:FROM:TO:MARKER,...] [--digest] [TAKE.bvh ...]
+// Usage: cleanup_accuracy [--seeds N] [--severity light|medium|heavy]... [--lookahead K (ours
+// only)] [--explain-pops] [--trace TAKE:FROM:TO:MARKER,...] [--digest] [TAKE.bvh ...]
 // --digest prints, per row of ours, a hash of every published bit (markers, status,
 // reasons, weights, poses): a change meant to alter no arithmetic must keep it.
 // MOCAPD_EXPLAIN_BACK=N shows N frames before each pop (default 4); MOCAPD_EXP_<FIELD>
@@ -40,7 +41,7 @@ struct Scores {
     int frame, joint;
     double excess_m;  // the joint's motion beyond the truth's
   };
-  std::vector<Pop> pop_frames;  ///< each pop's worst joint
+  std::vector<Pop> pop_frames;                                   ///< each pop's worst joint
   std::vector<std::vector<Vec3>> estimated_joints, true_joints;  ///< per frame (for --explain-pops)
   double p50_us = 0, p99_us = 0;
   uint64_t digest = 0;  ///< FNV-1a over every published frame (--digest)
@@ -49,7 +50,8 @@ struct Scores {
 // Accumulates a solved take against the truth.
 class Scorer {
  public:
-  Scorer(const Skeleton& sk, const std::vector<Pose>& truth) : sk_(sk), truth_(truth), errors_(sk) {}
+  Scorer(const Skeleton& sk, const std::vector<Pose>& truth)
+      : sk_(sk), truth_(truth), errors_(sk) {}
   void Add(int frame, const Pose& pose) { estimates_[frame] = pose; }
   Scores Finish() {
     Scores s;
@@ -67,8 +69,10 @@ class Scorer {
     double jerk_e = 0, jerk_t = 0;
     for (size_t f = 3; f < est_p.size(); ++f) {
       for (size_t j = 0; j < est_p[f].size(); ++j) {
-        jerk_e += (est_p[f][j] - 3 * est_p[f - 1][j] + 3 * est_p[f - 2][j] - est_p[f - 3][j]).norm();
-        jerk_t += (tru_p[f][j] - 3 * tru_p[f - 1][j] + 3 * tru_p[f - 2][j] - tru_p[f - 3][j]).norm();
+        jerk_e +=
+            (est_p[f][j] - 3 * est_p[f - 1][j] + 3 * est_p[f - 2][j] - est_p[f - 3][j]).norm();
+        jerk_t +=
+            (tru_p[f][j] - 3 * tru_p[f - 1][j] + 3 * tru_p[f - 2][j] - tru_p[f - 3][j]).norm();
       }
     }
     s.jerk_ratio = jerk_t > 0 ? jerk_e / jerk_t : 0;
@@ -76,7 +80,8 @@ class Scorer {
       double worst = 0.02;
       int worst_joint = -1;
       for (size_t j = 0; j < est_p[f].size(); ++j) {
-        const double excess = (est_p[f][j] - est_p[f - 1][j]).norm() - (tru_p[f][j] - tru_p[f - 1][j]).norm();
+        const double excess =
+            (est_p[f][j] - est_p[f - 1][j]).norm() - (tru_p[f][j] - tru_p[f - 1][j]).norm();
         if (excess > worst) {
           worst = excess;
           worst_joint = static_cast<int>(j);
@@ -116,22 +121,30 @@ C3dTake FillGaps(const C3dTake& in, bool cubic) {
       for (int g = f; g < e; ++g) {
         Vec3 v;
         if (s < 0 && e >= in.num_frames) break;
-        if (s < 0) v = in.at(e, p);
-        else if (e >= in.num_frames) v = in.at(s, p);
+        if (s < 0)
+          v = in.at(e, p);
+        else if (e >= in.num_frames)
+          v = in.at(s, p);
         else {
           const double u = static_cast<double>(g - s) / (e - s);
           const Vec3 a = in.at(s, p), b = in.at(e, p);
           if (!cubic) {
             v = (1 - u) * a + u * b;
           } else {
-            const Vec3 ma = (s > 0 && in.valid(s - 1, p)) ? Vec3((b - in.at(s - 1, p)) * 0.5 * (e - s) / (e - s + 1.0)) : Vec3(b - a);
-            const Vec3 mb = (e + 1 < in.num_frames && in.valid(e + 1, p)) ? Vec3((in.at(e + 1, p) - a) * 0.5 * (e - s) / (e - s + 1.0)) : Vec3(b - a);
+            const Vec3 ma = (s > 0 && in.valid(s - 1, p))
+                                ? Vec3((b - in.at(s - 1, p)) * 0.5 * (e - s) / (e - s + 1.0))
+                                : Vec3(b - a);
+            const Vec3 mb = (e + 1 < in.num_frames && in.valid(e + 1, p))
+                                ? Vec3((in.at(e + 1, p) - a) * 0.5 * (e - s) / (e - s + 1.0))
+                                : Vec3(b - a);
             const double u2 = u * u, u3 = u2 * u;
-            v = (2 * u3 - 3 * u2 + 1) * a + (u3 - 2 * u2 + u) * ma + (-2 * u3 + 3 * u2) * b + (u3 - u2) * mb;
+            v = (2 * u3 - 3 * u2 + 1) * a + (u3 - 2 * u2 + u) * ma + (-2 * u3 + 3 * u2) * b +
+                (u3 - u2) * mb;
           }
         }
         out.at(g, p) = v;
-        out.residuals[static_cast<size_t>(g) * static_cast<size_t>(in.num_points()) + static_cast<size_t>(p)] = 0.0f;
+        out.residuals[static_cast<size_t>(g) * static_cast<size_t>(in.num_points()) +
+                      static_cast<size_t>(p)] = 0.0f;
       }
       f = e;
     }
@@ -169,7 +182,8 @@ template <typename T>
 void DigestVector(uint64_t* h, const std::vector<T>& v) {
   Digest(h, v.data(), v.size() * sizeof(T));
 }
-int g_explain_back = std::getenv("MOCAPD_EXPLAIN_BACK") ? std::atoi(std::getenv("MOCAPD_EXPLAIN_BACK")) : 4;
+int g_explain_back =
+    std::getenv("MOCAPD_EXPLAIN_BACK") ? std::atoi(std::getenv("MOCAPD_EXPLAIN_BACK")) : 4;
 
 // One letter per repair reason for --explain-pops and --trace: m missing, d disagreement,
 // r residual, k spike, i rigid distance, w swap, z frozen, f fallen off, l small track,
@@ -188,7 +202,9 @@ struct Trace {
 bool ParseTrace(const std::string& spec, Trace* trace) {
   std::istringstream in(spec);
   std::string from, to, markers;
-  if (!std::getline(in, trace->take, ':') || !std::getline(in, from, ':') || !std::getline(in, to, ':') || !std::getline(in, markers)) return false;
+  if (!std::getline(in, trace->take, ':') || !std::getline(in, from, ':') ||
+      !std::getline(in, to, ':') || !std::getline(in, markers))
+    return false;
   trace->from = std::atoi(from.c_str());
   trace->to = std::atoi(to.c_str());
   std::istringstream names(markers);
@@ -196,28 +212,43 @@ bool ParseTrace(const std::string& spec, Trace* trace) {
   return !trace->take.empty() && !trace->markers.empty();
 }
 
-Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const C3dTake& clean, int lookahead) {
+Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const C3dTake& clean,
+                   int lookahead) {
   const auto skeleton = std::make_shared<const Skeleton>(take.bvh.skeleton);
   CleanupOptions options;
   options.lookahead = lookahead;
   // Experiments without rebuilding: MOCAPD_EXP_<FIELD>=value for a few options.
-  if (const char* v = std::getenv("MOCAPD_EXP_REPAIRED_WEIGHT")) options.repaired_weight = std::atof(v);
-  if (const char* v = std::getenv("MOCAPD_EXP_FINAL_TEMPORAL")) options.final_ik.temporal_weight = std::atof(v);
-  if (const char* v = std::getenv("MOCAPD_EXP_FINAL_GAIN")) options.final_ik.prediction_velocity_gain = std::atof(v);
-  if (const char* v = std::getenv("MOCAPD_EXP_ROBUST_GAIN")) options.robust_ik.prediction_velocity_gain = std::atof(v);
-  if (const char* v = std::getenv("MOCAPD_EXP_FINAL_ITERS")) options.final_ik.max_iterations = std::atoi(v);
-  if (const char* v = std::getenv("MOCAPD_EXP_NAIVE_ITERS")) options.naive_ik.max_iterations = std::atoi(v);
-  if (const char* v = std::getenv("MOCAPD_EXP_ROBUST_ITERS")) options.robust_ik.max_iterations = std::atoi(v);
-  if (const char* v = std::getenv("MOCAPD_EXP_FILL_ACCEL")) options.fill_reference_acceleration_mps2 = std::atof(v);
-  if (const char* v = std::getenv("MOCAPD_EXP_SNAP_RELEASE")) options.fill_snap_release = std::atof(v);
+  if (const char* v = std::getenv("MOCAPD_EXP_REPAIRED_WEIGHT"))
+    options.repaired_weight = std::atof(v);
+  if (const char* v = std::getenv("MOCAPD_EXP_FINAL_TEMPORAL"))
+    options.final_ik.temporal_weight = std::atof(v);
+  if (const char* v = std::getenv("MOCAPD_EXP_FINAL_GAIN"))
+    options.final_ik.prediction_velocity_gain = std::atof(v);
+  if (const char* v = std::getenv("MOCAPD_EXP_ROBUST_GAIN"))
+    options.robust_ik.prediction_velocity_gain = std::atof(v);
+  if (const char* v = std::getenv("MOCAPD_EXP_FINAL_ITERS"))
+    options.final_ik.max_iterations = std::atoi(v);
+  if (const char* v = std::getenv("MOCAPD_EXP_NAIVE_ITERS"))
+    options.naive_ik.max_iterations = std::atoi(v);
+  if (const char* v = std::getenv("MOCAPD_EXP_ROBUST_ITERS"))
+    options.robust_ik.max_iterations = std::atoi(v);
+  if (const char* v = std::getenv("MOCAPD_EXP_FILL_ACCEL"))
+    options.fill_reference_acceleration_mps2 = std::atof(v);
+  if (const char* v = std::getenv("MOCAPD_EXP_SNAP_RELEASE"))
+    options.fill_snap_release = std::atof(v);
   if (const char* v = std::getenv("MOCAPD_EXP_CATCHUP")) options.data_catchup_m = std::atof(v);
-  if (const char* v = std::getenv("MOCAPD_EXP_MOTION_ACCEL")) options.data_motion_acceleration_m = std::atof(v);
+  if (const char* v = std::getenv("MOCAPD_EXP_MOTION_ACCEL"))
+    options.data_motion_acceleration_m = std::atof(v);
   if (const char* v = std::getenv("MOCAPD_EXP_ANCHOR")) options.fill_anchor_radius_m = std::atof(v);
-  if (const char* v = std::getenv("MOCAPD_EXP_ANCHOR_ITERS")) options.anchor_ik.max_iterations = std::atoi(v);
-  if (const char* v = std::getenv("MOCAPD_EXP_HOLD_LIMBS")) options.anchor_holds_unseen_limbs = std::atoi(v) != 0;
-  if (const char* v = std::getenv("MOCAPD_EXP_SMALL_TRACK")) options.small_track_frames = std::atoi(v);
+  if (const char* v = std::getenv("MOCAPD_EXP_ANCHOR_ITERS"))
+    options.anchor_ik.max_iterations = std::atoi(v);
+  if (const char* v = std::getenv("MOCAPD_EXP_HOLD_LIMBS"))
+    options.anchor_holds_unseen_limbs = std::atoi(v) != 0;
+  if (const char* v = std::getenv("MOCAPD_EXP_SMALL_TRACK"))
+    options.small_track_frames = std::atoi(v);
   if (const char* v = std::getenv("MOCAPD_EXP_TRIM")) options.max_trim_frames = std::atoi(v);
-  if (const char* v = std::getenv("MOCAPD_EXP_WEIGHT_RAMP")) options.fill_weight_ramp = std::atof(v);
+  if (const char* v = std::getenv("MOCAPD_EXP_WEIGHT_RAMP"))
+    options.fill_weight_ramp = std::atof(v);
   if (const char* v = std::getenv("MOCAPD_EXP_STRAY_FRAMES")) options.stray_frames = std::atoi(v);
   if (const char* v = std::getenv("MOCAPD_EXP_STRAY_M")) options.stray_residual_m = std::atof(v);
   CleanupPipeline pipeline(skeleton, take.markers, options);
@@ -249,7 +280,9 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
     }
     scorer.Add(static_cast<int>(o.frame), o.pose);
     for (size_t m = 0; m < obs.size(); ++m) {
-      if (bad.at(static_cast<int>(o.frame), static_cast<int>(m)) == CorruptionKind::kNone || !o.markers[m].allFinite()) continue;
+      if (bad.at(static_cast<int>(o.frame), static_cast<int>(m)) == CorruptionKind::kNone ||
+          !o.markers[m].allFinite())
+        continue;
       sq += (o.markers[m] - clean.at(static_cast<int>(o.frame), static_cast<int>(m))).squaredNorm();
       ++n;
     }
@@ -259,7 +292,9 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
     const auto t0 = std::chrono::steady_clock::now();
     const bool ready = pipeline.Push(obs);
     // The first K + 1 frames hold the three solvers' cold starts: timed apart.
-    if (f > lookahead) times.push_back(std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - t0).count());
+    if (f > lookahead)
+      times.push_back(
+          std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - t0).count());
     if (ready) collect();
   }
   while (pipeline.Flush()) collect();
@@ -275,8 +310,11 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
         const int m = found->value;
         const auto ug = static_cast<size_t>(g), um = static_cast<size_t>(m);
         const MarkerStatus st = statuses[ug][um];
-        const char c = st == MarkerStatus::kObserved ? 'o' : st == MarkerStatus::kUnrecoverable ? 'x' : ReasonLetter(reasons[ug][um]);
-        std::printf(" %s %c%c e%.1f w%.2f", name.c_str(), c, ".gspzf"[static_cast<int>(bad.at(g, m))],
+        const char c = st == MarkerStatus::kObserved        ? 'o'
+                       : st == MarkerStatus::kUnrecoverable ? 'x'
+                                                            : ReasonLetter(reasons[ug][um]);
+        std::printf(" %s %c%c e%.1f w%.2f", name.c_str(), c,
+                    ".gspzf"[static_cast<int>(bad.at(g, m))],
                     (published[ug][um] - clean.at(g, m)).norm() * 100, weights[ug][um]);
       }
       std::printf("\n");
@@ -289,39 +327,50 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
     if (!s.pop_frames.empty())
       for (const CorruptionEvent& e : bad.events)
         if (e.kind == CorruptionKind::kSwap)
-          std::printf("swap %s frames %d-%d: %s <-> %s\n", take.name.c_str(), e.first_frame, e.last_frame,
-                      take.markers->marker(e.marker).name.c_str(), take.markers->marker(e.other).name.c_str());
+          std::printf("swap %s frames %d-%d: %s <-> %s\n", take.name.c_str(), e.first_frame,
+                      e.last_frame, take.markers->marker(e.marker).name.c_str(),
+                      take.markers->marker(e.other).name.c_str());
     for (const auto& [f, j, excess] : s.pop_frames) {
-      std::printf("pop %s K=%d frame %d joint %s +%.1fcm:", take.name.c_str(), lookahead, f, skeleton->joint(j).name.c_str(), excess * 100);
+      std::printf("pop %s K=%d frame %d joint %s +%.1fcm:", take.name.c_str(), lookahead, f,
+                  skeleton->joint(j).name.c_str(), excess * 100);
       const int parent = skeleton->joint(j).parent.value;
       for (int m = 0; m < take.markers->num_markers(); ++m) {
-        if (take.markers->primary_joint(m) != j && take.markers->primary_joint(m) != parent) continue;
+        if (take.markers->primary_joint(m) != j && take.markers->primary_joint(m) != parent)
+          continue;
         std::printf(" %s[", take.markers->marker(m).name.c_str());
-        for (int g = std::max(0, f - 6); g <= std::min<int>(f + 2, static_cast<int>(reasons.size()) - 1); ++g) {
+        for (int g = std::max(0, f - 6);
+             g <= std::min<int>(f + 2, static_cast<int>(reasons.size()) - 1); ++g) {
           const MarkerStatus st = statuses[static_cast<size_t>(g)][static_cast<size_t>(m)];
-          char c = st == MarkerStatus::kObserved ? 'o' : st == MarkerStatus::kUnrecoverable ? 'x'
-                                                                                             : ReasonLetter(reasons[static_cast<size_t>(g)][static_cast<size_t>(m)]);
+          char c = st == MarkerStatus::kObserved ? 'o'
+                   : st == MarkerStatus::kUnrecoverable
+                       ? 'x'
+                       : ReasonLetter(reasons[static_cast<size_t>(g)][static_cast<size_t>(m)]);
           if (bad.at(g, m) != CorruptionKind::kNone) c = static_cast<char>(std::toupper(c));
           std::printf("%c%s", g == f ? '|' : c, g == f ? std::string(1, c).c_str() : "");
         }
-        // The injected truth over the same frames: . fine, g gap, s swap, p pop, z frozen, f fallen off.
+        // The injected truth over the same frames: . fine, g gap, s swap, p pop, z frozen, f fallen
+        // off.
         std::printf("/");
-        for (int g = std::max(0, f - 6); g <= std::min<int>(f + 2, static_cast<int>(reasons.size()) - 1); ++g)
+        for (int g = std::max(0, f - 6);
+             g <= std::min<int>(f + 2, static_cast<int>(reasons.size()) - 1); ++g)
           std::printf("%c", ".gspzf"[static_cast<int>(bad.at(g, m))]);
         std::printf("]");
       }
       std::printf("\n");
       // Frame by frame around it: the joint's step (estimate / truth, cm) and each of its
       // markers' published step (cm) and final-solve weight.
-      for (int g = std::max(1, f - g_explain_back); g <= std::min<int>(f + 1, static_cast<int>(published.size()) - 1); ++g) {
+      for (int g = std::max(1, f - g_explain_back);
+           g <= std::min<int>(f + 1, static_cast<int>(published.size()) - 1); ++g) {
         const auto ug = static_cast<size_t>(g), uj = static_cast<size_t>(j);
-        std::printf("    %d joint %.1f/%.1f", g, (s.estimated_joints[ug][uj] - s.estimated_joints[ug - 1][uj]).norm() * 100,
+        std::printf("    %d joint %.1f/%.1f", g,
+                    (s.estimated_joints[ug][uj] - s.estimated_joints[ug - 1][uj]).norm() * 100,
                     (s.true_joints[ug][uj] - s.true_joints[ug - 1][uj]).norm() * 100);
         for (int m = 0; m < take.markers->num_markers(); ++m) {
-          if (take.markers->primary_joint(m) != j && take.markers->primary_joint(m) != parent) continue;
+          if (take.markers->primary_joint(m) != j && take.markers->primary_joint(m) != parent)
+            continue;
           const auto um = static_cast<size_t>(m);
-          std::printf(" %s %.1f w%.2f", take.markers->marker(m).name.c_str(), (published[ug][um] - published[ug - 1][um]).norm() * 100,
-                      weights[ug][um]);
+          std::printf(" %s %.1f w%.2f", take.markers->marker(m).name.c_str(),
+                      (published[ug][um] - published[ug - 1][um]).norm() * 100, weights[ug][um]);
         }
         std::printf("\n");
       }
@@ -341,24 +390,32 @@ int main(int argc, char** argv) {
   int only_lookahead = -1;  // -1: the baselines and K = 0, 4, 12
   std::vector<std::string> severities, paths;
   for (int i = 1; i < argc; ++i) {
-    if (std::strcmp(argv[i], "--seeds") == 0 && i + 1 < argc) seeds = std::atoi(argv[++i]);
-    else if (std::strcmp(argv[i], "--explain-pops") == 0) g_explain_pops = true;
-    else if (std::strcmp(argv[i], "--digest") == 0) g_digest = true;
+    if (std::strcmp(argv[i], "--seeds") == 0 && i + 1 < argc)
+      seeds = std::atoi(argv[++i]);
+    else if (std::strcmp(argv[i], "--explain-pops") == 0)
+      g_explain_pops = true;
+    else if (std::strcmp(argv[i], "--digest") == 0)
+      g_digest = true;
     else if (std::strcmp(argv[i], "--trace") == 0 && i + 1 < argc) {
       if (!ParseTrace(argv[++i], &g_trace)) {
-        std::fprintf(stderr, "--trace expects TAKE:FROM:TO:MARKER[,MARKER...], got '%s'\n", argv[i]);
+        std::fprintf(stderr, "--trace expects TAKE:FROM:TO:MARKER[,MARKER...], got '%s'\n",
+                     argv[i]);
         return 1;
       }
       g_explain_pops = true;  // the trace reads what --explain-pops keeps
-    }
-    else if (std::strcmp(argv[i], "--lookahead") == 0 && i + 1 < argc) only_lookahead = std::atoi(argv[++i]);
-    else if (std::strcmp(argv[i], "--severity") == 0 && i + 1 < argc) severities.emplace_back(argv[++i]);
-    else paths.emplace_back(argv[i]);
+    } else if (std::strcmp(argv[i], "--lookahead") == 0 && i + 1 < argc)
+      only_lookahead = std::atoi(argv[++i]);
+    else if (std::strcmp(argv[i], "--severity") == 0 && i + 1 < argc)
+      severities.emplace_back(argv[++i]);
+    else
+      paths.emplace_back(argv[i]);
   }
   if (severities.empty()) severities = {"light", "medium", "heavy"};
   if (paths.empty()) paths = bench::SharedBvhTakes();
   if (paths.empty()) paths.emplace_back("");
-  std::printf("| severity | method | Δpos (cm) | Δrot (deg) | marker RMSE on corrupted samples (mm) | jerk ratio | pops | per-frame p50 / p99 (us) |\n");
+  std::printf(
+      "| severity | method | Δpos (cm) | Δrot (deg) | marker RMSE on corrupted samples (mm) | jerk "
+      "ratio | pops | per-frame p50 / p99 (us) |\n");
   std::printf("|---|---|---|---|---|---|---|---|\n");
   std::vector<bench::BenchTake> takes;
   for (const auto& p : paths) takes.push_back(bench::LoadBenchTake(p, 120.0));
@@ -372,16 +429,19 @@ int main(int argc, char** argv) {
         co.seed = static_cast<uint64_t>(seed);
         const CorruptedTake bad = CorruptTake(clean, take.markers.get(), co);
         if (only_lookahead >= 0) {
-          results["mocapd K=" + std::to_string(only_lookahead)].push_back(RunPipeline(take, bad, clean, only_lookahead));
+          results["mocapd K=" + std::to_string(only_lookahead)].push_back(
+              RunPipeline(take, bad, clean, only_lookahead));
           continue;
         }
         results["raw IK"].push_back(SolveBaseline(take, bad.take));
         results["linear fill + IK"].push_back(SolveBaseline(take, FillGaps(bad.take, false)));
         results["cubic fill + IK"].push_back(SolveBaseline(take, FillGaps(bad.take, true)));
-        for (int k : {0, 4, 12}) results["mocapd K=" + std::to_string(k)].push_back(RunPipeline(take, bad, clean, k));
+        for (int k : {0, 4, 12})
+          results["mocapd K=" + std::to_string(k)].push_back(RunPipeline(take, bad, clean, k));
       }
     }
-    for (const char* method : {"raw IK", "linear fill + IK", "cubic fill + IK", "mocapd K=0", "mocapd K=4", "mocapd K=12"}) {
+    for (const char* method : {"raw IK", "linear fill + IK", "cubic fill + IK", "mocapd K=0",
+                               "mocapd K=4", "mocapd K=12"}) {
       const auto& v = results[method];
       if (v.empty()) continue;
       Scores mean;
@@ -402,12 +462,16 @@ int main(int argc, char** argv) {
         std::snprintf(rmse, sizeof(rmse), "%.1f", mean.marker_rmse_mm);
         std::snprintf(timing, sizeof(timing), "%.0f / %.0f", mean.p50_us, mean.p99_us);
       }
-      std::printf("| %s | %s | %.2f | %.2f | %s | %.2f | %d | %s |\n", severity_name.c_str(), method, mean.pos_cm, mean.rot_deg, rmse,
-                  mean.jerk_ratio, mean.pops, timing);
-      if (g_digest && ours) std::printf("digest %s %s: %016llx\n", severity_name.c_str(), method, static_cast<unsigned long long>(digest));
+      std::printf("| %s | %s | %.2f | %.2f | %s | %.2f | %d | %s |\n", severity_name.c_str(),
+                  method, mean.pos_cm, mean.rot_deg, rmse, mean.jerk_ratio, mean.pops, timing);
+      if (g_digest && ours)
+        std::printf("digest %s %s: %016llx\n", severity_name.c_str(), method,
+                    static_cast<unsigned long long>(digest));
       std::fflush(stdout);
     }
   }
-  std::printf("\n%zu takes x %d seeds per severity; pops summed over all runs; p99 is the worst run's.\n", takes.size(), seeds);
+  std::printf(
+      "\n%zu takes x %d seeds per severity; pops summed over all runs; p99 is the worst run's.\n",
+      takes.size(), seeds);
   return 0;
 }

@@ -14,8 +14,8 @@
 #include "bench/bench_takes.hpp"
 #include "filters/ik_solver.hpp"
 #include "filters/pose_error.hpp"
-#include "sim/synthesis.hpp"
 #include "formats/take_frames.hpp"
+#include "sim/synthesis.hpp"
 
 using namespace mocapd;
 
@@ -28,7 +28,8 @@ double RoundTripErrorInFileUnits(const BvhTake& take) {
   for (size_t f = 0; f < take.frames.size(); ++f) {
     ForwardKinematics(take.skeleton, take.frames[f], &a);
     ForwardKinematics(again.skeleton, again.frames[f], &b);
-    for (size_t j = 0; j < a.p_WJ.size(); ++j) worst = std::max(worst, (a.p_WJ[j] - b.p_WJ[j]).norm() / take.metres_per_unit);
+    for (size_t j = 0; j < a.p_WJ.size(); ++j)
+      worst = std::max(worst, (a.p_WJ[j] - b.p_WJ[j]).norm() / take.metres_per_unit);
   }
   return worst;
 }
@@ -72,14 +73,19 @@ int main(int argc, char** argv) {
   double noise_mm = 1.0;
   std::vector<std::string> paths;
   for (int i = 1; i < argc; ++i) {
-    if (std::strcmp(argv[i], "--noise-mm") == 0 && i + 1 < argc) noise_mm = std::atof(argv[++i]);
-    else paths.emplace_back(argv[i]);
+    if (std::strcmp(argv[i], "--noise-mm") == 0 && i + 1 < argc)
+      noise_mm = std::atof(argv[++i]);
+    else
+      paths.emplace_back(argv[i]);
   }
   if (paths.empty()) paths = bench::SharedBvhTakes();
   if (paths.empty()) paths.emplace_back("");  // the built-in humanoid
-  std::printf("| take | frames@120Hz | markers | DOF | BVH round trip (units) | clean: mean / max pos (mm) | clean: mean rot (deg) | "
-              "%.1fmm noise: mean / max pos (mm) | noise: mean rot (deg) | noise: worst joint p99 rot (deg) | solve p50 / p99 (us) | iters |\n",
-              noise_mm);
+  std::printf(
+      "| take | frames@120Hz | markers | DOF | BVH round trip (units) | clean: mean / max pos (mm) "
+      "| clean: mean rot (deg) | "
+      "%.1fmm noise: mean / max pos (mm) | noise: mean rot (deg) | noise: worst joint p99 rot "
+      "(deg) | solve p50 / p99 (us) | iters |\n",
+      noise_mm);
   std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   bool ok = true;
   for (const std::string& path : paths) {
@@ -89,18 +95,26 @@ int main(int argc, char** argv) {
     const Result noisy = Solve(take, noise_mm * 1e-3);
     int worst = 0;
     const double p99 = noisy.errors.worst_joint_rotation_quantile_rad(0.99, &worst) * 180 / M_PI;
-    std::printf("| %s | %zu | %d | %d | %.2e | %.3f / %.3f | %.3f | %.3f / %.3f | %.3f | %.2f (%s) | %.1f / %.1f | %.2f |\n",
-                take.name.c_str(), take.motion.size(), take.markers->num_markers(), take.bvh.skeleton.num_dofs(), round_trip,
-                clean.errors.mean_position_error_m() * 1e3, clean.errors.max_position_error_m() * 1e3,
-                clean.errors.mean_rotation_error_rad() * 180 / M_PI, noisy.errors.mean_position_error_m() * 1e3,
-                noisy.errors.max_position_error_m() * 1e3, noisy.errors.mean_rotation_error_rad() * 180 / M_PI, p99,
-                take.bvh.skeleton.joint(worst).name.c_str(), Quantile(noisy.times_us, 0.5), Quantile(noisy.times_us, 0.99),
-                noisy.iterations);
+    std::printf(
+        "| %s | %zu | %d | %d | %.2e | %.3f / %.3f | %.3f | %.3f / %.3f | %.3f | %.2f (%s) | %.1f "
+        "/ %.1f | %.2f |\n",
+        take.name.c_str(), take.motion.size(), take.markers->num_markers(),
+        take.bvh.skeleton.num_dofs(), round_trip, clean.errors.mean_position_error_m() * 1e3,
+        clean.errors.max_position_error_m() * 1e3,
+        clean.errors.mean_rotation_error_rad() * 180 / M_PI,
+        noisy.errors.mean_position_error_m() * 1e3, noisy.errors.max_position_error_m() * 1e3,
+        noisy.errors.mean_rotation_error_rad() * 180 / M_PI, p99,
+        take.bvh.skeleton.joint(worst).name.c_str(), Quantile(noisy.times_us, 0.5),
+        Quantile(noisy.times_us, 0.99), noisy.iterations);
     std::fflush(stdout);
-    ok = ok && round_trip < 1e-4 && clean.errors.mean_position_error_m() < 1e-3 && clean.errors.max_position_error_m() < 5e-3 &&
-         noisy.errors.mean_rotation_error_rad() * 180 / M_PI <= 2.0 && p99 <= 10.0 && clean.failures == 0 && noisy.failures == 0;
+    ok = ok && round_trip < 1e-4 && clean.errors.mean_position_error_m() < 1e-3 &&
+         clean.errors.max_position_error_m() < 5e-3 &&
+         noisy.errors.mean_rotation_error_rad() * 180 / M_PI <= 2.0 && p99 <= 10.0 &&
+         clean.failures == 0 && noisy.failures == 0;
   }
-  std::printf("\nacceptance (round trip < 1e-4, clean mean < 1 mm & max < 5 mm, noisy mean rot <= 2 deg & every joint p99 <= 10 deg): %s\n",
-              ok ? "PASS" : "FAIL");
+  std::printf(
+      "\nacceptance (round trip < 1e-4, clean mean < 1 mm & max < 5 mm, noisy mean rot <= 2 deg & "
+      "every joint p99 <= 10 deg): %s\n",
+      ok ? "PASS" : "FAIL");
   return ok ? 0 : 1;
 }

@@ -9,8 +9,8 @@
 #include "bench/bench_takes.hpp"
 #include "filters/ik_solver.hpp"
 #include "filters/pose_error.hpp"
-#include "sim/synthesis.hpp"
 #include "formats/take_frames.hpp"
+#include "sim/synthesis.hpp"
 
 namespace mocapd::bench {
 namespace {
@@ -55,13 +55,15 @@ void BM_IkSolveWarmStarted(benchmark::State& state) {
     const IkSummary summary = SolveIk(sk, markers, options, observed, weights, &ik);
     const auto t1 = std::chrono::steady_clock::now();
     benchmark::DoNotOptimize(summary);
-    if (times_us.size() < times_us.capacity()) times_us.push_back(std::chrono::duration<double, std::micro>(t1 - t0).count());
+    if (times_us.size() < times_us.capacity())
+      times_us.push_back(std::chrono::duration<double, std::micro>(t1 - t0).count());
     iterations += summary.iterations;
     ++frame;
   }
   state.counters["p50_us"] = Quantile(times_us, 0.5);
   state.counters["p99_us"] = Quantile(times_us, 0.99);
-  state.counters["iterations"] = static_cast<double>(iterations) / static_cast<double>(state.iterations());
+  state.counters["iterations"] =
+      static_cast<double>(iterations) / static_cast<double>(state.iterations());
   state.counters["markers"] = markers.num_markers();
   state.counters["dofs"] = sk.num_dofs();
   state.SetLabel(take.name + (noise_m > 0 ? " +noise" : " clean"));

@@ -13,9 +13,9 @@
 #include "bench/bench_takes.hpp"
 #include "filters/cleanup_pipeline.hpp"
 #include "filters/pose_error.hpp"
+#include "formats/take_frames.hpp"
 #include "sim/corruption.hpp"
 #include "sim/synthesis.hpp"
-#include "formats/take_frames.hpp"
 
 namespace mocapd::bench {
 namespace {
@@ -33,7 +33,8 @@ void BM_CleanupPipelinePush(benchmark::State& state) {
     if (p.find(state.range(2) == 0 ? "walk_normal" : "dance-short") != std::string::npos) path = p;
   const BenchTake take = LoadBenchTake(path, 120.0);
   std::mt19937_64 rng(1);
-  const C3dTake clean = SynthesizeMarkers(take.bvh.skeleton, *take.markers, take.motion, 120.0, 0.0005, &rng);
+  const C3dTake clean =
+      SynthesizeMarkers(take.bvh.skeleton, *take.markers, take.motion, 120.0, 0.0005, &rng);
   CorruptionOptions corruption;
   corruption.severity = static_cast<CorruptionSeverity>(state.range(0));
   const CorruptedTake bad = CorruptTake(clean, take.markers.get(), corruption);
@@ -73,7 +74,8 @@ void BM_CleanupPipelinePush(benchmark::State& state) {
   state.counters["cpu_p50_us"] = Quantile(cpu_times_us, 0.5);
   state.counters["cpu_p99_us"] = Quantile(cpu_times_us, 0.99);
   state.counters["iterations_per_frame"] =
-      static_cast<double>(pipeline.counters().solve_iterations) / static_cast<double>(pipeline.counters().frames_in);
+      static_cast<double>(pipeline.counters().solve_iterations) /
+      static_cast<double>(pipeline.counters().frames_in);
   state.SetLabel(take.name);
 }
 // Args: severity (0 light, 1 medium, 2 heavy), lookahead K, take (0 walk, 1 dance).

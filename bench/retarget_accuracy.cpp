@@ -33,7 +33,8 @@ std::shared_ptr<const Skeleton> Scaled(const Skeleton& sk, double factor) {
 // Merges every spine joint between the pelvis and the chest into one (the chest's
 // children hang from the lowest spine joint, their offsets carried through the merged
 // joints' rest transforms), then scales: a character with a shorter spine chain.
-std::shared_ptr<const Skeleton> MergedSpine(const Skeleton& sk, double factor, std::string* description) {
+std::shared_ptr<const Skeleton> MergedSpine(const Skeleton& sk, double factor,
+                                            std::string* description) {
   const HumanoidRoles roles = MatchHumanoidRoles(sk);
   if (roles.spine_chain.size() < 2) {
     *description = "spine already one joint; scaled only";
@@ -59,7 +60,8 @@ std::shared_ptr<const Skeleton> MergedSpine(const Skeleton& sk, double factor, s
     new_index[static_cast<size_t>(j)] = static_cast<int>(joints.size());
     joints.push_back(joint);
   }
-  *description = "merged " + std::to_string(removed.size()) + " spine joint(s) into " + sk.joint(keep).name;
+  *description =
+      "merged " + std::to_string(removed.size()) + " spine joint(s) into " + sk.joint(keep).name;
   return std::make_shared<const Skeleton>(std::move(joints));
 }
 
@@ -94,7 +96,8 @@ Scores Run(const bench::BenchTake& take, std::shared_ptr<const Skeleton> charact
   std::vector<std::pair<int, int>> effectors;
   for (const char* role : {"hand_l", "hand_r", "foot_l", "foot_r", "head"})
     effectors.emplace_back(sr.joint_of_role.at(role), tr.joint_of_role.at(role));
-  std::vector<std::pair<int, int>> torso = {{sr.joint_of_role.at("pelvis"), tr.joint_of_role.at("pelvis")}};
+  std::vector<std::pair<int, int>> torso = {
+      {sr.joint_of_role.at("pelvis"), tr.joint_of_role.at("pelvis")}};
   if (sr.joint_of_role.count("chest") && tr.joint_of_role.count("chest"))
     torso.emplace_back(sr.joint_of_role.at("chest"), tr.joint_of_role.at("chest"));
   KinematicsWorkspace s_fk(*source), s_rest(*source), t_rest(*character);
@@ -110,7 +113,8 @@ Scores Run(const bench::BenchTake& take, std::shared_ptr<const Skeleton> charact
   for (const Pose& pose : take.motion) {
     ForwardKinematics(*source, pose, &s_fk);
     for (size_t sd = 0; sd < 2; ++sd)
-      lowest_ankle[sd] = std::min(lowest_ankle[sd], s_fk.p_WJ[static_cast<size_t>(map.source_ankles[sd])].y());
+      lowest_ankle[sd] =
+          std::min(lowest_ankle[sd], s_fk.p_WJ[static_cast<size_t>(map.source_ankles[sd])].y());
   }
   Scores& s = *into;
   for (size_t f = 0; f < take.motion.size(); ++f) {
@@ -127,7 +131,8 @@ Scores Run(const bench::BenchTake& take, std::shared_ptr<const Skeleton> charact
     s.effector_cm += e / static_cast<double>(effectors.size()) * 100.0;
     double r = 0;
     for (const auto& [js, jt] : torso) {
-      const Mat3 d = RelativeToRest(t_fk, t_rest, jt) * RelativeToRest(s_fk, s_rest, js).transpose();
+      const Mat3 d =
+          RelativeToRest(t_fk, t_rest, jt) * RelativeToRest(s_fk, s_rest, js).transpose();
       r += std::acos(std::clamp(0.5 * (d.trace() - 1.0), -1.0, 1.0));
     }
     s.torso_deg += r / static_cast<double>(torso.size()) * 180.0 / M_PI;
@@ -141,7 +146,8 @@ Scores Run(const bench::BenchTake& take, std::shared_ptr<const Skeleton> charact
       Vec3 sv = s_fk.p_WJ[ankle_s] - previous_source_ankle[sd];
       sv.y() = 0;
       previous_source_ankle[sd] = s_fk.p_WJ[ankle_s];
-      const bool planted = s_fk.p_WJ[ankle_s].y() < lowest_ankle[sd] + 0.03 && sv.norm() * 120.0 < 0.2;
+      const bool planted =
+          s_fk.p_WJ[ankle_s].y() < lowest_ankle[sd] + 0.03 && sv.norm() * 120.0 < 0.2;
       Vec3 ankle = t_fk.p_WJ[static_cast<size_t>(map.target_ankles[sd])];
       ankle.y() = 0;
       if (planted && !was[sd]) {
@@ -178,13 +184,17 @@ int main(int argc, char** argv) {
     Run(take, Scaled(sk, 1.25), &results["scaled 1.25x"]);
     Run(take, MergedSpine(sk, 1.1, &merged_description), &results["merged spine, 1.1x"]);
   }
-  std::printf("%zu takes at 120 Hz; different hierarchy: %s\n\n", paths.size(), merged_description.c_str());
-  std::printf("| character | end-effector error / scale (cm) | torso orientation (deg) | foot slide per contact (cm) | contacts | per-frame p50 / p99 (us) |\n");
+  std::printf("%zu takes at 120 Hz; different hierarchy: %s\n\n", paths.size(),
+              merged_description.c_str());
+  std::printf(
+      "| character | end-effector error / scale (cm) | torso orientation (deg) | foot slide per "
+      "contact (cm) | contacts | per-frame p50 / p99 (us) |\n");
   std::printf("|---|---|---|---|---|---|\n");
   for (const char* name : {"scaled 0.8x", "scaled 1.25x", "merged spine, 1.1x"}) {
     const Scores& s = results[name];
-    std::printf("| %s | %.3f | %.2f | %.3f | %d | %.1f / %.1f |\n", name, s.effector_cm / s.frames, s.torso_deg / s.frames,
-                s.contacts > 0 ? s.slide_cm / s.contacts : 0.0, s.contacts, Quantile(s.times_us, 0.5), Quantile(s.times_us, 0.99));
+    std::printf("| %s | %.3f | %.2f | %.3f | %d | %.1f / %.1f |\n", name, s.effector_cm / s.frames,
+                s.torso_deg / s.frames, s.contacts > 0 ? s.slide_cm / s.contacts : 0.0, s.contacts,
+                Quantile(s.times_us, 0.5), Quantile(s.times_us, 0.99));
   }
   return 0;
 }

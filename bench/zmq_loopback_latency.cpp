@@ -3,8 +3,8 @@
 // ZeroMQ hops, as a frame and its skeleton make), paced at 120 Hz like a capture feed
 // so the idle wake-ups are included. Prints the round-trip p50/p90/p99/max.
 #include <chrono>
-#include <string>
 #include <cstdio>
+#include <string>
 #include <thread>
 #include <vector>
 #include <zmq.hpp>
@@ -44,15 +44,19 @@ int main(int argc, char** argv) {
   const auto start = std::chrono::steady_clock::now();
   zmq::message_t reply;
   for (int i = 0; i < count; ++i) {
-    std::this_thread::sleep_until(start + std::chrono::nanoseconds(static_cast<int64_t>(i * 1e9 / rate_hz)));
+    std::this_thread::sleep_until(
+        start + std::chrono::nanoseconds(static_cast<int64_t>(i * 1e9 / rate_hz)));
     const auto t0 = std::chrono::steady_clock::now();
     a_out.send(zmq::buffer(frame), zmq::send_flags::none);
     receive(a_in, reply);
-    rtt_us.push_back(std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - t0).count());
+    rtt_us.push_back(
+        std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - t0).count());
   }
   echo.join();
-  std::printf("zmq tcp loopback round trip (2 hops, %s), %d messages at %.0f Hz: p50 %.1f us, p90 %.1f us, p99 %.1f us, max %.1f us\n", spin ? "spinning" : "blocking", count,
-              rate_hz, mocapd::Quantile(rtt_us, 0.5), mocapd::Quantile(rtt_us, 0.9), mocapd::Quantile(rtt_us, 0.99),
-              mocapd::Quantile(rtt_us, 1.0));
+  std::printf(
+      "zmq tcp loopback round trip (2 hops, %s), %d messages at %.0f Hz: p50 %.1f us, p90 %.1f us, "
+      "p99 %.1f us, max %.1f us\n",
+      spin ? "spinning" : "blocking", count, rate_hz, mocapd::Quantile(rtt_us, 0.5),
+      mocapd::Quantile(rtt_us, 0.9), mocapd::Quantile(rtt_us, 0.99), mocapd::Quantile(rtt_us, 1.0));
   return 0;
 }

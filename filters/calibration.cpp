@@ -14,8 +14,8 @@ struct RigidFit {
   double rms = std::numeric_limits<double>::infinity();
 };
 
-RigidFit FitRigid(std::span<const KinematicsWorkspace> frames, const std::vector<int>& valid, std::span<const Vec3> y, size_t stride,
-                  size_t m, int j) {
+RigidFit FitRigid(std::span<const KinematicsWorkspace> frames, const std::vector<int>& valid,
+                  std::span<const Vec3> y, size_t stride, size_t m, int j) {
   const auto uj = static_cast<size_t>(j);
   RigidFit fit;
   Vec3 sum = Vec3::Zero();
@@ -27,7 +27,8 @@ RigidFit FitRigid(std::span<const KinematicsWorkspace> frames, const std::vector
   double sq = 0.0;
   for (int f : valid) {
     const auto uf = static_cast<size_t>(f);
-    sq += (frames[uf].R_WJ[uj] * fit.offset + frames[uf].p_WJ[uj] - y[uf * stride + m]).squaredNorm();
+    sq +=
+        (frames[uf].R_WJ[uj] * fit.offset + frames[uf].p_WJ[uj] - y[uf * stride + m]).squaredNorm();
   }
   fit.rms = std::sqrt(sq / static_cast<double>(valid.size()));
   return fit;
@@ -38,8 +39,8 @@ struct BlendFit {
   double rms = std::numeric_limits<double>::infinity();
 };
 
-BlendFit FitBlend(std::span<const KinematicsWorkspace> frames, const std::vector<int>& valid, std::span<const Vec3> y, size_t stride,
-                  size_t m, int child, int parent) {
+BlendFit FitBlend(std::span<const KinematicsWorkspace> frames, const std::vector<int>& valid,
+                  std::span<const Vec3> y, size_t stride, size_t m, int child, int parent) {
   const auto uc = static_cast<size_t>(child), up = static_cast<size_t>(parent);
   Mat6 H = Mat6::Zero();
   Vec6 g = Vec6::Zero();
@@ -64,7 +65,9 @@ BlendFit FitBlend(std::span<const KinematicsWorkspace> frames, const std::vector
   double sq = 0.0;
   for (int f : valid) {
     const auto uf = static_cast<size_t>(f);
-    sq += (frames[uf].R_WJ[uc] * fit.a + frames[uf].R_WJ[up] * fit.b + frames[uf].p_WJ[up] - y[uf * stride + m]).squaredNorm();
+    sq += (frames[uf].R_WJ[uc] * fit.a + frames[uf].R_WJ[up] * fit.b + frames[uf].p_WJ[up] -
+           y[uf * stride + m])
+              .squaredNorm();
   }
   fit.rms = std::sqrt(sq / static_cast<double>(valid.size()));
   return fit;
@@ -74,20 +77,24 @@ BlendFit FitBlend(std::span<const KinematicsWorkspace> frames, const std::vector
 
 void CalibrationOptions::Validate() const {
   if (!(max_rms_m > 0.0)) throw std::invalid_argument("CalibrationOptions.max_rms_m: expected > 0");
-  if (!(blend_improvement > 0.0 && blend_improvement <= 1.0)) throw std::invalid_argument("CalibrationOptions.blend_improvement: expected (0, 1]");
+  if (!(blend_improvement > 0.0 && blend_improvement <= 1.0))
+    throw std::invalid_argument("CalibrationOptions.blend_improvement: expected (0, 1]");
   if (!(blend_parent_weight > 0.0 && blend_parent_weight < 1.0))
     throw std::invalid_argument("CalibrationOptions.blend_parent_weight: expected (0, 1)");
   if (min_frames < 1) throw std::invalid_argument("CalibrationOptions.min_frames: expected >= 1");
 }
 
-std::vector<MarkerCalibration> CalibrateMarkers(const Skeleton& skeleton, std::span<const KinematicsWorkspace> joint_frames,
-                                                std::span<const std::string> names, std::span<const Vec3> observed,
+std::vector<MarkerCalibration> CalibrateMarkers(const Skeleton& skeleton,
+                                                std::span<const KinematicsWorkspace> joint_frames,
+                                                std::span<const std::string> names,
+                                                std::span<const Vec3> observed,
                                                 const CalibrationOptions& options) {
   options.Validate();
   const size_t stride = names.size();
   if (observed.size() != joint_frames.size() * stride)
-    throw std::invalid_argument("calibration: " + std::to_string(observed.size()) + " observations for " +
-                                std::to_string(joint_frames.size()) + " frames x " + std::to_string(stride) + " markers");
+    throw std::invalid_argument("calibration: " + std::to_string(observed.size()) +
+                                " observations for " + std::to_string(joint_frames.size()) +
+                                " frames x " + std::to_string(stride) + " markers");
   std::vector<MarkerCalibration> out;
   for (size_t m = 0; m < stride; ++m) {
     MarkerCalibration cal;
@@ -97,7 +104,8 @@ std::vector<MarkerCalibration> CalibrateMarkers(const Skeleton& skeleton, std::s
       if (observed[f * stride + m].allFinite()) valid.push_back(static_cast<int>(f));
     cal.frames_used = static_cast<int>(valid.size());
     if (cal.frames_used < options.min_frames) {
-      cal.reason = "only " + std::to_string(cal.frames_used) + " valid frames (need " + std::to_string(options.min_frames) + ")";
+      cal.reason = "only " + std::to_string(cal.frames_used) + " valid frames (need " +
+                   std::to_string(options.min_frames) + ")";
       out.push_back(cal);
       continue;
     }
@@ -116,12 +124,14 @@ std::vector<MarkerCalibration> CalibrateMarkers(const Skeleton& skeleton, std::s
     if (best_fit.rms > options.min_rigid_rms_for_blend_m) {
       // Try blends across the joints next to the best one: (best, parent) and (child, best).
       std::vector<std::pair<int, int>> pairs;
-      if (skeleton.joint(best).parent.is_valid()) pairs.emplace_back(best, skeleton.joint(best).parent.value);
+      if (skeleton.joint(best).parent.is_valid())
+        pairs.emplace_back(best, skeleton.joint(best).parent.value);
       for (int c : skeleton.children(best)) pairs.emplace_back(c, best);
       BlendFit best_blend;
       std::pair<int, int> best_pair{-1, -1};
       for (const auto& [c, p] : pairs) {
-        if (skeleton.joint(c).type == JointType::kFree) continue;  // its offset moves; no fixed blend
+        if (skeleton.joint(c).type == JointType::kFree)
+          continue;  // its offset moves; no fixed blend
         const BlendFit fit = FitBlend(joint_frames, valid, observed, stride, m, c, p);
         if (fit.rms < best_blend.rms) {
           best_blend = fit;
@@ -139,8 +149,10 @@ std::vector<MarkerCalibration> CalibrateMarkers(const Skeleton& skeleton, std::s
     }
     if (cal.rms_m > options.max_rms_m) {
       char buf[160];
-      std::snprintf(buf, sizeof(buf), "best fit (joint '%s') leaves %.1f mm RMS, above the %.1f mm limit",
-                    skeleton.joint(cal.definition.attachments[0].joint).name.c_str(), cal.rms_m * 1e3, options.max_rms_m * 1e3);
+      std::snprintf(buf, sizeof(buf),
+                    "best fit (joint '%s') leaves %.1f mm RMS, above the %.1f mm limit",
+                    skeleton.joint(cal.definition.attachments[0].joint).name.c_str(),
+                    cal.rms_m * 1e3, options.max_rms_m * 1e3);
       cal.reason = buf;
     } else {
       cal.accepted = true;

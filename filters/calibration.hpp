@@ -39,8 +39,10 @@ struct MarkerCalibration {
 /// Calibrates every marker. joint_frames[f] is FK of the skeleton at frame f;
 /// observed holds positions frame-major (observed[f * names.size() + m], metres, NaN when
 /// missing). Allocates; offline. Throws std::invalid_argument on mismatched sizes.
-std::vector<MarkerCalibration> CalibrateMarkers(const Skeleton& skeleton, std::span<const KinematicsWorkspace> joint_frames,
-                                                std::span<const std::string> names, std::span<const Vec3> observed,
+std::vector<MarkerCalibration> CalibrateMarkers(const Skeleton& skeleton,
+                                                std::span<const KinematicsWorkspace> joint_frames,
+                                                std::span<const std::string> names,
+                                                std::span<const Vec3> observed,
                                                 const CalibrationOptions& options = {});
 
 }  // namespace mocapd

@@ -14,44 +14,56 @@ constexpr double kDeg = M_PI / 180.0;
 constexpr double kNone = 1.0;  // the key's unit is SI already
 
 using O = CleanupOptions;
-// clang-format off
+using F = CleanupOptionField;
+constexpr const char* kPipeline = "pipeline";
+constexpr const char* kDetectors = "pipeline.detectors";
 const std::array kFields = {
-  CleanupOptionField{"rate_hz", nullptr, "rate_hz", kNone, 1, 10000, &O::rate_hz},
-  CleanupOptionField{"lookahead", "pipeline", "lookahead", kNone, 0, 1000, &O::lookahead},
-  CleanupOptionField{"window", "pipeline", "window", kNone, 1, 100000, &O::window},
-  CleanupOptionField{"disagreement_position_m", "pipeline.detectors", "disagreement_position_mm", kMm, 1, 1e5, &O::disagreement_position_m},
-  CleanupOptionField{"disagreement_rotation_rad", "pipeline.detectors", "disagreement_rotation_deg", kDeg, 1, 1000, &O::disagreement_rotation_rad},
-  CleanupOptionField{"disagreement_residual_m", nullptr, "disagreement_residual_mm", kMm, 0, 1000, &O::disagreement_residual_m},
-  CleanupOptionField{"residual_floor_m", "pipeline.detectors", "residual_floor_mm", kMm, 0.1, 1e5, &O::residual_floor_m},
-  CleanupOptionField{"residual_scale_factor", "pipeline.detectors", "residual_scale_factor", kNone, 1, 100, &O::residual_scale_factor},
-  CleanupOptionField{"spike_m", "pipeline.detectors", "spike_mm", kMm, 1, 1e5, &O::spike_m},
-  CleanupOptionField{"rigid_tolerance_m", "pipeline.detectors", "rigid_tolerance_mm", kMm, 1, 1e5, &O::rigid_tolerance_m},
-  CleanupOptionField{"swap_margin_m", "pipeline.detectors", "swap_margin_mm", kMm, 0, 1e5, &O::swap_margin_m},
-  CleanupOptionField{"swap_search_m", "pipeline.detectors", "swap_search_mm", kMm, 1, 1e5, &O::swap_search_m},
-  CleanupOptionField{"relabel_swaps", "pipeline.detectors", "relabel_swaps", kNone, 0, 1, &O::relabel_swaps},
-  CleanupOptionField{"frozen_radius_m", nullptr, "frozen_radius_mm", kMm, 0.1, 1e5, &O::frozen_radius_m},
-  CleanupOptionField{"frozen_reference_motion_m", nullptr, "frozen_reference_motion_mm", kMm, 0.1, 1e5, &O::frozen_reference_motion_m},
-  CleanupOptionField{"frozen_frames", "pipeline.detectors", "frozen_frames", kNone, 1, 1e6, &O::frozen_frames},
-  CleanupOptionField{"stray_residual_m", "pipeline.detectors", "stray_residual_mm", kMm, 1, 1e5, &O::stray_residual_m},
-  CleanupOptionField{"stray_frames", "pipeline.detectors", "stray_frames", kNone, 1, 1e6, &O::stray_frames},
-  CleanupOptionField{"fallen_frames", "pipeline.detectors", "fallen_frames", kNone, 1, 1e6, &O::fallen_frames},
-  CleanupOptionField{"fallen_residual_m", "pipeline.detectors", "fallen_residual_mm", kMm, 1, 1e5, &O::fallen_residual_m},
-  CleanupOptionField{"small_gap_frames", "pipeline.detectors", "small_gap_frames", kNone, 0, 1000, &O::small_gap_frames},
-  CleanupOptionField{"small_track_frames", "pipeline.detectors", "small_track_frames", kNone, 0, 1000, &O::small_track_frames},
-  CleanupOptionField{"trim_slope_m", nullptr, "trim_slope_mm", kMm, 0.001, 1000, &O::trim_slope_m},
-  CleanupOptionField{"max_trim_frames", "pipeline.detectors", "max_trim_frames", kNone, 0, 1000, &O::max_trim_frames},
-  CleanupOptionField{"max_offset_velocity_m", nullptr, "max_offset_velocity_mm", kMm, 0.001, 1000, &O::max_offset_velocity_m},
-  CleanupOptionField{"fill_reference_acceleration_mps2", nullptr, "fill_reference_acceleration_mps2", kNone, 0, 1e6, &O::fill_reference_acceleration_mps2},
-  CleanupOptionField{"fill_snap_release", nullptr, "fill_snap_release", kNone, 0, 1, &O::fill_snap_release},
-  CleanupOptionField{"repaired_weight", nullptr, "repaired_weight", kNone, 0, 1, &O::repaired_weight},
-  CleanupOptionField{"interpolated_weight", nullptr, "interpolated_weight", kNone, 0, 1, &O::interpolated_weight},
-  CleanupOptionField{"fill_weight_ramp", nullptr, "fill_weight_ramp", kNone, 1e-6, 1e6, &O::fill_weight_ramp},
-  CleanupOptionField{"data_catchup_m", nullptr, "data_catchup_mm", kMm, 0, 1000, &O::data_catchup_m},
-  CleanupOptionField{"data_motion_acceleration_m", nullptr, "data_motion_acceleration_mm", kMm, 0.001, 1000, &O::data_motion_acceleration_m},
-  CleanupOptionField{"fill_anchor_radius_m", nullptr, "fill_anchor_radius_mm", kMm, 0, 1000, &O::fill_anchor_radius_m},
-  CleanupOptionField{"anchor_holds_unseen_limbs", nullptr, "anchor_holds_unseen_limbs", kNone, 0, 1, &O::anchor_holds_unseen_limbs},
+    F{"rate_hz", nullptr, "rate_hz", kNone, 1, 10000, &O::rate_hz},
+    F{"lookahead", kPipeline, "lookahead", kNone, 0, 1000, &O::lookahead},
+    F{"window", kPipeline, "window", kNone, 1, 100000, &O::window},
+    F{"disagreement_position_m", kDetectors, "disagreement_position_mm", kMm, 1, 1e5,
+      &O::disagreement_position_m},
+    F{"disagreement_rotation_rad", kDetectors, "disagreement_rotation_deg", kDeg, 1, 1000,
+      &O::disagreement_rotation_rad},
+    F{"disagreement_residual_m", nullptr, "disagreement_residual_mm", kMm, 0, 1000,
+      &O::disagreement_residual_m},
+    F{"residual_floor_m", kDetectors, "residual_floor_mm", kMm, 0.1, 1e5, &O::residual_floor_m},
+    F{"residual_scale_factor", kDetectors, "residual_scale_factor", kNone, 1, 100,
+      &O::residual_scale_factor},
+    F{"spike_m", kDetectors, "spike_mm", kMm, 1, 1e5, &O::spike_m},
+    F{"rigid_tolerance_m", kDetectors, "rigid_tolerance_mm", kMm, 1, 1e5, &O::rigid_tolerance_m},
+    F{"swap_margin_m", kDetectors, "swap_margin_mm", kMm, 0, 1e5, &O::swap_margin_m},
+    F{"swap_search_m", kDetectors, "swap_search_mm", kMm, 1, 1e5, &O::swap_search_m},
+    F{"relabel_swaps", kDetectors, "relabel_swaps", kNone, 0, 1, &O::relabel_swaps},
+    F{"frozen_radius_m", nullptr, "frozen_radius_mm", kMm, 0.1, 1e5, &O::frozen_radius_m},
+    F{"frozen_reference_motion_m", nullptr, "frozen_reference_motion_mm", kMm, 0.1, 1e5,
+      &O::frozen_reference_motion_m},
+    F{"frozen_frames", kDetectors, "frozen_frames", kNone, 1, 1e6, &O::frozen_frames},
+    F{"stray_residual_m", kDetectors, "stray_residual_mm", kMm, 1, 1e5, &O::stray_residual_m},
+    F{"stray_frames", kDetectors, "stray_frames", kNone, 1, 1e6, &O::stray_frames},
+    F{"fallen_frames", kDetectors, "fallen_frames", kNone, 1, 1e6, &O::fallen_frames},
+    F{"fallen_residual_m", kDetectors, "fallen_residual_mm", kMm, 1, 1e5, &O::fallen_residual_m},
+    F{"small_gap_frames", kDetectors, "small_gap_frames", kNone, 0, 1000, &O::small_gap_frames},
+    F{"small_track_frames", kDetectors, "small_track_frames", kNone, 0, 1000,
+      &O::small_track_frames},
+    F{"trim_slope_m", nullptr, "trim_slope_mm", kMm, 0.001, 1000, &O::trim_slope_m},
+    F{"max_trim_frames", kDetectors, "max_trim_frames", kNone, 0, 1000, &O::max_trim_frames},
+    F{"max_offset_velocity_m", nullptr, "max_offset_velocity_mm", kMm, 0.001, 1000,
+      &O::max_offset_velocity_m},
+    F{"fill_reference_acceleration_mps2", nullptr, "fill_reference_acceleration_mps2", kNone, 0,
+      1e6, &O::fill_reference_acceleration_mps2},
+    F{"fill_snap_release", nullptr, "fill_snap_release", kNone, 0, 1, &O::fill_snap_release},
+    F{"repaired_weight", nullptr, "repaired_weight", kNone, 0, 1, &O::repaired_weight},
+    F{"interpolated_weight", nullptr, "interpolated_weight", kNone, 0, 1, &O::interpolated_weight},
+    F{"fill_weight_ramp", nullptr, "fill_weight_ramp", kNone, 1e-6, 1e6, &O::fill_weight_ramp},
+    F{"data_catchup_m", nullptr, "data_catchup_mm", kMm, 0, 1000, &O::data_catchup_m},
+    F{"data_motion_acceleration_m", nullptr, "data_motion_acceleration_mm", kMm, 0.001, 1000,
+      &O::data_motion_acceleration_m},
+    F{"fill_anchor_radius_m", nullptr, "fill_anchor_radius_mm", kMm, 0, 1000,
+      &O::fill_anchor_radius_m},
+    F{"anchor_holds_unseen_limbs", nullptr, "anchor_holds_unseen_limbs", kNone, 0, 1,
+      &O::anchor_holds_unseen_limbs},
 };
-// clang-format on
 
 std::string Str(double v) {
   std::ostringstream s;
@@ -84,16 +96,17 @@ std::span<const CleanupOptionField> CleanupOptionFields() { return kFields; }
 
 void CleanupOptions::Validate() const {
   for (const CleanupOptionField& f : kFields) {
-    const double value = std::visit(
-        [this](auto member) { return static_cast<double>(this->*member); }, f.member);
+    const double value =
+        std::visit([this](auto member) { return static_cast<double>(this->*member); }, f.member);
     const double min = f.min * f.to_si, max = f.max * f.to_si;
     if (!(value >= min && value <= max))  // NaN fails too
-      throw std::invalid_argument(std::string("CleanupOptions.") + f.name + ": must be in [" + Str(min) + ", " +
-                                  Str(max) + "], got " + Str(value));
+      throw std::invalid_argument(std::string("CleanupOptions.") + f.name + ": must be in [" +
+                                  Str(min) + ", " + Str(max) + "], got " + Str(value));
   }
   if (!(frozen_reference_motion_m > frozen_radius_m))
-    throw std::invalid_argument("CleanupOptions.frozen_reference_motion_m: must exceed frozen_radius_m (" +
-                                Str(frozen_radius_m) + "), got " + Str(frozen_reference_motion_m));
+    throw std::invalid_argument(
+        "CleanupOptions.frozen_reference_motion_m: must exceed frozen_radius_m (" +
+        Str(frozen_radius_m) + "), got " + Str(frozen_reference_motion_m));
   naive_ik.Validate();
   robust_ik.Validate();
   final_ik.Validate();

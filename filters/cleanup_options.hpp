@@ -25,11 +25,11 @@ struct CleanupOptions {
   double disagreement_residual_m = 0.01;
   double residual_floor_m = 0.012;     ///< Residuals below this are never outliers.
   double residual_scale_factor = 5.0;  ///< Threshold = max(floor, factor x running residual scale).
-  double spike_m = 0.03;               ///< Per-frame displacement differing from the reference's by more.
-  double rigid_tolerance_m = 0.03;     ///< Distance change between two markers on one rigid segment.
-  double swap_margin_m = 0.01;         ///< A swap must explain the data better by at least this.
-  double swap_search_m = 0.15;         ///< Only markers this close in the previous frame can swap.
-  bool relabel_swaps = true;           ///< Swap the labels back instead of filling both.
+  double spike_m = 0.03;  ///< Per-frame displacement differing from the reference's by more.
+  double rigid_tolerance_m = 0.03;  ///< Distance change between two markers on one rigid segment.
+  double swap_margin_m = 0.01;      ///< A swap must explain the data better by at least this.
+  double swap_search_m = 0.15;      ///< Only markers this close in the previous frame can swap.
+  bool relabel_swaps = true;        ///< Swap the labels back instead of filling both.
   /// Frozen: a marker staying within this distance of where it came to rest (wide enough
   /// for capture jitter, which a per-frame motion test mistakes for motion)...
   double frozen_radius_m = 0.015;
@@ -45,7 +45,8 @@ struct CleanupOptions {
   // Mask clean-up, bounded by the lookahead.
   int small_gap_frames = 5;     ///< Gaps up to this long between observed samples: plain Hermite.
   int small_track_frames = 10;  ///< Observed runs up to this long between gaps are dropped.
-  double trim_slope_m = 0.01;   ///< A returning track is trimmed while its per-frame slope differs more.
+  double trim_slope_m =
+      0.01;  ///< A returning track is trimmed while its per-frame slope differs more.
   int max_trim_frames = 6;
 
   // Repair (filters/gap_repair.hpp).
@@ -85,7 +86,8 @@ struct CleanupOptions {
   IkOptions naive_ik;   ///< Y: plain least squares.
   IkOptions robust_ik;  ///< Y^: Huber (4 mm), weak velocity prediction.
   IkOptions final_ik;   ///< Y-: decaying velocity prediction, so joints without data come to rest.
-  IkOptions anchor_ik;  ///< The anchor (see fill_anchor_radius_m): one iteration from last frame's Y-.
+  IkOptions
+      anchor_ik;  ///< The anchor (see fill_anchor_radius_m): one iteration from last frame's Y-.
   CleanupOptions();
   /// Throws std::invalid_argument naming the field, its bounds and the value if an
   /// option is out of range (the bounds of CleanupOptionFields()).
@@ -96,11 +98,12 @@ struct CleanupOptions {
 /// key carries the unit a person writes (spike_mm); a value in that unit times to_si is
 /// the option's value (SI: m, rad, s).
 struct CleanupOptionField {
-  const char* name;     ///< The C++ member's name.
-  const char* section;  ///< Config table ("pipeline", "pipeline.detectors"); nullptr: not in config files.
-  const char* key;      ///< Config key, with its unit suffix.
-  double to_si;         ///< Key's unit -> SI.
-  double min, max;      ///< Bounds, in the key's unit.
+  const char* name;  ///< The C++ member's name.
+  const char*
+      section;  ///< Config table ("pipeline", "pipeline.detectors"); nullptr: not in config files.
+  const char* key;  ///< Config key, with its unit suffix.
+  double to_si;     ///< Key's unit -> SI.
+  double min, max;  ///< Bounds, in the key's unit.
   std::variant<double CleanupOptions::*, int CleanupOptions::*, bool CleanupOptions::*> member;
 };
 

@@ -11,7 +11,8 @@ const CleanupOptions& Validated(const CleanupOptions& options) {
 
 }  // namespace
 
-CleanupPipeline::CleanupPipeline(std::shared_ptr<const Skeleton> skeleton, std::shared_ptr<const MarkerSet> markers,
+CleanupPipeline::CleanupPipeline(std::shared_ptr<const Skeleton> skeleton,
+                                 std::shared_ptr<const MarkerSet> markers,
                                  const CleanupOptions& options)
     : skeleton_(std::move(skeleton)),
       markers_(std::move(markers)),

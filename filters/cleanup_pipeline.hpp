@@ -28,8 +28,8 @@ namespace mocapd {
 class CleanupPipeline {
  public:
   /// Throws std::invalid_argument if the options are invalid.
-  CleanupPipeline(std::shared_ptr<const Skeleton> skeleton, std::shared_ptr<const MarkerSet> markers,
-                  const CleanupOptions& options);
+  CleanupPipeline(std::shared_ptr<const Skeleton> skeleton,
+                  std::shared_ptr<const MarkerSet> markers, const CleanupOptions& options);
   CleanupPipeline(const CleanupPipeline&) = delete;
   CleanupPipeline& operator=(const CleanupPipeline&) = delete;
 

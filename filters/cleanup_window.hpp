@@ -38,7 +38,8 @@ const char* to_string(MarkerStatus status);
 /// Where a published sample came from, which sets its weight in the final solve.
 enum class SampleSource : uint8_t {
   kCaptured,      ///< The capture's sample (relabelled or not).
-  kInterpolated,  ///< Filled between two known ends (a short gap, a gap whose end is in the lookahead).
+  kInterpolated,  ///< Filled between two known ends (a short gap, a gap whose end is in the
+                  ///< lookahead).
   kExtrapolated,  ///< Filled from one side only: a guess on the reference.
   kNone,          ///< Unrecoverable: nothing published.
 };
@@ -74,9 +75,9 @@ struct CleanupCounters {
 
 /// One buffered frame; every vector has one entry per marker.
 struct WindowFrame {
-  int64_t frame = -1;           ///< -1: the slot holds no frame.
-  std::vector<Vec3> raw;        ///< As captured (metres), after swap relabelling; NaN where missing.
-  std::vector<uint8_t> valid;   ///< A sample was captured.
+  int64_t frame = -1;          ///< -1: the slot holds no frame.
+  std::vector<Vec3> raw;       ///< As captured (metres), after swap relabelling; NaN where missing.
+  std::vector<uint8_t> valid;  ///< A sample was captured.
   std::vector<uint8_t> relabelled;
   std::vector<MaskReason> mask;
   std::vector<Vec3> reference;  ///< X^ = LBS(Y^), metres.
@@ -106,7 +107,9 @@ class CleanupWindow {
   }
 
  private:
-  size_t Index(int64_t frame) const { return static_cast<size_t>(frame % static_cast<int64_t>(frames_.size())); }
+  size_t Index(int64_t frame) const {
+    return static_cast<size_t>(frame % static_cast<int64_t>(frames_.size()));
+  }
   std::vector<WindowFrame> frames_;
 };
 

@@ -4,7 +4,8 @@
 #include <algorithm>
 
 namespace mocapd {
-FinalSolve::FinalSolve(const Skeleton& skeleton, const MarkerSet& markers, const CleanupOptions& options)
+FinalSolve::FinalSolve(const Skeleton& skeleton, const MarkerSet& markers,
+                       const CleanupOptions& options)
     : skeleton_(skeleton),
       markers_(markers),
       options_(options),
@@ -47,8 +48,8 @@ void FinalSolve::Solve(CleanFrame* frame, CleanupCounters* counters) {
     if (eased) {
       Vec3 motion = Vec3::Zero();  // unknown on a sample's first frame back
       if (track.last_captured == tau - 1)
-        motion = track.data_motion +
-                 ClampNorm(Vec3(x - track.output - track.data_motion), options_.data_motion_acceleration_m);
+        motion = track.data_motion + ClampNorm(Vec3(x - track.output - track.data_motion),
+                                               options_.data_motion_acceleration_m);
       track.data_motion = motion;
       const Vec3 from = final_.predicted_markers()[m] + motion;
       if ((x - from).norm() > catchup) {
@@ -59,21 +60,24 @@ void FinalSolve::Solve(CleanFrame* frame, CleanupCounters* counters) {
     solve_targets_[m] = solve_x;
     if (status != MarkerStatus::kUnrecoverable) track.output = x;
     if (data) track.last_captured = tau;
-    double weight = data                                       ? 1.0
-                    : status == MarkerStatus::kUnrecoverable   ? 0.0
+    double weight = data                                              ? 1.0
+                    : status == MarkerStatus::kUnrecoverable          ? 0.0
                     : frame->source[m] == SampleSource::kInterpolated ? options_.interpolated_weight
-                                                               : options_.repaired_weight;
+                                                                      : options_.repaired_weight;
     // A sample handed from a guess (a one-sided fill, weak) to data (an interpolation,
     // or a captured sample when the catch-up is off) gains weight gradually, so the final
     // solve does not snap to it in one frame.
-    if (options_.fill_weight_ramp > 1.0 && status != MarkerStatus::kUnrecoverable && weight > track.weight && !eased)
-      weight = std::min(weight, std::max(track.weight, options_.repaired_weight) * options_.fill_weight_ramp);
+    if (options_.fill_weight_ramp > 1.0 && status != MarkerStatus::kUnrecoverable &&
+        weight > track.weight && !eased)
+      weight = std::min(
+          weight, std::max(track.weight, options_.repaired_weight) * options_.fill_weight_ramp);
     track.weight = weight;
     weights_[m] = weight;
     frame->weight[m] = weight;
   }
   if (options_.fill_anchor_radius_m > 0.0 && final_.has_solution()) AnchorRepairs(*frame, counters);
-  frame->final_solve = SolveIk(skeleton_, markers_, options_.final_ik, solve_targets_, weights_, &final_);
+  frame->final_solve =
+      SolveIk(skeleton_, markers_, options_.final_ik, solve_targets_, weights_, &final_);
   counters->CountSolve(frame->final_solve);
   frame->pose = final_.pose();
 }
@@ -88,18 +92,24 @@ void FinalSolve::AnchorRepairs(const CleanFrame& frame, CleanupCounters* counter
   const size_t m_count = tracks_.size();
   for (size_t m = 0; m < m_count; ++m)
     anchor_weights_[m] =
-        frame.source[m] == SampleSource::kCaptured && !tracks_[m].catching_up && weights_[m] >= 1.0 ? 1.0 : 0.0;
+        frame.source[m] == SampleSource::kCaptured && !tracks_[m].catching_up && weights_[m] >= 1.0
+            ? 1.0
+            : 0.0;
   anchor_.Reset(final_.pose());
-  const IkSummary summary = SolveIk(skeleton_, markers_, options_.anchor_ik, solve_targets_, anchor_weights_, &anchor_);
+  const IkSummary summary =
+      SolveIk(skeleton_, markers_, options_.anchor_ik, solve_targets_, anchor_weights_, &anchor_);
   counters->CountSolve(summary);
   // Too few trusted samples to solve: the anchor is last frame's skeleton.
-  std::span<const Vec3> anchor =
-      summary.status == IkStatus::kTooFewMarkers ? final_.predicted_markers() : anchor_.predicted_markers();
-  if (summary.status != IkStatus::kTooFewMarkers && options_.anchor_holds_unseen_limbs && HoldUnseenLimbs())
+  std::span<const Vec3> anchor = summary.status == IkStatus::kTooFewMarkers
+                                     ? final_.predicted_markers()
+                                     : anchor_.predicted_markers();
+  if (summary.status != IkStatus::kTooFewMarkers && options_.anchor_holds_unseen_limbs &&
+      HoldUnseenLimbs())
     anchor = held_markers_;
   for (size_t m = 0; m < m_count; ++m) {
     if (anchor_weights_[m] > 0.0 || weights_[m] <= 0.0 || tracks_[m].catching_up) continue;
-    solve_targets_[m] = anchor[m] + ClampNorm(Vec3(solve_targets_[m] - anchor[m]), options_.fill_anchor_radius_m);
+    solve_targets_[m] =
+        anchor[m] + ClampNorm(Vec3(solve_targets_[m] - anchor[m]), options_.fill_anchor_radius_m);
   }
 }
 
@@ -113,9 +123,11 @@ bool FinalSolve::HoldUnseenLimbs() {
   const int joints = skeleton_.num_joints();
   std::fill(limb_seen_.begin(), limb_seen_.end(), 0);
   for (int m = 0; m < markers_.num_markers(); ++m)
-    if (anchor_weights_[static_cast<size_t>(m)] > 0.0) limb_seen_[static_cast<size_t>(markers_.primary_joint(m))] = 1;
+    if (anchor_weights_[static_cast<size_t>(m)] > 0.0)
+      limb_seen_[static_cast<size_t>(markers_.primary_joint(m))] = 1;
   for (int j = joints - 1; j > 0; --j)  // parents come first: children fold into them
-    if (limb_seen_[static_cast<size_t>(j)]) limb_seen_[static_cast<size_t>(skeleton_.joint(j).parent.value)] = 1;
+    if (limb_seen_[static_cast<size_t>(j)])
+      limb_seen_[static_cast<size_t>(skeleton_.joint(j).parent.value)] = 1;
   const KinematicsWorkspace& now = anchor_.kinematics();
   const KinematicsWorkspace& before = final_.kinematics();
   bool held = false;
@@ -124,9 +136,12 @@ bool FinalSolve::HoldUnseenLimbs() {
     const int parent = skeleton_.joint(j).parent.value;
     // Only a ball joint can take any orientation; the root of an unseen limb is an
     // unseen joint under a seen one.
-    if (parent < 0 || limb_seen_[uj] || !limb_seen_[static_cast<size_t>(parent)] || skeleton_.joint(j).type != JointType::kBall) continue;
+    if (parent < 0 || limb_seen_[uj] || !limb_seen_[static_cast<size_t>(parent)] ||
+        skeleton_.joint(j).type != JointType::kBall)
+      continue;
     if (!held) held_pose_ = anchor_.pose();
-    held_pose_.rotation[uj] = Quat(now.R_WJ[static_cast<size_t>(parent)].transpose() * before.R_WJ[uj]);
+    held_pose_.rotation[uj] =
+        Quat(now.R_WJ[static_cast<size_t>(parent)].transpose() * before.R_WJ[uj]);
     held = true;
   }
   if (!held) return false;

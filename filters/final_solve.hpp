@@ -33,11 +33,11 @@ class FinalSolve {
 
  private:
   struct Track {
-    double weight = 1.0;               // last final-solve weight
-    bool catching_up = false;          // the target is still closing on the sample
-    Vec3 data_motion = Vec3::Zero();   // the sample's motion as the catch-up last took it
-    Vec3 output = Vec3::Zero();        // last published sample ...
-    int64_t last_captured = -1;        // ... and the frame of the last captured one
+    double weight = 1.0;              // last final-solve weight
+    bool catching_up = false;         // the target is still closing on the sample
+    Vec3 data_motion = Vec3::Zero();  // the sample's motion as the catch-up last took it
+    Vec3 output = Vec3::Zero();       // last published sample ...
+    int64_t last_captured = -1;       // ... and the frame of the last captured one
   };
 
   void AnchorRepairs(const CleanFrame& frame, CleanupCounters* counters);
@@ -49,11 +49,11 @@ class FinalSolve {
   IkState final_, anchor_;
   std::vector<Track> tracks_;
   std::vector<double> weights_, anchor_weights_;
-  std::vector<Vec3> solve_targets_;      // what the solve fits: X-, captured samples eased in
-  std::vector<uint8_t> limb_seen_;       // per joint: a trusted sample on it or below
-  Pose held_pose_;                       // the anchor with its unseen limbs held in the world...
+  std::vector<Vec3> solve_targets_;  // what the solve fits: X-, captured samples eased in
+  std::vector<uint8_t> limb_seen_;   // per joint: a trusted sample on it or below
+  Pose held_pose_;                   // the anchor with its unseen limbs held in the world...
   KinematicsWorkspace held_kinematics_;
-  std::vector<Vec3> held_markers_;       // ...and its markers
+  std::vector<Vec3> held_markers_;  // ...and its markers
 };
 
 }  // namespace mocapd

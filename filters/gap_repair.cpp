@@ -50,7 +50,8 @@ void GapRepair::Repair(const CleanupWindow& window, int64_t tau, int64_t newest,
       track.offset_velocity = track.has_published ? Vec3(offset - track.offset) : Vec3::Zero();
       track.offset = offset;
       track.output_velocity = track.has_published ? Vec3(x - track.output) : Vec3::Zero();
-      track.reference_velocity = has_reference_before ? Vec3(ref - window.at(tau - 1).reference[m]) : Vec3::Zero();
+      track.reference_velocity =
+          has_reference_before ? Vec3(ref - window.at(tau - 1).reference[m]) : Vec3::Zero();
       track.held_snap.setZero();
       track.last_observed = tau;
     } else {
@@ -61,7 +62,8 @@ void GapRepair::Repair(const CleanupWindow& window, int64_t tau, int64_t newest,
           break;
         }
       }
-      const bool end_slope_known = end >= 0 && end + 1 <= newest && window.at(end + 1).mask[m] == MaskReason::kNone;
+      const bool end_slope_known =
+          end >= 0 && end + 1 <= newest && window.at(end + 1).mask[m] == MaskReason::kNone;
       if (!track.has_published) {
         if (end < 0) {
           status = MarkerStatus::kUnrecoverable;  // never seen: nothing to repair from
@@ -72,13 +74,15 @@ void GapRepair::Repair(const CleanupWindow& window, int64_t tau, int64_t newest,
           x = ref + track.offset;
           track.output_velocity = Vec3::Zero();
         }
-      } else if (end >= 0 && track.last_observed == tau - 1 && end - tau <= options_.small_gap_frames) {
+      } else if (end >= 0 && track.last_observed == tau - 1 &&
+                 end - tau <= options_.small_gap_frames) {
         interpolated = true;
         // A short gap right after an observed sample: a plain Hermite on the raw path.
-        const HermiteSegment h{
-            track.output, track.output_velocity, window.at(end).raw[m],
-            end_slope_known ? Vec3(window.at(end + 1).raw[m] - window.at(end).raw[m]) : track.output_velocity,
-            static_cast<double>(end - tau + 1)};
+        const HermiteSegment h{track.output, track.output_velocity, window.at(end).raw[m],
+                               end_slope_known
+                                   ? Vec3(window.at(end + 1).raw[m] - window.at(end).raw[m])
+                                   : track.output_velocity,
+                               static_cast<double>(end - tau + 1)};
         x = h.Value(1.0);
         track.output_velocity = h.Derivative(1.0);
         const Vec3 offset = x - ref;
@@ -100,10 +104,11 @@ void GapRepair::Repair(const CleanupWindow& window, int64_t tau, int64_t newest,
           const WindowFrame& e = window.at(end);
           const Vec3 snap_at_end = snap_now + reference_snap(m, tau + 1, end, &velocity);
           h.p1 = e.raw[m] - (e.reference[m] - snap_at_end);
-          h.m1 = end_slope_known ? ClampNorm((window.at(end + 1).raw[m] - window.at(end + 1).reference[m]) -
-                                                 (e.raw[m] - e.reference[m]),
-                                             max_v)
-                                 : Vec3::Zero();
+          h.m1 = end_slope_known
+                     ? ClampNorm((window.at(end + 1).raw[m] - window.at(end + 1).reference[m]) -
+                                     (e.raw[m] - e.reference[m]),
+                                 max_v)
+                     : Vec3::Zero();
           h.length = static_cast<double>(end - tau + 1);
         } else {
           h.p1 = h.p0;
@@ -134,7 +139,7 @@ void GapRepair::Repair(const CleanupWindow& window, int64_t tau, int64_t newest,
     out->markers[m] = x;
     out->status[m] = status;
     out->reason[m] = status == MarkerStatus::kObserved ? MaskReason::kNone : reason;
-    out->source[m] = s.mask[m] == MaskReason::kNone        ? SampleSource::kCaptured
+    out->source[m] = s.mask[m] == MaskReason::kNone           ? SampleSource::kCaptured
                      : status == MarkerStatus::kUnrecoverable ? SampleSource::kNone
                      : interpolated                           ? SampleSource::kInterpolated
                                                               : SampleSource::kExtrapolated;

@@ -26,7 +26,8 @@ class GapRepair {
   /// Fills out's markers, status, reason and source for frame tau from the window, which
   /// holds frames up to `newest` (the lookahead the repair may use). Frames must come in
   /// order, tau = the previous call's + 1 (or 0 after Reset). Never allocates or throws.
-  void Repair(const CleanupWindow& window, int64_t tau, int64_t newest, CleanFrame* out, CleanupCounters* counters);
+  void Repair(const CleanupWindow& window, int64_t tau, int64_t newest, CleanFrame* out,
+              CleanupCounters* counters);
   /// Forgets all state (a capture restart).
   void Reset();
 

@@ -18,12 +18,14 @@ struct HermiteSegment {
   /// Value at x frames from the start.
   Vec3 Value(double x) const {
     const double u = x / length, u2 = u * u, u3 = u2 * u;
-    return (2 * u3 - 3 * u2 + 1) * p0 + (u3 - 2 * u2 + u) * length * m0 + (-2 * u3 + 3 * u2) * p1 + (u3 - u2) * length * m1;
+    return (2 * u3 - 3 * u2 + 1) * p0 + (u3 - 2 * u2 + u) * length * m0 + (-2 * u3 + 3 * u2) * p1 +
+           (u3 - u2) * length * m1;
   }
   /// Per-frame derivative at x frames from the start.
   Vec3 Derivative(double x) const {
     const double u = x / length, u2 = u * u;
-    return ((6 * u2 - 6 * u) * p0 + (-6 * u2 + 6 * u) * p1) / length + (3 * u2 - 4 * u + 1) * m0 + (3 * u2 - 2 * u) * m1;
+    return ((6 * u2 - 6 * u) * p0 + (-6 * u2 + 6 * u) * p1) / length + (3 * u2 - 4 * u + 1) * m0 +
+           (3 * u2 - 2 * u) * m1;
   }
 };
 

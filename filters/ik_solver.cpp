@@ -40,7 +40,6 @@ void AddMoments(JointBlock* blk) {
   blk->b.tail<3>() += blk->wr;
 }
 
-
 double RobustCost(double r_norm, double delta) {
   if (delta <= 0.0 || r_norm <= delta) return 0.5 * r_norm * r_norm;
   return delta * (r_norm - 0.5 * delta);
@@ -54,8 +53,9 @@ double RobustWeight(double r_norm, double delta) {
 bool UsableMarker(const Vec3& y, double weight) { return weight > 0.0 && y.allFinite(); }
 
 // Marker cost of the current pose (robust loss), filling predicted.
-double MarkerCost(const MarkerSet& markers, const IkOptions& options, std::span<const Vec3> observed,
-                  std::span<const double> weights, const KinematicsWorkspace& ws, std::span<Vec3> predicted) {
+double MarkerCost(const MarkerSet& markers, const IkOptions& options,
+                  std::span<const Vec3> observed, std::span<const double> weights,
+                  const KinematicsWorkspace& ws, std::span<Vec3> predicted) {
   double cost = 0.0;
   for (int m = 0; m < markers.num_markers(); ++m) {
     const auto um = static_cast<size_t>(m);
@@ -63,7 +63,8 @@ double MarkerCost(const MarkerSet& markers, const IkOptions& options, std::span<
     if (!UsableMarker(observed[um], weights[um])) continue;
     const Vec3 r = observed[um] - predicted[um];
     // Plain least squares needs no square root.
-    cost += weights[um] * (options.huber_delta_m > 0.0 ? RobustCost(r.norm(), options.huber_delta_m) : 0.5 * r.squaredNorm());
+    cost += weights[um] * (options.huber_delta_m > 0.0 ? RobustCost(r.norm(), options.huber_delta_m)
+                                                       : 0.5 * r.squaredNorm());
   }
   return cost;
 }
@@ -72,22 +73,25 @@ double MarkerCost(const MarkerSet& markers, const IkOptions& options, std::span<
 // taken so far this frame, rest_error the rest-pose deviation at the warm start, both
 // per DOF (zero on translations). To first order x = q (-) q_prior and
 // rest_error + x = q (-) q_rest, which saves two logarithms per joint per evaluation.
-double PriorCost(double temporal_weight, double rest_weight, const Eigen::VectorXd& mask, const Eigen::VectorXd& rest_error,
-                 const Eigen::VectorXd& x) {
+double PriorCost(double temporal_weight, double rest_weight, const Eigen::VectorXd& mask,
+                 const Eigen::VectorXd& rest_error, const Eigen::VectorXd& x) {
   return 0.5 * (temporal_weight * (mask.array() * x.array().square()).sum() +
                 rest_weight * (mask.array() * (rest_error + x).array().square()).sum());
 }
 
 // Adds each marker's contribution to its joint's block (and the blend blocks), with
 // twists referred to each joint's pivot.
-void AccumulateMarkers(const MarkerSet& markers, const IkOptions& options, std::span<const Vec3> observed,
-                       std::span<const double> weights, std::span<const Vec3> predicted, const KinematicsWorkspace& ws,
+void AccumulateMarkers(const MarkerSet& markers, const IkOptions& options,
+                       std::span<const Vec3> observed, std::span<const double> weights,
+                       std::span<const Vec3> predicted, const KinematicsWorkspace& ws,
                        std::vector<JointBlock>* blocks) {
   for (int m = 0; m < markers.num_markers(); ++m) {
     const auto um = static_cast<size_t>(m);
     if (!UsableMarker(observed[um], weights[um])) continue;
     const Vec3 r = observed[um] - predicted[um];
-    const double w = options.huber_delta_m > 0.0 ? weights[um] * RobustWeight(r.norm(), options.huber_delta_m) : weights[um];
+    const double w = options.huber_delta_m > 0.0
+                         ? weights[um] * RobustWeight(r.norm(), options.huber_delta_m)
+                         : weights[um];
     const MarkerDefinition& def = markers.marker(m);
     const MarkerAttachment& a0 = def.attachments[0];
     const auto j0 = static_cast<size_t>(a0.joint);
@@ -115,17 +119,20 @@ void AccumulateMarkers(const MarkerSet& markers, const IkOptions& options, std::
     const Vec3 gamma = x0 - ws.p_WJ[j0];
     const Vec3 beta = a1.weight * (x1 - ws.p_WJ[j1]) + wc * (x0 - ws.p_WJ[j1]);
     const Mat3 Sb = Skew(beta), Sg = Skew(gamma);
-    blk.BB.topLeftCorner<3, 3>().noalias() += w * (beta.squaredNorm() * Mat3::Identity() - beta * beta.transpose());
+    blk.BB.topLeftCorner<3, 3>().noalias() +=
+        w * (beta.squaredNorm() * Mat3::Identity() - beta * beta.transpose());
     blk.BB.topRightCorner<3, 3>() += w * Sb;
     blk.BB.bottomLeftCorner<3, 3>() -= w * Sb;
     blk.BB.bottomRightCorner<3, 3>().diagonal().array() += w;
     const double wg = w * wc * wc;
-    blk.GG.topLeftCorner<3, 3>().noalias() += wg * (gamma.squaredNorm() * Mat3::Identity() - gamma * gamma.transpose());
+    blk.GG.topLeftCorner<3, 3>().noalias() +=
+        wg * (gamma.squaredNorm() * Mat3::Identity() - gamma * gamma.transpose());
     blk.GG.topRightCorner<3, 3>() += wg * Sg;
     blk.GG.bottomLeftCorner<3, 3>() -= wg * Sg;
     blk.GG.bottomRightCorner<3, 3>().diagonal().array() += wg;
     const double wbg = w * wc;
-    blk.BG.topLeftCorner<3, 3>().noalias() += wbg * (beta.dot(gamma) * Mat3::Identity() - gamma * beta.transpose());
+    blk.BG.topLeftCorner<3, 3>().noalias() +=
+        wbg * (beta.dot(gamma) * Mat3::Identity() - gamma * beta.transpose());
     blk.BG.topRightCorner<3, 3>() += wbg * Sb;
     blk.BG.bottomLeftCorner<3, 3>() -= wbg * Sg;
     blk.BG.bottomRightCorner<3, 3>().diagonal().array() += wbg;
@@ -180,7 +187,8 @@ bool CholeskyInPlace3(Mat3* H, Vec3* inv_diag) {
 }
 
 // Solves L X = M and L y = v in place for lower-triangular L.
-void ForwardSubstitute3(const Mat3& L, const Vec3& inv_diag, Eigen::Matrix<double, 3, 6>* M, Vec3* v) {
+void ForwardSubstitute3(const Mat3& L, const Vec3& inv_diag, Eigen::Matrix<double, 3, 6>* M,
+                        Vec3* v) {
   M->row(0) *= inv_diag[0];
   M->row(1) = (M->row(1) - L(1, 0) * M->row(0)) * inv_diag[1];
   M->row(2) = (M->row(2) - L(2, 0) * M->row(0) - L(2, 1) * M->row(1)) * inv_diag[2];
@@ -241,8 +249,9 @@ Eigen::Matrix<double, 6, N> MotionSubspace(const Joint& joint, const Mat3& R_WJ)
 // Eliminates joint blk (N DOF; N = 0 for a fixed joint) into its parent, whose pivot is
 // at -d from this joint's; for the root (parent == nullptr) the parent twist is zero.
 template <int N, typename PriorH, typename PriorG>
-bool EliminateJoint(const Joint& joint, const Mat3& R_WJ, const Vec3& d, JointBlock* blk, double damping,
-                    const PriorH& prior_h, const PriorG& prior_g, JointBlock* parent) {
+bool EliminateJoint(const Joint& joint, const Mat3& R_WJ, const Vec3& d, JointBlock* blk,
+                    double damping, const PriorH& prior_h, const PriorG& prior_g,
+                    JointBlock* parent) {
   AddMoments(blk);
   Mat6 QX, XtQX;
   Vec6 Xtb;
@@ -284,7 +293,8 @@ bool EliminateJoint(const Joint& joint, const Mat3& R_WJ, const Vec3& d, JointBl
     g += prior_g;
     for (int i = 0; i < N; ++i) H(i, i) += damping * H(i, i) + prior_h[i] + 1e-12;
     blk->dofs = N;
-    if constexpr (N != 3) blk->S.template leftCols<N>() = S;  // ball joints: S = [I; 0], used implicitly
+    if constexpr (N != 3)
+      blk->S.template leftCols<N>() = S;  // ball joints: S = [I; 0], used implicitly
     if constexpr (N == 3) {
       // Symmetric form: with H = L L', W = L^-1 HqV and w = L^-1 g, the parent receives
       // -W'W and -W'w, and the forward sweep solves L' dq = w - W V_p. About half the
@@ -329,8 +339,9 @@ bool EliminateJoint(const Joint& joint, const Mat3& R_WJ, const Vec3& d, JointBl
 // Solves the damped system for the step dq (world axes at each pivot; free-joint
 // translations in world axes). prior_h/prior_g (size num_dofs) hold the priors' Hessian
 // diagonal and negative gradient. Returns false on a numerical failure.
-bool ComputeStep(const Skeleton& skeleton, double damping, const Eigen::VectorXd& prior_h, const Eigen::VectorXd& prior_g,
-                 const KinematicsWorkspace& ws, std::vector<JointBlock>* blocks, Eigen::VectorXd* dq) {
+bool ComputeStep(const Skeleton& skeleton, double damping, const Eigen::VectorXd& prior_h,
+                 const Eigen::VectorXd& prior_g, const KinematicsWorkspace& ws,
+                 std::vector<JointBlock>* blocks, Eigen::VectorXd* dq) {
   const int n = skeleton.num_joints();
   for (int j = n - 1; j >= 0; --j) {
     const Joint& joint = skeleton.joint(j);
@@ -343,16 +354,20 @@ bool ComputeStep(const Skeleton& skeleton, double damping, const Eigen::VectorXd
     bool ok = true;
     switch (joint.type) {
       case JointType::kFixed:
-        ok = EliminateJoint<0>(joint, ws.R_WJ[uj], d, &blk, damping, prior_h.segment<0>(k), prior_g.segment<0>(k), parent);
+        ok = EliminateJoint<0>(joint, ws.R_WJ[uj], d, &blk, damping, prior_h.segment<0>(k),
+                               prior_g.segment<0>(k), parent);
         break;
       case JointType::kHinge:
-        ok = EliminateJoint<1>(joint, ws.R_WJ[uj], d, &blk, damping, prior_h.segment<1>(k), prior_g.segment<1>(k), parent);
+        ok = EliminateJoint<1>(joint, ws.R_WJ[uj], d, &blk, damping, prior_h.segment<1>(k),
+                               prior_g.segment<1>(k), parent);
         break;
       case JointType::kBall:
-        ok = EliminateJoint<3>(joint, ws.R_WJ[uj], d, &blk, damping, prior_h.segment<3>(k), prior_g.segment<3>(k), parent);
+        ok = EliminateJoint<3>(joint, ws.R_WJ[uj], d, &blk, damping, prior_h.segment<3>(k),
+                               prior_g.segment<3>(k), parent);
         break;
       case JointType::kFree:
-        ok = EliminateJoint<6>(joint, ws.R_WJ[uj], d, &blk, damping, prior_h.segment<6>(k), prior_g.segment<6>(k), parent);
+        ok = EliminateJoint<6>(joint, ws.R_WJ[uj], d, &blk, damping, prior_h.segment<6>(k),
+                               prior_g.segment<6>(k), parent);
         break;
     }
     if (!ok) return false;
@@ -396,22 +411,26 @@ bool ComputeStep(const Skeleton& skeleton, double damping, const Eigen::VectorXd
 }
 
 // Converts a world-axis step to the local-axis step IntegratePose takes.
-void WorldStepToLocal(const Skeleton& skeleton, const KinematicsWorkspace& ws, Eigen::VectorXd* dq) {
+void WorldStepToLocal(const Skeleton& skeleton, const KinematicsWorkspace& ws,
+                      Eigen::VectorXd* dq) {
   for (int j = 0; j < skeleton.num_joints(); ++j) {
     const Joint& joint = skeleton.joint(j);
     const auto uj = static_cast<size_t>(j);
     const int k = skeleton.dof_offset(j);
-    if (joint.type == JointType::kBall) dq->segment<3>(k) = ws.R_WJ[uj].transpose() * dq->segment<3>(k);
+    if (joint.type == JointType::kBall)
+      dq->segment<3>(k) = ws.R_WJ[uj].transpose() * dq->segment<3>(k);
     if (joint.type == JointType::kFree) {
       const int p = joint.parent.value;
-      if (p >= 0) dq->segment<3>(k) = ws.R_WJ[static_cast<size_t>(p)].transpose() * dq->segment<3>(k);
+      if (p >= 0)
+        dq->segment<3>(k) = ws.R_WJ[static_cast<size_t>(p)].transpose() * dq->segment<3>(k);
       dq->segment<3>(k + 3) = ws.R_WJ[uj].transpose() * dq->segment<3>(k + 3);
     }
   }
 }
 
 // Expresses a local-axis tangent vector (as PoseDifference writes it) in world axes.
-void LocalTangentToWorld(const Skeleton& skeleton, const KinematicsWorkspace& ws, Eigen::VectorXd* v) {
+void LocalTangentToWorld(const Skeleton& skeleton, const KinematicsWorkspace& ws,
+                         Eigen::VectorXd* v) {
   for (int j = 0; j < skeleton.num_joints(); ++j) {
     const JointType type = skeleton.joint(j).type;
     const auto uj = static_cast<size_t>(j);
@@ -442,21 +461,24 @@ void ClearBlocks(std::vector<JointBlock>* blocks) {
 }
 
 // Constant-velocity extrapolation, scaled by gain: X_pred = X_cur * (X_prev^-1 X_cur)^gain.
-void PredictConstantVelocity(const Skeleton& skeleton, const Pose& previous, const Pose& current, double gain, Pose* predicted) {
+void PredictConstantVelocity(const Skeleton& skeleton, const Pose& previous, const Pose& current,
+                             double gain, Pose* predicted) {
   for (int j = 0; j < skeleton.num_joints(); ++j) {
     const auto uj = static_cast<size_t>(j);
     const Quat delta = previous.rotation[uj].conjugate() * current.rotation[uj];
     const Quat step = gain == 1.0 ? delta : ExpRotation(gain * LogRotation(delta));
     predicted->rotation[uj] = (current.rotation[uj] * step).normalized();
-    predicted->translation[uj] = current.translation[uj] + gain * (current.translation[uj] - previous.translation[uj]);
+    predicted->translation[uj] =
+        current.translation[uj] + gain * (current.translation[uj] - previous.translation[uj]);
   }
 }
 
 // Cold start: rigidly aligns the rest-pose markers with the observation (Kabsch) and
 // moves the first free joint accordingly, so LM starts facing the right way.
-void AlignRestPose(const Skeleton& skeleton, const MarkerSet& markers, std::span<const Vec3> observed,
-                   std::span<const double> weights, int first_free_joint, std::span<const Vec3> rest_markers,
-                   const Pose& rest, Pose* pose, KinematicsWorkspace* ws) {
+void AlignRestPose(const Skeleton& skeleton, const MarkerSet& markers,
+                   std::span<const Vec3> observed, std::span<const double> weights,
+                   int first_free_joint, std::span<const Vec3> rest_markers, const Pose& rest,
+                   Pose* pose, KinematicsWorkspace* ws) {
   *pose = rest;
   if (first_free_joint < 0) return;
   Vec3 model_mean = Vec3::Zero(), data_mean = Vec3::Zero();
@@ -475,7 +497,8 @@ void AlignRestPose(const Skeleton& skeleton, const MarkerSet& markers, std::span
   for (int m = 0; m < markers.num_markers(); ++m) {
     const auto um = static_cast<size_t>(m);
     if (!UsableMarker(observed[um], weights[um])) continue;
-    cov.noalias() += weights[um] * (observed[um] - data_mean) * (rest_markers[um] - model_mean).transpose();
+    cov.noalias() +=
+        weights[um] * (observed[um] - data_mean) * (rest_markers[um] - model_mean).transpose();
   }
   const Eigen::JacobiSVD<Mat3> svd(cov, Eigen::ComputeFullU | Eigen::ComputeFullV);
   Mat3 D = Mat3::Identity();
@@ -498,19 +521,24 @@ void AlignRestPose(const Skeleton& skeleton, const MarkerSet& markers, std::span
 
 void IkOptions::Validate() const {
   auto require = [](bool ok, const char* field, const char* expected) {
-    if (!ok) throw std::invalid_argument(std::string("IkOptions.") + field + ": expected " + expected);
+    if (!ok)
+      throw std::invalid_argument(std::string("IkOptions.") + field + ": expected " + expected);
   };
   require(max_iterations >= 1, "max_iterations", ">= 1");
   require(cold_start_max_iterations >= 1, "cold_start_max_iterations", ">= 1");
-  require(initial_damping >= 0.0 && std::isfinite(initial_damping), "initial_damping", "a finite value >= 0");
+  require(initial_damping >= 0.0 && std::isfinite(initial_damping), "initial_damping",
+          "a finite value >= 0");
   require(function_tolerance >= 0.0, "function_tolerance", ">= 0");
   require(step_tolerance >= 0.0, "step_tolerance", ">= 0");
   require(residual_tolerance_m >= 0.0, "residual_tolerance_m", ">= 0");
-  require(huber_delta_m >= 0.0 && std::isfinite(huber_delta_m), "huber_delta_m", "a finite value >= 0");
-  require(temporal_weight >= 0.0 && std::isfinite(temporal_weight), "temporal_weight", "a finite value >= 0");
+  require(huber_delta_m >= 0.0 && std::isfinite(huber_delta_m), "huber_delta_m",
+          "a finite value >= 0");
+  require(temporal_weight >= 0.0 && std::isfinite(temporal_weight), "temporal_weight",
+          "a finite value >= 0");
   require(rest_weight >= 0.0 && std::isfinite(rest_weight), "rest_weight", "a finite value >= 0");
   require(min_markers >= 1, "min_markers", ">= 1");
-  require(prediction_velocity_gain >= 0.0 && prediction_velocity_gain <= 1.0, "prediction_velocity_gain", "0..1");
+  require(prediction_velocity_gain >= 0.0 && prediction_velocity_gain <= 1.0,
+          "prediction_velocity_gain", "0..1");
 }
 
 const char* to_string(IkStatus status) {
@@ -582,8 +610,8 @@ void IkState::Reset(const Pose& pose) {
 }
 
 bool ComputeIkStep(const Skeleton& skeleton, const MarkerSet& markers, const IkOptions& options,
-                   std::span<const Vec3> observed, std::span<const double> weights, const Pose& pose, double damping,
-                   IkState* state, Eigen::VectorXd* dq) {
+                   std::span<const Vec3> observed, std::span<const double> weights,
+                   const Pose& pose, double damping, IkState* state, Eigen::VectorXd* dq) {
   IkState& s = *state;
   ForwardKinematics(skeleton, pose, &s.ws_);
   EvaluateMarkers(markers, s.ws_, s.predicted_);
@@ -605,7 +633,8 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
   IkState& s = *state;
   IkSummary summary;
   for (int m = 0; m < markers.num_markers(); ++m)
-    if (UsableMarker(observed[static_cast<size_t>(m)], weights[static_cast<size_t>(m)])) ++summary.markers_used;
+    if (UsableMarker(observed[static_cast<size_t>(m)], weights[static_cast<size_t>(m)]))
+      ++summary.markers_used;
   if (summary.markers_used < options.min_markers) {
     // Hold the last solution; the velocity history is no longer trustworthy.
     summary.status = IkStatus::kTooFewMarkers;
@@ -616,7 +645,8 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
   // Warm start (constant-velocity prediction when two solutions are known) or cold start.
   int max_iterations = options.max_iterations;
   if (s.history_ >= 2 && options.predict_constant_velocity) {
-    PredictConstantVelocity(skeleton, s.previous_, s.pose_, options.prediction_velocity_gain, &s.trial_);
+    PredictConstantVelocity(skeleton, s.previous_, s.pose_, options.prediction_velocity_gain,
+                            &s.trial_);
     std::swap(s.previous_, s.pose_);
     std::swap(s.pose_, s.trial_);
   } else if (s.history_ >= 1) {
@@ -624,8 +654,8 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
   } else {
     summary.cold_start = true;
     max_iterations = options.cold_start_max_iterations;
-    AlignRestPose(skeleton, markers, observed, weights, s.first_free_joint_, s.rest_markers_, s.rest_, &s.pose_,
-                  &s.ws_);
+    AlignRestPose(skeleton, markers, observed, weights, s.first_free_joint_, s.rest_markers_,
+                  s.rest_, &s.pose_, &s.ws_);
     s.previous_ = s.pose_;
   }
 
@@ -647,11 +677,15 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
   double damping = options.initial_damping;
   // A cold start is far from the answer: the warm-start tolerance would stop it early,
   // in the basin of whatever local minimum it is crossing.
-  const double function_tolerance = summary.cold_start ? std::min(options.function_tolerance, 1e-10) : options.function_tolerance;
+  const double function_tolerance =
+      summary.cold_start ? std::min(options.function_tolerance, 1e-10) : options.function_tolerance;
   double weight_sum = 0.0;
   for (int m = 0; m < markers.num_markers(); ++m)
-    if (UsableMarker(observed[static_cast<size_t>(m)], weights[static_cast<size_t>(m)])) weight_sum += weights[static_cast<size_t>(m)];
-  const double cost_floor = summary.cold_start ? 0.0 : 0.5 * weight_sum * options.residual_tolerance_m * options.residual_tolerance_m;
+    if (UsableMarker(observed[static_cast<size_t>(m)], weights[static_cast<size_t>(m)]))
+      weight_sum += weights[static_cast<size_t>(m)];
+  const double cost_floor = summary.cold_start ? 0.0
+                                               : 0.5 * weight_sum * options.residual_tolerance_m *
+                                                     options.residual_tolerance_m;
   summary.status = IkStatus::kMaxIterations;
   for (int iteration = 0; iteration < max_iterations; ++iteration) {
     summary.iterations = iteration + 1;
@@ -659,7 +693,8 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
     // including a retry after a rejected step, starts from freshly accumulated blocks.
     ClearBlocks(&s.blocks_);
     AccumulateMarkers(markers, options, observed, weights, s.predicted_, s.ws_, &s.blocks_);
-    s.prior_g_ = -(at * s.step_total_ + ar * (s.rest_error_ + s.step_total_)).cwiseProduct(s.prior_mask_);
+    s.prior_g_ =
+        -(at * s.step_total_ + ar * (s.rest_error_ + s.step_total_)).cwiseProduct(s.prior_mask_);
     if (!ComputeStep(skeleton, damping, s.prior_h_, s.prior_g_, s.ws_, &s.blocks_, &s.dq_)) {
       summary.status = IkStatus::kNumericalFailure;
       break;
@@ -671,8 +706,9 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
     if (options.apply_joint_limits) ApplyJointLimits(skeleton, &s.trial_);
     ForwardKinematics(skeleton, s.trial_, &s.trial_ws_);
     s.trial_total_ = s.step_total_ + s.dq_;
-    const double trial_cost = MarkerCost(markers, options, observed, weights, s.trial_ws_, s.trial_predicted_) +
-                              PriorCost(at, ar, s.prior_mask_, s.rest_error_, s.trial_total_);
+    const double trial_cost =
+        MarkerCost(markers, options, observed, weights, s.trial_ws_, s.trial_predicted_) +
+        PriorCost(at, ar, s.prior_mask_, s.rest_error_, s.trial_total_);
     const double step_size = s.dq_.cwiseAbs().maxCoeff();
     if (std::isfinite(trial_cost) && trial_cost <= cost) {
       std::swap(s.pose_, s.trial_);
@@ -682,7 +718,8 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
       const double decrease = cost - trial_cost;
       cost = trial_cost;
       damping = std::max(damping * 0.3, 1e-9);
-      if (decrease <= function_tolerance * (cost + decrease) || step_size <= options.step_tolerance || cost <= cost_floor) {
+      if (decrease <= function_tolerance * (cost + decrease) ||
+          step_size <= options.step_tolerance || cost <= cost_floor) {
         summary.status = IkStatus::kConverged;
         break;
       }
@@ -707,7 +744,8 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
   double sum_sq = 0.0;
   for (int m = 0; m < markers.num_markers(); ++m) {
     const auto um = static_cast<size_t>(m);
-    if (UsableMarker(observed[um], weights[um])) sum_sq += (observed[um] - s.predicted_[um]).squaredNorm();
+    if (UsableMarker(observed[um], weights[um]))
+      sum_sq += (observed[um] - s.predicted_[um]).squaredNorm();
   }
   summary.rms_residual_m = std::sqrt(sum_sq / summary.markers_used);
   s.history_ = std::min(s.history_ + 1, 2);

@@ -28,12 +28,12 @@ struct IkOptions {
   int max_iterations = 3;              ///< Per warm-started frame.
   int cold_start_max_iterations = 60;  ///< When there is no previous solution.
   double initial_damping = 1e-4;       ///< LM factor on diag(H).
-  double function_tolerance = 1e-2;    ///< Converged when the cost drops by less than this fraction.
-  double step_tolerance = 1e-5;        ///< Converged when every step component is below this (rad or m).
+  double function_tolerance = 1e-2;  ///< Converged when the cost drops by less than this fraction.
+  double step_tolerance = 1e-5;  ///< Converged when every step component is below this (rad or m).
   /// Converged when the weighted RMS marker residual (priors included) is below this, m:
   /// refining a fit far inside the capture's own precision buys nothing.
   double residual_tolerance_m = 5e-5;
-  double huber_delta_m = 0.0;          ///< Huber threshold in metres; 0 disables the robust loss.
+  double huber_delta_m = 0.0;  ///< Huber threshold in metres; 0 disables the robust loss.
   bool predict_constant_velocity = true;
   /// Fraction of the last frame-to-frame motion carried into the prediction (0..1). Below
   /// 1 the velocity decays, so a joint whose markers have all vanished comes to rest
@@ -83,7 +83,7 @@ class IkState {
   struct JointBlock {
     Mat6 Q, BB, BG, GG, S, K;
     Vec6 b, Br, Gr, k, V;
-    Mat3 L = Mat3::Identity();  // ball joints: Cholesky factor of the joint's system...
+    Mat3 L = Mat3::Identity();       // ball joints: Cholesky factor of the joint's system...
     Vec3 L_inv_diag = Vec3::Ones();  // ...and the reciprocals of its diagonal
     // Rigidly attached markers, as weighted moments about the pivot: their quadratic is
     // [tr(M2) I - M2, [m1]x; -[m1]x, m0 I] with gradient (sum w x cross r, sum w r).
@@ -95,16 +95,18 @@ class IkState {
   };
 
  private:
-  friend IkSummary SolveIk(const Skeleton&, const MarkerSet&, const IkOptions&, std::span<const Vec3>,
-                           std::span<const double>, IkState*);
-  friend bool ComputeIkStep(const Skeleton&, const MarkerSet&, const IkOptions&, std::span<const Vec3>,
-                            std::span<const double>, const Pose&, double, IkState*, Eigen::VectorXd*);
+  friend IkSummary SolveIk(const Skeleton&, const MarkerSet&, const IkOptions&,
+                           std::span<const Vec3>, std::span<const double>, IkState*);
+  friend bool ComputeIkStep(const Skeleton&, const MarkerSet&, const IkOptions&,
+                            std::span<const Vec3>, std::span<const double>, const Pose&, double,
+                            IkState*, Eigen::VectorXd*);
   Pose pose_, previous_, trial_, rest_;
   int history_ = 0;
   KinematicsWorkspace ws_, trial_ws_;
   std::vector<Vec3> predicted_, trial_predicted_, rest_markers_;
   std::vector<JointBlock> blocks_;
-  Eigen::VectorXd dq_, step_total_, trial_total_, rest_error_, prior_mask_, prior_h_, prior_g_, local_step_;
+  Eigen::VectorXd dq_, step_total_, trial_total_, rest_error_, prior_mask_, prior_h_, prior_g_,
+      local_step_;
   int first_free_joint_ = -1;
 };
 
@@ -122,7 +124,7 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
 /// reduced diagonal. Uses state only as scratch space. Returns false on a numerical
 /// failure. Exposed for tests and diagnostics; SolveIk iterates it.
 bool ComputeIkStep(const Skeleton& skeleton, const MarkerSet& markers, const IkOptions& options,
-                   std::span<const Vec3> observed, std::span<const double> weights, const Pose& pose, double damping,
-                   IkState* state, Eigen::VectorXd* dq);
+                   std::span<const Vec3> observed, std::span<const double> weights,
+                   const Pose& pose, double damping, IkState* state, Eigen::VectorXd* dq);
 
 }  // namespace mocapd

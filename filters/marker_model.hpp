@@ -68,11 +68,13 @@ inline Vec3 EvaluateMarker(const MarkerDefinition& marker, const KinematicsWorks
 /// Writes the world-frame twists of joint j's DOF into the first DofCount columns of S.
 /// A twist is (angular velocity; velocity of the world point `origin`), so a point x
 /// moving with the joint moves at  w x (x - origin) + v  per unit DOF. Returns the DOF count.
-int JointMotionSubspace(const Skeleton& skeleton, const KinematicsWorkspace& ws, int j, const Vec3& origin, Mat6* S);
+int JointMotionSubspace(const Skeleton& skeleton, const KinematicsWorkspace& ws, int j,
+                        const Vec3& origin, Mat6* S);
 
 /// Computes the dense Jacobian d p_WM / d dq (3 * num_markers rows, num_dofs columns) of
 /// the markers with respect to an IntegratePose step. Allocates; for tests, calibration
 /// and diagnostics, not the per-frame path.
-Eigen::MatrixXd MarkerJacobian(const Skeleton& skeleton, const MarkerSet& markers, const KinematicsWorkspace& ws);
+Eigen::MatrixXd MarkerJacobian(const Skeleton& skeleton, const MarkerSet& markers,
+                               const KinematicsWorkspace& ws);
 
 }  // namespace mocapd

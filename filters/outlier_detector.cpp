@@ -6,22 +6,30 @@
 
 namespace mocapd {
 
-OutlierDetector::OutlierDetector(const Skeleton& skeleton, const MarkerSet& markers, const CleanupOptions& options)
-    : skeleton_(skeleton), markers_(markers), options_(options), naive_(skeleton, markers), robust_(skeleton, markers) {
+OutlierDetector::OutlierDetector(const Skeleton& skeleton, const MarkerSet& markers,
+                                 const CleanupOptions& options)
+    : skeleton_(skeleton),
+      markers_(markers),
+      options_(options),
+      naive_(skeleton, markers),
+      robust_(skeleton, markers) {
   const auto m = static_cast<size_t>(markers_.num_markers());
   tracks_.assign(m, FreshTrack());
   markers_of_joint_.assign(static_cast<size_t>(skeleton_.num_joints()), {});
   for (int i = 0; i < markers_.num_markers(); ++i) {
     const MarkerDefinition& d = markers_.marker(i);
     for (int k = 0; k < d.num_attachments; ++k)
-      markers_of_joint_[static_cast<size_t>(d.attachments[static_cast<size_t>(k)].joint)].push_back(i);
+      markers_of_joint_[static_cast<size_t>(d.attachments[static_cast<size_t>(k)].joint)].push_back(
+          i);
   }
   // Markers rigidly on the same joint keep their distance.
   for (int i = 0; i < markers_.num_markers(); ++i) {
     for (int j = i + 1; j < markers_.num_markers(); ++j) {
       const MarkerDefinition& a = markers_.marker(i);
       const MarkerDefinition& b = markers_.marker(j);
-      if (a.num_attachments != 1 || b.num_attachments != 1 || a.attachments[0].joint != b.attachments[0].joint) continue;
+      if (a.num_attachments != 1 || b.num_attachments != 1 ||
+          a.attachments[0].joint != b.attachments[0].joint)
+        continue;
       rigid_pairs_.emplace_back(i, j);
       rigid_distance_.push_back((a.attachments[0].offset - b.attachments[0].offset).norm());
     }
@@ -46,7 +54,8 @@ void OutlierDetector::Reset() {
   robust_.Reset();
 }
 
-void OutlierDetector::Process(CleanupWindow& window, int64_t t, int64_t first_unpublished, CleanupCounters* counters) {
+void OutlierDetector::Process(CleanupWindow& window, int64_t t, int64_t first_unpublished,
+                              CleanupCounters* counters) {
   RelabelSwaps(window, t, counters);
   SolveReferences(window.at(t), counters);
   Detect(window, t, first_unpublished, counters);
@@ -60,7 +69,8 @@ void OutlierDetector::SolveReferences(WindowFrame& s, CleanupCounters* counters)
   // in (the Huber loss bounds their pull): excluding them would let the reference drift
   // away and keep them out.
   for (size_t m = 0; m < m_count; ++m)
-    weights_[m] = s.valid[m] && !tracks_[m].frozen && !tracks_[m].fallen && !tracks_[m].stray ? 1.0 : 0.0;
+    weights_[m] =
+        s.valid[m] && !tracks_[m].frozen && !tracks_[m].fallen && !tracks_[m].stray ? 1.0 : 0.0;
   counters->CountSolve(SolveIk(skeleton_, markers_, options_.robust_ik, s.raw, weights_, &robust_));
   const auto predicted = robust_.predicted_markers();
   std::copy(predicted.begin(), predicted.end(), s.reference.begin());
@@ -69,7 +79,8 @@ void OutlierDetector::SolveReferences(WindowFrame& s, CleanupCounters* counters)
   // (and re-seeded from Y^ when next needed): about a third of the per-frame work.
   naive_solved_ = false;
   for (size_t m = 0; m < m_count && !naive_solved_; ++m)
-    naive_solved_ = s.valid[m] && (s.raw[m] - s.reference[m]).norm() > options_.disagreement_residual_m;
+    naive_solved_ =
+        s.valid[m] && (s.raw[m] - s.reference[m]).norm() > options_.disagreement_residual_m;
   if (naive_solved_) {
     if (!naive_fresh_) naive_.Reset(robust_.pose());
     for (size_t m = 0; m < m_count; ++m) weights_[m] = s.valid[m] ? 1.0 : 0.0;
@@ -87,7 +98,9 @@ void OutlierDetector::RelabelSwaps(CleanupWindow& window, int64_t t, CleanupCoun
   const auto m_count = static_cast<size_t>(markers_.num_markers());
   // Model distance between two markers rigidly on the same joint.
   auto RigidDistance = [&](size_t a, size_t b) {
-    return (markers_.marker(static_cast<int>(a)).attachments[0].offset - markers_.marker(static_cast<int>(b)).attachments[0].offset).norm();
+    return (markers_.marker(static_cast<int>(a)).attachments[0].offset -
+            markers_.marker(static_cast<int>(b)).attachments[0].offset)
+        .norm();
   };
   // Swaps first: a relabelled pair is fine for every other detector. Within one rigid
   // segment the layout's distances identify each marker: a pair whose exchanged labels
@@ -98,7 +111,8 @@ void OutlierDetector::RelabelSwaps(CleanupWindow& window, int64_t t, CleanupCoun
     if (!s.valid[i] || !s.valid[j] || s.relabelled[i] || s.relabelled[j]) continue;
     double straight = 0.0, crossed = 0.0;
     int witnesses = 0;
-    for (int other : markers_of_joint_[static_cast<size_t>(markers_.primary_joint(static_cast<int>(i)))]) {
+    for (int other :
+         markers_of_joint_[static_cast<size_t>(markers_.primary_joint(static_cast<int>(i)))]) {
       const auto o = static_cast<size_t>(other);
       if (o == i || o == j || !s.valid[o] || markers_.marker(other).num_attachments != 1) continue;
       const double di = (s.raw[i] - s.raw[o]).norm(), dj = (s.raw[j] - s.raw[o]).norm();
@@ -124,7 +138,8 @@ void OutlierDetector::RelabelSwaps(CleanupWindow& window, int64_t t, CleanupCoun
     // their positions first keeps the pair search to a tight loop over few markers.
     swap_candidates_.clear();
     for (size_t i = 0; i < m_count; ++i) {
-      if (!s.valid[i] || prev.mask[i] != MaskReason::kNone || prev2.mask[i] != MaskReason::kNone) continue;
+      if (!s.valid[i] || prev.mask[i] != MaskReason::kNone || prev2.mask[i] != MaskReason::kNone)
+        continue;
       swap_candidates_.push_back(static_cast<int>(i));
       candidate_previous_[swap_candidates_.size() - 1] = prev.raw[i];
     }
@@ -157,7 +172,8 @@ void OutlierDetector::RelabelSwaps(CleanupWindow& window, int64_t t, CleanupCoun
   }
 }
 
-void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unpublished, CleanupCounters* counters) {
+void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unpublished,
+                             CleanupCounters* counters) {
   WindowFrame& s = window.at(t);
   const bool has_previous = t > 0 && window.at(t - 1).frame == t - 1;
   const WindowFrame& prev = window.at(t - 1 >= 0 ? t - 1 : 0);
@@ -166,10 +182,12 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
 
   // Residuals against X^ and each marker's adaptive threshold.
   auto threshold = [&](size_t m) {
-    return std::max(options_.residual_floor_m, options_.residual_scale_factor * tracks_[m].residual_scale);
+    return std::max(options_.residual_floor_m,
+                    options_.residual_scale_factor * tracks_[m].residual_scale);
   };
   std::span<Vec3> residual(residual_.data(), m_count);
-  for (size_t m = 0; m < m_count; ++m) residual[m] = s.valid[m] ? Vec3(s.raw[m] - s.reference[m]) : Vec3::Zero();
+  for (size_t m = 0; m < m_count; ++m)
+    residual[m] = s.valid[m] ? Vec3(s.raw[m] - s.reference[m]) : Vec3::Zero();
 
   // The rest: a pair that each fit the other's reference position.
   for (size_t i = 0; i < m_count; ++i) {
@@ -179,7 +197,8 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
       const double crossed_i = (s.raw[i] - s.reference[j]).norm();  // i's sample fits j
       const double crossed_j = (s.raw[j] - s.reference[i]).norm();
       if (crossed_i > threshold(j) || crossed_j > threshold(i)) continue;
-      if (crossed_i + crossed_j + options_.swap_margin_m >= residual[i].norm() + residual[j].norm()) continue;
+      if (crossed_i + crossed_j + options_.swap_margin_m >= residual[i].norm() + residual[j].norm())
+        continue;
       if (options_.relabel_swaps) {
         std::swap(s.raw[i], s.raw[j]);
         s.relabelled[i] = s.relabelled[j] = 1;
@@ -201,11 +220,15 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
     if (skeleton_.joint(j).type == JointType::kFixed) continue;
     const auto uj = static_cast<size_t>(j);
     const double dp = (naive.p_WJ[uj] - robust.p_WJ[uj]).norm();
-    const double cos_angle = std::clamp(0.5 * ((naive.R_WJ[uj].transpose() * robust.R_WJ[uj]).trace() - 1.0), -1.0, 1.0);
-    if (dp <= options_.disagreement_position_m && std::acos(cos_angle) <= options_.disagreement_rotation_rad) continue;
+    const double cos_angle =
+        std::clamp(0.5 * ((naive.R_WJ[uj].transpose() * robust.R_WJ[uj]).trace() - 1.0), -1.0, 1.0);
+    if (dp <= options_.disagreement_position_m &&
+        std::acos(cos_angle) <= options_.disagreement_rotation_rad)
+      continue;
     for (int m : markers_of_joint_[uj]) {
       const auto um = static_cast<size_t>(m);
-      if (s.valid[um] && s.mask[um] == MaskReason::kNone && !s.relabelled[um] && residual[um].norm() > options_.disagreement_residual_m)
+      if (s.valid[um] && s.mask[um] == MaskReason::kNone && !s.relabelled[um] &&
+          residual[um].norm() > options_.disagreement_residual_m)
         s.mask[um] = MaskReason::kDisagreement;
     }
   }
@@ -214,9 +237,11 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
   // motion is seen: another marker on the same joint fits its reference. (A planted
   // foot's markers stay still while a reference with no foot data drifts.)
   auto has_fitting_neighbour = [&](size_t m) {
-    for (int other : markers_of_joint_[static_cast<size_t>(markers_.primary_joint(static_cast<int>(m)))]) {
+    for (int other :
+         markers_of_joint_[static_cast<size_t>(markers_.primary_joint(static_cast<int>(m)))]) {
       const auto o = static_cast<size_t>(other);
-      if (o != m && s.valid[o] && !tracks_[o].frozen && residual[o].norm() <= threshold(o)) return true;
+      if (o != m && s.valid[o] && !tracks_[o].frozen && residual[o].norm() <= threshold(o))
+        return true;
     }
     return false;
   };
@@ -231,13 +256,15 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
     const double thr = threshold(m);
     if (r > thr) {
       ++track.residual_run;
-      if (s.mask[m] == MaskReason::kNone || s.mask[m] == MaskReason::kDisagreement) s.mask[m] = MaskReason::kResidual;
+      if (s.mask[m] == MaskReason::kNone || s.mask[m] == MaskReason::kDisagreement)
+        s.mask[m] = MaskReason::kResidual;
       // Fallen off: far from where it belongs (not a reference a few cm off) for long.
       if (track.residual_run >= options_.fallen_frames && r > options_.fallen_residual_m) {
         track.fallen = true;
         s.mask[m] = MaskReason::kFallenOff;
       }
-      if (track.residual_run >= options_.stray_frames && r > options_.stray_residual_m) track.stray = true;
+      if (track.residual_run >= options_.stray_frames && r > options_.stray_residual_m)
+        track.stray = true;
     } else {
       track.residual_run = 0;
       track.fallen = false;
@@ -247,27 +274,31 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
     }
     // Frozen: at rest (within a radius, so jitter is not motion) while the reference
     // moves away; the run starts over wherever the marker leaves the radius.
-    if (track.still_since < 0 || (s.raw[m] - track.still_anchor).norm() > options_.frozen_radius_m) {
+    if (track.still_since < 0 ||
+        (s.raw[m] - track.still_anchor).norm() > options_.frozen_radius_m) {
       track.still_since = t;
       track.still_anchor = s.raw[m];
       track.still_reference = s.reference[m];
       track.frozen = false;
     } else if (t - track.still_since + 1 >= options_.frozen_frames &&
-               (s.reference[m] - track.still_reference).norm() > options_.frozen_reference_motion_m &&
+               (s.reference[m] - track.still_reference).norm() >
+                   options_.frozen_reference_motion_m &&
                has_fitting_neighbour(m)) {
       track.frozen = true;
     }
     if (track.frozen) {
       // Still and far from its reference for long is the more specific diagnosis.
       for (int64_t f = std::max(first_unpublished, track.still_since); f <= t; ++f)
-        if (window.at(f).valid[m] && window.at(f).mask[m] != MaskReason::kFallenOff) window.at(f).mask[m] = MaskReason::kFrozen;
+        if (window.at(f).valid[m] && window.at(f).mask[m] != MaskReason::kFallenOff)
+          window.at(f).mask[m] = MaskReason::kFrozen;
     }
     if (!has_previous || !prev.valid[m]) continue;
     // Spikes: this frame's displacement disagrees with the reference's, from a sample
     // that was itself fine (so the return from a pop is not a spike).
     const Vec3 moved = s.raw[m] - prev.raw[m];
     const Vec3 reference_moved = s.reference[m] - prev.reference[m];
-    if (prev.mask[m] == MaskReason::kNone && s.mask[m] == MaskReason::kNone && (moved - reference_moved).norm() > options_.spike_m)
+    if (prev.mask[m] == MaskReason::kNone && s.mask[m] == MaskReason::kNone &&
+        (moved - reference_moved).norm() > options_.spike_m)
       s.mask[m] = MaskReason::kSpike;
   }
 
@@ -276,8 +307,11 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
   for (size_t k = 0; k < rigid_pairs_.size(); ++k) {
     const auto i = static_cast<size_t>(rigid_pairs_[k].first);
     const auto j = static_cast<size_t>(rigid_pairs_[k].second);
-    if (!s.valid[i] || !s.valid[j] || s.mask[i] != MaskReason::kNone || s.mask[j] != MaskReason::kNone) continue;
-    if (std::abs((s.raw[i] - s.raw[j]).norm() - rigid_distance_[k]) <= options_.rigid_tolerance_m) continue;
+    if (!s.valid[i] || !s.valid[j] || s.mask[i] != MaskReason::kNone ||
+        s.mask[j] != MaskReason::kNone)
+      continue;
+    if (std::abs((s.raw[i] - s.raw[j]).norm() - rigid_distance_[k]) <= options_.rigid_tolerance_m)
+      continue;
     s.mask[residual[i].norm() >= residual[j].norm() ? i : j] = MaskReason::kRigidDistance;
   }
 }
@@ -300,7 +334,8 @@ void OutlierDetector::CleanMask(CleanupWindow& window, int64_t t, int64_t first_
     for (int64_t g = first; g + 1 <= t; ++g) {
       if (g == 0 || good(g - 1, m) || !good(g, m)) continue;
       if (g - 1 < first - 1) continue;
-      for (int n = 0; n < options_.max_trim_frames && g + 1 <= t && good(g, m) && good(g + 1, m); ++n, ++g) {
+      for (int n = 0; n < options_.max_trim_frames && g + 1 <= t && good(g, m) && good(g + 1, m);
+           ++n, ++g) {
         const WindowFrame& a = window.at(g);
         const WindowFrame& b = window.at(g + 1);
         const Vec3 slope = (b.raw[m] - a.raw[m]) - (b.reference[m] - a.reference[m]);
@@ -315,7 +350,8 @@ void OutlierDetector::CleanMask(CleanupWindow& window, int64_t t, int64_t first_
         if (run_start < 0) run_start = f;
         continue;
       }
-      if (run_start > first && !good(run_start - 1, m) && f - run_start <= options_.small_track_frames)
+      if (run_start > first && !good(run_start - 1, m) &&
+          f - run_start <= options_.small_track_frames)
         for (int64_t g = run_start; g < f; ++g) window.at(g).mask[m] = MaskReason::kSmallTrack;
       run_start = -1;
     }

@@ -27,12 +27,14 @@ class OutlierDetector {
  public:
   /// The options must be valid (CleanupOptions::Validate); skeleton and markers must
   /// outlive the detector.
-  OutlierDetector(const Skeleton& skeleton, const MarkerSet& markers, const CleanupOptions& options);
+  OutlierDetector(const Skeleton& skeleton, const MarkerSet& markers,
+                  const CleanupOptions& options);
 
   /// Processes frame t, the newest in the window (its raw samples and validity filled):
   /// relabels swaps in it, solves Y^ (filling its reference) and Y, writes its mask, and
   /// cleans the masks of frames [first_unpublished, t]. Never allocates or throws.
-  void Process(CleanupWindow& window, int64_t t, int64_t first_unpublished, CleanupCounters* counters);
+  void Process(CleanupWindow& window, int64_t t, int64_t first_unpublished,
+               CleanupCounters* counters);
   /// Forgets all state (a capture restart).
   void Reset();
 
@@ -58,7 +60,8 @@ class OutlierDetector {
 
   void RelabelSwaps(CleanupWindow& window, int64_t t, CleanupCounters* counters);
   void SolveReferences(WindowFrame& s, CleanupCounters* counters);
-  void Detect(CleanupWindow& window, int64_t t, int64_t first_unpublished, CleanupCounters* counters);
+  void Detect(CleanupWindow& window, int64_t t, int64_t first_unpublished,
+              CleanupCounters* counters);
   void CleanMask(CleanupWindow& window, int64_t t, int64_t first_unpublished);
   Track FreshTrack() const;
 
@@ -73,10 +76,11 @@ class OutlierDetector {
   std::vector<double> rigid_distance_;            // ...and their distance in the model
   std::vector<std::vector<int>> markers_of_joint_;
   std::vector<double> weights_;
-  std::vector<Vec3> residual_;             // per marker, of the newest frame
-  std::vector<uint8_t> marker_flags_;      // CleanMask scratch
-  std::vector<int> swap_candidates_;       // RelabelSwaps scratch: markers predictable from fine samples...
-  std::vector<Vec3> candidate_previous_;   // ...and their previous positions, packed
+  std::vector<Vec3> residual_;         // per marker, of the newest frame
+  std::vector<uint8_t> marker_flags_;  // CleanMask scratch
+  std::vector<int>
+      swap_candidates_;  // RelabelSwaps scratch: markers predictable from fine samples...
+  std::vector<Vec3> candidate_previous_;  // ...and their previous positions, packed
 };
 
 }  // namespace mocapd

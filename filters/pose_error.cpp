@@ -8,9 +8,11 @@ namespace mocapd {
 
 double Quantile(std::vector<double> values, double q) {
   if (values.empty()) return 0.0;
-  const auto rank = static_cast<size_t>(std::clamp(std::ceil(q * static_cast<double>(values.size())) - 1.0, 0.0,
-                                                   static_cast<double>(values.size() - 1)));
-  std::nth_element(values.begin(), values.begin() + static_cast<std::ptrdiff_t>(rank), values.end());
+  const auto rank =
+      static_cast<size_t>(std::clamp(std::ceil(q * static_cast<double>(values.size())) - 1.0, 0.0,
+                                     static_cast<double>(values.size() - 1)));
+  std::nth_element(values.begin(), values.begin() + static_cast<std::ptrdiff_t>(rank),
+                   values.end());
   return values[rank];
 }
 
@@ -21,7 +23,8 @@ PoseErrorAccumulator::PoseErrorAccumulator(const Skeleton& skeleton) {
   rotation_.resize(joints_.size());
 }
 
-void PoseErrorAccumulator::Add(const KinematicsWorkspace& truth, const KinematicsWorkspace& estimate) {
+void PoseErrorAccumulator::Add(const KinematicsWorkspace& truth,
+                               const KinematicsWorkspace& estimate) {
   for (size_t i = 0; i < joints_.size(); ++i) {
     const auto j = static_cast<size_t>(joints_[i]);
     position_[i].push_back((truth.p_WJ[j] - estimate.p_WJ[j]).norm());
@@ -47,7 +50,8 @@ double Max(const std::vector<std::vector<double>>& samples) {
     for (double x : v) m = std::max(m, x);
   return m;
 }
-double WorstQuantile(const std::vector<std::vector<double>>& samples, const std::vector<int>& joints, double q, int* worst) {
+double WorstQuantile(const std::vector<std::vector<double>>& samples,
+                     const std::vector<int>& joints, double q, int* worst) {
   double result = 0.0;
   for (size_t i = 0; i < samples.size(); ++i) {
     const double value = Quantile(samples[i], q);

@@ -7,9 +7,10 @@
 
 namespace mocapd {
 
-std::vector<Pose> ResampleMotion(const Skeleton& skeleton, const std::vector<Pose>& frames, double src_rate_hz,
-                                 double dst_rate_hz) {
-  if (!(src_rate_hz > 0.0) || !(dst_rate_hz > 0.0)) throw std::invalid_argument("resample: rates must be > 0");
+std::vector<Pose> ResampleMotion(const Skeleton& skeleton, const std::vector<Pose>& frames,
+                                 double src_rate_hz, double dst_rate_hz) {
+  if (!(src_rate_hz > 0.0) || !(dst_rate_hz > 0.0))
+    throw std::invalid_argument("resample: rates must be > 0");
   if (frames.empty()) throw std::invalid_argument("resample: no frames");
   const double duration = static_cast<double>(frames.size() - 1) / src_rate_hz;
   const auto count = static_cast<size_t>(std::floor(duration * dst_rate_hz + 1e-9)) + 1;

@@ -11,7 +11,7 @@ namespace mocapd {
 /// Resamples poses from src_rate to dst_rate over the same duration: frame k of the
 /// result is at time k / dst_rate; rotations are slerped, translations lerped. Throws
 /// std::invalid_argument for non-positive rates or an empty input. Allocates the result.
-std::vector<Pose> ResampleMotion(const Skeleton& skeleton, const std::vector<Pose>& frames, double src_rate_hz,
-                                 double dst_rate_hz);
+std::vector<Pose> ResampleMotion(const Skeleton& skeleton, const std::vector<Pose>& frames,
+                                 double src_rate_hz, double dst_rate_hz);
 
 }  // namespace mocapd

@@ -51,8 +51,10 @@ std::vector<int> FarthestPoints(const Capsule& c, int count) {
     const Vec3 last = CandidatePoint(c, chosen.back());
     int best = -1;
     for (int k = 0; k < kAlong * kAround; ++k) {
-      distance[static_cast<size_t>(k)] = std::min(distance[static_cast<size_t>(k)], (CandidatePoint(c, k) - last).squaredNorm());
-      if (best < 0 || distance[static_cast<size_t>(k)] > distance[static_cast<size_t>(best)]) best = k;
+      distance[static_cast<size_t>(k)] =
+          std::min(distance[static_cast<size_t>(k)], (CandidatePoint(c, k) - last).squaredNorm());
+      if (best < 0 || distance[static_cast<size_t>(k)] > distance[static_cast<size_t>(best)])
+        best = k;
     }
     chosen.push_back(best);
   }
@@ -68,37 +70,47 @@ double Smoothstep(double x) {
 
 void RetargetOptions::Validate() const {
   auto require = [](bool ok, const char* field, const char* rule) {
-    if (!ok) throw std::invalid_argument(std::string("retarget option ") + field + " must be " + rule);
+    if (!ok)
+      throw std::invalid_argument(std::string("retarget option ") + field + " must be " + rule);
   };
   require(rate_hz > 0 && std::isfinite(rate_hz), "rate_hz", "> 0");
-  require(points_per_bone >= 1 && points_per_bone <= kAlong * kAround, "points_per_bone", "in [1, 32]");
-  require(surface_radius_fraction > 0 && surface_radius_fraction < 1, "surface_radius_fraction", "in (0, 1)");
+  require(points_per_bone >= 1 && points_per_bone <= kAlong * kAround, "points_per_bone",
+          "in [1, 32]");
+  require(surface_radius_fraction > 0 && surface_radius_fraction < 1, "surface_radius_fraction",
+          "in (0, 1)");
   require(normal_lever_m > 0 && normal_lever_m < 1, "normal_lever_m", "in (0, 1) m");
-  require(end_effector_weight >= 0 && torso_weight >= 0 && limb_weight >= 0 && root_weight >= 0, "weights", ">= 0");
+  require(end_effector_weight >= 0 && torso_weight >= 0 && limb_weight >= 0 && root_weight >= 0,
+          "weights", ">= 0");
   require(damping >= 0 && std::isfinite(damping), "damping", ">= 0");
   require(max_iterations >= 1 && max_iterations <= 100, "max_iterations", "in [1, 100]");
-  require(contact_height_m >= 0 && contact_speed_m_s >= 0, "contact_height_m / contact_speed_m_s", ">= 0");
+  require(contact_height_m >= 0 && contact_speed_m_s >= 0, "contact_height_m / contact_speed_m_s",
+          ">= 0");
   require(release_frames >= 1, "release_frames", ">= 1");
   require(contact_weight_gain >= 1, "contact_weight_gain", ">= 1");
 }
 
-Retargeter::Retargeter(std::shared_ptr<const Skeleton> source, std::shared_ptr<const Skeleton> target, RetargetMap map,
+Retargeter::Retargeter(std::shared_ptr<const Skeleton> source,
+                       std::shared_ptr<const Skeleton> target, RetargetMap map,
                        const RetargetOptions& options)
     : source_(std::move(source)),
       target_(std::move(target)),
       map_(std::move(map)),
       options_(options),
-      state_(*target_, MarkerSet(*target_, {MarkerDefinition{"root", 1, {MarkerAttachment{0, 1.0, Vec3::Zero()}, {}}}})),
+      state_(*target_,
+             MarkerSet(*target_, {MarkerDefinition{
+                                     "root", 1, {MarkerAttachment{0, 1.0, Vec3::Zero()}, {}}}})),
       source_fk_(*source_) {
   options_.Validate();
   if (map_.bones.empty()) throw std::invalid_argument("retarget: no corresponding bones");
   auto check = [](int j, const Skeleton& sk, const std::string& what) {
-    if (j < 0 || j >= sk.num_joints()) throw std::invalid_argument("retarget: " + what + " joint index out of range");
+    if (j < 0 || j >= sk.num_joints())
+      throw std::invalid_argument("retarget: " + what + " joint index out of range");
   };
   check(map_.source_root, *source_, "source root");
   check(map_.target_root, *target_, "target root");
   scale_ = map_.target_leg_length_m / map_.source_leg_length_m;
-  if (!(scale_ > 0 && std::isfinite(scale_))) throw std::invalid_argument("retarget: leg lengths must be positive");
+  if (!(scale_ > 0 && std::isfinite(scale_)))
+    throw std::invalid_argument("retarget: leg lengths must be positive");
 
   KinematicsWorkspace source_rest(*source_), target_rest(*target_);
   ForwardKinematics(*source_, RestPose(*source_), &source_rest);
@@ -109,11 +121,14 @@ Retargeter::Retargeter(std::shared_ptr<const Skeleton> source, std::shared_ptr<c
     const RetargetBone& bone = map_.bones[b];
     check(bone.source_joint, *source_, bone.role);
     check(bone.target_joint, *target_, bone.role);
-    const auto js = static_cast<size_t>(bone.source_joint), jt = static_cast<size_t>(bone.target_joint);
-    const Capsule cs = MakeCapsule(source_rest.p_WJ[js], bone.source_bone, options_.surface_radius_fraction);
-    const Capsule ct = MakeCapsule(target_rest.p_WJ[jt], bone.target_bone, options_.surface_radius_fraction);
+    const auto js = static_cast<size_t>(bone.source_joint),
+               jt = static_cast<size_t>(bone.target_joint);
+    const Capsule cs =
+        MakeCapsule(source_rest.p_WJ[js], bone.source_bone, options_.surface_radius_fraction);
+    const Capsule ct =
+        MakeCapsule(target_rest.p_WJ[jt], bone.target_bone, options_.surface_radius_fraction);
     const bool positions = bone.region == RetargetRegion::kEndEffector;
-    const double weight = (positions ? options_.end_effector_weight
+    const double weight = (positions                               ? options_.end_effector_weight
                            : bone.region == RetargetRegion::kTorso ? options_.torso_weight
                                                                    : options_.limb_weight) /
                           options_.points_per_bone;
@@ -127,11 +142,13 @@ Retargeter::Retargeter(std::shared_ptr<const Skeleton> source, std::shared_ptr<c
       // A normal-tracked point is represented on the target by a lever point: as far
       // along the bone's axis as the surface point, one lever out along its normal.
       const Vec3 world = positions ? CandidatePoint(ct, k)
-                                   : Vec3(ct.origin + p.target_along_m * ct.axis + options_.normal_lever_m * CandidateNormal(ct, k));
+                                   : Vec3(ct.origin + p.target_along_m * ct.axis +
+                                          options_.normal_lever_m * CandidateNormal(ct, k));
       p.marker = static_cast<int>(defs.size());
       MarkerDefinition def;
       def.name = bone.role + "_" + std::to_string(k);
-      def.attachments[0] = {bone.target_joint, 1.0, target_rest.R_WJ[jt].transpose() * (world - ct.origin)};
+      def.attachments[0] = {bone.target_joint, 1.0,
+                            target_rest.R_WJ[jt].transpose() * (world - ct.origin)};
       defs.push_back(def);
       region_weight.push_back(weight);
       points_.push_back(p);
@@ -178,11 +195,15 @@ void Retargeter::ComputeGoals(bool predict) {
       const Vec3 tracked = scale_ * source_point;
       // A foot in contact keeps its horizontal place: every point of that foot moves by
       // the same correction, so the foot still rolls heel to toe but does not slide.
-      goal = bone.foot_side < 0 ? tracked : Vec3(tracked + foot_correction_[static_cast<size_t>(bone.foot_side)]);
+      goal = bone.foot_side < 0
+                 ? tracked
+                 : Vec3(tracked + foot_correction_[static_cast<size_t>(bone.foot_side)]);
       // A planted foot outweighs the rest, so that the lock holds against other pulls.
       weights_[static_cast<size_t>(p.marker)] =
           base_weights_[static_cast<size_t>(p.marker)] *
-          (bone.foot_side >= 0 && planted_[static_cast<size_t>(bone.foot_side)] ? options_.contact_weight_gain : 1.0);
+          (bone.foot_side >= 0 && planted_[static_cast<size_t>(bone.foot_side)]
+               ? options_.contact_weight_gain
+               : 1.0);
     } else {
       // Where the lever point belongs: from the target joint's origin along the actor's
       // bone axis, then out along the actor's normal -- zero residual exactly when the
@@ -190,11 +211,16 @@ void Retargeter::ComputeGoals(bool predict) {
       // origin is the last solution's, moved by the actor's own (scaled) motion since the
       // last frame: no lag, and no feedback of the solve's velocity into its goals.
       const auto jt = static_cast<size_t>(bone.target_joint);
-      const Vec3 anchor = warm.p_WJ[jt] + (predict ? Vec3(scale_ * (source_fk_.p_WJ[js] - source_origin_before_[js])) : Vec3::Zero());
-      goal = anchor + p.target_along_m * (source_fk_.R_WJ[js] * p.source_axis) + options_.normal_lever_m * (source_fk_.R_WJ[js] * p.source_normal);
+      const Vec3 anchor =
+          warm.p_WJ[jt] + (predict
+                               ? Vec3(scale_ * (source_fk_.p_WJ[js] - source_origin_before_[js]))
+                               : Vec3::Zero());
+      goal = anchor + p.target_along_m * (source_fk_.R_WJ[js] * p.source_axis) +
+             options_.normal_lever_m * (source_fk_.R_WJ[js] * p.source_normal);
     }
   }
-  goals_[static_cast<size_t>(root_marker_)] = scale_ * source_fk_.p_WJ[static_cast<size_t>(map_.source_root)];
+  goals_[static_cast<size_t>(root_marker_)] =
+      scale_ * source_fk_.p_WJ[static_cast<size_t>(map_.source_root)];
 }
 
 const Pose& Retargeter::Retarget(const Pose& source_pose) {
@@ -214,7 +240,8 @@ const Pose& Retargeter::Retarget(const Pose& source_pose) {
     // Hysteresis: leaving contact needs clearly more than entering it.
     planted_now[static_cast<size_t>(side)] =
         was ? height < 1.5 * options_.contact_height_m && speed < 1.5 * options_.contact_speed_m_s
-            : height < options_.contact_height_m && speed < options_.contact_speed_m_s && frames_ > 0;
+            : height < options_.contact_height_m && speed < options_.contact_speed_m_s &&
+                  frames_ > 0;
     previous_ankle_[static_cast<size_t>(side)] = p;
   }
   for (int side = 0; side < 2; ++side) {
@@ -226,7 +253,8 @@ const Pose& Retargeter::Retarget(const Pose& source_pose) {
     if (planted_now[sd] && !planted_[sd]) {
       // Touch-down: the character's foot stays where it is now (horizontally).
       const int held = map_.target_ankles[sd];
-      lock_[sd] = held >= 0 ? state_.kinematics().p_WJ[static_cast<size_t>(held)] : Vec3(reference + foot_correction_[sd]);
+      lock_[sd] = held >= 0 ? state_.kinematics().p_WJ[static_cast<size_t>(held)]
+                            : Vec3(reference + foot_correction_[sd]);
       lock_[sd].y() = 0.0;
     }
     if (planted_now[sd]) {
@@ -234,7 +262,8 @@ const Pose& Retargeter::Retarget(const Pose& source_pose) {
       release_correction_[sd] = foot_correction_[sd];
     } else {
       // Lifted: ease the correction away over release_frames.
-      const double blend = Smoothstep(static_cast<double>(since_release_[sd] + 1) / options_.release_frames);
+      const double blend =
+          Smoothstep(static_cast<double>(since_release_[sd] + 1) / options_.release_frames);
       foot_correction_[sd] = (1.0 - blend) * release_correction_[sd];
     }
   }

@@ -54,8 +54,8 @@ struct RetargetMap {
 
 struct RetargetOptions {
   double rate_hz = 120.0;
-  int points_per_bone = 8;                  ///< Kept by farthest-point sampling (of 32 candidates).
-  double surface_radius_fraction = 0.15;    ///< Capsule radius / bone length (clamped 2-12 cm).
+  int points_per_bone = 8;                ///< Kept by farthest-point sampling (of 32 candidates).
+  double surface_radius_fraction = 0.15;  ///< Capsule radius / bone length (clamped 2-12 cm).
   double normal_lever_m = 0.10;
   double end_effector_weight = 1.0;
   double torso_weight = 1.0;
@@ -73,9 +73,9 @@ struct RetargetOptions {
   // into the actor's own foot roll and the end-effector error grows to 1.3 cm.
   double contact_height_m = 0.04;
   double contact_speed_m_s = 0.15;
-  int release_frames = 8;  ///< A lifted foot eases from its lock back onto tracking.
+  int release_frames = 8;             ///< A lifted foot eases from its lock back onto tracking.
   double contact_weight_gain = 10.0;  ///< A planted foot's points weigh this much more.
-  int first_frame_passes = 20;  ///< Re-anchoring solves on the first frame (after a reset).
+  int first_frame_passes = 20;        ///< Re-anchoring solves on the first frame (after a reset).
   /// Throws std::invalid_argument naming the field.
   void Validate() const;
 };
@@ -89,8 +89,8 @@ class Retargeter {
  public:
   /// Builds the surface points of both rigs. Throws std::invalid_argument if the map is
   /// empty or names joints outside the skeletons.
-  Retargeter(std::shared_ptr<const Skeleton> source, std::shared_ptr<const Skeleton> target, RetargetMap map,
-             const RetargetOptions& options);
+  Retargeter(std::shared_ptr<const Skeleton> source, std::shared_ptr<const Skeleton> target,
+             RetargetMap map, const RetargetOptions& options);
 
   /// Retargets one source pose (the actor's solved skeleton). Warm-started from the
   /// previous call; never allocates.
@@ -115,7 +115,7 @@ class Retargeter {
     int bone = 0;
     Vec3 source_offset, source_normal, source_axis;  ///< In the source joint's frame.
     double target_along_m = 0.0;                     ///< How far along the target bone.
-    int marker = -1;                    ///< The target's virtual marker for it.
+    int marker = -1;                                 ///< The target's virtual marker for it.
   };
   void ComputeGoals(bool predict);
 
@@ -136,7 +136,8 @@ class Retargeter {
   std::array<bool, 2> planted_{false, false};
   std::array<int, 2> since_release_{1 << 20, 1 << 20};
   std::array<Vec3, 2> previous_ankle_{Vec3::Zero(), Vec3::Zero()};
-  std::array<Vec3, 2> lock_{Vec3::Zero(), Vec3::Zero()};  ///< Where a planted foot's reference stays (x, z).
+  std::array<Vec3, 2> lock_{Vec3::Zero(),
+                            Vec3::Zero()};  ///< Where a planted foot's reference stays (x, z).
   std::array<Vec3, 2> foot_correction_{Vec3::Zero(), Vec3::Zero()};
   std::array<Vec3, 2> release_correction_{Vec3::Zero(), Vec3::Zero()};
   double floor_ankle_y_ = 1e9;

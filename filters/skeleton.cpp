@@ -35,24 +35,33 @@ Skeleton::Skeleton(std::vector<Joint> joints) : joints_(std::move(joints)) {
   children_.resize(joints_.size());
   for (size_t j = 0; j < joints_.size(); ++j) {
     const Joint& joint = joints_[j];
-    if (joint.name.empty()) throw std::invalid_argument("skeleton: joint " + std::to_string(j) + " has an empty name");
-    if (!names.insert(joint.name).second) throw std::invalid_argument("skeleton: joint name '" + joint.name + "' is repeated");
+    if (joint.name.empty())
+      throw std::invalid_argument("skeleton: joint " + std::to_string(j) + " has an empty name");
+    if (!names.insert(joint.name).second)
+      throw std::invalid_argument("skeleton: joint name '" + joint.name + "' is repeated");
     if (!joint.parent.is_valid()) {
       ++roots;
-      if (j != 0) throw std::invalid_argument("skeleton: joint '" + joint.name + "' has no parent but is not the first joint");
+      if (j != 0)
+        throw std::invalid_argument("skeleton: joint '" + joint.name +
+                                    "' has no parent but is not the first joint");
     } else {
       if (joint.parent.value >= static_cast<int>(j))
-        throw std::invalid_argument("skeleton: joint '" + joint.name + "' has parent index " + std::to_string(joint.parent.value) +
+        throw std::invalid_argument("skeleton: joint '" + joint.name + "' has parent index " +
+                                    std::to_string(joint.parent.value) +
                                     ", expected a joint listed before it");
       children_[static_cast<size_t>(joint.parent.value)].push_back(static_cast<int>(j));
     }
     if (joint.type == JointType::kHinge && std::abs(joint.hinge_axis.norm() - 1.0) > 1e-9)
-      throw std::invalid_argument("skeleton: hinge axis of joint '" + joint.name + "' is not unit length");
-    if (!joint.offset.allFinite()) throw std::invalid_argument("skeleton: joint '" + joint.name + "' has a non-finite offset");
+      throw std::invalid_argument("skeleton: hinge axis of joint '" + joint.name +
+                                  "' is not unit length");
+    if (!joint.offset.allFinite())
+      throw std::invalid_argument("skeleton: joint '" + joint.name + "' has a non-finite offset");
     dof_offset_.push_back(num_dofs_);
     num_dofs_ += DofCount(joint.type);
   }
-  if (roots != 1) throw std::invalid_argument("skeleton: expected exactly one root joint, found " + std::to_string(roots));
+  if (roots != 1)
+    throw std::invalid_argument("skeleton: expected exactly one root joint, found " +
+                                std::to_string(roots));
 }
 
 std::optional<JointIndex> Skeleton::FindJoint(std::string_view name) const {
@@ -100,7 +109,8 @@ void ForwardKinematics(const Skeleton& skeleton, const Pose& pose, KinematicsWor
   }
 }
 
-void IntegratePose(const Skeleton& skeleton, const Eigen::Ref<const Eigen::VectorXd>& dq, Pose* pose) {
+void IntegratePose(const Skeleton& skeleton, const Eigen::Ref<const Eigen::VectorXd>& dq,
+                   Pose* pose) {
   for (int j = 0; j < skeleton.num_joints(); ++j) {
     const Joint& joint = skeleton.joint(j);
     const auto uj = static_cast<size_t>(j);
@@ -108,7 +118,8 @@ void IntegratePose(const Skeleton& skeleton, const Eigen::Ref<const Eigen::Vecto
     switch (joint.type) {
       case JointType::kFixed: break;
       case JointType::kHinge:
-        pose->rotation[uj] = (pose->rotation[uj] * ExpRotation(joint.hinge_axis * dq[k])).normalized();
+        pose->rotation[uj] =
+            (pose->rotation[uj] * ExpRotation(joint.hinge_axis * dq[k])).normalized();
         break;
       case JointType::kBall:
         pose->rotation[uj] = (pose->rotation[uj] * ExpRotation(dq.segment<3>(k))).normalized();
@@ -121,7 +132,8 @@ void IntegratePose(const Skeleton& skeleton, const Eigen::Ref<const Eigen::Vecto
   }
 }
 
-void PoseDifference(const Skeleton& skeleton, const Pose& a, const Pose& b, Eigen::Ref<Eigen::VectorXd> dq) {
+void PoseDifference(const Skeleton& skeleton, const Pose& a, const Pose& b,
+                    Eigen::Ref<Eigen::VectorXd> dq) {
   for (int j = 0; j < skeleton.num_joints(); ++j) {
     const Joint& joint = skeleton.joint(j);
     const auto uj = static_cast<size_t>(j);
@@ -146,7 +158,8 @@ void ApplyJointLimits(const Skeleton& skeleton, Pose* pose) {
     const auto uj = static_cast<size_t>(j);
     const Vec3 w = LogRotation(joint.rest_rotation.conjugate() * pose->rotation[uj]);
     const double angle = w.norm();
-    if (angle > joint.max_angle_rad) pose->rotation[uj] = joint.rest_rotation * ExpRotation(w * (joint.max_angle_rad / angle));
+    if (angle > joint.max_angle_rad)
+      pose->rotation[uj] = joint.rest_rotation * ExpRotation(w * (joint.max_angle_rad / angle));
   }
 }
 

@@ -32,7 +32,7 @@ int DofCount(JointType type);
 
 struct Joint {
   std::string name;
-  JointIndex parent;  ///< Invalid for the root.
+  JointIndex parent;           ///< Invalid for the root.
   Vec3 offset = Vec3::Zero();  ///< Rest translation of the joint origin in the parent frame, m.
   Quat rest_rotation = Quat::Identity();
   JointType type = JointType::kBall;
@@ -99,11 +99,13 @@ inline const Vec3& LocalTranslation(const Skeleton& skeleton, const Pose& pose, 
 
 /// Applies a step dq (size num_dofs) to the pose with the exponential map: for each joint,
 /// R_PJ <- R_PJ * Exp(rotation part), translation += translation part. Does not allocate.
-void IntegratePose(const Skeleton& skeleton, const Eigen::Ref<const Eigen::VectorXd>& dq, Pose* pose);
+void IntegratePose(const Skeleton& skeleton, const Eigen::Ref<const Eigen::VectorXd>& dq,
+                   Pose* pose);
 
 /// Writes into dq (size num_dofs) the step that takes pose a to pose b: the inverse of
 /// IntegratePose. Does not allocate.
-void PoseDifference(const Skeleton& skeleton, const Pose& a, const Pose& b, Eigen::Ref<Eigen::VectorXd> dq);
+void PoseDifference(const Skeleton& skeleton, const Pose& a, const Pose& b,
+                    Eigen::Ref<Eigen::VectorXd> dq);
 
 /// Clamps every joint's rotation to its max_angle_rad away from its rest rotation.
 void ApplyJointLimits(const Skeleton& skeleton, Pose* pose);

@@ -40,7 +40,9 @@ class Tokens {
     }
   }
   bool done() const { return pos_ >= tokens_.size(); }
-  int line() const { return done() ? (tokens_.empty() ? 1 : tokens_.back().line) : tokens_[pos_].line; }
+  int line() const {
+    return done() ? (tokens_.empty() ? 1 : tokens_.back().line) : tokens_[pos_].line;
+  }
   const std::string& Peek() const {
     static const std::string kEnd;
     return done() ? kEnd : tokens_[pos_].text;
@@ -59,7 +61,8 @@ class Tokens {
     const std::string t = Next(what);
     char* end = nullptr;
     const double v = std::strtod(t.c_str(), &end);
-    if (end == t.c_str() || *end != '\0' || !std::isfinite(v)) FailAt(at, std::string("expected a number for ") + what + ", found '" + t + "'");
+    if (end == t.c_str() || *end != '\0' || !std::isfinite(v))
+      FailAt(at, std::string("expected a number for ") + what + ", found '" + t + "'");
     return v;
   }
   [[noreturn]] void Fail(const std::string& what) const { FailAt(line(), what); }
@@ -83,7 +86,8 @@ struct RawJoint {
 BvhChannel ParseChannel(Tokens& t) {
   const int at = t.line();
   std::string name = t.Next("a channel name");
-  std::transform(name.begin(), name.end(), name.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  std::transform(name.begin(), name.end(), name.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
   if (name == "xposition") return BvhChannel::kXposition;
   if (name == "yposition") return BvhChannel::kYposition;
   if (name == "zposition") return BvhChannel::kZposition;
@@ -96,7 +100,8 @@ BvhChannel ParseChannel(Tokens& t) {
 bool IsRotation(BvhChannel c) { return c >= BvhChannel::kXrotation; }
 int Axis(BvhChannel c) { return static_cast<int>(c) % 3; }
 
-void ParseJoint(Tokens& t, int parent, std::vector<RawJoint>* joints, std::vector<std::pair<int, Vec3>>* end_sites) {
+void ParseJoint(Tokens& t, int parent, std::vector<RawJoint>* joints,
+                std::vector<std::pair<int, Vec3>>* end_sites) {
   const int at = t.line();
   RawJoint joint{t.Next("a joint name"), parent, Vec3::Zero(), {}};
   // Names may contain spaces in some exporters; join tokens up to the brace.
@@ -107,7 +112,9 @@ void ParseJoint(Tokens& t, int parent, std::vector<RawJoint>* joints, std::vecto
   if (t.Peek() == "CHANNELS") {
     t.Next("CHANNELS");
     const double n = t.Number("the channel count");
-    if (n < 0 || n > 6 || n != std::floor(n)) t.FailAt(at, "joint '" + joint.name + "' has " + std::to_string(n) + " channels, expected 0..6");
+    if (n < 0 || n > 6 || n != std::floor(n))
+      t.FailAt(at,
+               "joint '" + joint.name + "' has " + std::to_string(n) + " channels, expected 0..6");
     for (int k = 0; k < static_cast<int>(n); ++k) joint.channels.push_back(ParseChannel(t));
   }
   int rot = 0, pos = 0;
@@ -118,8 +125,9 @@ void ParseJoint(Tokens& t, int parent, std::vector<RawJoint>* joints, std::vecto
     (IsRotation(c) ? rot : pos)++;
   }
   if ((rot != 0 && rot != 3) || (pos != 0 && pos != 3) || (rot == 0 && pos == 3))
-    t.FailAt(at, "joint '" + joint.name + "' has an unsupported channel set (" + std::to_string(pos) + " position, " +
-                     std::to_string(rot) + " rotation); supported: 3 rotations, optionally 3 positions");
+    t.FailAt(at, "joint '" + joint.name + "' has an unsupported channel set (" +
+                     std::to_string(pos) + " position, " + std::to_string(rot) +
+                     " rotation); supported: 3 rotations, optionally 3 positions");
   const int index = static_cast<int>(joints->size());
   joints->push_back(std::move(joint));
   while (true) {
@@ -145,7 +153,8 @@ std::string GuessUnits(const std::vector<RawJoint>& joints) {
   std::vector<Vec3> p(joints.size());
   Vec3 lo = Vec3::Constant(1e300), hi = Vec3::Constant(-1e300);
   for (size_t j = 0; j < joints.size(); ++j) {
-    p[j] = joints[j].parent < 0 ? Vec3::Zero() : Vec3(p[static_cast<size_t>(joints[j].parent)] + joints[j].offset);
+    p[j] = joints[j].parent < 0 ? Vec3::Zero()
+                                : Vec3(p[static_cast<size_t>(joints[j].parent)] + joints[j].offset);
     lo = lo.cwiseMin(p[j]);
     hi = hi.cwiseMax(p[j]);
   }
@@ -166,7 +175,8 @@ Quat RotationFromChannels(const std::vector<BvhChannel>& channels, const double*
 
 }  // namespace
 
-BvhTake ParseBvh(const std::string& text, const std::string& source_name, const BvhReadOptions& options) {
+BvhTake ParseBvh(const std::string& text, const std::string& source_name,
+                 const BvhReadOptions& options) {
   Tokens t(text, source_name);
   t.Expect("HIERARCHY");
   t.Expect("ROOT");
@@ -177,7 +187,8 @@ BvhTake ParseBvh(const std::string& text, const std::string& source_name, const 
   t.Expect("MOTION");
   t.Expect("Frames:");
   const double frames_d = t.Number("the frame count");
-  if (frames_d < 0 || frames_d != std::floor(frames_d) || frames_d > 1e8) t.Fail("invalid frame count");
+  if (frames_d < 0 || frames_d != std::floor(frames_d) || frames_d > 1e8)
+    t.Fail("invalid frame count");
   const auto num_frames = static_cast<size_t>(frames_d);
   t.Expect("Frame");
   t.Expect("Time:");
@@ -189,12 +200,14 @@ BvhTake ParseBvh(const std::string& text, const std::string& source_name, const 
   std::vector<double> values(num_frames * total_channels);
   for (size_t f = 0; f < num_frames; ++f) {
     for (size_t c = 0; c < total_channels; ++c) {
-      if (t.done()) t.Fail("frame " + std::to_string(f + 1) + " of " + std::to_string(num_frames) + " is truncated: expected " +
-                           std::to_string(total_channels) + " values");
+      if (t.done())
+        t.Fail("frame " + std::to_string(f + 1) + " of " + std::to_string(num_frames) +
+               " is truncated: expected " + std::to_string(total_channels) + " values");
       values[f * total_channels + c] = t.Number("a channel value");
     }
   }
-  if (!t.done()) t.Fail("unexpected data after frame " + std::to_string(num_frames) + ": '" + t.Peek() + "'");
+  if (!t.done())
+    t.Fail("unexpected data after frame " + std::to_string(num_frames) + ": '" + t.Peek() + "'");
 
   BvhTake take;
   take.units = options.units.empty() ? GuessUnits(raw) : options.units;
@@ -222,19 +235,23 @@ BvhTake ParseBvh(const std::string& text, const std::string& source_name, const 
     for (size_t c = 0; c < r.channels.size(); ++c) {
       const double v0 = num_frames > 0 ? values[first_channel + c] : 0.0;
       bool moves = false;
-      for (size_t f = 1; f < num_frames && !moves; ++f) moves = std::abs(values[f * total_channels + first_channel + c] - v0) > 1e-9 * std::max(1.0, std::abs(v0));
+      for (size_t f = 1; f < num_frames && !moves; ++f)
+        moves = std::abs(values[f * total_channels + first_channel + c] - v0) >
+                1e-9 * std::max(1.0, std::abs(v0));
       anything_moves = anything_moves || moves;
       if (!IsRotation(r.channels[c])) {
         translation_moves = translation_moves || moves;
         if (num_frames > 0) constant_translation[Axis(r.channels[c])] = v0;
       }
     }
-    const bool has_translation = std::any_of(r.channels.begin(), r.channels.end(), [](BvhChannel c) { return !IsRotation(c); });
+    const bool has_translation = std::any_of(r.channels.begin(), r.channels.end(),
+                                             [](BvhChannel c) { return !IsRotation(c); });
     if (r.channels.empty()) {
       joint.type = JointType::kFixed;
     } else if (r.parent < 0 && !anything_moves) {
       joint.type = JointType::kFixed;
-      if (num_frames > 0) joint.rest_rotation = RotationFromChannels(r.channels, &values[first_channel]);
+      if (num_frames > 0)
+        joint.rest_rotation = RotationFromChannels(r.channels, &values[first_channel]);
       joint.offset = constant_translation * s;
     } else if (has_translation && translation_moves) {
       joint.type = JointType::kFree;
@@ -303,7 +320,9 @@ void AppendNumber(std::string* out, double v) {
 
 std::vector<BvhChannel> DefaultChannels(JointType type) {
   using C = BvhChannel;
-  if (type == JointType::kFree) return {C::kXposition, C::kYposition, C::kZposition, C::kZrotation, C::kXrotation, C::kYrotation};
+  if (type == JointType::kFree)
+    return {C::kXposition, C::kYposition, C::kZposition,
+            C::kZrotation, C::kXrotation, C::kYrotation};
   return {C::kZrotation, C::kXrotation, C::kYrotation};
 }
 
@@ -321,7 +340,8 @@ const char* ChannelName(BvhChannel c) {
 
 }  // namespace
 
-BvhTake MakeBvhTake(Skeleton skeleton, std::vector<Pose> frames, double frame_time_s, const std::string& units) {
+BvhTake MakeBvhTake(Skeleton skeleton, std::vector<Pose> frames, double frame_time_s,
+                    const std::string& units) {
   BvhTake take;
   take.units = units;
   take.metres_per_unit = MetresPerUnit(units);
@@ -339,14 +359,17 @@ std::string FormatBvh(const BvhTake& take) {
   const Skeleton& sk = take.skeleton;
   const double inv = 1.0 / take.metres_per_unit;
   auto channels_of = [&](int j) {
-    return static_cast<size_t>(j) < take.channels.size() ? take.channels[static_cast<size_t>(j)] : DefaultChannels(sk.joint(j).type);
+    return static_cast<size_t>(j) < take.channels.size() ? take.channels[static_cast<size_t>(j)]
+                                                         : DefaultChannels(sk.joint(j).type);
   };
   std::string out = "HIERARCHY\n";
   // Recursive emit in child order; joints are stored parents-first.
   auto emit = [&](auto&& self, int j, int depth) -> void {
     const std::string indent(static_cast<size_t>(2 * depth), ' ');
     out += indent + (depth == 0 ? "ROOT " : "JOINT ") + sk.joint(j).name + "\n" + indent + "{\n";
-    const Vec3 offset = static_cast<size_t>(j) < take.file_offsets.size() ? take.file_offsets[static_cast<size_t>(j)] : sk.joint(j).offset;
+    const Vec3 offset = static_cast<size_t>(j) < take.file_offsets.size()
+                            ? take.file_offsets[static_cast<size_t>(j)]
+                            : sk.joint(j).offset;
     out += indent + "  OFFSET ";
     for (int k = 0; k < 3; ++k) {
       AppendNumber(&out, offset[k] * inv);
@@ -395,7 +418,8 @@ std::string FormatBvh(const BvhTake& take) {
       }
       const Vec3& translation = LocalTranslation(sk, pose, j);
       int r = 0;
-      for (BvhChannel c : ch) put(IsRotation(c) ? euler[r++] / kDegToRad : translation[Axis(c)] * inv);
+      for (BvhChannel c : ch)
+        put(IsRotation(c) ? euler[r++] / kDegToRad : translation[Axis(c)] * inv);
     }
     out += "\n";
   }

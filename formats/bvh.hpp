@@ -53,7 +53,8 @@ struct BvhReadOptions {
 
 /// Parses BVH text. source_name is used in messages. Throws BvhError naming the
 /// source and line for malformed input.
-BvhTake ParseBvh(const std::string& text, const std::string& source_name, const BvhReadOptions& options = {});
+BvhTake ParseBvh(const std::string& text, const std::string& source_name,
+                 const BvhReadOptions& options = {});
 /// Reads a BVH file. Throws BvhError (or std::runtime_error if it cannot be opened).
 BvhTake ReadBvh(const std::string& path, const BvhReadOptions& options = {});
 
@@ -64,6 +65,7 @@ std::string FormatBvh(const BvhTake& take);
 void WriteBvh(const std::string& path, const BvhTake& take);
 
 /// Builds a take around a skeleton with default channel layouts and no end sites.
-BvhTake MakeBvhTake(Skeleton skeleton, std::vector<Pose> frames, double frame_time_s, const std::string& units = "cm");
+BvhTake MakeBvhTake(Skeleton skeleton, std::vector<Pose> frames, double frame_time_s,
+                    const std::string& units = "cm");
 
 }  // namespace mocapd

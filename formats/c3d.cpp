@@ -19,7 +19,8 @@ constexpr size_t kBlock = 512;
 constexpr uint8_t kProcessorIntel = 84, kProcessorDec = 85, kProcessorMips = 86;
 
 std::string Upper(std::string s) {
-  std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return static_cast<char>(std::toupper(c)); });
+  std::transform(s.begin(), s.end(), s.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::toupper(c)); });
   return s;
 }
 
@@ -37,7 +38,8 @@ struct Parameter {
 
 class Parser {
  public:
-  Parser(std::span<const uint8_t> bytes, const std::string& source) : reader_(bytes), source_(source) {}
+  Parser(std::span<const uint8_t> bytes, const std::string& source)
+      : reader_(bytes), source_(source) {}
 
   C3dTake Parse() {
     ReadHeader();
@@ -47,7 +49,8 @@ class Parser {
 
  private:
   [[noreturn]] void Fail(const std::string& section, size_t offset, const std::string& what) const {
-    throw C3dError(source_ + ": " + section + " section, byte " + std::to_string(offset) + ": " + what);
+    throw C3dError(source_ + ": " + section + " section, byte " + std::to_string(offset) + ": " +
+                   what);
   }
   // Takes C strings so the common (successful) case builds no std::string.
   void Require(bool ok, const char* section, const char* what) {
@@ -58,27 +61,34 @@ class Parser {
   }
 
   void ReadHeader() {
-    Require(reader_.size() >= kBlock, "header", "file is " + std::to_string(reader_.size()) + " bytes, shorter than the 512-byte header");
+    Require(
+        reader_.size() >= kBlock, "header",
+        "file is " + std::to_string(reader_.size()) + " bytes, shorter than the 512-byte header");
     uint8_t param_block = 0, key = 0;
     Require(reader_.ReadU8(&param_block) && reader_.ReadU8(&key), "header", "truncated");
     if (key != 0x50) Fail("header", 1, "expected key byte 0x50, found " + std::to_string(key));
     if (param_block < 1) Fail("header", 0, "parameter section block number is 0");
     param_start_ = (static_cast<size_t>(param_block) - 1) * kBlock;
     // The processor type (which fixes byte order) lives in the parameter section header.
-    Require(reader_.Seek(param_start_ + 3), "header", "parameter section starts beyond the end of the file");
+    Require(reader_.Seek(param_start_ + 3), "header",
+            "parameter section starts beyond the end of the file");
     Require(reader_.ReadU8(&processor_), "parameters", "truncated");
     switch (processor_) {
       case kProcessorIntel: reader_.set_format(ByteOrder::kLittle, FloatFormat::kIeee); break;
       case kProcessorDec: reader_.set_format(ByteOrder::kLittle, FloatFormat::kVax); break;
       case kProcessorMips: reader_.set_format(ByteOrder::kBig, FloatFormat::kIeee); break;
-      default: Fail("parameters", param_start_ + 3, "unknown processor type " + std::to_string(processor_) + " (expected 84, 85 or 86)");
+      default:
+        Fail("parameters", param_start_ + 3,
+             "unknown processor type " + std::to_string(processor_) + " (expected 84, 85 or 86)");
     }
-    uint16_t points = 0, analog = 0, first = 0, last = 0, gap = 0, data_block = 0, analog_per_frame = 0;
+    uint16_t points = 0, analog = 0, first = 0, last = 0, gap = 0, data_block = 0,
+             analog_per_frame = 0;
     float scale = 0.0f, rate = 0.0f;
     Require(reader_.Seek(2), "header", "truncated");
-    Require(reader_.ReadU16(&points) && reader_.ReadU16(&analog) && reader_.ReadU16(&first) && reader_.ReadU16(&last) &&
-                reader_.ReadU16(&gap) && reader_.ReadF32(&scale) && reader_.ReadU16(&data_block) &&
-                reader_.ReadU16(&analog_per_frame) && reader_.ReadF32(&rate),
+    Require(reader_.ReadU16(&points) && reader_.ReadU16(&analog) && reader_.ReadU16(&first) &&
+                reader_.ReadU16(&last) && reader_.ReadU16(&gap) && reader_.ReadF32(&scale) &&
+                reader_.ReadU16(&data_block) && reader_.ReadU16(&analog_per_frame) &&
+                reader_.ReadF32(&rate),
             "header", "truncated");
     header_points_ = points;
     header_analog_ = analog;
@@ -92,9 +102,11 @@ class Parser {
   void ReadParameters() {
     Require(reader_.Seek(param_start_), "parameters", "starts beyond the end of the file");
     uint8_t reserved1 = 0, reserved2 = 0, blocks = 0, processor = 0;
-    Require(reader_.ReadU8(&reserved1) && reader_.ReadU8(&reserved2) && reader_.ReadU8(&blocks) && reader_.ReadU8(&processor),
+    Require(reader_.ReadU8(&reserved1) && reader_.ReadU8(&reserved2) && reader_.ReadU8(&blocks) &&
+                reader_.ReadU8(&processor),
             "parameters", "truncated section header");
-    const size_t end = std::min(reader_.size(), param_start_ + std::max<size_t>(blocks, 1) * kBlock);
+    const size_t end =
+        std::min(reader_.size(), param_start_ + std::max<size_t>(blocks, 1) * kBlock);
     std::map<int, std::string> group_names;
     struct Pending {
       int group;
@@ -106,35 +118,42 @@ class Parser {
     while (pos + 2 <= end) {
       Require(reader_.Seek(pos), "parameters", "truncated");
       int8_t name_len_signed = 0, id = 0;
-      Require(reader_.ReadI8(&name_len_signed) && reader_.ReadI8(&id), "parameters", "truncated entry");
+      Require(reader_.ReadI8(&name_len_signed) && reader_.ReadI8(&id), "parameters",
+              "truncated entry");
       if (name_len_signed == 0 || id == 0) break;  // end of the list
       const size_t name_len = static_cast<size_t>(std::abs(static_cast<int>(name_len_signed)));
       std::string name;
-      Require(reader_.ReadString(name_len, &name), "parameters", "name runs past the end of the file");
+      Require(reader_.ReadString(name_len, &name), "parameters",
+              "name runs past the end of the file");
       const size_t next_field = reader_.offset();
       int16_t next = 0;
       Require(reader_.ReadI16(&next), "parameters", "truncated entry");
       if (id < 0) {
         uint8_t desc_len = 0;
-        Require(reader_.ReadU8(&desc_len) && reader_.Skip(desc_len), "parameters", "group '" + name + "' description runs past the end");
+        Require(reader_.ReadU8(&desc_len) && reader_.Skip(desc_len), "parameters",
+                "group '" + name + "' description runs past the end");
         group_names[-id] = Upper(TrimRight(name));
       } else {
         Parameter p;
         uint8_t ndims = 0;
-        Require(reader_.ReadI8(&p.type) && reader_.ReadU8(&ndims), "parameters", "parameter '" + name + "' is truncated");
+        Require(reader_.ReadI8(&p.type) && reader_.ReadU8(&ndims), "parameters",
+                "parameter '" + name + "' is truncated");
         if (p.type != -1 && p.type != 1 && p.type != 2 && p.type != 4)
-          Fail("parameters", reader_.offset() - 2, "parameter '" + name + "' has invalid type " + std::to_string(p.type));
+          Fail("parameters", reader_.offset() - 2,
+               "parameter '" + name + "' has invalid type " + std::to_string(p.type));
         size_t count = 1;
         for (uint8_t d = 0; d < ndims; ++d) {
           uint8_t dim = 0;
-          Require(reader_.ReadU8(&dim), "parameters", "parameter '" + name + "' dimensions are truncated");
+          Require(reader_.ReadU8(&dim), "parameters",
+                  "parameter '" + name + "' dimensions are truncated");
           p.dims.push_back(dim);
           count *= dim;
         }
         const size_t bytes = count * static_cast<size_t>(std::abs(static_cast<int>(p.type)));
         p.offset = reader_.offset();
         Require(reader_.ReadBytes(bytes, &p.data), "parameters",
-                "parameter '" + name + "' data (" + std::to_string(bytes) + " bytes) runs past the end");
+                "parameter '" + name + "' data (" + std::to_string(bytes) +
+                    " bytes) runs past the end");
         pending.push_back({id, Upper(TrimRight(name)), std::move(p)});
       }
       if (next <= 0) break;  // 0 marks the last entry; a negative link cannot move forward
@@ -142,7 +161,8 @@ class Parser {
     }
     for (Pending& p : pending) {
       auto g = group_names.find(p.group);
-      const std::string group = g == group_names.end() ? "GROUP" + std::to_string(p.group) : g->second;
+      const std::string group =
+          g == group_names.end() ? "GROUP" + std::to_string(p.group) : g->second;
       params_[group + ":" + p.name] = std::move(p.param);
     }
   }
@@ -192,12 +212,14 @@ class Parser {
     }
     const auto len = static_cast<size_t>(p->dims[0]);
     if (len == 0) return out;
-    for (size_t k = 0; k * len < all.size(); ++k) out.push_back(TrimRight(all.substr(k * len, len)));
+    for (size_t k = 0; k * len < all.size(); ++k)
+      out.push_back(TrimRight(all.substr(k * len, len)));
     return out;
   }
 
   // LABELS, LABELS2, LABELS3 ... concatenated.
-  std::vector<std::string> StringsContinued(const std::string& group, const std::string& name) const {
+  std::vector<std::string> StringsContinued(const std::string& group,
+                                            const std::string& name) const {
     std::vector<std::string> out = Strings(group + ":" + name);
     for (int k = 2; Find(group + ":" + name + std::to_string(k)) != nullptr; ++k) {
       const auto more = Strings(group + ":" + name + std::to_string(k));
@@ -208,16 +230,21 @@ class Parser {
 
   C3dTake ReadData() {
     C3dTake take;
-    take.processor = processor_ == kProcessorIntel ? "Intel" : processor_ == kProcessorDec ? "DEC" : "MIPS";
+    take.processor = processor_ == kProcessorIntel ? "Intel"
+                     : processor_ == kProcessorDec ? "DEC"
+                                                   : "MIPS";
     const int points = static_cast<int>(Number("POINT:USED").value_or(header_points_));
     if (points < 0) Fail("parameters", 0, "POINT:USED is negative");
     // Integer parameters above 32767 are stored as unsigned 16-bit words.
     const auto used = static_cast<size_t>(points < 0 ? points + 65536 : points);
     const double scale = Number("POINT:SCALE").value_or(header_scale_);
-    if (!std::isfinite(scale) || scale == 0.0) Fail("parameters", 0, "POINT:SCALE is " + std::to_string(scale) + ", expected a non-zero number");
+    if (!std::isfinite(scale) || scale == 0.0)
+      Fail("parameters", 0,
+           "POINT:SCALE is " + std::to_string(scale) + ", expected a non-zero number");
     take.float_storage = scale < 0.0;
     take.rate_hz = Number("POINT:RATE").value_or(header_rate_);
-    if (!(take.rate_hz > 0.0) || !std::isfinite(take.rate_hz)) Fail("parameters", 0, "POINT:RATE is " + std::to_string(take.rate_hz) + ", expected > 0");
+    if (!(take.rate_hz > 0.0) || !std::isfinite(take.rate_hz))
+      Fail("parameters", 0, "POINT:RATE is " + std::to_string(take.rate_hz) + ", expected > 0");
     const auto units = Strings("POINT:UNITS");
     take.units = units.empty() || units[0].empty() ? "mm" : units[0];
     try {
@@ -230,12 +257,15 @@ class Parser {
     if (auto f = Number("POINT:FRAMES")) {
       double v = *f;
       if (Find("POINT:FRAMES")->type == 2 && v < 0) v += 65536;  // unsigned word
-      if (header_last_ == 65535 || frames <= 0 || static_cast<int64_t>(v) > frames) frames = static_cast<int64_t>(v);
+      if (header_last_ == 65535 || frames <= 0 || static_cast<int64_t>(v) > frames)
+        frames = static_cast<int64_t>(v);
     }
     if (auto end_lo = Number("TRIAL:ACTUAL_END_FIELD", 0)) {
       const auto lo = static_cast<int64_t>(static_cast<uint16_t>(static_cast<int16_t>(*end_lo)));
-      const auto hi = static_cast<int64_t>(static_cast<uint16_t>(static_cast<int16_t>(Number("TRIAL:ACTUAL_END_FIELD", 1).value_or(0))));
-      const auto slo = static_cast<int64_t>(static_cast<uint16_t>(static_cast<int16_t>(Number("TRIAL:ACTUAL_START_FIELD", 0).value_or(1))));
+      const auto hi = static_cast<int64_t>(static_cast<uint16_t>(
+          static_cast<int16_t>(Number("TRIAL:ACTUAL_END_FIELD", 1).value_or(0))));
+      const auto slo = static_cast<int64_t>(static_cast<uint16_t>(
+          static_cast<int16_t>(Number("TRIAL:ACTUAL_START_FIELD", 0).value_or(1))));
       const int64_t trial_frames = (lo + (hi << 16)) - slo + 1;
       if (trial_frames > frames) frames = trial_frames;
     }
@@ -271,14 +301,18 @@ class Parser {
     if (frame_bytes > 0 && static_cast<size_t>(frames) > available / frame_bytes) {
       const size_t whole = available / frame_bytes;
       Fail("data", data_start + whole * frame_bytes,
-           "file ends inside frame " + std::to_string(whole + 1) + " of " + std::to_string(frames) + " (" + std::to_string(frame_bytes) + " bytes per frame)");
+           "file ends inside frame " + std::to_string(whole + 1) + " of " + std::to_string(frames) +
+               " (" + std::to_string(frame_bytes) + " bytes per frame)");
     }
     if (frames > 0 && used > 0 && static_cast<uint64_t>(frames) * used > (1ull << 31))
-      Fail("data", data_start, "implausible size: " + std::to_string(frames) + " frames x " + std::to_string(used) + " points");
+      Fail("data", data_start,
+           "implausible size: " + std::to_string(frames) + " frames x " + std::to_string(used) +
+               " points");
     if (frame_bytes == 0 && frames > 0) {
       // Nothing is stored per frame (no points, no analog): a frame count alone, however
       // large, carries no samples -- keep it out of loops that would walk it.
-      Fail("parameters", param_start_, std::to_string(frames) + " frames declared but no points or analog channels to store");
+      Fail("parameters", param_start_,
+           std::to_string(frames) + " frames declared but no points or analog channels to store");
     }
     take.Allocate(static_cast<int>(frames));
     const double unit_scale = std::abs(scale);
@@ -305,7 +339,8 @@ class Parser {
         Require(ok, "data", "truncated frame");
         const size_t idx = static_cast<size_t>(f) * used + p;
         // A float residual holds an integer word; negative marks an invalid sample.
-        const bool valid = residual >= 0.0f && std::isfinite(xyz[0]) && std::isfinite(xyz[1]) && std::isfinite(xyz[2]);
+        const bool valid = residual >= 0.0f && std::isfinite(xyz[0]) && std::isfinite(xyz[1]) &&
+                           std::isfinite(xyz[2]);
         take.residuals[idx] = valid ? residual : -1.0f;
         if (valid) take.positions[idx] = Vec3(xyz[0], xyz[1], xyz[2]) * take.metres_per_unit;
       }
@@ -317,14 +352,16 @@ class Parser {
   std::string source_;
   size_t param_start_ = 0;
   uint8_t processor_ = kProcessorIntel;
-  uint16_t header_points_ = 0, header_analog_ = 0, header_first_ = 1, header_last_ = 0, header_data_block_ = 0;
+  uint16_t header_points_ = 0, header_analog_ = 0, header_first_ = 1, header_last_ = 0,
+           header_data_block_ = 0;
   float header_scale_ = -1.0f, header_rate_ = 0.0f;
   std::map<std::string, Parameter> params_;
 };
 
 // Writes one parameter entry; the link to the next entry is patched by the caller.
-void WriteParameter(ByteWriter& w, std::vector<uint8_t>& out, ByteOrder order, int8_t group, const std::string& name,
-                    int8_t type, const std::vector<int>& dims, const std::vector<uint8_t>& data) {
+void WriteParameter(ByteWriter& w, std::vector<uint8_t>& out, ByteOrder order, int8_t group,
+                    const std::string& name, int8_t type, const std::vector<int>& dims,
+                    const std::vector<uint8_t>& data) {
   w.WriteI8(static_cast<int8_t>(name.size()));
   w.WriteI8(group);
   w.WriteString(name);
@@ -370,8 +407,8 @@ void WriteGroup(ByteWriter& w, int8_t id, const std::string& name) {
   w.WriteU8(0);
 }
 
-void WriteStrings(ByteWriter& w, std::vector<uint8_t>& out, ByteOrder order, int8_t group, const std::string& name,
-                  const std::vector<std::string>& values) {
+void WriteStrings(ByteWriter& w, std::vector<uint8_t>& out, ByteOrder order, int8_t group,
+                  const std::string& name, const std::vector<std::string>& values) {
   size_t len = 1;
   for (const auto& v : values) len = std::max(len, v.size());
   len = std::min<size_t>(len, 255);
@@ -381,7 +418,8 @@ void WriteStrings(ByteWriter& w, std::vector<uint8_t>& out, ByteOrder order, int
     padded.resize(len, ' ');
     data.insert(data.end(), padded.begin(), padded.end());
   }
-  WriteParameter(w, out, order, group, name, -1, {static_cast<int>(len), static_cast<int>(values.size())}, data);
+  WriteParameter(w, out, order, group, name, -1,
+                 {static_cast<int>(len), static_cast<int>(values.size())}, data);
 }
 
 }  // namespace
@@ -418,22 +456,29 @@ C3dTake ParseC3d(std::span<const uint8_t> bytes, const std::string& source_name)
 C3dTake ReadC3d(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) throw std::runtime_error(path + ": cannot open for reading");
-  const std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)),
+                                   std::istreambuf_iterator<char>());
   return ParseC3d(bytes, path);
 }
 
 std::vector<uint8_t> EncodeC3d(const C3dTake& take, const C3dEncoding& encoding) {
   const size_t points = take.labels.size();
-  if (take.positions.size() != static_cast<size_t>(take.num_frames) * points || take.residuals.size() != take.positions.size())
+  if (take.positions.size() != static_cast<size_t>(take.num_frames) * points ||
+      take.residuals.size() != take.positions.size())
     throw std::invalid_argument("C3D writer: positions/residuals do not match frames x points");
   if (!(take.rate_hz > 0.0)) throw std::invalid_argument("C3D writer: rate must be > 0");
   if (points > 65535) throw std::invalid_argument("C3D writer: too many points");
-  if (encoding.integer_storage && !(encoding.integer_scale > 0.0)) throw std::invalid_argument("C3D writer: integer scale must be > 0");
+  if (encoding.integer_storage && !(encoding.integer_scale > 0.0))
+    throw std::invalid_argument("C3D writer: integer scale must be > 0");
   Layout layout;
   switch (encoding.processor) {
     case C3dEncoding::Processor::kIntel: break;
-    case C3dEncoding::Processor::kDec: layout = {ByteOrder::kLittle, FloatFormat::kVax, kProcessorDec}; break;
-    case C3dEncoding::Processor::kMips: layout = {ByteOrder::kBig, FloatFormat::kIeee, kProcessorMips}; break;
+    case C3dEncoding::Processor::kDec:
+      layout = {ByteOrder::kLittle, FloatFormat::kVax, kProcessorDec};
+      break;
+    case C3dEncoding::Processor::kMips:
+      layout = {ByteOrder::kBig, FloatFormat::kIeee, kProcessorMips};
+      break;
   }
   const ByteOrder order = layout.order;
   const double units_per_metre = 1.0 / MetresPerUnit(take.units);
@@ -448,15 +493,19 @@ std::vector<uint8_t> EncodeC3d(const C3dTake& take, const C3dEncoding& encoding)
   pw.WriteU8(layout.processor);
   WriteGroup(pw, 1, "POINT");
   WriteGroup(pw, 2, "ANALOG");
-  WriteParameter(pw, params, order, 1, "USED", 2, {}, Int16Data(layout, {static_cast<int16_t>(static_cast<uint16_t>(points))}));
+  WriteParameter(pw, params, order, 1, "USED", 2, {},
+                 Int16Data(layout, {static_cast<int16_t>(static_cast<uint16_t>(points))}));
   WriteParameter(pw, params, order, 1, "SCALE", 4, {}, FloatData(layout, {scale}));
-  WriteParameter(pw, params, order, 1, "RATE", 4, {}, FloatData(layout, {static_cast<float>(take.rate_hz)}));
+  WriteParameter(pw, params, order, 1, "RATE", 4, {},
+                 FloatData(layout, {static_cast<float>(take.rate_hz)}));
   const int first = std::clamp(take.first_frame, 1, 65535);
   const bool long_take = static_cast<int64_t>(first) + take.num_frames - 1 > 65535;
   if (take.num_frames <= 32767)
-    WriteParameter(pw, params, order, 1, "FRAMES", 2, {}, Int16Data(layout, {static_cast<int16_t>(take.num_frames)}));
+    WriteParameter(pw, params, order, 1, "FRAMES", 2, {},
+                   Int16Data(layout, {static_cast<int16_t>(take.num_frames)}));
   else
-    WriteParameter(pw, params, order, 1, "FRAMES", 4, {}, FloatData(layout, {static_cast<float>(take.num_frames)}));
+    WriteParameter(pw, params, order, 1, "FRAMES", 4, {},
+                   FloatData(layout, {static_cast<float>(take.num_frames)}));
   const size_t data_start_param = params.size();
   WriteParameter(pw, params, order, 1, "DATA_START", 2, {}, Int16Data(layout, {0}));
   WriteStrings(pw, params, order, 1, "UNITS", {take.units});
@@ -465,7 +514,8 @@ std::vector<uint8_t> EncodeC3d(const C3dTake& take, const C3dEncoding& encoding)
     const std::vector<std::string> labels(take.labels.begin() + static_cast<std::ptrdiff_t>(begin),
                                           take.labels.begin() + static_cast<std::ptrdiff_t>(end));
     std::vector<std::string> descriptions(labels.size());
-    for (size_t i = begin; i < end && i < take.descriptions.size(); ++i) descriptions[i - begin] = take.descriptions[i];
+    for (size_t i = begin; i < end && i < take.descriptions.size(); ++i)
+      descriptions[i - begin] = take.descriptions[i];
     const std::string suffix = k == 1 ? "" : std::to_string(k);
     WriteStrings(pw, params, order, 1, "LABELS" + suffix, labels);
     WriteStrings(pw, params, order, 1, "DESCRIPTIONS" + suffix, descriptions);
@@ -473,10 +523,12 @@ std::vector<uint8_t> EncodeC3d(const C3dTake& take, const C3dEncoding& encoding)
   }
   std::map<std::string, std::vector<std::string>> outputs;
   for (size_t i = 0; i < points && i < take.model_output_kind.size(); ++i)
-    if (!take.model_output_kind[i].empty()) outputs[take.model_output_kind[i]].push_back(take.labels[i]);
+    if (!take.model_output_kind[i].empty())
+      outputs[take.model_output_kind[i]].push_back(take.labels[i]);
   for (const auto& [kind, labels] : outputs) WriteStrings(pw, params, order, 1, kind, labels);
   WriteParameter(pw, params, order, 2, "USED", 2, {}, Int16Data(layout, {0}));
-  WriteParameter(pw, params, order, 2, "RATE", 4, {}, FloatData(layout, {static_cast<float>(take.rate_hz)}));
+  WriteParameter(pw, params, order, 2, "RATE", 4, {},
+                 FloatData(layout, {static_cast<float>(take.rate_hz)}));
   // Terminate the list: an entry whose name length is 0.
   pw.WriteU8(0);
   pw.WriteU8(0);
@@ -510,7 +562,8 @@ std::vector<uint8_t> EncodeC3d(const C3dTake& take, const C3dEncoding& encoding)
   w.WriteF32(static_cast<float>(take.rate_hz));
   w.PadTo(kBlock);
   out.insert(out.end(), params.begin(), params.end());
-  out.reserve(out.size() + static_cast<size_t>(take.num_frames) * points * (encoding.integer_storage ? 8 : 16));
+  out.reserve(out.size() +
+              static_cast<size_t>(take.num_frames) * points * (encoding.integer_storage ? 8 : 16));
   for (int f = 0; f < take.num_frames; ++f) {
     for (size_t p = 0; p < points; ++p) {
       const size_t idx = static_cast<size_t>(f) * points + p;
@@ -519,10 +572,13 @@ std::vector<uint8_t> EncodeC3d(const C3dTake& take, const C3dEncoding& encoding)
       if (encoding.integer_storage) {
         for (int k = 0; k < 3; ++k) {
           const double steps = std::round(v[k] / encoding.integer_scale);
-          if (std::abs(steps) > 32767) throw std::invalid_argument("C3D writer: coordinate does not fit 16-bit integer storage");
+          if (std::abs(steps) > 32767)
+            throw std::invalid_argument(
+                "C3D writer: coordinate does not fit 16-bit integer storage");
           w.WriteI16(static_cast<int16_t>(steps));
         }
-        const double residual_steps = std::clamp(std::round(take.residuals[idx] / encoding.integer_scale), 0.0, 255.0);
+        const double residual_steps =
+            std::clamp(std::round(take.residuals[idx] / encoding.integer_scale), 0.0, 255.0);
         w.WriteI16(valid ? static_cast<int16_t>(residual_steps) : int16_t{-1});
       } else {
         w.WriteF32(static_cast<float>(v.x()));
@@ -540,7 +596,8 @@ void WriteC3d(const std::string& path, const C3dTake& take) {
   const std::vector<uint8_t> bytes = EncodeC3d(take);
   std::ofstream out(path, std::ios::binary | std::ios::trunc);
   if (!out) throw std::runtime_error(path + ": cannot open for writing");
-  out.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
+  out.write(reinterpret_cast<const char*>(bytes.data()),
+            static_cast<std::streamsize>(bytes.size()));
   if (!out) throw std::runtime_error(path + ": write failed");
 }
 

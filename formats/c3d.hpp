@@ -22,7 +22,7 @@ class C3dError : public std::runtime_error {
 };
 
 struct C3dTake {
-  std::vector<std::string> labels;        ///< One per point (trimmed); generated if the file has none.
+  std::vector<std::string> labels;  ///< One per point (trimmed); generated if the file has none.
   std::vector<std::string> descriptions;  ///< One per point, may be empty strings.
   /// Non-empty for points the file lists as model outputs (POINT:ANGLES, POWERS, FORCES,
   /// MOMENTS, SCALARS, REACTIONS): the group name, e.g. "ANGLES". Empty = physical marker.

@@ -13,7 +13,8 @@ namespace mocapd {
 namespace {
 
 std::string Lower(std::string s) {
-  std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  std::transform(s.begin(), s.end(), s.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
   return s;
 }
 
@@ -30,8 +31,10 @@ std::pair<char, std::string> SplitSide(const std::string& original) {
     lower.erase(at, word.size());
     return true;
   };
-  if (erase("left")) side = 'l';
-  else if (erase("right")) side = 'r';
+  if (erase("left"))
+    side = 'l';
+  else if (erase("right"))
+    side = 'r';
   // Tokens split on punctuation: "_l", ".L", "l_" ...
   std::vector<std::string> tokens;
   std::string token;
@@ -53,7 +56,8 @@ std::pair<char, std::string> SplitSide(const std::string& original) {
     joined += t;
   }
   // CMU style: "LHipJoint", "RFoot": a capital L/R followed by another capital.
-  if (side == 0 && name.size() > 2 && (name[0] == 'L' || name[0] == 'R') && std::isupper(static_cast<unsigned char>(name[1]))) {
+  if (side == 0 && name.size() > 2 && (name[0] == 'L' || name[0] == 'R') &&
+      std::isupper(static_cast<unsigned char>(name[1]))) {
     side = static_cast<char>(std::tolower(name[0]));
     joined = Lower(name.substr(1));
   }
@@ -64,17 +68,23 @@ bool Contains(const std::string& s, const char* word) { return s.find(word) != s
 
 // The role a joint name suggests, without side ("" if none).
 std::string RoleOfName(const std::string& bare) {
-  for (const char* finger : {"thumb", "index", "middle", "ring", "pinky", "finger", "end", "site", "twist", "roll"})
+  for (const char* finger :
+       {"thumb", "index", "middle", "ring", "pinky", "finger", "end", "site", "twist", "roll"})
     if (Contains(bare, finger)) return "";
   if (Contains(bare, "hipjoint")) return "";
-  if (Contains(bare, "forearm") || Contains(bare, "lowerarm") || Contains(bare, "elbow")) return "forearm";
+  if (Contains(bare, "forearm") || Contains(bare, "lowerarm") || Contains(bare, "elbow"))
+    return "forearm";
   if (Contains(bare, "upperarm") || bare == "arm" || Contains(bare, "humerus")) return "upper_arm";
-  if (Contains(bare, "shoulder") || Contains(bare, "clavicle") || Contains(bare, "collar")) return "clavicle";
+  if (Contains(bare, "shoulder") || Contains(bare, "clavicle") || Contains(bare, "collar"))
+    return "clavicle";
   if (Contains(bare, "hand") || Contains(bare, "wrist")) return "hand";
-  if (Contains(bare, "upleg") || Contains(bare, "upperleg") || Contains(bare, "thigh")) return "thigh";
+  if (Contains(bare, "upleg") || Contains(bare, "upperleg") || Contains(bare, "thigh"))
+    return "thigh";
   if (Contains(bare, "toe") || Contains(bare, "ball")) return "toe";
   if (Contains(bare, "foot") || Contains(bare, "ankle")) return "foot";
-  if (Contains(bare, "leg") || Contains(bare, "calf") || Contains(bare, "shin") || Contains(bare, "knee")) return "shin";
+  if (Contains(bare, "leg") || Contains(bare, "calf") || Contains(bare, "shin") ||
+      Contains(bare, "knee"))
+    return "shin";
   if (Contains(bare, "head")) return "head";
   if (Contains(bare, "neck")) return "neck";
   if (Contains(bare, "hips") || Contains(bare, "pelvis")) return "pelvis";
@@ -83,11 +93,12 @@ std::string RoleOfName(const std::string& bare) {
 
 }  // namespace
 
-Vec3 SegmentBoneWorld(const Skeleton& skeleton, const HumanoidRoles& roles, const KinematicsWorkspace& rest,
-                      std::span<const BvhEndSite> end_sites, const std::string& role, int joint, double height) {
+Vec3 SegmentBoneWorld(const Skeleton& skeleton, const HumanoidRoles& roles,
+                      const KinematicsWorkspace& rest, std::span<const BvhEndSite> end_sites,
+                      const std::string& role, int joint, double height) {
   static const std::map<std::string, std::string> kNext = {
-      {"clavicle", "upper_arm"}, {"upper_arm", "forearm"}, {"forearm", "hand"}, {"thigh", "shin"}, {"shin", "foot"},
-      {"foot", "toe"},           {"neck", "head"}};
+      {"clavicle", "upper_arm"}, {"upper_arm", "forearm"}, {"forearm", "hand"}, {"thigh", "shin"},
+      {"shin", "foot"},          {"foot", "toe"},          {"neck", "head"}};
   const auto uj = static_cast<size_t>(joint);
   std::string base = role, side;
   if (role.size() > 2 && role[role.size() - 2] == '_') {
@@ -96,11 +107,13 @@ Vec3 SegmentBoneWorld(const Skeleton& skeleton, const HumanoidRoles& roles, cons
   }
   int next = -1;
   if (auto it = kNext.find(base); it != kNext.end()) {
-    if (auto r = roles.joint_of_role.find(it->second + side); r != roles.joint_of_role.end()) next = r->second;
+    if (auto r = roles.joint_of_role.find(it->second + side); r != roles.joint_of_role.end())
+      next = r->second;
   } else if (base == "pelvis" || base == "spine" || base == "chest") {
     // Up the torso: the next joint on the chain toward the neck.
     std::vector<int> chain = roles.spine_chain;
-    if (auto n = roles.joint_of_role.find("neck"); n != roles.joint_of_role.end()) chain.push_back(n->second);
+    if (auto n = roles.joint_of_role.find("neck"); n != roles.joint_of_role.end())
+      chain.push_back(n->second);
     for (size_t i = 0; i < chain.size(); ++i) {
       if (base == "pelvis") {
         next = chain.empty() ? -1 : chain[0];
@@ -114,24 +127,28 @@ Vec3 SegmentBoneWorld(const Skeleton& skeleton, const HumanoidRoles& roles, cons
   for (const BvhEndSite& e : end_sites)
     if (e.parent == joint && e.offset.norm() > 1e-6) return rest.R_WJ[uj] * e.offset;
   // Zero-length end segment: continue the parent's bone with a nominal length.
-  const double nominal = base == "head" ? 0.10 : base == "hand" ? 0.06 : base == "toe" ? 0.04 : base == "foot" ? 0.12 : 0.08;
+  const double nominal = base == "head"   ? 0.10
+                         : base == "hand" ? 0.06
+                         : base == "toe"  ? 0.04
+                         : base == "foot" ? 0.12
+                                          : 0.08;
   const int parent = skeleton.joint(joint).parent.value;
-  Vec3 dir = parent >= 0 ? Vec3(rest.p_WJ[uj] - rest.p_WJ[static_cast<size_t>(parent)]) : Vec3::UnitY();
+  Vec3 dir =
+      parent >= 0 ? Vec3(rest.p_WJ[uj] - rest.p_WJ[static_cast<size_t>(parent)]) : Vec3::UnitY();
   if (dir.norm() < 1e-9) dir = Vec3::UnitY();
   return dir.normalized() * nominal * height / 1.75;
 }
 
-
 std::vector<LayoutMarker> DefaultMarkerLayout() {
   std::vector<LayoutMarker> layout = {
       // Torso and head. Angles are around the bone; along is a fraction of its length.
-      {"PEL1", "pelvis", -0.4, 20, 0.075},   {"PEL2", "pelvis", -0.2, 140, 0.07},
-      {"PEL3", "pelvis", 0.3, 215, 0.065},   {"PEL4", "pelvis", 0.1, 300, 0.08},
-      {"SPN1", "spine", 0.4, 95, 0.055},     {"SPN2", "spine", 0.7, 250, 0.05},
-      {"CHS1", "chest", 0.3, 30, 0.07},      {"CHS2", "chest", 0.55, 160, 0.075},
-      {"CHS3", "chest", 0.85, 275, 0.06},    {"NCK1", "neck", 0.4, 70, 0.045},
-      {"NCK2", "neck", 0.6, 230, 0.04},      {"HED1", "head", 0.3, 10, 0.075},
-      {"HED2", "head", 0.5, 105, 0.08},      {"HED3", "head", 0.8, 200, 0.07},
+      {"PEL1", "pelvis", -0.4, 20, 0.075}, {"PEL2", "pelvis", -0.2, 140, 0.07},
+      {"PEL3", "pelvis", 0.3, 215, 0.065}, {"PEL4", "pelvis", 0.1, 300, 0.08},
+      {"SPN1", "spine", 0.4, 95, 0.055},   {"SPN2", "spine", 0.7, 250, 0.05},
+      {"CHS1", "chest", 0.3, 30, 0.07},    {"CHS2", "chest", 0.55, 160, 0.075},
+      {"CHS3", "chest", 0.85, 275, 0.06},  {"NCK1", "neck", 0.4, 70, 0.045},
+      {"NCK2", "neck", 0.6, 230, 0.04},    {"HED1", "head", 0.3, 10, 0.075},
+      {"HED2", "head", 0.5, 105, 0.08},    {"HED3", "head", 0.8, 200, 0.07},
       {"HED4", "head", 0.6, 290, 0.065},
   };
   // Limbs: the right side is deliberately not the mirror of the left.
@@ -139,10 +156,11 @@ std::vector<LayoutMarker> DefaultMarkerLayout() {
     const bool left = side[0] == 'l';
     const std::string S = left ? "L" : "R";
     const std::string sfx = std::string("_") + side;
-    const double a = left ? 0.0 : 25.0;   // angular offset of the right side
-    const double d = left ? 0.0 : 0.07;   // along offset of the right side
+    const double a = left ? 0.0 : 25.0;    // angular offset of the right side
+    const double d = left ? 0.0 : 0.07;    // along offset of the right side
     const double dr = left ? 0.0 : 0.004;  // radius offset of the right side
-    auto add = [&](const std::string& name, const std::string& seg, double along, double angle, double radius, double pw = 0.0) {
+    auto add = [&](const std::string& name, const std::string& seg, double along, double angle,
+                   double radius, double pw = 0.0) {
       layout.push_back({S + name, seg + sfx, along, angle + a, radius + dr, pw});
     };
     add("CLV1", "clavicle", 0.45 + d, 60, 0.045);
@@ -194,7 +212,8 @@ std::vector<LayoutMarker> ReadMarkerLayout(const std::string& path) {
 
 std::string HumanoidRoles::Describe(const Skeleton& skeleton) const {
   std::string out;
-  for (const auto& [role, joint] : joint_of_role) out += role + " -> " + skeleton.joint(joint).name + "\n";
+  for (const auto& [role, joint] : joint_of_role)
+    out += role + " -> " + skeleton.joint(joint).name + "\n";
   return out;
 }
 
@@ -222,7 +241,8 @@ HumanoidRoles MatchHumanoidRoles(const Skeleton& skeleton) {
     if (!roles.joint_of_role.count(role)) missing.push_back(role);
   for (const char* base : {"upper_arm", "forearm", "hand", "thigh", "shin", "foot"})
     for (const char* side : {"_l", "_r"})
-      if (!roles.joint_of_role.count(std::string(base) + side)) missing.push_back(std::string(base) + side);
+      if (!roles.joint_of_role.count(std::string(base) + side))
+        missing.push_back(std::string(base) + side);
   if (!missing.empty()) {
     std::string msg = "not a recognisable humanoid: no joint found for";
     for (const auto& m : missing) msg += " " + m;
@@ -232,8 +252,10 @@ HumanoidRoles MatchHumanoidRoles(const Skeleton& skeleton) {
   }
   // The spine chain: ancestors of the neck (or head) strictly below the pelvis.
   const int pelvis = roles.joint_of_role["pelvis"];
-  const int top = roles.joint_of_role.count("neck") ? roles.joint_of_role["neck"] : roles.joint_of_role["head"];
-  for (int j = skeleton.joint(top).parent.value; j >= 0 && j != pelvis; j = skeleton.joint(j).parent.value)
+  const int top =
+      roles.joint_of_role.count("neck") ? roles.joint_of_role["neck"] : roles.joint_of_role["head"];
+  for (int j = skeleton.joint(top).parent.value; j >= 0 && j != pelvis;
+       j = skeleton.joint(j).parent.value)
     roles.spine_chain.insert(roles.spine_chain.begin(), j);
   if (!roles.spine_chain.empty()) {
     roles.joint_of_role["chest"] = roles.spine_chain.back();
@@ -243,7 +265,8 @@ HumanoidRoles MatchHumanoidRoles(const Skeleton& skeleton) {
 }
 
 std::vector<MarkerDefinition> PlaceMarkers(const Skeleton& skeleton, const HumanoidRoles& roles,
-                                           std::span<const LayoutMarker> layout, std::span<const BvhEndSite> end_sites) {
+                                           std::span<const LayoutMarker> layout,
+                                           std::span<const BvhEndSite> end_sites) {
   KinematicsWorkspace rest(skeleton);
   ForwardKinematics(skeleton, RestPose(skeleton), &rest);
   // Height estimate, for nominal end-segment lengths.
@@ -265,9 +288,12 @@ std::vector<MarkerDefinition> PlaceMarkers(const Skeleton& skeleton, const Human
       for (const auto& [r, jr] : roles.joint_of_role)
         if (jr == joint) role = r;
     } else {
-      static const char* kOptional[] = {"neck", "spine", "chest", "clavicle_l", "clavicle_r", "toe_l", "toe_r"};
-      if (std::find(std::begin(kOptional), std::end(kOptional), lm.segment) != std::end(kOptional)) continue;
-      throw std::invalid_argument("marker '" + lm.name + "': unknown segment '" + lm.segment + "' (not a role on this skeleton or a joint name)");
+      static const char* kOptional[] = {"neck",       "spine", "chest", "clavicle_l",
+                                        "clavicle_r", "toe_l", "toe_r"};
+      if (std::find(std::begin(kOptional), std::end(kOptional), lm.segment) != std::end(kOptional))
+        continue;
+      throw std::invalid_argument("marker '" + lm.name + "': unknown segment '" + lm.segment +
+                                  "' (not a role on this skeleton or a joint name)");
     }
     const auto uj = static_cast<size_t>(joint);
     const Vec3 bone = SegmentBoneWorld(skeleton, roles, rest, end_sites, role, joint, height);
@@ -278,15 +304,18 @@ std::vector<MarkerDefinition> PlaceMarkers(const Skeleton& skeleton, const Human
     const Vec3 u = axis.cross(ref).normalized();
     const Vec3 w = axis.cross(u);
     const double angle = lm.angle_deg * M_PI / 180.0;
-    const Vec3 p_W = rest.p_WJ[uj] + lm.along * bone + lm.radius_m * (std::cos(angle) * u + std::sin(angle) * w);
+    const Vec3 p_W =
+        rest.p_WJ[uj] + lm.along * bone + lm.radius_m * (std::cos(angle) * u + std::sin(angle) * w);
     MarkerDefinition def;
     def.name = lm.name;
     const int parent = skeleton.joint(joint).parent.value;
     if (lm.parent_weight > 0.0 && parent >= 0) {
       const auto up = static_cast<size_t>(parent);
       def.num_attachments = 2;
-      def.attachments[0] = {joint, 1.0 - lm.parent_weight, rest.R_WJ[uj].transpose() * (p_W - rest.p_WJ[uj])};
-      def.attachments[1] = {parent, lm.parent_weight, rest.R_WJ[up].transpose() * (p_W - rest.p_WJ[up])};
+      def.attachments[0] = {joint, 1.0 - lm.parent_weight,
+                            rest.R_WJ[uj].transpose() * (p_W - rest.p_WJ[uj])};
+      def.attachments[1] = {parent, lm.parent_weight,
+                            rest.R_WJ[up].transpose() * (p_W - rest.p_WJ[up])};
     } else {
       def.attachments[0] = {joint, 1.0, rest.R_WJ[uj].transpose() * (p_W - rest.p_WJ[uj])};
     }

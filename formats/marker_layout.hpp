@@ -17,10 +17,10 @@ namespace mocapd {
 /// One marker of a layout, placed relative to a segment's bone.
 struct LayoutMarker {
   std::string name;
-  std::string segment;     ///< A role (pelvis, chest, thigh_l ...) or an exact joint name.
-  double along = 0.5;      ///< Position along the bone, as a fraction of its length.
-  double angle_deg = 0.0;  ///< Direction around the bone.
-  double radius_m = 0.05;  ///< Distance off the bone axis.
+  std::string segment;         ///< A role (pelvis, chest, thigh_l ...) or an exact joint name.
+  double along = 0.5;          ///< Position along the bone, as a fraction of its length.
+  double angle_deg = 0.0;      ///< Direction around the bone.
+  double radius_m = 0.05;      ///< Distance off the bone axis.
   double parent_weight = 0.0;  ///< > 0: blend with the segment's parent joint (near a joint).
 };
 
@@ -47,13 +47,15 @@ HumanoidRoles MatchHumanoidRoles(const Skeleton& skeleton);
 /// The bone of a role's segment: the vector, in the rest pose's world frame, from the
 /// role's joint to where its segment ends (the next joint along the limb or spine, an End
 /// Site, or a nominal length along the parent's bone scaled by height / 1.75 m).
-Vec3 SegmentBoneWorld(const Skeleton& skeleton, const HumanoidRoles& roles, const KinematicsWorkspace& rest,
-                      std::span<const BvhEndSite> end_sites, const std::string& role, int joint, double height);
+Vec3 SegmentBoneWorld(const Skeleton& skeleton, const HumanoidRoles& roles,
+                      const KinematicsWorkspace& rest, std::span<const BvhEndSite> end_sites,
+                      const std::string& role, int joint, double height);
 
 /// Places a layout on the skeleton's rest pose. end_sites (may be empty) give bone
 /// directions for end segments. Throws std::invalid_argument naming the marker whose
 /// segment is unknown. Markers on optional roles the skeleton lacks are skipped.
 std::vector<MarkerDefinition> PlaceMarkers(const Skeleton& skeleton, const HumanoidRoles& roles,
-                                           std::span<const LayoutMarker> layout, std::span<const BvhEndSite> end_sites);
+                                           std::span<const LayoutMarker> layout,
+                                           std::span<const BvhEndSite> end_sites);
 
 }  // namespace mocapd

@@ -32,16 +32,22 @@ constexpr RoleSpec kRoles[] = {
 };
 
 const char* RegionName(RetargetRegion r) {
-  return r == RetargetRegion::kEndEffector ? "position" : r == RetargetRegion::kTorso ? "normals (torso)" : "normals (limb)";
+  return r == RetargetRegion::kEndEffector ? "position"
+         : r == RetargetRegion::kTorso     ? "normals (torso)"
+                                           : "normals (limb)";
 }
 
 // Rest height of the root above the lowest joint or End Site: the leg length that
 // scales the actor's positions onto the character.
-double RootHeight(const Skeleton& sk, const KinematicsWorkspace& rest, std::span<const BvhEndSite> end_sites, int root) {
+double RootHeight(const Skeleton& sk, const KinematicsWorkspace& rest,
+                  std::span<const BvhEndSite> end_sites, int root) {
   double lowest = rest.p_WJ[static_cast<size_t>(root)].y();
-  for (int j = 0; j < sk.num_joints(); ++j) lowest = std::min(lowest, rest.p_WJ[static_cast<size_t>(j)].y());
+  for (int j = 0; j < sk.num_joints(); ++j)
+    lowest = std::min(lowest, rest.p_WJ[static_cast<size_t>(j)].y());
   for (const BvhEndSite& e : end_sites)
-    lowest = std::min(lowest, Vec3(rest.R_WJ[static_cast<size_t>(e.parent)] * e.offset + rest.p_WJ[static_cast<size_t>(e.parent)]).y());
+    lowest = std::min(lowest, Vec3(rest.R_WJ[static_cast<size_t>(e.parent)] * e.offset +
+                                   rest.p_WJ[static_cast<size_t>(e.parent)])
+                                  .y());
   return rest.p_WJ[static_cast<size_t>(root)].y() - lowest;
 }
 
@@ -56,16 +62,20 @@ double Height(const KinematicsWorkspace& rest) {
 
 }  // namespace
 
-RetargetMap MakeRetargetMap(const Skeleton& source, std::span<const BvhEndSite> source_end_sites, const Skeleton& target,
-                            std::span<const BvhEndSite> target_end_sites, const std::map<std::string, std::string>& overrides) {
+RetargetMap MakeRetargetMap(const Skeleton& source, std::span<const BvhEndSite> source_end_sites,
+                            const Skeleton& target, std::span<const BvhEndSite> target_end_sites,
+                            const std::map<std::string, std::string>& overrides) {
   const HumanoidRoles source_roles = MatchHumanoidRoles(source);
   HumanoidRoles target_roles = MatchHumanoidRoles(target);
   std::set<std::string> known;
   for (const RoleSpec& r : kRoles) known.insert(r.role);
   for (const auto& [role, joint] : overrides) {
-    if (!known.count(role)) throw std::invalid_argument("retarget joint map: unknown role '" + role + "'");
+    if (!known.count(role))
+      throw std::invalid_argument("retarget joint map: unknown role '" + role + "'");
     const auto j = target.FindJoint(joint);
-    if (!j) throw std::invalid_argument("retarget joint map: the character has no joint '" + joint + "' (for role " + role + ")");
+    if (!j)
+      throw std::invalid_argument("retarget joint map: the character has no joint '" + joint +
+                                  "' (for role " + role + ")");
     target_roles.joint_of_role[role] = j->value;
   }
   KinematicsWorkspace source_rest(source), target_rest(target);
@@ -78,8 +88,10 @@ RetargetMap MakeRetargetMap(const Skeleton& source, std::span<const BvhEndSite> 
   map.target_root = target_roles.joint_of_role.at("pelvis");
   map.source_leg_length_m = RootHeight(source, source_rest, source_end_sites, map.source_root);
   map.target_leg_length_m = RootHeight(target, target_rest, target_end_sites, map.target_root);
-  map.source_ankles = {source_roles.joint_of_role.at("foot_l"), source_roles.joint_of_role.at("foot_r")};
-  map.target_ankles = {target_roles.joint_of_role.at("foot_l"), target_roles.joint_of_role.at("foot_r")};
+  map.source_ankles = {source_roles.joint_of_role.at("foot_l"),
+                       source_roles.joint_of_role.at("foot_r")};
+  map.target_ankles = {target_roles.joint_of_role.at("foot_l"),
+                       target_roles.joint_of_role.at("foot_r")};
   std::set<int> covered;
   std::string matched, missing;
   for (const RoleSpec& spec : kRoles) {
@@ -93,24 +105,31 @@ RetargetMap MakeRetargetMap(const Skeleton& source, std::span<const BvhEndSite> 
     bone.role = spec.role;
     bone.source_joint = s->second;
     bone.target_joint = t->second;
-    bone.source_bone = SegmentBoneWorld(source, source_roles, source_rest, source_end_sites, spec.role, s->second, source_height);
-    bone.target_bone = SegmentBoneWorld(target, target_roles, target_rest, target_end_sites, spec.role, t->second, target_height);
+    bone.source_bone = SegmentBoneWorld(source, source_roles, source_rest, source_end_sites,
+                                        spec.role, s->second, source_height);
+    bone.target_bone = SegmentBoneWorld(target, target_roles, target_rest, target_end_sites,
+                                        spec.role, t->second, target_height);
     bone.region = spec.region;
     bone.foot_side = spec.foot_side;
     map.bones.push_back(bone);
     covered.insert(t->second);
-    matched += "  " + std::string(spec.role) + ": " + source.joint(s->second).name + " -> " + target.joint(t->second).name + " (" +
-               RegionName(spec.region) + ")\n";
+    matched += "  " + std::string(spec.role) + ": " + source.joint(s->second).name + " -> " +
+               target.joint(t->second).name + " (" + RegionName(spec.region) + ")\n";
   }
   std::string uncovered;
   for (int j = 0; j < target.num_joints(); ++j)
-    if (!covered.count(j)) uncovered += std::string(uncovered.empty() ? "" : ", ") + target.joint(j).name;
+    if (!covered.count(j))
+      uncovered += std::string(uncovered.empty() ? "" : ", ") + target.joint(j).name;
   char scale[128];
-  std::snprintf(scale, sizeof(scale), "leg length %.3f m -> %.3f m (scale %.3f)\n", map.source_leg_length_m, map.target_leg_length_m,
+  std::snprintf(scale, sizeof(scale), "leg length %.3f m -> %.3f m (scale %.3f)\n",
+                map.source_leg_length_m, map.target_leg_length_m,
                 map.target_leg_length_m / map.source_leg_length_m);
-  map.report = "retarget map: " + std::to_string(map.bones.size()) + " bones matched, " + scale + matched +
-               (missing.empty() ? "" : "  roles on only one rig (not tracked): " + missing + "\n") +
-               (uncovered.empty() ? "" : "  character joints without surface points (solved, not tracked): " + uncovered + "\n");
+  map.report =
+      "retarget map: " + std::to_string(map.bones.size()) + " bones matched, " + scale + matched +
+      (missing.empty() ? "" : "  roles on only one rig (not tracked): " + missing + "\n") +
+      (uncovered.empty() ? ""
+                         : "  character joints without surface points (solved, not tracked): " +
+                               uncovered + "\n");
   return map;
 }
 

@@ -16,7 +16,8 @@ namespace mocapd {
 /// overrides: role (e.g. "hand_l", "chest") -> character joint name. Throws
 /// std::invalid_argument naming what is missing (a rig that is not a humanoid, an
 /// override naming an unknown joint or role).
-RetargetMap MakeRetargetMap(const Skeleton& source, std::span<const BvhEndSite> source_end_sites, const Skeleton& target,
-                            std::span<const BvhEndSite> target_end_sites, const std::map<std::string, std::string>& overrides = {});
+RetargetMap MakeRetargetMap(const Skeleton& source, std::span<const BvhEndSite> source_end_sites,
+                            const Skeleton& target, std::span<const BvhEndSite> target_end_sites,
+                            const std::map<std::string, std::string>& overrides = {});
 
 }  // namespace mocapd

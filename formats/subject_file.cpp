@@ -48,7 +48,9 @@ SubjectModel ParseSubjectModel(const std::string& text, const std::string& sourc
   TomlTable top(root, "", source_name);
   SubjectModel model;
   const int version = top.Integer("format_version", 0, 0, 1 << 20);
-  if (version != 1) top.Fail(root.get("format_version"), "format_version", "expected 1, found " + std::to_string(version));
+  if (version != 1)
+    top.Fail(root.get("format_version"), "format_version",
+             "expected 1, found " + std::to_string(version));
   TomlTable subject = top.Table("subject");
   model.name = subject.String("name", "subject");
   model.bvh_units = subject.String("bvh_units", "cm");
@@ -69,24 +71,32 @@ SubjectModel ParseSubjectModel(const std::string& text, const std::string& sourc
       int p = -1;
       for (size_t k = 0; k < js.size(); ++k)
         if (js[k].name == parent) p = static_cast<int>(k);
-      if (p < 0) t.Fail(t.Find("parent"), "parent", "'" + parent + "' is not a joint listed before '" + j.name + "'");
+      if (p < 0)
+        t.Fail(t.Find("parent"), "parent",
+               "'" + parent + "' is not a joint listed before '" + j.name + "'");
       j.parent = JointIndex(p);
     }
     const std::string type = t.Choice("type", "ball", {"fixed", "hinge", "ball", "free"});
-    j.type = type == "fixed" ? JointType::kFixed : type == "hinge" ? JointType::kHinge : type == "ball" ? JointType::kBall : JointType::kFree;
+    j.type = type == "fixed"   ? JointType::kFixed
+             : type == "hinge" ? JointType::kHinge
+             : type == "ball"  ? JointType::kBall
+                               : JointType::kFree;
     j.offset = t.Vector3("offset", /*required=*/true);
     j.hinge_axis = t.Vector3("hinge_axis", /*required=*/false, Vec3::UnitX());
     if (j.type == JointType::kHinge) {
-      if (j.hinge_axis.norm() < 1e-9) t.Fail(t.Find("hinge_axis"), "hinge_axis", "must be non-zero");
+      if (j.hinge_axis.norm() < 1e-9)
+        t.Fail(t.Find("hinge_axis"), "hinge_axis", "must be non-zero");
       j.hinge_axis.normalize();
     }
     const std::vector<double> q = t.Numbers("rest_rotation", 4, /*required=*/false);
     if (!q.empty()) {
       j.rest_rotation = Quat(q[0], q[1], q[2], q[3]);
-      if (j.rest_rotation.norm() < 1e-9) t.Fail(t.Find("rest_rotation"), "rest_rotation", "must be non-zero");
+      if (j.rest_rotation.norm() < 1e-9)
+        t.Fail(t.Find("rest_rotation"), "rest_rotation", "must be non-zero");
       j.rest_rotation.normalize();
     }
-    if (const auto limit = t.OptionalNumber("max_angle_deg", 1e-9, 1e12)) j.max_angle_rad = *limit * M_PI / 180.0;
+    if (const auto limit = t.OptionalNumber("max_angle_deg", 1e-9, 1e12))
+      j.max_angle_rad = *limit * M_PI / 180.0;
     t.RejectUnknown();
     js.push_back(std::move(j));
   }
@@ -110,7 +120,8 @@ SubjectModel ParseSubjectModel(const std::string& text, const std::string& sourc
     const double parent_weight = t.Number("parent_weight", 0.0, 0.0, 0.999999);
     const int parent = sk.joint(d.attachments[0].joint).parent.value;
     if (parent_weight > 0.0 && parent < 0)
-      t.Fail(t.Find("parent_weight"), "parent_weight", "the root joint has no parent to blend with");
+      t.Fail(t.Find("parent_weight"), "parent_weight",
+             "the root joint has no parent to blend with");
     const Vec3 parent_offset = t.Vector3("parent_offset", /*required=*/parent_weight > 0.0);
     if (parent_weight > 0.0) {
       d.num_attachments = 2;
@@ -143,29 +154,39 @@ std::string FormatSubjectModel(const SubjectModel& model) {
   std::string out =
       "# mocapd subject model: a skeleton and the markers attached to it.\n"
       "# Units: metres; rotations: quaternions [w, x, y, z]. Format: config/subject.example.toml.\n"
-      "format_version = 1\n\n[subject]\nname = " + Quoted(model.name) + "\nbvh_units = " + Quoted(model.bvh_units) + "\n";
+      "format_version = 1\n\n[subject]\nname = " +
+      Quoted(model.name) + "\nbvh_units = " + Quoted(model.bvh_units) + "\n";
   for (const Joint& j : sk.joints()) {
     out += "\n[[joint]]\nname = " + Quoted(j.name) + "\n";
-    out += "parent = " + Quoted(j.parent.is_valid() ? sk.joint(j.parent.value).name : std::string()) + "\n";
+    out +=
+        "parent = " + Quoted(j.parent.is_valid() ? sk.joint(j.parent.value).name : std::string()) +
+        "\n";
     out += std::string("type = \"") + to_string(j.type) + "\"\n";
     out += "offset = " + Array({j.offset.x(), j.offset.y(), j.offset.z()}) + "\n";
     if (!j.rest_rotation.coeffs().isApprox(Quat::Identity().coeffs(), 1e-12))
-      out += "rest_rotation = " + Array({j.rest_rotation.w(), j.rest_rotation.x(), j.rest_rotation.y(), j.rest_rotation.z()}) + "\n";
-    if (j.type == JointType::kHinge) out += "hinge_axis = " + Array({j.hinge_axis.x(), j.hinge_axis.y(), j.hinge_axis.z()}) + "\n";
-    if (j.max_angle_rad < 1e8) out += "max_angle_deg = " + Num(j.max_angle_rad * 180.0 / M_PI) + "\n";
+      out += "rest_rotation = " +
+             Array({j.rest_rotation.w(), j.rest_rotation.x(), j.rest_rotation.y(),
+                    j.rest_rotation.z()}) +
+             "\n";
+    if (j.type == JointType::kHinge)
+      out += "hinge_axis = " + Array({j.hinge_axis.x(), j.hinge_axis.y(), j.hinge_axis.z()}) + "\n";
+    if (j.max_angle_rad < 1e8)
+      out += "max_angle_deg = " + Num(j.max_angle_rad * 180.0 / M_PI) + "\n";
   }
   const MarkerSet& ms = *model.markers;
   for (int m = 0; m < ms.num_markers(); ++m) {
     const MarkerDefinition& d = ms.marker(m);
     const MarkerAttachment& a = d.attachments[0];
-    out += "\n[[marker]]\nname = " + Quoted(d.name) + "\njoint = " + Quoted(sk.joint(a.joint).name) + "\n";
+    out += "\n[[marker]]\nname = " + Quoted(d.name) +
+           "\njoint = " + Quoted(sk.joint(a.joint).name) + "\n";
     out += "offset = " + Array({a.offset.x(), a.offset.y(), a.offset.z()}) + "\n";
     if (d.num_attachments == 2) {
       const MarkerAttachment& b = d.attachments[1];
       out += "parent_weight = " + Num(b.weight) + "\n";
       out += "parent_offset = " + Array({b.offset.x(), b.offset.y(), b.offset.z()}) + "\n";
     }
-    if (static_cast<size_t>(m) < model.fit_rms_m.size() && std::isfinite(model.fit_rms_m[static_cast<size_t>(m)]))
+    if (static_cast<size_t>(m) < model.fit_rms_m.size() &&
+        std::isfinite(model.fit_rms_m[static_cast<size_t>(m)]))
       out += "fit_rms_mm = " + Num(model.fit_rms_m[static_cast<size_t>(m)] * 1e3) + "\n";
   }
   return out;

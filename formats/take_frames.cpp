@@ -9,18 +9,22 @@ TakeMarkerMap::TakeMarkerMap(const MarkerSet& markers, const C3dTake& take, int 
   for (const MarkerDefinition& m : markers.markers()) {
     const int p = take.FindLabel(m.name);
     point_of_marker_.push_back(p);
-    if (p < 0) unmatched_.push_back(m.name);
-    else ++matched_;
+    if (p < 0)
+      unmatched_.push_back(m.name);
+    else
+      ++matched_;
   }
   if (matched_ < min_matched) {
-    std::string msg = "take has " + std::to_string(matched_) + " of the subject's " + std::to_string(markers.num_markers()) +
-                      " markers (need " + std::to_string(min_matched) + "); missing:";
+    std::string msg = "take has " + std::to_string(matched_) + " of the subject's " +
+                      std::to_string(markers.num_markers()) + " markers (need " +
+                      std::to_string(min_matched) + "); missing:";
     for (const auto& n : unmatched_) msg += " " + n;
     throw std::invalid_argument(msg);
   }
 }
 
-void TakeMarkerMap::Observe(const C3dTake& take, int frame, std::span<Vec3> p_WM, std::span<double> weights) const {
+void TakeMarkerMap::Observe(const C3dTake& take, int frame, std::span<Vec3> p_WM,
+                            std::span<double> weights) const {
   for (size_t m = 0; m < point_of_marker_.size(); ++m) {
     const int p = point_of_marker_[m];
     const bool ok = p >= 0 && take.valid(frame, p);
@@ -29,7 +33,8 @@ void TakeMarkerMap::Observe(const C3dTake& take, int frame, std::span<Vec3> p_WM
   }
 }
 
-void TakeMarkerMap::FillMessage(const C3dTake& take, int frame, protocol::MarkerFrameMessage* message) const {
+void TakeMarkerMap::FillMessage(const C3dTake& take, int frame,
+                                protocol::MarkerFrameMessage* message) const {
   message->positions.resize(point_of_marker_.size());
   message->valid.resize(point_of_marker_.size());
   for (size_t m = 0; m < point_of_marker_.size(); ++m) {

@@ -7,8 +7,8 @@
 #include <vector>
 
 #include "filters/marker_model.hpp"
-#include "protocol/messages.hpp"
 #include "formats/c3d.hpp"
+#include "protocol/messages.hpp"
 
 namespace mocapd {
 
@@ -19,7 +19,8 @@ class TakeMarkerMap {
   TakeMarkerMap(const MarkerSet& markers, const C3dTake& take, int min_matched = 3);
 
   /// Fills p_WM and weights (1 observed, 0 missing or absent from the take) for a frame.
-  void Observe(const C3dTake& take, int frame, std::span<Vec3> p_WM, std::span<double> weights) const;
+  void Observe(const C3dTake& take, int frame, std::span<Vec3> p_WM,
+               std::span<double> weights) const;
   /// Fills a marker frame's positions and validity (subject's marker order) for a frame;
   /// the caller sets subject, hash, frame number, time and rate. Allocates only the
   /// first time the message holds this many markers.

@@ -42,9 +42,11 @@ toml::table ReadTomlFile(const std::string& path) {
 TomlTable::TomlTable(const toml::table& table, std::string path, std::string source)
     : table_(table), path_(std::move(path)), source_(std::move(source)) {}
 
-void TomlTable::Fail(const toml::node* node, const std::string& key, const std::string& what) const {
+void TomlTable::Fail(const toml::node* node, const std::string& key,
+                     const std::string& what) const {
   const auto line = node != nullptr ? node->source().begin.line : table_.source().begin.line;
-  throw std::runtime_error(source_ + ":" + std::to_string(line) + ": field '" + Join(key) + "': " + what);
+  throw std::runtime_error(source_ + ":" + std::to_string(line) + ": field '" + Join(key) +
+                           "': " + what);
 }
 
 const toml::node* TomlTable::Find(const std::string& key) {
@@ -73,7 +75,8 @@ int TomlTable::Integer(const std::string& key, int fallback, int min, int max) {
   if (!v || !node->is_integer()) Fail(node, key, "expected an integer");
   if (*v < min || *v > max)
     Fail(node, key,
-         "must be in [" + std::to_string(min) + ", " + std::to_string(max) + "], got " + std::to_string(*v));
+         "must be in [" + std::to_string(min) + ", " + std::to_string(max) + "], got " +
+             std::to_string(*v));
   return static_cast<int>(*v);
 }
 
@@ -112,7 +115,8 @@ std::vector<double> TomlTable::Numbers(const std::string& key, size_t size, bool
     return {};
   }
   const toml::array* a = node->as_array();
-  if (a == nullptr || a->size() != size) Fail(node, key, "expected an array of " + std::to_string(size) + " numbers");
+  if (a == nullptr || a->size() != size)
+    Fail(node, key, "expected an array of " + std::to_string(size) + " numbers");
   std::vector<double> out;
   for (const toml::node& x : *a) {
     const auto v = x.value<double>();
@@ -166,7 +170,8 @@ std::vector<TomlTable> TomlTable::Tables(const std::string& key, bool required) 
     return out;
   }
   const toml::array* list = node->as_array();
-  if (list == nullptr || (required && list->empty())) Fail(node, key, "expected [[" + Join(key) + "]] tables");
+  if (list == nullptr || (required && list->empty()))
+    Fail(node, key, "expected [[" + Join(key) + "]] tables");
   for (size_t i = 0; i < list->size(); ++i) {
     const toml::table* t = (*list)[i].as_table();
     const std::string item = key + "[" + std::to_string(i) + "]";
@@ -178,7 +183,8 @@ std::vector<TomlTable> TomlTable::Tables(const std::string& key, bool required) 
 
 void TomlTable::RejectUnknown() const {
   for (const auto& [key, node] : table_)
-    if (known_.count(std::string(key.str())) == 0) Fail(&node, std::string(key.str()), "unknown field");
+    if (known_.count(std::string(key.str())) == 0)
+      Fail(&node, std::string(key.str()), "unknown field");
 }
 
 }  // namespace mocapd

@@ -32,7 +32,8 @@ class TomlTable {
   /// path: the table's dotted name in the document ("" for the root), for messages.
   TomlTable(const toml::table& table, std::string path, std::string source);
 
-  [[noreturn]] void Fail(const toml::node* node, const std::string& key, const std::string& what) const;
+  [[noreturn]] void Fail(const toml::node* node, const std::string& key,
+                         const std::string& what) const;
   /// The node under key (nullptr when absent), marking the key as known.
   const toml::node* Find(const std::string& key);
   bool Has(const std::string& key) const { return table_.contains(key); }
@@ -45,7 +46,8 @@ class TomlTable {
   /// A string; required: absent is an error.
   std::string String(const std::string& key, const std::string& fallback, bool required = false);
   /// One of choices (a string); fallback when absent.
-  std::string Choice(const std::string& key, const std::string& fallback, std::initializer_list<const char*> choices);
+  std::string Choice(const std::string& key, const std::string& fallback,
+                     std::initializer_list<const char*> choices);
   /// An array of `size` finite numbers.
   std::vector<double> Numbers(const std::string& key, size_t size, bool required);
   /// [x, y, z] of finite numbers; fallback when absent and not required.

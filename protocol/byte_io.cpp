@@ -98,7 +98,8 @@ bool ByteReader::ReadF64(double* out) {
 
 bool ByteReader::ReadBytes(size_t count, std::vector<uint8_t>* out) {
   if (count > remaining()) return false;
-  out->assign(data_.begin() + static_cast<std::ptrdiff_t>(offset_), data_.begin() + static_cast<std::ptrdiff_t>(offset_ + count));
+  out->assign(data_.begin() + static_cast<std::ptrdiff_t>(offset_),
+              data_.begin() + static_cast<std::ptrdiff_t>(offset_ + count));
   offset_ += count;
   return true;
 }
@@ -135,8 +136,8 @@ void ByteWriter::WriteF32(float v) {
   if (floats_ == FloatFormat::kVax) {
     // Inverse of the reader: scale by 4 (exponent bias 129), then swap the 16-bit words.
     const uint32_t bits = v == 0.0f ? 0u : std::bit_cast<uint32_t>(v * 4.0f);
-    const uint8_t b[4] = {static_cast<uint8_t>(bits), static_cast<uint8_t>(bits >> 8), static_cast<uint8_t>(bits >> 16),
-                          static_cast<uint8_t>(bits >> 24)};
+    const uint8_t b[4] = {static_cast<uint8_t>(bits), static_cast<uint8_t>(bits >> 8),
+                          static_cast<uint8_t>(bits >> 16), static_cast<uint8_t>(bits >> 24)};
     out_->insert(out_->end(), {b[2], b[3], b[0], b[1]});
     return;
   }

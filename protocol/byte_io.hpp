@@ -56,7 +56,8 @@ class ByteReader {
 /// Appends little-endian (or big-endian) values to a caller-owned byte vector.
 class ByteWriter {
  public:
-  explicit ByteWriter(std::vector<uint8_t>* out, ByteOrder order = ByteOrder::kLittle, FloatFormat floats = FloatFormat::kIeee)
+  explicit ByteWriter(std::vector<uint8_t>* out, ByteOrder order = ByteOrder::kLittle,
+                      FloatFormat floats = FloatFormat::kIeee)
       : out_(out), order_(order), floats_(floats) {}
   void WriteU8(uint8_t v) { out_->push_back(v); }
   void WriteI8(int8_t v) { out_->push_back(static_cast<uint8_t>(v)); }

@@ -9,9 +9,9 @@
 namespace mocapd::protocol {
 namespace {
 
-constexpr size_t kMarkerBytes = 13;  // x, y, z (f32) + flags (u8)
-constexpr size_t kJointBytes = 16;   // quaternion w, x, y, z (f32)
-constexpr size_t kGlobalJointBytes = 28;  // quaternion (4 x f32) + position (3 x f32)
+constexpr size_t kMarkerBytes = 13;         // x, y, z (f32) + flags (u8)
+constexpr size_t kJointBytes = 16;          // quaternion w, x, y, z (f32)
+constexpr size_t kGlobalJointBytes = 28;    // quaternion (4 x f32) + position (3 x f32)
 constexpr size_t kCleanedMarkerBytes = 14;  // x, y, z (f32) + status (u8) + reason (u8)
 constexpr uint16_t kFlagGlobalTransforms = 1;
 constexpr uint8_t kMaxMaskReason = 10;  // MaskReason::kTrimmed
@@ -33,7 +33,8 @@ void FinishMessage(std::vector<uint8_t>* out) {
 
 void WriteSubject(ByteWriter& w, const std::string& subject) {
   if (subject.empty() || subject.size() > kMaxSubjectName)
-    throw std::invalid_argument("protocol: subject name must be 1.." + std::to_string(kMaxSubjectName) + " bytes");
+    throw std::invalid_argument("protocol: subject name must be 1.." +
+                                std::to_string(kMaxSubjectName) + " bytes");
   w.WriteU8(static_cast<uint8_t>(subject.size()));
   w.WriteString(subject);
 }
@@ -42,7 +43,8 @@ void WriteSubject(ByteWriter& w, const std::string& subject) {
 DecodeStatus ReadHeader(ByteReader& r, MessageType expected) {
   uint32_t magic = 0, payload = 0, reserved = 0;
   uint16_t version = 0, type = 0;
-  if (!r.ReadU32(&magic) || !r.ReadU16(&version) || !r.ReadU16(&type) || !r.ReadU32(&payload) || !r.ReadU32(&reserved))
+  if (!r.ReadU32(&magic) || !r.ReadU16(&version) || !r.ReadU16(&type) || !r.ReadU32(&payload) ||
+      !r.ReadU32(&reserved))
     return DecodeStatus::kTooShort;
   if (magic != kMagic) return DecodeStatus::kBadMagic;
   if (version != kVersion) return DecodeStatus::kUnsupportedVersion;
@@ -110,7 +112,8 @@ DecodeStatus ReadName(ByteReader& r, std::string* name) {
 
 void WriteName(ByteWriter& w, const std::string& name) {
   if (name.empty() || name.size() > kMaxSubjectName)
-    throw std::invalid_argument("protocol: marker and joint names must be 1.." + std::to_string(kMaxSubjectName) + " bytes: '" + name + "'");
+    throw std::invalid_argument("protocol: marker and joint names must be 1.." +
+                                std::to_string(kMaxSubjectName) + " bytes: '" + name + "'");
   w.WriteU8(static_cast<uint8_t>(name.size()));
   w.WriteString(name);
 }
@@ -164,7 +167,8 @@ uint64_t MarkerSetHash(const MarkerSet& markers) {
 
 uint64_t SkeletonHash(const Skeleton& skeleton) {
   std::vector<std::string> names;
-  for (const Joint& j : skeleton.joints()) names.push_back(j.name + "/" + std::to_string(j.parent.value));
+  for (const Joint& j : skeleton.joints())
+    names.push_back(j.name + "/" + std::to_string(j.parent.value));
   return NamesHash(names);
 }
 
@@ -191,10 +195,13 @@ void EncodeMarkerFrame(const MarkerFrameMessage& m, std::vector<uint8_t>* out) {
 
 DecodeStatus DecodeMarkerFrame(std::span<const uint8_t> bytes, MarkerFrameMessage* m) {
   ByteReader r(bytes);
-  if (const DecodeStatus s = ReadPrelude(r, MessageType::kMarkerFrame, &m->subject); s != DecodeStatus::kOk) return s;
+  if (const DecodeStatus s = ReadPrelude(r, MessageType::kMarkerFrame, &m->subject);
+      s != DecodeStatus::kOk)
+    return s;
   uint16_t count = 0, reserved = 0;
-  if (!r.ReadU64(&m->model_hash) || !r.ReadU64(&m->frame_number) || !r.ReadU64(&m->capture_time_ns) || !r.ReadF32(&m->rate_hz) ||
-      !r.ReadU16(&count) || !r.ReadU16(&reserved))
+  if (!r.ReadU64(&m->model_hash) || !r.ReadU64(&m->frame_number) ||
+      !r.ReadU64(&m->capture_time_ns) || !r.ReadF32(&m->rate_hz) || !r.ReadU16(&count) ||
+      !r.ReadU16(&reserved))
     return DecodeStatus::kTooShort;
   if (!Finite(m->rate_hz) || !(m->rate_hz > 0.0f)) return DecodeStatus::kNonFinite;
   if (count > kMaxMarkers) return DecodeStatus::kTooManyItems;
@@ -204,9 +211,11 @@ DecodeStatus DecodeMarkerFrame(std::span<const uint8_t> bytes, MarkerFrameMessag
   for (size_t i = 0; i < count; ++i) {
     float xyz[3];
     uint8_t flags = 0;
-    if (!r.ReadF32(&xyz[0]) || !r.ReadF32(&xyz[1]) || !r.ReadF32(&xyz[2]) || !r.ReadU8(&flags)) return DecodeStatus::kTooShort;
+    if (!r.ReadF32(&xyz[0]) || !r.ReadF32(&xyz[1]) || !r.ReadF32(&xyz[2]) || !r.ReadU8(&flags))
+      return DecodeStatus::kTooShort;
     const bool valid = (flags & 1u) != 0;
-    if (valid && !(Finite(xyz[0]) && Finite(xyz[1]) && Finite(xyz[2]))) return DecodeStatus::kNonFinite;
+    if (valid && !(Finite(xyz[0]) && Finite(xyz[1]) && Finite(xyz[2])))
+      return DecodeStatus::kNonFinite;
     m->valid[i] = valid;
     m->positions[i] = valid ? Vec3(xyz[0], xyz[1], xyz[2]) : Vec3::Constant(kNaN);
   }
@@ -215,9 +224,12 @@ DecodeStatus DecodeMarkerFrame(std::span<const uint8_t> bytes, MarkerFrameMessag
 
 void EncodeSkeletonFrame(const SkeletonFrameMessage& m, std::vector<uint8_t>* out) {
   const bool globals = !m.global_rotations.empty();
-  if (m.rotations.size() > kMaxJoints) throw std::invalid_argument("protocol: skeleton frame with too many joints");
-  if (globals && (m.global_rotations.size() != m.rotations.size() || m.global_positions.size() != m.rotations.size()))
-    throw std::invalid_argument("protocol: skeleton frame with global transforms for some joints only");
+  if (m.rotations.size() > kMaxJoints)
+    throw std::invalid_argument("protocol: skeleton frame with too many joints");
+  if (globals && (m.global_rotations.size() != m.rotations.size() ||
+                  m.global_positions.size() != m.rotations.size()))
+    throw std::invalid_argument(
+        "protocol: skeleton frame with global transforms for some joints only");
   out->clear();
   ByteWriter w(out);
   WriteHeader(w, MessageType::kSkeletonFrame);
@@ -245,17 +257,22 @@ void EncodeSkeletonFrame(const SkeletonFrameMessage& m, std::vector<uint8_t>* ou
 
 DecodeStatus DecodeSkeletonFrame(std::span<const uint8_t> bytes, SkeletonFrameMessage* m) {
   ByteReader r(bytes);
-  if (const DecodeStatus s = ReadPrelude(r, MessageType::kSkeletonFrame, &m->subject); s != DecodeStatus::kOk) return s;
+  if (const DecodeStatus s = ReadPrelude(r, MessageType::kSkeletonFrame, &m->subject);
+      s != DecodeStatus::kOk)
+    return s;
   uint8_t state = 0;
   uint16_t flags = 0, count = 0, reserved = 0;
-  if (!r.ReadU64(&m->model_hash) || !r.ReadU64(&m->frame_number) || !r.ReadU64(&m->capture_time_ns) || !r.ReadU64(&m->publish_time_ns) ||
-      !r.ReadU8(&m->status) || !r.ReadU8(&state) || !r.ReadU16(&flags) || !r.ReadU16(&count) || !r.ReadU16(&reserved))
+  if (!r.ReadU64(&m->model_hash) || !r.ReadU64(&m->frame_number) ||
+      !r.ReadU64(&m->capture_time_ns) || !r.ReadU64(&m->publish_time_ns) || !r.ReadU8(&m->status) ||
+      !r.ReadU8(&state) || !r.ReadU16(&flags) || !r.ReadU16(&count) || !r.ReadU16(&reserved))
     return DecodeStatus::kTooShort;
-  if (state > static_cast<uint8_t>(SubjectState::kWaiting) || (flags & ~kFlagGlobalTransforms) != 0) return DecodeStatus::kBadField;
+  if (state > static_cast<uint8_t>(SubjectState::kWaiting) || (flags & ~kFlagGlobalTransforms) != 0)
+    return DecodeStatus::kBadField;
   m->subject_state = static_cast<SubjectState>(state);
   if (count > kMaxJoints) return DecodeStatus::kTooManyItems;
   const bool globals = (flags & kFlagGlobalTransforms) != 0;
-  if (r.remaining() != 16 + (kJointBytes + (globals ? kGlobalJointBytes : 0)) * count) return DecodeStatus::kSizeMismatch;
+  if (r.remaining() != 16 + (kJointBytes + (globals ? kGlobalJointBytes : 0)) * count)
+    return DecodeStatus::kSizeMismatch;
   if (!r.ReadF32(&m->residual_m)) return DecodeStatus::kTooShort;
   if (!Finite(m->residual_m)) return DecodeStatus::kNonFinite;
   if (const DecodeStatus s = ReadVec3(r, &m->root_translation); s != DecodeStatus::kOk) return s;
@@ -265,13 +282,16 @@ DecodeStatus DecodeSkeletonFrame(std::span<const uint8_t> bytes, SkeletonFrameMe
   m->global_rotations.resize(globals ? count : 0);
   m->global_positions.resize(globals ? count : 0);
   for (size_t j = 0; j < m->global_rotations.size(); ++j) {
-    if (const DecodeStatus s = ReadQuat(r, &m->global_rotations[j]); s != DecodeStatus::kOk) return s;
-    if (const DecodeStatus s = ReadVec3(r, &m->global_positions[j]); s != DecodeStatus::kOk) return s;
+    if (const DecodeStatus s = ReadQuat(r, &m->global_rotations[j]); s != DecodeStatus::kOk)
+      return s;
+    if (const DecodeStatus s = ReadVec3(r, &m->global_positions[j]); s != DecodeStatus::kOk)
+      return s;
   }
   return DecodeStatus::kOk;
 }
 
-SubjectDescriptionMessage DescribeSubject(const std::string& subject, const Skeleton& skeleton, const MarkerSet& markers, float rate_hz,
+SubjectDescriptionMessage DescribeSubject(const std::string& subject, const Skeleton& skeleton,
+                                          const MarkerSet& markers, float rate_hz,
                                           int lookahead_frames) {
   SubjectDescriptionMessage d;
   d.subject = subject;
@@ -291,9 +311,11 @@ SubjectDescriptionMessage DescribeSubject(const std::string& subject, const Skel
 
 void EncodeSubjectDescription(const SubjectDescriptionMessage& m, std::vector<uint8_t>* out) {
   const size_t joints = m.joint_names.size();
-  if (m.marker_names.size() > kMaxMarkers || joints > kMaxJoints || m.joint_parents.size() != joints || m.rest_offsets.size() != joints ||
+  if (m.marker_names.size() > kMaxMarkers || joints > kMaxJoints ||
+      m.joint_parents.size() != joints || m.rest_offsets.size() != joints ||
       m.rest_rotations.size() != joints)
-    throw std::invalid_argument("protocol: subject description with inconsistent or too many markers/joints");
+    throw std::invalid_argument(
+        "protocol: subject description with inconsistent or too many markers/joints");
   out->clear();
   ByteWriter w(out);
   WriteHeader(w, MessageType::kSubjectDescription);
@@ -315,12 +337,16 @@ void EncodeSubjectDescription(const SubjectDescriptionMessage& m, std::vector<ui
   FinishMessage(out);
 }
 
-DecodeStatus DecodeSubjectDescription(std::span<const uint8_t> bytes, SubjectDescriptionMessage* m) {
+DecodeStatus DecodeSubjectDescription(std::span<const uint8_t> bytes,
+                                      SubjectDescriptionMessage* m) {
   ByteReader r(bytes);
-  if (const DecodeStatus s = ReadPrelude(r, MessageType::kSubjectDescription, &m->subject); s != DecodeStatus::kOk) return s;
+  if (const DecodeStatus s = ReadPrelude(r, MessageType::kSubjectDescription, &m->subject);
+      s != DecodeStatus::kOk)
+    return s;
   uint16_t markers = 0, joints = 0, reserved = 0;
-  if (!r.ReadU64(&m->marker_set_hash) || !r.ReadU64(&m->skeleton_hash) || !r.ReadF32(&m->rate_hz) || !r.ReadU16(&m->lookahead_frames) ||
-      !r.ReadU16(&markers) || !r.ReadU16(&joints) || !r.ReadU16(&reserved))
+  if (!r.ReadU64(&m->marker_set_hash) || !r.ReadU64(&m->skeleton_hash) || !r.ReadF32(&m->rate_hz) ||
+      !r.ReadU16(&m->lookahead_frames) || !r.ReadU16(&markers) || !r.ReadU16(&joints) ||
+      !r.ReadU16(&reserved))
     return DecodeStatus::kTooShort;
   if (!Finite(m->rate_hz) || !(m->rate_hz > 0.0f)) return DecodeStatus::kNonFinite;
   if (markers > kMaxMarkers || joints > kMaxJoints) return DecodeStatus::kTooManyItems;
@@ -339,7 +365,8 @@ DecodeStatus DecodeSubjectDescription(std::span<const uint8_t> bytes, SubjectDes
     if (!r.ReadI16(&m->joint_parents[j])) return DecodeStatus::kTooShort;
     const int parent = m->joint_parents[j];
     // Parents first, exactly one root (joint 0).
-    if ((j == 0) != (parent == -1) || parent >= static_cast<int>(j) || parent < -1) return DecodeStatus::kBadField;
+    if ((j == 0) != (parent == -1) || parent >= static_cast<int>(j) || parent < -1)
+      return DecodeStatus::kBadField;
     if (const DecodeStatus s = ReadVec3(r, &m->rest_offsets[j]); s != DecodeStatus::kOk) return s;
     if (const DecodeStatus s = ReadQuat(r, &m->rest_rotations[j]); s != DecodeStatus::kOk) return s;
   }
@@ -348,7 +375,8 @@ DecodeStatus DecodeSubjectDescription(std::span<const uint8_t> bytes, SubjectDes
 }
 
 void EncodeCleanedMarkers(const CleanedMarkersMessage& m, std::vector<uint8_t>* out) {
-  if (m.positions.size() > kMaxMarkers || m.status.size() != m.positions.size() || m.reason.size() != m.positions.size())
+  if (m.positions.size() > kMaxMarkers || m.status.size() != m.positions.size() ||
+      m.reason.size() != m.positions.size())
     throw std::invalid_argument("protocol: cleaned markers with inconsistent or too many markers");
   out->clear();
   ByteWriter w(out);
@@ -372,10 +400,13 @@ void EncodeCleanedMarkers(const CleanedMarkersMessage& m, std::vector<uint8_t>* 
 
 DecodeStatus DecodeCleanedMarkers(std::span<const uint8_t> bytes, CleanedMarkersMessage* m) {
   ByteReader r(bytes);
-  if (const DecodeStatus s = ReadPrelude(r, MessageType::kCleanedMarkers, &m->subject); s != DecodeStatus::kOk) return s;
+  if (const DecodeStatus s = ReadPrelude(r, MessageType::kCleanedMarkers, &m->subject);
+      s != DecodeStatus::kOk)
+    return s;
   uint16_t count = 0, reserved = 0;
-  if (!r.ReadU64(&m->model_hash) || !r.ReadU64(&m->frame_number) || !r.ReadU64(&m->capture_time_ns) || !r.ReadU64(&m->publish_time_ns) ||
-      !r.ReadU16(&count) || !r.ReadU16(&reserved))
+  if (!r.ReadU64(&m->model_hash) || !r.ReadU64(&m->frame_number) ||
+      !r.ReadU64(&m->capture_time_ns) || !r.ReadU64(&m->publish_time_ns) || !r.ReadU16(&count) ||
+      !r.ReadU16(&reserved))
     return DecodeStatus::kTooShort;
   if (count > kMaxMarkers) return DecodeStatus::kTooManyItems;
   if (r.remaining() != kCleanedMarkerBytes * count) return DecodeStatus::kSizeMismatch;
@@ -410,11 +441,14 @@ void EncodeSubjectStatus(const SubjectStatusMessage& m, std::vector<uint8_t>* ou
 
 DecodeStatus DecodeSubjectStatus(std::span<const uint8_t> bytes, SubjectStatusMessage* m) {
   ByteReader r(bytes);
-  if (const DecodeStatus s = ReadPrelude(r, MessageType::kSubjectStatus, &m->subject); s != DecodeStatus::kOk) return s;
+  if (const DecodeStatus s = ReadPrelude(r, MessageType::kSubjectStatus, &m->subject);
+      s != DecodeStatus::kOk)
+    return s;
   uint8_t state = 0, reserved8 = 0;
   uint16_t reserved16 = 0;
-  if (!r.ReadU8(&state) || !r.ReadU8(&reserved8) || !r.ReadU16(&reserved16) || !r.ReadU64(&m->last_frame_number) ||
-      !r.ReadU64(&m->since_last_input_ns) || !r.ReadU64(&m->frames_in) || !r.ReadU64(&m->frames_out) || !r.ReadU64(&m->frames_dropped))
+  if (!r.ReadU8(&state) || !r.ReadU8(&reserved8) || !r.ReadU16(&reserved16) ||
+      !r.ReadU64(&m->last_frame_number) || !r.ReadU64(&m->since_last_input_ns) ||
+      !r.ReadU64(&m->frames_in) || !r.ReadU64(&m->frames_out) || !r.ReadU64(&m->frames_dropped))
     return DecodeStatus::kTooShort;
   if (r.remaining() != 0) return DecodeStatus::kSizeMismatch;
   if (state > static_cast<uint8_t>(SubjectState::kWaiting)) return DecodeStatus::kBadField;
@@ -433,7 +467,9 @@ void EncodeEndOfStream(const EndOfStreamMessage& m, std::vector<uint8_t>* out) {
 
 DecodeStatus DecodeEndOfStream(std::span<const uint8_t> bytes, EndOfStreamMessage* m) {
   ByteReader r(bytes);
-  if (const DecodeStatus s = ReadPrelude(r, MessageType::kEndOfStream, &m->subject); s != DecodeStatus::kOk) return s;
+  if (const DecodeStatus s = ReadPrelude(r, MessageType::kEndOfStream, &m->subject);
+      s != DecodeStatus::kOk)
+    return s;
   if (!r.ReadU64(&m->last_frame_number)) return DecodeStatus::kTooShort;
   if (r.remaining() != 0) return DecodeStatus::kSizeMismatch;
   return DecodeStatus::kOk;
@@ -443,10 +479,12 @@ DecodeStatus PeekType(std::span<const uint8_t> bytes, MessageType* type) {
   ByteReader r(bytes);
   uint32_t magic = 0;
   uint16_t version = 0, raw = 0;
-  if (!r.ReadU32(&magic) || !r.ReadU16(&version) || !r.ReadU16(&raw)) return DecodeStatus::kTooShort;
+  if (!r.ReadU32(&magic) || !r.ReadU16(&version) || !r.ReadU16(&raw))
+    return DecodeStatus::kTooShort;
   if (magic != kMagic) return DecodeStatus::kBadMagic;
   if (version != kVersion) return DecodeStatus::kUnsupportedVersion;
-  if (raw < static_cast<uint16_t>(MessageType::kSubjectDescription) || raw > static_cast<uint16_t>(MessageType::kEndOfStream))
+  if (raw < static_cast<uint16_t>(MessageType::kSubjectDescription) ||
+      raw > static_cast<uint16_t>(MessageType::kEndOfStream))
     return DecodeStatus::kWrongType;
   *type = static_cast<MessageType>(raw);
   return DecodeStatus::kOk;

@@ -1,8 +1,8 @@
 // The mocapd wire format (documented byte by byte in protocol/README.md): a 16-byte
 // versioned header and little-endian payloads for marker frames in; skeleton frames,
-// cleaned markers, subject descriptions and subject status out. Encoding writes into a caller-owned buffer; decoding is bounds-checked, never
-// throws and never allocates beyond the caller's message storage (sized once), and
-// reports a status for every way a message can be malformed.
+// cleaned markers, subject descriptions and subject status out. Encoding writes into a caller-owned
+// buffer; decoding is bounds-checked, never throws and never allocates beyond the caller's message
+// storage (sized once), and reports a status for every way a message can be malformed.
 #pragma once
 
 #include <cstdint>
@@ -43,15 +43,15 @@ const char* to_string(SubjectState state);
 
 enum class DecodeStatus {
   kOk,
-  kTooShort,         ///< Fewer bytes than the header or the payload needs.
+  kTooShort,  ///< Fewer bytes than the header or the payload needs.
   kBadMagic,
   kUnsupportedVersion,
-  kWrongType,        ///< A valid message, but not the type asked for.
-  kSizeMismatch,     ///< The header's payload size disagrees with the bytes or the counts.
-  kBadSubjectName,   ///< Empty or longer than kMaxSubjectName.
-  kTooManyItems,     ///< More markers or joints than the limits.
-  kNonFinite,        ///< NaN or Inf where a number must be finite.
-  kBadField,         ///< A field outside its allowed values (flags, names, parent indices, enums).
+  kWrongType,       ///< A valid message, but not the type asked for.
+  kSizeMismatch,    ///< The header's payload size disagrees with the bytes or the counts.
+  kBadSubjectName,  ///< Empty or longer than kMaxSubjectName.
+  kTooManyItems,    ///< More markers or joints than the limits.
+  kNonFinite,       ///< NaN or Inf where a number must be finite.
+  kBadField,        ///< A field outside its allowed values (flags, names, parent indices, enums).
 };
 const char* to_string(DecodeStatus status);
 
@@ -144,8 +144,9 @@ void EncodeSubjectStatus(const SubjectStatusMessage& message, std::vector<uint8_
 void EncodeEndOfStream(const EndOfStreamMessage& message, std::vector<uint8_t>* out);
 
 /// The description of a solved subject, from its model.
-SubjectDescriptionMessage DescribeSubject(const std::string& subject, const Skeleton& skeleton, const MarkerSet& markers,
-                                          float rate_hz, int lookahead_frames);
+SubjectDescriptionMessage DescribeSubject(const std::string& subject, const Skeleton& skeleton,
+                                          const MarkerSet& markers, float rate_hz,
+                                          int lookahead_frames);
 
 /// Reads the message type after validating the header. Returns kOk and sets type.
 DecodeStatus PeekType(std::span<const uint8_t> bytes, MessageType* type);
@@ -153,7 +154,8 @@ DecodeStatus PeekType(std::span<const uint8_t> bytes, MessageType* type);
 /// of this size). On any status but kOk, message is unspecified.
 DecodeStatus DecodeMarkerFrame(std::span<const uint8_t> bytes, MarkerFrameMessage* message);
 DecodeStatus DecodeSkeletonFrame(std::span<const uint8_t> bytes, SkeletonFrameMessage* message);
-DecodeStatus DecodeSubjectDescription(std::span<const uint8_t> bytes, SubjectDescriptionMessage* message);
+DecodeStatus DecodeSubjectDescription(std::span<const uint8_t> bytes,
+                                      SubjectDescriptionMessage* message);
 DecodeStatus DecodeCleanedMarkers(std::span<const uint8_t> bytes, CleanedMarkersMessage* message);
 DecodeStatus DecodeSubjectStatus(std::span<const uint8_t> bytes, SubjectStatusMessage* message);
 DecodeStatus DecodeEndOfStream(std::span<const uint8_t> bytes, EndOfStreamMessage* message);

@@ -17,7 +17,9 @@ namespace mocapd {
 namespace {
 
 int64_t SteadyNs() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch()).count();
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(
+             std::chrono::steady_clock::now().time_since_epoch())
+      .count();
 }
 
 int64_t Seconds(double s) { return static_cast<int64_t>(s * 1e9); }
@@ -51,7 +53,8 @@ struct Daemon::DataPlane final : OutputSink {
       : owned_context(shared_context == nullptr ? std::make_unique<zmq::context_t>(1) : nullptr),
         context(shared_context != nullptr ? *shared_context : *owned_context),
         config(std::move(cfg)) {
-    for (const SubjectConfig& s : config.subjects) runners.push_back(std::make_unique<SubjectRunner>(s, config));
+    for (const SubjectConfig& s : config.subjects)
+      runners.push_back(std::make_unique<SubjectRunner>(s, config));
     frame.positions.reserve(protocol::kMaxMarkers);
     frame.valid.reserve(protocol::kMaxMarkers);
     frame.subject.reserve(protocol::kMaxSubjectName);
@@ -60,14 +63,17 @@ struct Daemon::DataPlane final : OutputSink {
   // Binds and connects; throws std::runtime_error naming the endpoint.
   void Open() {
     try {
-      input = zmq::socket_t(context, config.input_pattern == InputPattern::kSub ? zmq::socket_type::sub : zmq::socket_type::pull);
+      input = zmq::socket_t(context, config.input_pattern == InputPattern::kSub
+                                         ? zmq::socket_type::sub
+                                         : zmq::socket_type::pull);
       input.set(zmq::sockopt::rcvhwm, config.receive_high_water_mark);
       input.set(zmq::sockopt::linger, 0);
       if (config.input_pattern == InputPattern::kSub) {
         if (config.subscribe_all) {
           input.set(zmq::sockopt::subscribe, "");
         } else {
-          for (const auto& r : runners) input.set(zmq::sockopt::subscribe, Topic("markers", r->name()));
+          for (const auto& r : runners)
+            input.set(zmq::sockopt::subscribe, Topic("markers", r->name()));
         }
         input.connect(config.input_endpoint);
       } else {
@@ -89,8 +95,11 @@ struct Daemon::DataPlane final : OutputSink {
 
   void Send(std::string_view topic, std::span<const uint8_t> message) override {
     // PUB never blocks: a slow subscriber loses messages at its high-water mark instead.
-    const auto a = output.send(zmq::const_buffer(topic.data(), topic.size()), zmq::send_flags::sndmore | zmq::send_flags::dontwait);
-    const auto b = a ? output.send(zmq::const_buffer(message.data(), message.size()), zmq::send_flags::dontwait) : std::nullopt;
+    const auto a = output.send(zmq::const_buffer(topic.data(), topic.size()),
+                               zmq::send_flags::sndmore | zmq::send_flags::dontwait);
+    const auto b = a ? output.send(zmq::const_buffer(message.data(), message.size()),
+                                   zmq::send_flags::dontwait)
+                     : std::nullopt;
     if (!b) ++stats.output_send_failures;
   }
 
@@ -108,11 +117,14 @@ struct Daemon::DataPlane final : OutputSink {
     // One part (the message), or two (a topic, then the message).
     if (part_count > 2) return Drop(DropReason::kMalformed);
     if (message.size() > config.max_message_bytes) return Drop(DropReason::kOversized);
-    const std::span<const uint8_t> bytes(static_cast<const uint8_t*>(message.data()), message.size());
+    const std::span<const uint8_t> bytes(static_cast<const uint8_t*>(message.data()),
+                                         message.size());
     protocol::MessageType type;
-    if (protocol::PeekType(bytes, &type) != protocol::DecodeStatus::kOk) return Drop(DropReason::kMalformed);
+    if (protocol::PeekType(bytes, &type) != protocol::DecodeStatus::kOk)
+      return Drop(DropReason::kMalformed);
     if (type == protocol::MessageType::kEndOfStream) {
-      if (protocol::DecodeEndOfStream(bytes, &end_of_stream) != protocol::DecodeStatus::kOk) return Drop(DropReason::kMalformed);
+      if (protocol::DecodeEndOfStream(bytes, &end_of_stream) != protocol::DecodeStatus::kOk)
+        return Drop(DropReason::kMalformed);
       SubjectRunner* runner = FindRunner(end_of_stream.subject);
       if (runner == nullptr) return Drop(DropReason::kUnknownSubject);
       ++stats.control_messages;
@@ -122,9 +134,11 @@ struct Daemon::DataPlane final : OutputSink {
     const protocol::DecodeStatus status = protocol::DecodeMarkerFrame(bytes, &frame);
     if (status != protocol::DecodeStatus::kOk) {
       // A non-finite value is found after the subject name, so it can be charged to it.
-      SubjectRunner* runner = status == protocol::DecodeStatus::kNonFinite ? FindRunner(frame.subject) : nullptr;
+      SubjectRunner* runner =
+          status == protocol::DecodeStatus::kNonFinite ? FindRunner(frame.subject) : nullptr;
       if (runner != nullptr) return runner->CountDrop(DropReason::kNonFinite);
-      return Drop(status == protocol::DecodeStatus::kNonFinite ? DropReason::kNonFinite : DropReason::kMalformed);
+      return Drop(status == protocol::DecodeStatus::kNonFinite ? DropReason::kNonFinite
+                                                               : DropReason::kMalformed);
     }
     SubjectRunner* runner = FindRunner(frame.subject);
     if (runner == nullptr) return Drop(DropReason::kUnknownSubject);
@@ -158,7 +172,8 @@ struct Daemon::DataPlane final : OutputSink {
     if (!reload) return;
     std::vector<std::unique_ptr<SubjectRunner>> next;
     for (auto& fresh : reload->runners) {
-      auto old = std::find_if(runners.begin(), runners.end(), [&](const auto& r) { return r && r->name() == fresh->name(); });
+      auto old = std::find_if(runners.begin(), runners.end(),
+                              [&](const auto& r) { return r && r->name() == fresh->name(); });
       if (old != runners.end() && (*old)->fingerprint() == fresh->fingerprint()) {
         next.push_back(std::move(*old));  // unchanged: keeps its lookahead and timing
         continue;
@@ -179,7 +194,8 @@ struct Daemon::DataPlane final : OutputSink {
     runners = std::move(next);
     const bool resubscribe = config.input_pattern == InputPattern::kSub && !config.subscribe_all;
     if (resubscribe)
-      for (const SubjectConfig& s : config.subjects) input.set(zmq::sockopt::unsubscribe, Topic("markers", s.name));
+      for (const SubjectConfig& s : config.subjects)
+        input.set(zmq::sockopt::unsubscribe, Topic("markers", s.name));
     // Endpoints and socket options stay as bound; the rest of the config applies now.
     reload->config.input_endpoint = config.input_endpoint;
     reload->config.input_pattern = config.input_pattern;
@@ -215,7 +231,8 @@ struct Daemon::DataPlane final : OutputSink {
       s.counters = r.counters();
       s.cleanup = r.cleanup_counters();
       s.pending = r.pending_received();
-      s.since_last_input_s = r.last_receive_ns() < 0 ? -1.0 : static_cast<double>(now - r.last_receive_ns()) * 1e-9;
+      s.since_last_input_s =
+          r.last_receive_ns() < 0 ? -1.0 : static_cast<double>(now - r.last_receive_ns()) * 1e-9;
       const protocol::SubjectDescriptionMessage& d = r.description();
       s.markers = static_cast<int>(d.marker_names.size());
       s.joints = static_cast<int>(d.joint_names.size());
@@ -309,7 +326,9 @@ struct Daemon::ControlPlane {
 };
 
 Daemon::Daemon(DaemonConfig config, std::string config_path, zmq::context_t* context)
-    : config_path_(std::move(config_path)), data_(std::make_unique<DataPlane>(config, context)), control_(std::make_unique<ControlPlane>()) {
+    : config_path_(std::move(config_path)),
+      data_(std::make_unique<DataPlane>(config, context)),
+      control_(std::make_unique<ControlPlane>()) {
   control_->config = std::move(config);
 }
 
@@ -350,21 +369,28 @@ bool Daemon::Reload() {
 
 void Daemon::Reload(DaemonConfig config) {
   // Runs on the control plane, which owns its copy of the config.
-  boost::asio::post(control_->io, [this, c = std::make_shared<DaemonConfig>(std::move(config))]() mutable { ApplyReload(std::move(*c)); });
+  boost::asio::post(control_->io,
+                    [this, c = std::make_shared<DaemonConfig>(std::move(config))]() mutable {
+                      ApplyReload(std::move(*c));
+                    });
 }
 
 void Daemon::ApplyReload(DaemonConfig config) {
   const DaemonConfig& old = control_->config;
-  if (config.input_endpoint != old.input_endpoint || config.output_endpoint != old.output_endpoint ||
-      config.input_pattern != old.input_pattern || config.subscribe_all != old.subscribe_all ||
-      config.http_port != old.http_port || config.http_address != old.http_address || config.http_enabled != old.http_enabled)
-    spdlog::warn("reload: endpoint changes take effect only after a restart; the sockets stay as they are");
+  if (config.input_endpoint != old.input_endpoint ||
+      config.output_endpoint != old.output_endpoint || config.input_pattern != old.input_pattern ||
+      config.subscribe_all != old.subscribe_all || config.http_port != old.http_port ||
+      config.http_address != old.http_address || config.http_enabled != old.http_enabled)
+    spdlog::warn(
+        "reload: endpoint changes take effect only after a restart; the sockets stay as they are");
   auto pending = std::make_unique<DataPlane::PendingReload>();
-  for (const SubjectConfig& s : config.subjects) pending->runners.push_back(std::make_unique<SubjectRunner>(s, config));
+  for (const SubjectConfig& s : config.subjects)
+    pending->runners.push_back(std::make_unique<SubjectRunner>(s, config));
   pending->config = config;
   std::string names;
   for (const SubjectConfig& s : config.subjects) names += (names.empty() ? "" : ", ") + s.name;
-  spdlog::info("reload: applying {} ({} subjects: {})", config.source, config.subjects.size(), names);
+  spdlog::info("reload: applying {} ({} subjects: {})", config.source, config.subjects.size(),
+               names);
   control_->config = std::move(config);
   std::lock_guard lock(data_->mailbox_mutex);
   data_->pending_reload = std::move(pending);
@@ -387,18 +413,24 @@ bool Daemon::WaitUntilRunning(std::chrono::milliseconds timeout) {
 namespace {
 
 void LogStartup(const DaemonConfig& c, int http_port) {
-  spdlog::info("mocapd starting: input {} {} ({}), output PUB {}", c.input_pattern == InputPattern::kSub ? "SUB connect" : "PULL bind",
-               c.input_endpoint, c.input_pattern == InputPattern::kSub && !c.subscribe_all ? "subjects' topics" : "all messages",
+  spdlog::info("mocapd starting: input {} {} ({}), output PUB {}",
+               c.input_pattern == InputPattern::kSub ? "SUB connect" : "PULL bind",
+               c.input_endpoint,
+               c.input_pattern == InputPattern::kSub && !c.subscribe_all ? "subjects' topics"
+                                                                         : "all messages",
                c.output_endpoint);
   for (const SubjectConfig& s : c.subjects) {
     const double budget_ms = 1e3 / s.rate_hz;
-    spdlog::info("  subject '{}': {} markers, {} joints, {:.0f} Hz, lookahead K={} ({:.1f} ms delay), frame budget {:.2f} ms, model {}",
-                 s.name, s.model.markers->num_markers(), s.model.skeleton->num_joints(), s.rate_hz, s.cleanup.lookahead,
-                 s.cleanup.lookahead * budget_ms, budget_ms, s.model_path);
+    spdlog::info(
+        "  subject '{}': {} markers, {} joints, {:.0f} Hz, lookahead K={} ({:.1f} ms delay), frame "
+        "budget {:.2f} ms, model {}",
+        s.name, s.model.markers->num_markers(), s.model.skeleton->num_joints(), s.rate_hz,
+        s.cleanup.lookahead, s.cleanup.lookahead * budget_ms, budget_ms, s.model_path);
   }
   if (http_port > 0) {
-    spdlog::info("control: http://{}:{}/health /subjects /metrics; watchdog {:.2f} s; stats every {:.2f} s", c.http_address, http_port,
-                 c.watchdog_timeout_s, c.stats_interval_s);
+    spdlog::info(
+        "control: http://{}:{}/health /subjects /metrics; watchdog {:.2f} s; stats every {:.2f} s",
+        c.http_address, http_port, c.watchdog_timeout_s, c.stats_interval_s);
   } else {
     spdlog::info("control: HTTP disabled; watchdog {:.2f} s", c.watchdog_timeout_s);
   }
@@ -411,14 +443,22 @@ void Daemon::Run(bool handle_signals) {
   try {
     data_->Open();
     if (cp.config.http_enabled) {
-      cp.http = std::make_unique<HttpServer>(cp.io, cp.config.http_address, cp.config.http_port, [this](const std::string& target) {
-        const DaemonStats stats = Stats();
-        const bool alive = stats.running && SteadyNs() - stats.data_plane_heartbeat_ns < 1'000'000'000;
-        if (target == "/metrics") return HttpResponse{200, "text/plain; version=0.0.4; charset=utf-8", FormatPrometheusMetrics(stats)};
-        if (target == "/subjects") return HttpResponse{200, "application/json", FormatSubjectsJson(stats)};
-        if (target == "/health") return HttpResponse{alive ? 200 : 503, "application/json", FormatHealthJson(stats, alive)};
-        return HttpResponse{404, "text/plain; charset=utf-8", "not found; try /health, /subjects or /metrics\n"};
-      });
+      cp.http = std::make_unique<HttpServer>(
+          cp.io, cp.config.http_address, cp.config.http_port, [this](const std::string& target) {
+            const DaemonStats stats = Stats();
+            const bool alive =
+                stats.running && SteadyNs() - stats.data_plane_heartbeat_ns < 1'000'000'000;
+            if (target == "/metrics")
+              return HttpResponse{200, "text/plain; version=0.0.4; charset=utf-8",
+                                  FormatPrometheusMetrics(stats)};
+            if (target == "/subjects")
+              return HttpResponse{200, "application/json", FormatSubjectsJson(stats)};
+            if (target == "/health")
+              return HttpResponse{alive ? 200 : 503, "application/json",
+                                  FormatHealthJson(stats, alive)};
+            return HttpResponse{404, "text/plain; charset=utf-8",
+                                "not found; try /health, /subjects or /metrics\n"};
+          });
       http_port_.store(cp.http->port());
     }
   } catch (...) {
@@ -453,56 +493,70 @@ void Daemon::Run(bool handle_signals) {
 
   // Stats tick: the watchdog on the data plane itself, and rate-limited drop warnings.
   cp.tick.emplace(cp.io);
-  std::function<void(const boost::system::error_code&)> on_tick = [this, &on_tick](const boost::system::error_code& ec) {
-    if (ec) return;
-    ControlPlane& c = *control_;
-    const DaemonStats now = Stats();
-    const int64_t t = SteadyNs();
-    const bool alive = now.running && t - now.data_plane_heartbeat_ns < 1'000'000'000;
-    if (alive != c.data_plane_alive) {
-      if (!alive) spdlog::error("watchdog: the data plane has not reported for over 1 s");
-      else spdlog::info("watchdog: the data plane is reporting again");
-      c.data_plane_alive = alive;
-    }
-    for (const SubjectStats& s : now.subjects) {
-      const SubjectStats* before = nullptr;
-      for (const SubjectStats& b : c.last_logged.subjects)
-        if (b.name == s.name) before = &b;
-      if (before != nullptr && s.counters.stalls > before->counters.stalls)
-        spdlog::warn("watchdog: subject '{}' input stalled (no frame for {:.2f} s, last frame {})", s.name, s.since_last_input_s,
-                     s.counters.last_frame_number);
-      if (before != nullptr && before->state == protocol::SubjectState::kStalled && s.state != protocol::SubjectState::kStalled)
-        spdlog::info("subject '{}' input resumed at frame {}", s.name, s.counters.last_frame_number);
-      if (before != nullptr && s.counters.restarts > before->counters.restarts)
-        spdlog::warn("subject '{}': capture restart or jump in frame numbers; pipeline re-synchronised at frame {}", s.name,
-                     s.counters.last_frame_number);
-    }
-    // Drops: at most one line per reason per log interval, with the count since the last.
-    for (int reason = 0; reason < kDropReasonCount; ++reason) {
-      auto total = [&](const DaemonStats& st) {
-        uint64_t n = st.unattributed_dropped[static_cast<size_t>(reason)];
-        for (const SubjectStats& s : st.subjects) n += s.counters.dropped[static_cast<size_t>(reason)];
-        return n;
+  std::function<void(const boost::system::error_code&)> on_tick =
+      [this, &on_tick](const boost::system::error_code& ec) {
+        if (ec) return;
+        ControlPlane& c = *control_;
+        const DaemonStats now = Stats();
+        const int64_t t = SteadyNs();
+        const bool alive = now.running && t - now.data_plane_heartbeat_ns < 1'000'000'000;
+        if (alive != c.data_plane_alive) {
+          if (!alive)
+            spdlog::error("watchdog: the data plane has not reported for over 1 s");
+          else
+            spdlog::info("watchdog: the data plane is reporting again");
+          c.data_plane_alive = alive;
+        }
+        for (const SubjectStats& s : now.subjects) {
+          const SubjectStats* before = nullptr;
+          for (const SubjectStats& b : c.last_logged.subjects)
+            if (b.name == s.name) before = &b;
+          if (before != nullptr && s.counters.stalls > before->counters.stalls)
+            spdlog::warn(
+                "watchdog: subject '{}' input stalled (no frame for {:.2f} s, last frame {})",
+                s.name, s.since_last_input_s, s.counters.last_frame_number);
+          if (before != nullptr && before->state == protocol::SubjectState::kStalled &&
+              s.state != protocol::SubjectState::kStalled)
+            spdlog::info("subject '{}' input resumed at frame {}", s.name,
+                         s.counters.last_frame_number);
+          if (before != nullptr && s.counters.restarts > before->counters.restarts)
+            spdlog::warn(
+                "subject '{}': capture restart or jump in frame numbers; pipeline re-synchronised "
+                "at frame {}",
+                s.name, s.counters.last_frame_number);
+        }
+        // Drops: at most one line per reason per log interval, with the count since the last.
+        for (int reason = 0; reason < kDropReasonCount; ++reason) {
+          auto total = [&](const DaemonStats& st) {
+            uint64_t n = st.unattributed_dropped[static_cast<size_t>(reason)];
+            for (const SubjectStats& s : st.subjects)
+              n += s.counters.dropped[static_cast<size_t>(reason)];
+            return n;
+          };
+          if (t - c.last_drop_log_ns[static_cast<size_t>(reason)] <
+              Seconds(c.config.log_interval_s))
+            continue;
+          auto& logged = c.logged_drops;
+          const uint64_t n = total(now);
+          if (n > logged[static_cast<size_t>(reason)]) {
+            spdlog::warn("dropped {} input message(s): {} (total {})",
+                         n - logged[static_cast<size_t>(reason)],
+                         to_string(static_cast<DropReason>(reason)), n);
+            logged[static_cast<size_t>(reason)] = n;
+            c.last_drop_log_ns[static_cast<size_t>(reason)] = t;
+          }
+        }
+        if (t - c.last_log_ns >= Seconds(c.config.log_interval_s)) {
+          spdlog::info("stats: {} messages in, {} frames published, {} dropped, {} pending",
+                       now.messages_in, now.published_total(), now.dropped_total(),
+                       now.pending_total());
+          c.last_log_ns = t;
+        }
+        c.last_logged = now;
+        c.tick->expires_after(std::chrono::milliseconds(
+            static_cast<int64_t>(std::min(c.config.stats_interval_s, 0.25) * 1e3)));
+        c.tick->async_wait(on_tick);
       };
-      if (t - c.last_drop_log_ns[static_cast<size_t>(reason)] < Seconds(c.config.log_interval_s)) continue;
-      auto& logged = c.logged_drops;
-      const uint64_t n = total(now);
-      if (n > logged[static_cast<size_t>(reason)]) {
-        spdlog::warn("dropped {} input message(s): {} (total {})", n - logged[static_cast<size_t>(reason)],
-                     to_string(static_cast<DropReason>(reason)), n);
-        logged[static_cast<size_t>(reason)] = n;
-        c.last_drop_log_ns[static_cast<size_t>(reason)] = t;
-      }
-    }
-    if (t - c.last_log_ns >= Seconds(c.config.log_interval_s)) {
-      spdlog::info("stats: {} messages in, {} frames published, {} dropped, {} pending", now.messages_in, now.published_total(),
-                   now.dropped_total(), now.pending_total());
-      c.last_log_ns = t;
-    }
-    c.last_logged = now;
-    c.tick->expires_after(std::chrono::milliseconds(static_cast<int64_t>(std::min(c.config.stats_interval_s, 0.25) * 1e3)));
-    c.tick->async_wait(on_tick);
-  };
   cp.last_log_ns = SteadyNs();
   cp.tick->expires_after(std::chrono::milliseconds(100));
   cp.tick->async_wait(on_tick);
@@ -518,8 +572,9 @@ void Daemon::Run(bool handle_signals) {
     data_->thread.join();
   }
   const DaemonStats final_stats = Stats();
-  spdlog::info("mocapd stopped: {} messages in, {} frames published, {} dropped, {} pending ({})", final_stats.messages_in,
-               final_stats.published_total(), final_stats.dropped_total(), final_stats.pending_total(),
+  spdlog::info("mocapd stopped: {} messages in, {} frames published, {} dropped, {} pending ({})",
+               final_stats.messages_in, final_stats.published_total(), final_stats.dropped_total(),
+               final_stats.pending_total(),
                final_stats.Balanced() ? "every frame accounted for" : "ACCOUNTING MISMATCH");
   std::lock_guard lock(run_mutex_);
   run_state_ = RunState::kStopped;

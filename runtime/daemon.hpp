@@ -29,7 +29,7 @@ struct SubjectStats {
   protocol::SubjectState state = protocol::SubjectState::kWaiting;
   SubjectCounters counters;
   CleanupCounters cleanup;
-  uint64_t pending = 0;  ///< Received frames held in the lookahead.
+  uint64_t pending = 0;              ///< Received frames held in the lookahead.
   double since_last_input_s = -1.0;  ///< -1 before the first frame.
   int markers = 0;
   int joints = 0;
@@ -42,7 +42,7 @@ struct SubjectStats {
 struct DaemonStats {
   bool running = false;
   double uptime_s = 0.0;
-  uint64_t messages_in = 0;  ///< Every message received on the input socket.
+  uint64_t messages_in = 0;       ///< Every message received on the input socket.
   uint64_t control_messages = 0;  ///< Accepted end-of-stream messages (not frames).
   /// Drops not attributable to a configured subject (malformed, unknown subject, ...).
   std::array<uint64_t, kDropReasonCount> unattributed_dropped{};
@@ -60,7 +60,9 @@ struct DaemonStats {
   uint64_t dropped_total() const;
   uint64_t pending_total() const;
   /// messages_in == published + dropped + pending (+ control messages): every frame accounted for.
-  bool Balanced() const { return messages_in == published_total() + dropped_total() + pending_total() + control_messages; }
+  bool Balanced() const {
+    return messages_in == published_total() + dropped_total() + pending_total() + control_messages;
+  }
 };
 
 class Daemon {

@@ -3,18 +3,18 @@
 
 #include <cmath>
 #include <filesystem>
-#include <map>
 #include <fstream>
+#include <map>
 #include <set>
 #include <sstream>
 #include <stdexcept>
 #include <type_traits>
 #include <variant>
 
-#include "protocol/messages.hpp"
 #include "formats/bvh.hpp"
 #include "formats/retarget_map.hpp"
 #include "formats/toml_reader.hpp"
+#include "protocol/messages.hpp"
 
 namespace mocapd {
 namespace {
@@ -27,19 +27,24 @@ bool SplitTcp(const std::string& endpoint, std::string* host, std::string* port)
   if (colon == std::string::npos) return false;
   *host = rest.substr(0, colon);
   *port = rest.substr(colon + 1);
-  if (host->size() >= 2 && host->front() == '[' && host->back() == ']') *host = host->substr(1, host->size() - 2);
+  if (host->size() >= 2 && host->front() == '[' && host->back() == ']')
+    *host = host->substr(1, host->size() - 2);
   return true;
 }
 
-bool IsLoopbackHost(const std::string& host) { return host == "127.0.0.1" || host == "localhost" || host == "::1"; }
+bool IsLoopbackHost(const std::string& host) {
+  return host == "127.0.0.1" || host == "localhost" || host == "::1";
+}
 
 std::string Endpoint(TomlTable& t, const std::string& key, const std::string& fallback) {
   const std::string e = t.String(key, fallback);
   std::string host, port;
   const bool ok = e.rfind("ipc://", 0) == 0 ? e.size() > 6
-                  : e.rfind("inproc://", 0) == 0 ? e.size() > 9
-                  : SplitTcp(e, &host, &port) && !host.empty() && !port.empty();
-  if (!ok) t.Fail(nullptr, key, "expected tcp://HOST:PORT, ipc://PATH or inproc://NAME, got '" + e + "'");
+                  : e.rfind("inproc://", 0) == 0
+                      ? e.size() > 9
+                      : SplitTcp(e, &host, &port) && !host.empty() && !port.empty();
+  if (!ok)
+    t.Fail(nullptr, key, "expected tcp://HOST:PORT, ipc://PATH or inproc://NAME, got '" + e + "'");
   return e;
 }
 
@@ -54,7 +59,8 @@ void ReadCleanupOptions(TomlTable& table, const std::string& section, CleanupOpt
           if constexpr (std::is_same_v<T, bool>) {
             o->*member = table.Bool(f.key, o->*member);
           } else if constexpr (std::is_same_v<T, int>) {
-            o->*member = table.Integer(f.key, o->*member, static_cast<int>(f.min), static_cast<int>(f.max));
+            o->*member =
+                table.Integer(f.key, o->*member, static_cast<int>(f.min), static_cast<int>(f.max));
           } else if (const auto v = table.OptionalNumber(f.key, f.min, f.max)) {
             o->*member = *v * f.to_si;
           }
@@ -83,11 +89,11 @@ std::string SubjectFingerprint(const SubjectConfig& s, const DaemonConfig& c) {
   f << FormatSubjectModel(s.model) << '\n' << s.name << ' ' << s.rate_hz;
   for (const CleanupOptionField& field : CleanupOptionFields())
     std::visit([&](auto member) { f << ' ' << s.cleanup.*member; }, field.member);
-  f << ' ' << c.max_gap_frames << ' ' << c.restart_backjump_frames << ' ' << c.publish_cleaned_markers << ' '
-    << c.publish_global_transforms << '\n'
+  f << ' ' << c.max_gap_frames << ' ' << c.restart_backjump_frames << ' '
+    << c.publish_cleaned_markers << ' ' << c.publish_global_transforms << '\n'
     << s.character_path << ' ' << s.character_map.report << ' ' << s.retarget.damping << ' '
-    << s.retarget.contact_height_m << ' ' << s.retarget.contact_speed_m_s << ' ' << s.retarget.release_frames << ' '
-    << s.retarget.points_per_bone;
+    << s.retarget.contact_height_m << ' ' << s.retarget.contact_speed_m_s << ' '
+    << s.retarget.release_frames << ' ' << s.retarget.points_per_bone;
   return f.str();
 }
 
@@ -97,7 +103,8 @@ bool IsLocalEndpoint(const std::string& endpoint) {
   return SplitTcp(endpoint, &host, &port) && IsLoopbackHost(host);
 }
 
-DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& source_name, const std::string& base_dir) {
+DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& source_name,
+                               const std::string& base_dir) {
   const toml::table root = ParseToml(text, source_name);
   DaemonConfig c;
   c.source = source_name;
@@ -107,15 +114,19 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
 
   TomlTable input = top.Table("input");
   c.input_endpoint = Endpoint(input, "endpoint", c.input_endpoint);
-  c.input_pattern = input.Choice("pattern", "sub", {"sub", "pull"}) == "sub" ? InputPattern::kSub : InputPattern::kPull;
+  c.input_pattern = input.Choice("pattern", "sub", {"sub", "pull"}) == "sub" ? InputPattern::kSub
+                                                                             : InputPattern::kPull;
   c.subscribe_all = input.Choice("subscribe", "subjects", {"subjects", "all"}) == "all";
-  c.receive_high_water_mark = input.Integer("receive_high_water_mark", c.receive_high_water_mark, 1, 10'000'000);
-  c.max_message_bytes = static_cast<size_t>(input.Integer("max_message_bytes", static_cast<int>(c.max_message_bytes), 64, 64 << 20));
+  c.receive_high_water_mark =
+      input.Integer("receive_high_water_mark", c.receive_high_water_mark, 1, 10'000'000);
+  c.max_message_bytes = static_cast<size_t>(
+      input.Integer("max_message_bytes", static_cast<int>(c.max_message_bytes), 64, 64 << 20));
   input.RejectUnknown();
 
   TomlTable output = top.Table("output");
   c.output_endpoint = Endpoint(output, "endpoint", c.output_endpoint);
-  c.send_high_water_mark = output.Integer("send_high_water_mark", c.send_high_water_mark, 1, 10'000'000);
+  c.send_high_water_mark =
+      output.Integer("send_high_water_mark", c.send_high_water_mark, 1, 10'000'000);
   c.publish_cleaned_markers = output.Bool("cleaned_markers", c.publish_cleaned_markers);
   c.publish_global_transforms = output.Bool("global_transforms", c.publish_global_transforms);
   output.RejectUnknown();
@@ -133,16 +144,20 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
   if (!c.allow_remote) {
     TomlTable in = top.Table("input"), out = top.Table("output"), ctl = top.Table("control");
     if (c.input_pattern == InputPattern::kPull && !IsLocalEndpoint(c.input_endpoint))
-      in.Fail(root["input"]["endpoint"].node(), "endpoint", "binds a non-loopback address; set control.allow_remote = true to allow it");
+      in.Fail(root["input"]["endpoint"].node(), "endpoint",
+              "binds a non-loopback address; set control.allow_remote = true to allow it");
     if (!IsLocalEndpoint(c.output_endpoint))
-      out.Fail(root["output"]["endpoint"].node(), "endpoint", "binds a non-loopback address; set control.allow_remote = true to allow it");
+      out.Fail(root["output"]["endpoint"].node(), "endpoint",
+               "binds a non-loopback address; set control.allow_remote = true to allow it");
     if (c.http_enabled && !IsLoopbackHost(c.http_address))
-      ctl.Fail(root["control"]["http_address"].node(), "http_address", "is not loopback; set control.allow_remote = true to allow it");
+      ctl.Fail(root["control"]["http_address"].node(), "http_address",
+               "is not loopback; set control.allow_remote = true to allow it");
   }
 
   TomlTable frames = top.Table("frames");
   c.max_gap_frames = frames.Integer("max_gap_frames", c.max_gap_frames, 0, 100000);
-  c.restart_backjump_frames = frames.Integer("restart_backjump_frames", c.restart_backjump_frames, 1, 1'000'000);
+  c.restart_backjump_frames =
+      frames.Integer("restart_backjump_frames", c.restart_backjump_frames, 1, 1'000'000);
   frames.RejectUnknown();
 
   CleanupOptions defaults;
@@ -157,21 +172,25 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
   {
     TomlTable r = top.Table("retarget");
     retarget.damping = r.Number("damping", retarget.damping, 0, 10);
-    retarget.contact_height_m = r.Number("contact_height_mm", retarget.contact_height_m * 1e3, 0, 1000) * 1e-3;
+    retarget.contact_height_m =
+        r.Number("contact_height_mm", retarget.contact_height_m * 1e3, 0, 1000) * 1e-3;
     retarget.contact_speed_m_s = r.Number("contact_speed_m_s", retarget.contact_speed_m_s, 0, 100);
     retarget.release_frames = r.Integer("release_frames", retarget.release_frames, 1, 10000);
     retarget.points_per_bone = r.Integer("points_per_bone", retarget.points_per_bone, 1, 32);
     r.RejectUnknown();
   }
 
-  if (!top.Has("subject")) top.Fail(nullptr, "subject", "no [[subject]] tables: name at least one subject to solve");
+  if (!top.Has("subject"))
+    top.Fail(nullptr, "subject", "no [[subject]] tables: name at least one subject to solve");
   for (TomlTable& t : top.Tables("subject", /*required=*/true)) {
     const toml::table* table = &t.table();
     SubjectConfig s;
     s.name = t.String("name", "", true);
-    if (s.name.empty() || s.name.size() > protocol::kMaxSubjectName || s.name.find_first_of("/ \t\n") != std::string::npos)
+    if (s.name.empty() || s.name.size() > protocol::kMaxSubjectName ||
+        s.name.find_first_of("/ \t\n") != std::string::npos)
       t.Fail(table->get("name"), "name", "must be 1..63 characters without '/' or spaces");
-    if (c.FindSubject(s.name) != nullptr) t.Fail(table->get("name"), "name", "subject '" + s.name + "' is listed twice");
+    if (c.FindSubject(s.name) != nullptr)
+      t.Fail(table->get("name"), "name", "subject '" + s.name + "' is listed twice");
     s.model_path = t.String("model", "", true);
     if (!s.model_path.empty() && std::filesystem::path(s.model_path).is_relative())
       s.model_path = (std::filesystem::path(base_dir) / s.model_path).lexically_normal().string();
@@ -180,10 +199,12 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
     s.cleanup.rate_hz = s.rate_hz;
     const CleanupOptionField& lookahead = OptionField("lookahead");
     s.cleanup.lookahead =
-        t.Integer("lookahead", defaults.lookahead, static_cast<int>(lookahead.min), static_cast<int>(lookahead.max));
+        t.Integer("lookahead", defaults.lookahead, static_cast<int>(lookahead.min),
+                  static_cast<int>(lookahead.max));
     s.character_path = t.String("character", "");
     if (!s.character_path.empty() && std::filesystem::path(s.character_path).is_relative())
-      s.character_path = (std::filesystem::path(base_dir) / s.character_path).lexically_normal().string();
+      s.character_path =
+          (std::filesystem::path(base_dir) / s.character_path).lexically_normal().string();
     const std::map<std::string, std::string> joint_map = t.StringMap("character_joint_map");
     t.RejectUnknown();
     try {
@@ -205,7 +226,8 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
       try {
         const BvhTake character = ReadBvh(s.character_path);
         s.character = std::make_shared<const Skeleton>(character.skeleton);
-        s.character_map = MakeRetargetMap(*s.model.skeleton, {}, *s.character, character.end_sites, joint_map);
+        s.character_map =
+            MakeRetargetMap(*s.model.skeleton, {}, *s.character, character.end_sites, joint_map);
       } catch (const std::exception& e) {
         t.Fail(table->get("character"), "character", e.what());
       }

@@ -61,7 +61,8 @@ struct DaemonConfig {
 
 /// Parses and validates a config; subject model paths are resolved against base_dir
 /// and loaded. Throws std::runtime_error "SOURCE:LINE: field 'a.b': problem".
-DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& source_name, const std::string& base_dir);
+DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& source_name,
+                               const std::string& base_dir);
 DaemonConfig LoadDaemonConfig(const std::string& path);
 
 /// What a subject's pipeline is built from (its model and every option it uses): a reload

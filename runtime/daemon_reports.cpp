@@ -1,12 +1,12 @@
 // What the daemon's HTTP endpoint serves: Prometheus metrics (serialised by
 // prometheus-cpp, so the exposition format is the library's, not hand-rolled), and JSON
 // for /subjects and /health.
-#include <nlohmann/json.hpp>
 #include <prometheus/counter.h>
 #include <prometheus/gauge.h>
 #include <prometheus/histogram.h>
 #include <prometheus/registry.h>
 #include <prometheus/text_serializer.h>
+#include <nlohmann/json.hpp>
 
 #include "runtime/daemon.hpp"
 
@@ -17,31 +17,55 @@ std::string FormatPrometheusMetrics(const DaemonStats& stats) {
   using prometheus::BuildGauge;
   using prometheus::BuildHistogram;
   prometheus::Registry registry;
-  auto counter = [&](const std::string& name, const std::string& help) -> prometheus::Family<prometheus::Counter>& {
+  auto counter = [&](const std::string& name,
+                     const std::string& help) -> prometheus::Family<prometheus::Counter>& {
     return BuildCounter().Name(name).Help(help).Register(registry);
   };
-  auto gauge = [&](const std::string& name, const std::string& help) -> prometheus::Family<prometheus::Gauge>& {
+  auto gauge = [&](const std::string& name,
+                   const std::string& help) -> prometheus::Family<prometheus::Gauge>& {
     return BuildGauge().Name(name).Help(help).Register(registry);
   };
   gauge("mocapd_up", "1 while the data plane is running").Add({}).Set(stats.running ? 1 : 0);
-  gauge("mocapd_uptime_seconds", "Seconds since the data plane started").Add({}).Set(stats.uptime_s);
-  counter("mocapd_messages_received_total", "Messages received on the input socket").Add({}).Increment(static_cast<double>(stats.messages_in));
-  counter("mocapd_control_messages_total", "End-of-stream messages accepted").Add({}).Increment(static_cast<double>(stats.control_messages));
-  counter("mocapd_reloads_total", "Configuration reloads applied").Add({}).Increment(static_cast<double>(stats.reloads));
-  counter("mocapd_reload_failures_total", "Configuration reloads refused (invalid config)").Add({}).Increment(static_cast<double>(stats.reload_failures));
-  counter("mocapd_output_send_failures_total", "Messages the PUB socket could not queue").Add({}).Increment(static_cast<double>(stats.output_send_failures));
-  counter("mocapd_retired_frames_published_total", "Frames published by subjects a reload removed").Add({}).Increment(static_cast<double>(stats.retired_published));
+  gauge("mocapd_uptime_seconds", "Seconds since the data plane started")
+      .Add({})
+      .Set(stats.uptime_s);
+  counter("mocapd_messages_received_total", "Messages received on the input socket")
+      .Add({})
+      .Increment(static_cast<double>(stats.messages_in));
+  counter("mocapd_control_messages_total", "End-of-stream messages accepted")
+      .Add({})
+      .Increment(static_cast<double>(stats.control_messages));
+  counter("mocapd_reloads_total", "Configuration reloads applied")
+      .Add({})
+      .Increment(static_cast<double>(stats.reloads));
+  counter("mocapd_reload_failures_total", "Configuration reloads refused (invalid config)")
+      .Add({})
+      .Increment(static_cast<double>(stats.reload_failures));
+  counter("mocapd_output_send_failures_total", "Messages the PUB socket could not queue")
+      .Add({})
+      .Increment(static_cast<double>(stats.output_send_failures));
+  counter("mocapd_retired_frames_published_total", "Frames published by subjects a reload removed")
+      .Add({})
+      .Increment(static_cast<double>(stats.retired_published));
 
   auto& received = counter("mocapd_frames_received_total", "Marker frames received per subject");
-  auto& published = counter("mocapd_frames_published_total", "Received frames published (cleaned and solved)");
-  auto& inserted = counter("mocapd_frames_inserted_total", "All-missing frames inserted for missing frame numbers");
-  auto& dropped = counter("mocapd_frames_dropped_total", "Input messages dropped, by subject (empty if unknown) and reason");
+  auto& published =
+      counter("mocapd_frames_published_total", "Received frames published (cleaned and solved)");
+  auto& inserted = counter("mocapd_frames_inserted_total",
+                           "All-missing frames inserted for missing frame numbers");
+  auto& dropped = counter("mocapd_frames_dropped_total",
+                          "Input messages dropped, by subject (empty if unknown) and reason");
   auto& pending = gauge("mocapd_frames_pending", "Frames held in the lookahead");
-  auto& restarts = counter("mocapd_capture_restarts_total", "Capture restarts or long frame-number jumps re-synchronised");
-  auto& stalls = counter("mocapd_input_stalls_total", "Times the watchdog saw a subject's input stall");
-  auto& state = gauge("mocapd_subject_state", "0 tracking, 1 repairing, 2 lost, 3 stalled, 4 waiting");
-  auto& repaired = counter("mocapd_samples_repaired_total", "Published marker samples repaired, by detector");
-  auto& unrecoverable = counter("mocapd_samples_unrecoverable_total", "Published marker samples with no data to repair from");
+  auto& restarts = counter("mocapd_capture_restarts_total",
+                           "Capture restarts or long frame-number jumps re-synchronised");
+  auto& stalls =
+      counter("mocapd_input_stalls_total", "Times the watchdog saw a subject's input stall");
+  auto& state =
+      gauge("mocapd_subject_state", "0 tracking, 1 repairing, 2 lost, 3 stalled, 4 waiting");
+  auto& repaired =
+      counter("mocapd_samples_repaired_total", "Published marker samples repaired, by detector");
+  auto& unrecoverable = counter("mocapd_samples_unrecoverable_total",
+                                "Published marker samples with no data to repair from");
   auto& iterations = counter("mocapd_solve_iterations_total", "IK iterations over all solves");
   auto& failures = counter("mocapd_solve_failures_total", "IK solves that failed numerically");
   auto& cold = counter("mocapd_solve_cold_starts_total", "IK solves that started cold");
@@ -49,7 +73,8 @@ std::string FormatPrometheusMetrics(const DaemonStats& stats) {
                       .Name("mocapd_processing_latency_seconds")
                       .Help("From receiving the frame that completes a publication to sending it")
                       .Register(registry);
-  const prometheus::Histogram::BucketBoundaries bounds(kLatencyBucketsS.begin(), kLatencyBucketsS.end());
+  const prometheus::Histogram::BucketBoundaries bounds(kLatencyBucketsS.begin(),
+                                                       kLatencyBucketsS.end());
   for (int r = 0; r < kDropReasonCount; ++r)
     dropped.Add({{"subject", ""}, {"reason", to_string(static_cast<DropReason>(r))}})
         .Increment(static_cast<double>(stats.unattributed_dropped[static_cast<size_t>(r)]));
@@ -72,7 +97,8 @@ std::string FormatPrometheusMetrics(const DaemonStats& stats) {
     for (int r = 1; r < kMaskReasonCount; ++r)
       repaired.Add({{"subject", s.name}, {"detector", to_string(static_cast<MaskReason>(r))}})
           .Increment(static_cast<double>(s.cleanup.repaired_by[static_cast<size_t>(r)]));
-    std::vector<double> buckets(s.counters.processing.counts.begin(), s.counters.processing.counts.end());
+    std::vector<double> buckets(s.counters.processing.counts.begin(),
+                                s.counters.processing.counts.end());
     latency.Add(subject, bounds).ObserveMultiple(buckets, s.counters.processing.sum_s);
   }
   return prometheus::TextSerializer().Serialize(registry.Collect());
@@ -83,11 +109,17 @@ namespace {
 nlohmann::json SubjectJson(const SubjectStats& s) {
   nlohmann::json dropped = nlohmann::json::object();
   for (int r = 0; r < kDropReasonCount; ++r)
-    if (s.counters.dropped[static_cast<size_t>(r)] > 0) dropped[to_string(static_cast<DropReason>(r))] = s.counters.dropped[static_cast<size_t>(r)];
+    if (s.counters.dropped[static_cast<size_t>(r)] > 0)
+      dropped[to_string(static_cast<DropReason>(r))] = s.counters.dropped[static_cast<size_t>(r)];
   nlohmann::json repaired = nlohmann::json::object();
   for (int r = 1; r < kMaskReasonCount; ++r)
-    if (s.cleanup.repaired_by[static_cast<size_t>(r)] > 0) repaired[to_string(static_cast<MaskReason>(r))] = s.cleanup.repaired_by[static_cast<size_t>(r)];
-  const double mean_latency_us = s.counters.processing.count > 0 ? s.counters.processing.sum_s / static_cast<double>(s.counters.processing.count) * 1e6 : 0.0;
+    if (s.cleanup.repaired_by[static_cast<size_t>(r)] > 0)
+      repaired[to_string(static_cast<MaskReason>(r))] =
+          s.cleanup.repaired_by[static_cast<size_t>(r)];
+  const double mean_latency_us =
+      s.counters.processing.count > 0
+          ? s.counters.processing.sum_s / static_cast<double>(s.counters.processing.count) * 1e6
+          : 0.0;
   return {{"name", s.name},
           {"state", protocol::to_string(s.state)},
           {"markers", s.markers},

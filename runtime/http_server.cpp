@@ -15,11 +15,14 @@ using tcp = boost::asio::ip::tcp;
 
 class Session : public std::enable_shared_from_this<Session> {
  public:
-  Session(tcp::socket socket, std::shared_ptr<HttpServer::Handler> handler) : stream_(std::move(socket)), handler_(std::move(handler)) {}
+  Session(tcp::socket socket, std::shared_ptr<HttpServer::Handler> handler)
+      : stream_(std::move(socket)), handler_(std::move(handler)) {}
 
   void Start() {
     stream_.expires_after(std::chrono::seconds(5));
-    http::async_read(stream_, buffer_, request_, [self = shared_from_this()](beast::error_code ec, size_t) { self->OnRead(ec); });
+    http::async_read(
+        stream_, buffer_, request_,
+        [self = shared_from_this()](beast::error_code ec, size_t) { self->OnRead(ec); });
   }
 
  private:
@@ -32,7 +35,8 @@ class Session : public std::enable_shared_from_this<Session> {
       try {
         answer = (*handler_)(std::string(request_.target()));
       } catch (const std::exception& e) {
-        answer = {500, "text/plain; charset=utf-8", std::string("internal error: ") + e.what() + "\n"};
+        answer = {500, "text/plain; charset=utf-8",
+                  std::string("internal error: ") + e.what() + "\n"};
       }
     }
     response_.version(request_.version());
@@ -58,7 +62,8 @@ class Session : public std::enable_shared_from_this<Session> {
 
 }  // namespace
 
-HttpServer::HttpServer(boost::asio::io_context& io, const std::string& address, int port, Handler handler)
+HttpServer::HttpServer(boost::asio::io_context& io, const std::string& address, int port,
+                       Handler handler)
     : io_(io), acceptor_(io), handler_(std::make_shared<Handler>(std::move(handler))) {
   boost::system::error_code ec;
   const auto ip = boost::asio::ip::make_address(address == "localhost" ? "127.0.0.1" : address, ec);
@@ -68,7 +73,9 @@ HttpServer::HttpServer(boost::asio::io_context& io, const std::string& address, 
   if (!ec) acceptor_.set_option(boost::asio::socket_base::reuse_address(true), ec);
   if (!ec) acceptor_.bind(endpoint, ec);
   if (!ec) acceptor_.listen(boost::asio::socket_base::max_listen_connections, ec);
-  if (ec) throw std::runtime_error("cannot serve HTTP on " + address + ":" + std::to_string(port) + ": " + ec.message());
+  if (ec)
+    throw std::runtime_error("cannot serve HTTP on " + address + ":" + std::to_string(port) + ": " +
+                             ec.message());
   port_ = acceptor_.local_endpoint().port();
   Accept();
 }

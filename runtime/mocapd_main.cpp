@@ -11,8 +11,8 @@
 
 #include "runtime/calibrate_command.hpp"
 #include "runtime/daemon.hpp"
-#include "sim/demo_command.hpp"
 #include "runtime/process_command.hpp"
+#include "sim/demo_command.hpp"
 
 #include <unistd.h>
 
@@ -21,10 +21,17 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
 
   mocapd::DemoOptions demo;
-  CLI::App* demo_cmd = app.add_subcommand("demo", "Synthesize a take from the built-in humanoid and solve it frame by frame");
-  demo_cmd->add_option("--seconds", demo.seconds, "Take length")->check(CLI::Range(0.1, 3600.0))->capture_default_str();
-  demo_cmd->add_option("--rate", demo.rate_hz, "Capture rate, Hz")->check(CLI::Range(1.0, 2000.0))->capture_default_str();
-  demo_cmd->add_option("--noise-mm", demo.noise_mm, "Gaussian marker noise (sigma, mm)")->check(CLI::Range(0.0, 100.0))->capture_default_str();
+  CLI::App* demo_cmd = app.add_subcommand(
+      "demo", "Synthesize a take from the built-in humanoid and solve it frame by frame");
+  demo_cmd->add_option("--seconds", demo.seconds, "Take length")
+      ->check(CLI::Range(0.1, 3600.0))
+      ->capture_default_str();
+  demo_cmd->add_option("--rate", demo.rate_hz, "Capture rate, Hz")
+      ->check(CLI::Range(1.0, 2000.0))
+      ->capture_default_str();
+  demo_cmd->add_option("--noise-mm", demo.noise_mm, "Gaussian marker noise (sigma, mm)")
+      ->check(CLI::Range(0.0, 100.0))
+      ->capture_default_str();
   demo_cmd->add_option("--motion", demo.motion, "walk | reach | turn | mixed")
       ->check(CLI::IsMember({"walk", "reach", "turn", "mixed"}))
       ->capture_default_str();
@@ -32,33 +39,61 @@ int main(int argc, char** argv) {
 
   mocapd::CalibrateCommandOptions cal;
   double max_rms_mm = cal.calibration.max_rms_m * 1e3;
-  CLI::App* cal_cmd = app.add_subcommand("calibrate", "Attach a C3D take's markers to a BVH skeleton and write a subject model");
-  cal_cmd->add_option("--skeleton", cal.skeleton_bvh, "BVH with the hierarchy and the motion of the captured take")->required()->check(CLI::ExistingFile);
-  cal_cmd->add_option("--markers", cal.markers_c3d, "C3D marker capture of the same take")->required()->check(CLI::ExistingFile);
+  CLI::App* cal_cmd = app.add_subcommand(
+      "calibrate", "Attach a C3D take's markers to a BVH skeleton and write a subject model");
+  cal_cmd
+      ->add_option("--skeleton", cal.skeleton_bvh,
+                   "BVH with the hierarchy and the motion of the captured take")
+      ->required()
+      ->check(CLI::ExistingFile);
+  cal_cmd->add_option("--markers", cal.markers_c3d, "C3D marker capture of the same take")
+      ->required()
+      ->check(CLI::ExistingFile);
   cal_cmd->add_option("--out", cal.out_subject, "Subject model to write (TOML)")->required();
   cal_cmd->add_option("--name", cal.subject_name, "Subject name (default: the output file's stem)");
-  cal_cmd->add_option("--bvh-units", cal.bvh_units, "BVH length unit: mm, cm, m or in (default: guess)");
-  cal_cmd->add_option("--max-residual-mm", max_rms_mm, "Reject markers whose best fit leaves more RMS than this")
+  cal_cmd->add_option("--bvh-units", cal.bvh_units,
+                      "BVH length unit: mm, cm, m or in (default: guess)");
+  cal_cmd
+      ->add_option("--max-residual-mm", max_rms_mm,
+                   "Reject markers whose best fit leaves more RMS than this")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
 
   mocapd::ProcessCommandOptions proc;
-  CLI::App* proc_cmd = app.add_subcommand("process", "Clean a recorded take frame by frame and solve the skeleton");
-  proc_cmd->add_option("--subject", proc.subject, "Subject model (TOML)")->required()->check(CLI::ExistingFile);
-  proc_cmd->add_option("--in", proc.input_c3d, "Marker take (C3D)")->required()->check(CLI::ExistingFile);
+  CLI::App* proc_cmd =
+      app.add_subcommand("process", "Clean a recorded take frame by frame and solve the skeleton");
+  proc_cmd->add_option("--subject", proc.subject, "Subject model (TOML)")
+      ->required()
+      ->check(CLI::ExistingFile);
+  proc_cmd->add_option("--in", proc.input_c3d, "Marker take (C3D)")
+      ->required()
+      ->check(CLI::ExistingFile);
   proc_cmd->add_option("--out-bvh", proc.output_bvh, "Solved skeleton to write (BVH)")->required();
-  proc_cmd->add_option("--out-c3d", proc.output_c3d, "Cleaned markers to write (C3D; untouched samples are kept bit for bit)");
-  proc_cmd->add_option("--lookahead", proc.lookahead, "Frames of lookahead K (delay)")->check(CLI::Range(0, 1000))->capture_default_str();
+  proc_cmd->add_option("--out-c3d", proc.output_c3d,
+                       "Cleaned markers to write (C3D; untouched samples are kept bit for bit)");
+  proc_cmd->add_option("--lookahead", proc.lookahead, "Frames of lookahead K (delay)")
+      ->check(CLI::Range(0, 1000))
+      ->capture_default_str();
   proc_cmd->add_option("--report", proc.report_json, "Write the summary as JSON");
-  proc_cmd->add_option("--retarget", proc.retarget_bvh, "Also retarget onto this character (BVH: hierarchy and rest pose)")->check(CLI::ExistingFile);
-  proc_cmd->add_option("--out-character-bvh", proc.output_character_bvh, "The retargeted character's motion (BVH)");
+  proc_cmd
+      ->add_option("--retarget", proc.retarget_bvh,
+                   "Also retarget onto this character (BVH: hierarchy and rest pose)")
+      ->check(CLI::ExistingFile);
+  proc_cmd->add_option("--out-character-bvh", proc.output_character_bvh,
+                       "The retargeted character's motion (BVH)");
   std::vector<std::string> joint_map_args;
-  proc_cmd->add_option("--joint-map", joint_map_args, "Retarget overrides ROLE=JOINT (e.g. hand_l=L_Wrist), comma-separated")->delimiter(',');
+  proc_cmd
+      ->add_option("--joint-map", joint_map_args,
+                   "Retarget overrides ROLE=JOINT (e.g. hand_l=L_Wrist), comma-separated")
+      ->delimiter(',');
 
   std::string run_config = "config/mocapd.toml";
   std::string log_level = "info";
-  CLI::App* run_cmd = app.add_subcommand("run", "Run the daemon: clean and solve live marker frames from ZeroMQ");
-  run_cmd->add_option("--config", run_config, "Daemon config (TOML)")->check(CLI::ExistingFile)->capture_default_str();
+  CLI::App* run_cmd =
+      app.add_subcommand("run", "Run the daemon: clean and solve live marker frames from ZeroMQ");
+  run_cmd->add_option("--config", run_config, "Daemon config (TOML)")
+      ->check(CLI::ExistingFile)
+      ->capture_default_str();
   run_cmd->add_option("--log-level", log_level, "trace | debug | info | warn | error")
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error"}))
       ->capture_default_str();

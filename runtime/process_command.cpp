@@ -9,8 +9,8 @@
 #include "filters/pose_error.hpp"
 #include "formats/bvh.hpp"
 #include "formats/c3d.hpp"
-#include "formats/subject_file.hpp"
 #include "formats/retarget_map.hpp"
+#include "formats/subject_file.hpp"
 #include "formats/take_frames.hpp"
 
 namespace mocapd {
@@ -21,7 +21,8 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
   const MarkerSet& markers = *subject.markers;
   const TakeMarkerMap map(markers, take);
   if (!map.unmatched().empty()) {
-    out << "warning: " << map.unmatched().size() << " of the subject's markers are not in the take and stay missing:";
+    out << "warning: " << map.unmatched().size()
+        << " of the subject's markers are not in the take and stay missing:";
     for (const auto& n : map.unmatched()) out << " " << n;
     out << "\n";
   }
@@ -38,7 +39,8 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
   std::vector<Vec3> observed(static_cast<size_t>(markers.num_markers()));
   std::vector<double> weights(observed.size());
   std::vector<int> point_of_marker;
-  for (const MarkerDefinition& m : markers.markers()) point_of_marker.push_back(take.FindLabel(m.name));
+  for (const MarkerDefinition& m : markers.markers())
+    point_of_marker.push_back(take.FindLabel(m.name));
   std::vector<double> times_us;
   times_us.reserve(static_cast<size_t>(take.num_frames));
   C3dTake cleaned = take;  // untouched samples keep their exact file values
@@ -51,22 +53,26 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
       const int p = point_of_marker[m];
       if (p < 0 || frame.status[m] != MarkerStatus::kRepaired) continue;
       cleaned.at(f, p) = frame.markers[m];
-      cleaned.residuals[static_cast<size_t>(f) * static_cast<size_t>(cleaned.num_points()) + static_cast<size_t>(p)] = 0.0f;
+      cleaned.residuals[static_cast<size_t>(f) * static_cast<size_t>(cleaned.num_points()) +
+                        static_cast<size_t>(p)] = 0.0f;
     }
   };
   auto draw_progress = [&](int done) {
     if (!options.progress) return;
     const int width = 40;
     const int filled = take.num_frames > 0 ? done * width / take.num_frames : width;
-    out << "\r[" << std::string(static_cast<size_t>(filled), '#') << std::string(static_cast<size_t>(width - filled), ' ') << "] "
-        << done << "/" << take.num_frames << " frames" << std::flush;
+    out << "\r[" << std::string(static_cast<size_t>(filled), '#')
+        << std::string(static_cast<size_t>(width - filled), ' ') << "] " << done << "/"
+        << take.num_frames << " frames" << std::flush;
   };
   for (int f = 0; f < take.num_frames; ++f) {
     map.Observe(take, f, observed, weights);
     const auto t0 = std::chrono::steady_clock::now();
     const bool ready = pipeline.Push(observed);
     // The first K + 1 frames hold the solvers' cold starts; the rest is the steady state.
-    if (f > options.lookahead) times_us.push_back(std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - t0).count());
+    if (f > options.lookahead)
+      times_us.push_back(
+          std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - t0).count());
     if (ready) collect();
     if (f % 64 == 0) draw_progress(f);
   }
@@ -87,9 +93,11 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
     summary.max_us = worst;
   }
 
-  BvhTake bvh = MakeBvhTake(*subject.skeleton, std::move(poses), 1.0 / take.rate_hz, subject.bvh_units);
+  BvhTake bvh =
+      MakeBvhTake(*subject.skeleton, std::move(poses), 1.0 / take.rate_hz, subject.bvh_units);
   WriteBvh(options.output_bvh, bvh);
-  out << "wrote " << options.output_bvh << " (" << take.num_frames << " frames at " << take.rate_hz << " Hz, " << subject.bvh_units << ")\n";
+  out << "wrote " << options.output_bvh << " (" << take.num_frames << " frames at " << take.rate_hz
+      << " Hz, " << subject.bvh_units << ")\n";
   if (!options.output_c3d.empty()) {
     WriteC3d(options.output_c3d, cleaned);
     out << "wrote " << options.output_c3d << "\n";
@@ -98,7 +106,8 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
     // The solved frames in order, exactly as the live path feeds them to the retargeter.
     BvhTake character = ReadBvh(options.retarget_bvh);
     auto target = std::make_shared<const Skeleton>(character.skeleton);
-    const RetargetMap joints = MakeRetargetMap(*subject.skeleton, {}, *target, character.end_sites, options.joint_map);
+    const RetargetMap joints =
+        MakeRetargetMap(*subject.skeleton, {}, *target, character.end_sites, options.joint_map);
     out << joints.report;
     RetargetOptions retarget_options;
     retarget_options.rate_hz = take.rate_hz;
@@ -110,35 +119,45 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
     for (const Pose& pose : bvh.frames) {
       const auto t0 = std::chrono::steady_clock::now();
       motion.push_back(retargeter.Retarget(pose));
-      retarget_us.push_back(std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - t0).count());
+      retarget_us.push_back(
+          std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - t0).count());
     }
     summary.retarget_p50_us = Quantile(retarget_us, 0.5);
     summary.retarget_p99_us = Quantile(retarget_us, 0.99);
     character.frames = std::move(motion);
     character.frame_time_s = 1.0 / take.rate_hz;
-    const std::string path = options.output_character_bvh.empty() ? options.retarget_bvh + ".retargeted.bvh" : options.output_character_bvh;
+    const std::string path = options.output_character_bvh.empty()
+                                 ? options.retarget_bvh + ".retargeted.bvh"
+                                 : options.output_character_bvh;
     WriteBvh(path, character);
-    out << "wrote " << path << " (the character, " << character.frames.size() << " frames, " << character.units << "; retarget p50 "
-        << summary.retarget_p50_us << " us, p99 " << summary.retarget_p99_us << " us per frame)\n";
+    out << "wrote " << path << " (the character, " << character.frames.size() << " frames, "
+        << character.units << "; retarget p50 " << summary.retarget_p50_us << " us, p99 "
+        << summary.retarget_p99_us << " us per frame)\n";
   }
 
   const CleanupCounters& c = summary.counters;
   const double samples = std::max<double>(1.0, static_cast<double>(c.samples_out));
   char line[160];
-  std::snprintf(line, sizeof(line), "%d frames, %d markers (%d in the take), lookahead %d frames (%.1f ms)\n", summary.frames,
-                summary.markers, summary.matched_markers, options.lookahead, 1000.0 * options.lookahead / take.rate_hz);
+  std::snprintf(line, sizeof(line),
+                "%d frames, %d markers (%d in the take), lookahead %d frames (%.1f ms)\n",
+                summary.frames, summary.markers, summary.matched_markers, options.lookahead,
+                1000.0 * options.lookahead / take.rate_hz);
   out << line;
   for (int r = 1; r < kMaskReasonCount; ++r) {
     const int64_t n = c.repaired_by[static_cast<size_t>(r)];
     if (n == 0) continue;
-    std::snprintf(line, sizeof(line), "  repaired (%-14s) %8lld samples  %6.2f %%\n", to_string(static_cast<MaskReason>(r)),
-                  static_cast<long long>(n), 100.0 * static_cast<double>(n) / samples);
+    std::snprintf(line, sizeof(line), "  repaired (%-14s) %8lld samples  %6.2f %%\n",
+                  to_string(static_cast<MaskReason>(r)), static_cast<long long>(n),
+                  100.0 * static_cast<double>(n) / samples);
     out << line;
   }
-  std::snprintf(line, sizeof(line), "  unrecoverable            %8lld samples  %6.2f %%\n", static_cast<long long>(c.unrecoverable),
+  std::snprintf(line, sizeof(line), "  unrecoverable            %8lld samples  %6.2f %%\n",
+                static_cast<long long>(c.unrecoverable),
                 100.0 * static_cast<double>(c.unrecoverable) / samples);
   out << line;
-  std::snprintf(line, sizeof(line), "per frame (after the first K + 1 cold-start frames): mean %.1f us, p50 %.1f us, p99 %.1f us, max %.1f us\n",
+  std::snprintf(line, sizeof(line),
+                "per frame (after the first K + 1 cold-start frames): mean %.1f us, p50 %.1f us, "
+                "p99 %.1f us, max %.1f us\n",
                 summary.mean_us, summary.p50_us, summary.p99_us, summary.max_us);
   out << line;
   if (!options.report_json.empty()) {
@@ -150,10 +169,12 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
   return summary;
 }
 
-nlohmann::json ProcessSummaryJson(const ProcessSummary& summary, const ProcessCommandOptions& options) {
+nlohmann::json ProcessSummaryJson(const ProcessSummary& summary,
+                                  const ProcessCommandOptions& options) {
   const CleanupCounters& c = summary.counters;
   nlohmann::json repaired = nlohmann::json::object();
-  for (int r = 1; r < kMaskReasonCount; ++r) repaired[to_string(static_cast<MaskReason>(r))] = c.repaired_by[static_cast<size_t>(r)];
+  for (int r = 1; r < kMaskReasonCount; ++r)
+    repaired[to_string(static_cast<MaskReason>(r))] = c.repaired_by[static_cast<size_t>(r)];
   return {{"input", options.input_c3d},
           {"subject", options.subject},
           {"lookahead_frames", options.lookahead},
@@ -165,8 +186,13 @@ nlohmann::json ProcessSummaryJson(const ProcessSummary& summary, const ProcessCo
           {"repaired_samples_by_reason", repaired},
           {"swaps_relabelled", c.swaps_relabelled},
           {"unrecoverable_samples", c.unrecoverable},
-          {"per_frame_us", {{"mean", summary.mean_us}, {"p50", summary.p50_us}, {"p99", summary.p99_us}, {"max", summary.max_us}}},
-          {"retarget_per_frame_us", {{"p50", summary.retarget_p50_us}, {"p99", summary.retarget_p99_us}}}};
+          {"per_frame_us",
+           {{"mean", summary.mean_us},
+            {"p50", summary.p50_us},
+            {"p99", summary.p99_us},
+            {"max", summary.max_us}}},
+          {"retarget_per_frame_us",
+           {{"p50", summary.retarget_p50_us}, {"p99", summary.retarget_p99_us}}}};
 }
 
 }  // namespace mocapd

@@ -4,9 +4,9 @@
 // was repaired.
 #pragma once
 
+#include <map>
 #include <nlohmann/json_fwd.hpp>
 #include <ostream>
-#include <map>
 #include <string>
 
 #include "filters/cleanup_pipeline.hpp"
@@ -17,12 +17,13 @@ struct ProcessCommandOptions {
   std::string subject;
   std::string input_c3d;
   std::string output_bvh;
-  std::string output_c3d;  ///< Empty: not written.
+  std::string output_c3d;   ///< Empty: not written.
   std::string report_json;  ///< Empty: not written.
   int lookahead = 12;
   bool progress = false;  ///< Draw a progress bar (on a terminal).
-  std::string retarget_bvh;           ///< Character to retarget onto (its hierarchy and rest pose); empty: none.
-  std::string output_character_bvh;   ///< With retarget_bvh: the character's motion.
+  std::string
+      retarget_bvh;  ///< Character to retarget onto (its hierarchy and rest pose); empty: none.
+  std::string output_character_bvh;              ///< With retarget_bvh: the character's motion.
   std::map<std::string, std::string> joint_map;  ///< Retarget overrides: role -> character joint.
 };
 
@@ -32,7 +33,7 @@ struct ProcessSummary {
   int matched_markers = 0;
   CleanupCounters counters;
   double mean_us = 0.0, p50_us = 0.0, p99_us = 0.0, max_us = 0.0;  ///< Per-frame pipeline time.
-  double retarget_p50_us = 0.0, retarget_p99_us = 0.0;             ///< Per-frame retarget time, if any.
+  double retarget_p50_us = 0.0, retarget_p99_us = 0.0;  ///< Per-frame retarget time, if any.
 };
 
 /// Runs the command, printing progress and the summary to out. Throws std::runtime_error
@@ -40,6 +41,7 @@ struct ProcessSummary {
 ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostream& out);
 
 /// The summary as JSON (what --report writes).
-nlohmann::json ProcessSummaryJson(const ProcessSummary& summary, const ProcessCommandOptions& options);
+nlohmann::json ProcessSummaryJson(const ProcessSummary& summary,
+                                  const ProcessCommandOptions& options);
 
 }  // namespace mocapd

@@ -8,11 +8,15 @@ namespace mocapd {
 namespace {
 
 uint64_t WallClockNs() {
-  return static_cast<uint64_t>(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch()).count());
+  return static_cast<uint64_t>(std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                   std::chrono::system_clock::now().time_since_epoch())
+                                   .count());
 }
 
 int64_t SteadyNs() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch()).count();
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(
+             std::chrono::steady_clock::now().time_since_epoch())
+      .count();
 }
 
 }  // namespace
@@ -69,8 +73,9 @@ SubjectRunner::SubjectRunner(const SubjectConfig& config, const DaemonConfig& da
       stamps_(static_cast<size_t>(config.cleanup.lookahead + 2)),
       missing_(static_cast<size_t>(config.model.markers->num_markers()), Vec3::Constant(kNaN)),
       kinematics_(*config.model.skeleton),
-      description_(protocol::DescribeSubject(config.name, *config.model.skeleton, *config.model.markers,
-                                             static_cast<float>(config.rate_hz), config.cleanup.lookahead)),
+      description_(
+          protocol::DescribeSubject(config.name, *config.model.skeleton, *config.model.markers,
+                                    static_cast<float>(config.rate_hz), config.cleanup.lookahead)),
       skeleton_topic_(Topic("skeleton", config.name)),
       cleaned_topic_(Topic("cleaned", config.name)),
       description_topic_(Topic("subject", config.name)),
@@ -91,7 +96,8 @@ SubjectRunner::SubjectRunner(const SubjectConfig& config, const DaemonConfig& da
   cleaned_message_.reason.resize(markers);
   status_message_.subject = name_;
   if (config.character) {
-    retargeter_ = std::make_unique<Retargeter>(config.model.skeleton, config.character, config.character_map, config.retarget);
+    retargeter_ = std::make_unique<Retargeter>(config.model.skeleton, config.character,
+                                               config.character_map, config.retarget);
     const Skeleton& c = *config.character;
     character_topic_ = Topic("character", config.name);
     character_message_.subject = name_;
@@ -116,7 +122,8 @@ SubjectRunner::SubjectRunner(const SubjectConfig& config, const DaemonConfig& da
     }
   }
   // The largest message this runner encodes, so encoding never grows the buffer.
-  const size_t character_joints = config.character ? static_cast<size_t>(config.character->num_joints()) : 0;
+  const size_t character_joints =
+      config.character ? static_cast<size_t>(config.character->num_joints()) : 0;
   buffer_.reserve(256 + 64 * markers + 128 * std::max(joints, character_joints));
 }
 
@@ -132,12 +139,14 @@ void SubjectRunner::InheritCounters(const SubjectRunner& previous) {
   started_ = false;
 }
 
-std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessage& frame, int64_t receive_ns, OutputSink& sink) {
+std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessage& frame,
+                                                int64_t receive_ns, OutputSink& sink) {
   auto drop = [&](DropReason reason) {
     CountDrop(reason);
     return std::optional<DropReason>(reason);
   };
-  if (frame.model_hash != marker_hash_ || frame.positions.size() != missing_.size()) return drop(DropReason::kModelMismatch);
+  if (frame.model_hash != marker_hash_ || frame.positions.size() != missing_.size())
+    return drop(DropReason::kModelMismatch);
   if (std::abs(frame.rate_hz - rate_hz_) > 1e-3 * rate_hz_) return drop(DropReason::kRateMismatch);
 
   if (started_ && frame.frame_number != next_frame_number_) {
@@ -171,7 +180,8 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
   last_receive_ns_ = receive_ns;
   last_capture_ns_ = frame.capture_time_ns;
   counters_.last_frame_number = frame.frame_number;
-  if (state_ == protocol::SubjectState::kWaiting || state_ == protocol::SubjectState::kStalled) state_ = protocol::SubjectState::kTracking;
+  if (state_ == protocol::SubjectState::kWaiting || state_ == protocol::SubjectState::kStalled)
+    state_ = protocol::SubjectState::kTracking;
   Push(frame.positions, Stamp{frame.frame_number, frame.capture_time_ns, false}, receive_ns, sink);
   return std::nullopt;
 }
@@ -194,7 +204,8 @@ void SubjectRunner::EndOfStream(OutputSink& sink) {
   ++counters_.ends_of_stream;
 }
 
-void SubjectRunner::Push(std::span<const Vec3> positions, const Stamp& stamp, int64_t receive_ns, OutputSink& sink) {
+void SubjectRunner::Push(std::span<const Vec3> positions, const Stamp& stamp, int64_t receive_ns,
+                         OutputSink& sink) {
   stamps_[static_cast<size_t>(pushed_) % stamps_.size()] = stamp;
   ++pushed_;
   next_frame_number_ = stamp.frame_number + 1;
@@ -218,7 +229,9 @@ void SubjectRunner::Publish(int64_t trigger_receive_ns, OutputSink& sink) {
   bool repaired = false;
   for (MarkerStatus s : out.status) repaired |= s != MarkerStatus::kObserved;
   const bool lost = out.final_solve.status == IkStatus::kTooFewMarkers;
-  state_ = lost ? protocol::SubjectState::kLost : repaired ? protocol::SubjectState::kRepairing : protocol::SubjectState::kTracking;
+  state_ = lost       ? protocol::SubjectState::kLost
+           : repaired ? protocol::SubjectState::kRepairing
+                      : protocol::SubjectState::kTracking;
 
   protocol::SkeletonFrameMessage& s = skeleton_message_;
   s.frame_number = stamp.frame_number;
@@ -226,7 +239,9 @@ void SubjectRunner::Publish(int64_t trigger_receive_ns, OutputSink& sink) {
   s.publish_time_ns = publish_ns;
   s.status = static_cast<uint8_t>(out.final_solve.status);
   s.subject_state = state_;
-  s.residual_m = std::isfinite(out.final_solve.rms_residual_m) ? static_cast<float>(out.final_solve.rms_residual_m) : 0.0f;
+  s.residual_m = std::isfinite(out.final_solve.rms_residual_m)
+                     ? static_cast<float>(out.final_solve.rms_residual_m)
+                     : 0.0f;
   s.root_translation = out.pose.translation[0];
   for (size_t j = 0; j < s.rotations.size(); ++j) s.rotations[j] = out.pose.rotation[j];
   if (publish_globals_) {
@@ -260,7 +275,9 @@ void SubjectRunner::Publish(int64_t trigger_receive_ns, OutputSink& sink) {
     c.publish_time_ns = publish_ns;
     c.status = static_cast<uint8_t>(retargeter_->summary().ik.status);
     c.subject_state = state_;
-    c.residual_m = std::isfinite(retargeter_->summary().ik.rms_residual_m) ? static_cast<float>(retargeter_->summary().ik.rms_residual_m) : 0.0f;
+    c.residual_m = std::isfinite(retargeter_->summary().ik.rms_residual_m)
+                       ? static_cast<float>(retargeter_->summary().ik.rms_residual_m)
+                       : 0.0f;
     c.root_translation = character.translation[0];
     for (size_t j = 0; j < c.rotations.size(); ++j) c.rotations[j] = character.rotation[j];
     if (publish_globals_) {
@@ -273,11 +290,14 @@ void SubjectRunner::Publish(int64_t trigger_receive_ns, OutputSink& sink) {
     protocol::EncodeSkeletonFrame(c, &buffer_);
     sink.Send(character_topic_, buffer_);
   }
-  if (trigger_receive_ns >= 0) counters_.processing.Add(static_cast<double>(SteadyNs() - trigger_receive_ns) * 1e-9);
+  if (trigger_receive_ns >= 0)
+    counters_.processing.Add(static_cast<double>(SteadyNs() - trigger_receive_ns) * 1e-9);
 }
 
 bool SubjectRunner::CheckStall(int64_t now_ns, int64_t timeout_ns, OutputSink& sink) {
-  if (last_receive_ns_ < 0 || state_ == protocol::SubjectState::kStalled || now_ns - last_receive_ns_ <= timeout_ns) return false;
+  if (last_receive_ns_ < 0 || state_ == protocol::SubjectState::kStalled ||
+      now_ns - last_receive_ns_ <= timeout_ns)
+    return false;
   state_ = protocol::SubjectState::kStalled;
   ++counters_.stalls;
   PublishStatus(now_ns, sink);
@@ -297,7 +317,9 @@ void SubjectRunner::PublishStatus(int64_t now_ns, OutputSink& sink) {
   protocol::SubjectStatusMessage& m = status_message_;
   m.state = state_;
   m.last_frame_number = counters_.last_frame_number;
-  m.since_last_input_ns = last_receive_ns_ < 0 ? 0 : static_cast<uint64_t>(std::max<int64_t>(0, now_ns - last_receive_ns_));
+  m.since_last_input_ns =
+      last_receive_ns_ < 0 ? 0
+                           : static_cast<uint64_t>(std::max<int64_t>(0, now_ns - last_receive_ns_));
   m.frames_in = counters_.frames_in;
   m.frames_out = counters_.frames_published + counters_.inserted_published;
   m.frames_dropped = counters_.dropped_total();

@@ -46,8 +46,8 @@ class OutputSink {
 };
 
 /// Fixed latency buckets (upper bounds, seconds) for the Prometheus histogram.
-inline constexpr std::array<double, 13> kLatencyBucketsS = {25e-6, 50e-6, 100e-6, 250e-6, 500e-6, 1e-3, 2.5e-3,
-                                                             5e-3,  10e-3, 25e-3,  50e-3,  100e-3, 1.0};
+inline constexpr std::array<double, 13> kLatencyBucketsS = {
+    25e-6, 50e-6, 100e-6, 250e-6, 500e-6, 1e-3, 2.5e-3, 5e-3, 10e-3, 25e-3, 50e-3, 100e-3, 1.0};
 
 struct LatencyHistogram {
   std::array<uint64_t, kLatencyBucketsS.size() + 1> counts{};  ///< Last: above every bound.
@@ -57,14 +57,14 @@ struct LatencyHistogram {
 };
 
 struct SubjectCounters {
-  uint64_t frames_in = 0;         ///< Marker frames received for this subject (accepted or not).
-  uint64_t frames_accepted = 0;   ///< Pushed into the pipeline.
-  uint64_t frames_published = 0;  ///< Published frames that came in (not inserted).
-  uint64_t frames_inserted = 0;   ///< All-missing frames pushed for missing frame numbers...
+  uint64_t frames_in = 0;           ///< Marker frames received for this subject (accepted or not).
+  uint64_t frames_accepted = 0;     ///< Pushed into the pipeline.
+  uint64_t frames_published = 0;    ///< Published frames that came in (not inserted).
+  uint64_t frames_inserted = 0;     ///< All-missing frames pushed for missing frame numbers...
   uint64_t inserted_published = 0;  ///< ...and how many of those were published.
   std::array<uint64_t, kDropReasonCount> dropped{};
-  uint64_t restarts = 0;  ///< Capture restarts and long jumps re-synchronised.
-  uint64_t stalls = 0;    ///< Times the watchdog saw the input stall.
+  uint64_t restarts = 0;        ///< Capture restarts and long jumps re-synchronised.
+  uint64_t stalls = 0;          ///< Times the watchdog saw the input stall.
   uint64_t ends_of_stream = 0;  ///< End-of-stream messages (not frames: outside the frame balance).
   LatencyHistogram processing;  ///< Receive of the frame that completed a publication -> its send.
   uint64_t last_frame_number = 0;
@@ -82,7 +82,8 @@ class SubjectRunner {
   /// Takes one decoded marker frame of this subject, received at receive_ns (steady
   /// clock). Publishes whatever became final through sink. Returns the drop reason if
   /// the frame was rejected (and counts it), nothing otherwise.
-  std::optional<DropReason> Accept(const protocol::MarkerFrameMessage& frame, int64_t receive_ns, OutputSink& sink);
+  std::optional<DropReason> Accept(const protocol::MarkerFrameMessage& frame, int64_t receive_ns,
+                                   OutputSink& sink);
   /// Counts a frame for this subject that was rejected before it could be decoded fully.
   void CountDrop(DropReason reason);
   /// Publishes everything still held in the lookahead (shutdown, reload, restart).
@@ -99,7 +100,9 @@ class SubjectRunner {
   /// Frames in the pipeline not yet published (received and inserted ones).
   uint64_t pending() const;
   /// Of those, the received ones: frames in = published + dropped + this.
-  uint64_t pending_received() const { return pending() - (counters_.frames_inserted - counters_.inserted_published); }
+  uint64_t pending_received() const {
+    return pending() - (counters_.frames_inserted - counters_.inserted_published);
+  }
   protocol::SubjectState state() const { return state_; }
   int64_t last_receive_ns() const { return last_receive_ns_; }
   const SubjectCounters& counters() const { return counters_; }
@@ -114,7 +117,8 @@ class SubjectRunner {
     uint64_t capture_ns = 0;
     bool inserted = false;
   };
-  void Push(std::span<const Vec3> positions, const Stamp& stamp, int64_t receive_ns, OutputSink& sink);
+  void Push(std::span<const Vec3> positions, const Stamp& stamp, int64_t receive_ns,
+            OutputSink& sink);
   void Publish(int64_t trigger_receive_ns, OutputSink& sink);
   void Resynchronise(OutputSink& sink);
 

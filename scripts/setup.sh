@@ -7,7 +7,7 @@ packages=(
   libeigen3-dev libzmq3-dev cppzmq-dev libboost-dev
   libspdlog-dev libfmt-dev libcli11-dev libtomlplusplus-dev nlohmann-json3-dev prometheus-cpp-dev
   libgtest-dev libgmock-dev libbenchmark-dev
-  clang libclang-rt-14-dev
+  clang libclang-rt-14-dev clang-format
   python3 python3-zmq python3-prometheus-client
 )
 missing=()

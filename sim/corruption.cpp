@@ -26,7 +26,8 @@ CorruptionSeverity ParseCorruptionSeverity(const std::string& name) {
   if (name == "light") return CorruptionSeverity::kLight;
   if (name == "medium") return CorruptionSeverity::kMedium;
   if (name == "heavy") return CorruptionSeverity::kHeavy;
-  throw std::invalid_argument("unknown corruption severity '" + name + "' (expected light, medium or heavy)");
+  throw std::invalid_argument("unknown corruption severity '" + name +
+                              "' (expected light, medium or heavy)");
 }
 
 double TargetCorruptedFraction(CorruptionSeverity severity) {
@@ -47,20 +48,23 @@ class Corruptor {
     out_.take = clean;
     frames_ = clean.num_frames;
     points_ = clean.num_points();
-    out_.truth.assign(static_cast<size_t>(frames_) * static_cast<size_t>(points_), CorruptionKind::kNone);
+    out_.truth.assign(static_cast<size_t>(frames_) * static_cast<size_t>(points_),
+                      CorruptionKind::kNone);
     // Occlusion clusters: markers on the same joint vanish together.
     std::map<int, std::vector<int>> by_joint;
     for (int p = 0; p < points_; ++p) {
       int key = -1 - p;
       if (markers != nullptr)
-        if (auto m = markers->FindMarker(clean.labels[static_cast<size_t>(p)])) key = markers->primary_joint(m->value);
+        if (auto m = markers->FindMarker(clean.labels[static_cast<size_t>(p)]))
+          key = markers->primary_joint(m->value);
       by_joint[key].push_back(p);
     }
     for (auto& [joint, members] : by_joint) clusters_.push_back(members);
   }
 
   CorruptedTake Run() {
-    const double target = TargetCorruptedFraction(options_.severity) * static_cast<double>(frames_) * points_;
+    const double target =
+        TargetCorruptedFraction(options_.severity) * static_cast<double>(frames_) * points_;
     // One of each kind first, so every detector has work at every severity; then a mix
     // dominated by occlusion, as in real captures, until the target fraction is reached.
     Swap();
@@ -72,20 +76,31 @@ class Corruptor {
     std::uniform_real_distribution<double> u(0.0, 1.0);
     for (int guard = 0; guard < 100000 && static_cast<double>(corrupted_) < target; ++guard) {
       const double r = u(rng_);
-      if (r < 0.62) Gap(false);
-      else if (r < 0.80) Pop();
-      else if (r < 0.90) Swap();
-      else Frozen();
+      if (r < 0.62)
+        Gap(false);
+      else if (r < 0.80)
+        Pop();
+      else if (r < 0.90)
+        Swap();
+      else
+        Frozen();
     }
     Jitter();
-    out_.corrupted_fraction = static_cast<double>(corrupted_) / (static_cast<double>(frames_) * points_);
+    out_.corrupted_fraction =
+        static_cast<double>(corrupted_) / (static_cast<double>(frames_) * points_);
     return std::move(out_);
   }
 
  private:
-  size_t Index(int f, int p) const { return static_cast<size_t>(f) * static_cast<size_t>(points_) + static_cast<size_t>(p); }
-  int Uniform(int lo, int hi) { return std::uniform_int_distribution<int>(lo, std::max(lo, hi))(rng_); }
-  double UniformReal(double lo, double hi) { return std::uniform_real_distribution<double>(lo, hi)(rng_); }
+  size_t Index(int f, int p) const {
+    return static_cast<size_t>(f) * static_cast<size_t>(points_) + static_cast<size_t>(p);
+  }
+  int Uniform(int lo, int hi) {
+    return std::uniform_int_distribution<int>(lo, std::max(lo, hi))(rng_);
+  }
+  double UniformReal(double lo, double hi) {
+    return std::uniform_real_distribution<double>(lo, hi)(rng_);
+  }
 
   void Mark(int f, int p, CorruptionKind kind) {
     CorruptionKind& t = out_.truth[Index(f, p)];
@@ -97,12 +112,14 @@ class Corruptor {
   // 1 frame to 2 s, log-uniform: most occlusions are short, a few are long.
   int GapLength() {
     const double max_frames = std::max(1.0, 2.0 * clean_.rate_hz);
-    return std::max(1, static_cast<int>(std::round(std::exp(UniformReal(0.0, std::log(max_frames))))));
+    return std::max(1,
+                    static_cast<int>(std::round(std::exp(UniformReal(0.0, std::log(max_frames))))));
   }
 
   void Gap(bool open_end) {
     if (frames_ < 2 || clusters_.empty()) return;
-    const auto& cluster = clusters_[static_cast<size_t>(Uniform(0, static_cast<int>(clusters_.size()) - 1))];
+    const auto& cluster =
+        clusters_[static_cast<size_t>(Uniform(0, static_cast<int>(clusters_.size()) - 1))];
     const int length = GapLength();
     int first = Uniform(-length / 3, frames_ - 1);
     if (open_end) first = std::max(0, frames_ - length);
@@ -139,7 +156,8 @@ class Corruptor {
   void Frozen() {
     const int p = Uniform(0, points_ - 1);
     const int first = Uniform(1, frames_ - 1);
-    const int last = std::min(frames_ - 1, first + Uniform(static_cast<int>(0.2 * clean_.rate_hz), static_cast<int>(clean_.rate_hz)));
+    const int last = std::min(frames_ - 1, first + Uniform(static_cast<int>(0.2 * clean_.rate_hz),
+                                                           static_cast<int>(clean_.rate_hz)));
     if (!Valid(first - 1, p)) return;
     const Vec3 held = out_.take.at(first - 1, p);
     for (int f = first; f <= last; ++f) {
@@ -158,7 +176,8 @@ class Corruptor {
     // The marker drops to the floor (the lowest any marker gets) below where it came off.
     double floor = 1e300;
     for (size_t i = 0; i < clean_.positions.size(); ++i)
-      if (clean_.residuals[i] >= 0.0f) floor = std::min(floor, clean_.positions[i][options_.up_axis]);
+      if (clean_.residuals[i] >= 0.0f)
+        floor = std::min(floor, clean_.positions[i][options_.up_axis]);
     Vec3 rest = out_.take.at(first - 1, p);
     rest[options_.up_axis] = floor;
     for (int f = first; f < frames_; ++f) {
@@ -189,10 +208,12 @@ class Corruptor {
         }
       }
       if (best_i < 0) continue;
-      const int last = std::min(frames_ - 1, f0 + Uniform(static_cast<int>(0.2 * clean_.rate_hz), static_cast<int>(2.0 * clean_.rate_hz)));
+      const int last = std::min(frames_ - 1, f0 + Uniform(static_cast<int>(0.2 * clean_.rate_hz),
+                                                          static_cast<int>(2.0 * clean_.rate_hz)));
       for (int f = f0; f <= last; ++f) {
         // A second swap over the same samples would undo the first.
-        if (!Valid(f, best_i) || !Valid(f, best_j) || out_.truth[Index(f, best_i)] == CorruptionKind::kSwap ||
+        if (!Valid(f, best_i) || !Valid(f, best_j) ||
+            out_.truth[Index(f, best_i)] == CorruptionKind::kSwap ||
             out_.truth[Index(f, best_j)] == CorruptionKind::kSwap)
           continue;
         std::swap(out_.take.at(f, best_i), out_.take.at(f, best_j));
@@ -206,7 +227,8 @@ class Corruptor {
 
   void Jitter() {
     for (int p = 0; p < points_; ++p) {
-      std::normal_distribution<double> noise(0.0, UniformReal(options_.jitter_min_m, options_.jitter_max_m));
+      std::normal_distribution<double> noise(
+          0.0, UniformReal(options_.jitter_min_m, options_.jitter_max_m));
       for (int f = 0; f < frames_; ++f)
         if (Valid(f, p)) out_.take.at(f, p) += Vec3(noise(rng_), noise(rng_), noise(rng_));
     }
@@ -223,16 +245,22 @@ class Corruptor {
 
 }  // namespace
 
-CorruptedTake CorruptTake(const C3dTake& clean, const MarkerSet* markers, const CorruptionOptions& options) {
-  if (clean.num_frames < 2 || clean.num_points() < 2) throw std::invalid_argument("corruption: take needs at least 2 frames and 2 points");
-  if (options.up_axis < 0 || options.up_axis > 2) throw std::invalid_argument("corruption: up_axis must be 0, 1 or 2");
+CorruptedTake CorruptTake(const C3dTake& clean, const MarkerSet* markers,
+                          const CorruptionOptions& options) {
+  if (clean.num_frames < 2 || clean.num_points() < 2)
+    throw std::invalid_argument("corruption: take needs at least 2 frames and 2 points");
+  if (options.up_axis < 0 || options.up_axis > 2)
+    throw std::invalid_argument("corruption: up_axis must be 0, 1 or 2");
   if (!(options.jitter_min_m >= 0.0 && options.jitter_max_m >= options.jitter_min_m))
     throw std::invalid_argument("corruption: expected 0 <= jitter_min_m <= jitter_max_m");
   return Corruptor(clean, markers, options).Run();
 }
 
-nlohmann::json CorruptionTruthJson(const CorruptedTake& corrupted, const CorruptionOptions& options) {
-  const char* severity = options.severity == CorruptionSeverity::kLight ? "light" : options.severity == CorruptionSeverity::kMedium ? "medium" : "heavy";
+nlohmann::json CorruptionTruthJson(const CorruptedTake& corrupted,
+                                   const CorruptionOptions& options) {
+  const char* severity = options.severity == CorruptionSeverity::kLight    ? "light"
+                         : options.severity == CorruptionSeverity::kMedium ? "medium"
+                                                                           : "heavy";
   nlohmann::json j = {{"severity", severity},
                       {"seed", options.seed},
                       {"frames", corrupted.take.num_frames},

@@ -49,16 +49,19 @@ struct CorruptedTake {
   std::vector<CorruptionKind> truth;
   double corrupted_fraction = 0.0;
   CorruptionKind at(int frame, int point) const {
-    return truth[static_cast<size_t>(frame) * static_cast<size_t>(take.num_points()) + static_cast<size_t>(point)];
+    return truth[static_cast<size_t>(frame) * static_cast<size_t>(take.num_points()) +
+                 static_cast<size_t>(point)];
   }
 };
 
 /// Corrupts a clean take. markers (may be null) groups points into clusters by the joint
 /// they ride on, for correlated occlusion; points are matched to markers by label.
 /// Deterministic for a given seed. Throws std::invalid_argument for an empty take.
-CorruptedTake CorruptTake(const C3dTake& clean, const MarkerSet* markers, const CorruptionOptions& options);
+CorruptedTake CorruptTake(const C3dTake& clean, const MarkerSet* markers,
+                          const CorruptionOptions& options);
 
 /// The ground-truth mask as JSON: options, fraction, and the event list.
-nlohmann::json CorruptionTruthJson(const CorruptedTake& corrupted, const CorruptionOptions& options);
+nlohmann::json CorruptionTruthJson(const CorruptedTake& corrupted,
+                                   const CorruptionOptions& options);
 
 }  // namespace mocapd

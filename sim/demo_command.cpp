@@ -8,10 +8,10 @@
 
 #include "filters/ik_solver.hpp"
 #include "filters/pose_error.hpp"
-#include "sim/humanoid.hpp"
 #include "formats/marker_layout.hpp"
-#include "sim/synthesis.hpp"
 #include "formats/take_frames.hpp"
+#include "sim/humanoid.hpp"
+#include "sim/synthesis.hpp"
 
 namespace mocapd {
 
@@ -19,14 +19,18 @@ int RunDemoCommand(const DemoOptions& options, std::ostream& out) {
   const Skeleton skeleton = MakeHumanoidSkeleton(1.75);
   const HumanoidRoles roles = MatchHumanoidRoles(skeleton);
   const MarkerSet markers(skeleton, PlaceMarkers(skeleton, roles, DefaultMarkerLayout(), {}));
-  const std::vector<Pose> truth = MakeHumanoidMotion(skeleton, ParseHumanoidMotion(options.motion), options.seconds, options.rate_hz);
+  const std::vector<Pose> truth = MakeHumanoidMotion(skeleton, ParseHumanoidMotion(options.motion),
+                                                     options.seconds, options.rate_hz);
   std::mt19937_64 rng(options.seed);
-  const C3dTake take = SynthesizeMarkers(skeleton, markers, truth, options.rate_hz, options.noise_mm * 1e-3, &rng);
+  const C3dTake take =
+      SynthesizeMarkers(skeleton, markers, truth, options.rate_hz, options.noise_mm * 1e-3, &rng);
   char line[256];
   std::snprintf(line, sizeof(line),
-                "mocapd demo: %s motion, %.1f s at %.0f Hz (%d frames), %d joints / %d DOF, %d markers, %.1f mm noise\n",
-                options.motion.c_str(), options.seconds, options.rate_hz, take.num_frames, skeleton.num_joints(),
-                skeleton.num_dofs(), markers.num_markers(), options.noise_mm);
+                "mocapd demo: %s motion, %.1f s at %.0f Hz (%d frames), %d joints / %d DOF, %d "
+                "markers, %.1f mm noise\n",
+                options.motion.c_str(), options.seconds, options.rate_hz, take.num_frames,
+                skeleton.num_joints(), skeleton.num_dofs(), markers.num_markers(),
+                options.noise_mm);
   out << line << std::flush;
 
   IkOptions ik_options;
@@ -51,8 +55,10 @@ int RunDemoCommand(const DemoOptions& options, std::ostream& out) {
     ForwardKinematics(skeleton, truth[static_cast<size_t>(f)], &truth_fk);
     errors.Add(truth_fk, state.kinematics());
     if (f % report_every == 0 || f + 1 == take.num_frames) {
-      std::snprintf(line, sizeof(line), "  frame %5d  t=%5.1fs  %-10s iters %2d  marker rms %5.2f mm  solve %6.1f us\n", f,
-                    f / options.rate_hz, to_string(summary.status), summary.iterations, summary.rms_residual_m * 1e3, solve_us.back());
+      std::snprintf(line, sizeof(line),
+                    "  frame %5d  t=%5.1fs  %-10s iters %2d  marker rms %5.2f mm  solve %6.1f us\n",
+                    f, f / options.rate_hz, to_string(summary.status), summary.iterations,
+                    summary.rms_residual_m * 1e3, solve_us.back());
       out << line << std::flush;
     }
   }
@@ -67,7 +73,8 @@ int RunDemoCommand(const DemoOptions& options, std::ostream& out) {
   row("joint position error mean (mm)", errors.mean_position_error_m() * 1e3, 3);
   row("joint position error max (mm)", errors.max_position_error_m() * 1e3, 3);
   row("joint rotation error mean (deg)", errors.mean_rotation_error_rad() * 180 / M_PI, 3);
-  row("worst joint p99 rotation (deg)", errors.worst_joint_rotation_quantile_rad(0.99) * 180 / M_PI, 3);
+  row("worst joint p99 rotation (deg)", errors.worst_joint_rotation_quantile_rad(0.99) * 180 / M_PI,
+      3);
   row("warm solve p50 (us)", Quantile(warm, 0.5), 1);
   row("warm solve p99 (us)", Quantile(warm, 0.99), 1);
   row("cold first-frame solve (us)", cold_us, 1);

@@ -20,6 +20,7 @@ HumanoidMotion ParseHumanoidMotion(const std::string& name);
 
 /// Generates `seconds` of motion at `rate_hz` for MakeHumanoidSkeleton's skeleton.
 /// Deterministic; kMixed walks, turns and reaches in one take.
-std::vector<Pose> MakeHumanoidMotion(const Skeleton& skeleton, HumanoidMotion motion, double seconds, double rate_hz);
+std::vector<Pose> MakeHumanoidMotion(const Skeleton& skeleton, HumanoidMotion motion,
+                                     double seconds, double rate_hz);
 
 }  // namespace mocapd

@@ -1,8 +1,8 @@
 // The built-in humanoid subject.
 #include "sim/humanoid_subject.hpp"
 
-#include "sim/humanoid.hpp"
 #include "formats/marker_layout.hpp"
+#include "sim/humanoid.hpp"
 
 namespace mocapd {
 
@@ -12,7 +12,8 @@ SubjectModel MakeHumanoidSubject(const std::string& name) {
   SubjectModel model;
   model.name = name;
   model.bvh_units = "cm";
-  model.markers = std::make_shared<const MarkerSet>(*skeleton, PlaceMarkers(*skeleton, roles, DefaultMarkerLayout(), {}));
+  model.markers = std::make_shared<const MarkerSet>(
+      *skeleton, PlaceMarkers(*skeleton, roles, DefaultMarkerLayout(), {}));
   model.skeleton = std::move(skeleton);
   return model;
 }

@@ -1,25 +1,25 @@
 // mocap-sim: the replay simulator's command line. Subcommands:
 //   info   summarise a C3D or BVH take
 //   synth  place a virtual marker set on a BVH (or the built-in humanoid) and write the marker take
-//   replay publish a take's (or a recording's) marker frames to the daemon in real time and measure what comes back
-//   record subscribe to a capture publisher and record its stream with timing
+//   replay publish a take's (or a recording's) marker frames to the daemon in real time and measure
+//   what comes back record subscribe to a capture publisher and record its stream with timing
 #include <CLI/CLI.hpp>
-#include <exception>
-#include <iostream>
-#include <nlohmann/json.hpp>
-#include <fstream>
-#include <random>
 #include <atomic>
 #include <csignal>
+#include <exception>
+#include <fstream>
+#include <iostream>
+#include <nlohmann/json.hpp>
+#include <random>
 
 #include "formats/bvh.hpp"
 #include "formats/c3d.hpp"
+#include "formats/marker_layout.hpp"
+#include "formats/subject_file.hpp"
 #include "sim/corruption.hpp"
 #include "sim/humanoid.hpp"
 #include "sim/recording.hpp"
 #include "sim/replay.hpp"
-#include "formats/marker_layout.hpp"
-#include "formats/subject_file.hpp"
 #include "sim/synthesis.hpp"
 #include "sim/take_info.hpp"
 
@@ -50,33 +50,39 @@ int RunSynth(const SynthOptions& o) {
   } else {
     const double rate = o.rate_hz > 0 ? o.rate_hz : 120.0;
     mocapd::Skeleton sk = mocapd::MakeHumanoidSkeleton();
-    auto frames = mocapd::MakeHumanoidMotion(sk, mocapd::ParseHumanoidMotion(o.humanoid_motion), o.seconds, rate);
+    auto frames = mocapd::MakeHumanoidMotion(sk, mocapd::ParseHumanoidMotion(o.humanoid_motion),
+                                             o.seconds, rate);
     source = mocapd::MakeBvhTake(std::move(sk), std::move(frames), 1.0 / rate, "cm");
   }
   const double rate = o.rate_hz > 0 ? o.rate_hz : source.rate_hz();
-  std::vector<mocapd::Pose> motion = mocapd::ResampleMotion(source.skeleton, source.frames, source.rate_hz(), rate);
+  std::vector<mocapd::Pose> motion =
+      mocapd::ResampleMotion(source.skeleton, source.frames, source.rate_hz(), rate);
   const auto roles = mocapd::MatchHumanoidRoles(source.skeleton);
-  const auto layout = o.layout.empty() ? mocapd::DefaultMarkerLayout() : mocapd::ReadMarkerLayout(o.layout);
+  const auto layout =
+      o.layout.empty() ? mocapd::DefaultMarkerLayout() : mocapd::ReadMarkerLayout(o.layout);
   auto markers = std::make_shared<const mocapd::MarkerSet>(
       source.skeleton, mocapd::PlaceMarkers(source.skeleton, roles, layout, source.end_sites));
   std::mt19937_64 rng(o.seed);
-  mocapd::C3dTake take = mocapd::SynthesizeMarkers(source.skeleton, *markers, motion, rate, o.noise_mm * 1e-3, &rng);
+  mocapd::C3dTake take =
+      mocapd::SynthesizeMarkers(source.skeleton, *markers, motion, rate, o.noise_mm * 1e-3, &rng);
   if (!o.corrupt.empty()) {
     mocapd::CorruptionOptions corruption;
     corruption.severity = mocapd::ParseCorruptionSeverity(o.corrupt);
     corruption.seed = o.seed;
     mocapd::CorruptedTake corrupted = mocapd::CorruptTake(take, markers.get(), corruption);
-    std::cout << "corrupted " << 100.0 * corrupted.corrupted_fraction << " % of marker-samples (" << corrupted.events.size()
-              << " events, " << o.corrupt << ", seed " << o.seed << ")\n";
+    std::cout << "corrupted " << 100.0 * corrupted.corrupted_fraction << " % of marker-samples ("
+              << corrupted.events.size() << " events, " << o.corrupt << ", seed " << o.seed
+              << ")\n";
     if (!o.truth_mask.empty()) {
-      std::ofstream(o.truth_mask) << mocapd::CorruptionTruthJson(corrupted, corruption).dump(1) << "\n";
+      std::ofstream(o.truth_mask) << mocapd::CorruptionTruthJson(corrupted, corruption).dump(1)
+                                  << "\n";
       std::cout << "wrote " << o.truth_mask << "\n";
     }
     take = std::move(corrupted.take);
   }
   mocapd::WriteC3d(o.out, take);
-  std::cout << "wrote " << o.out << ": " << take.num_frames << " frames at " << rate << " Hz, " << markers->num_markers()
-            << " markers\n";
+  std::cout << "wrote " << o.out << ": " << take.num_frames << " frames at " << rate << " Hz, "
+            << markers->num_markers() << " markers\n";
   if (!o.subject_out.empty()) {
     mocapd::SubjectModel model;
     model.name = "synthetic";
@@ -114,43 +120,58 @@ std::atomic<bool> g_stop{false};
 
 int RunReplayCommand(ReplayCommand& c) {
   mocapd::ReplaySource source;
-  if (!c.take.empty() && !c.humanoid.empty()) throw std::invalid_argument("replay: give a TAKE file or --humanoid, not both");
+  if (!c.take.empty() && !c.humanoid.empty())
+    throw std::invalid_argument("replay: give a TAKE file or --humanoid, not both");
   const bool recording = !c.take.empty() && mocapd::IsRecordingFile(c.take);
   if (recording) {
-    if (c.rate != "realtime" && c.rate != "max") throw std::invalid_argument("replay: a recording plays at --rate realtime (its own timing) or max");
+    if (c.rate != "realtime" && c.rate != "max")
+      throw std::invalid_argument(
+          "replay: a recording plays at --rate realtime (its own timing) or max");
     if (!c.options.corrupt.empty() || c.options.subjects != 1 || c.options.loops != 1)
-      throw std::invalid_argument("replay: --corrupt, --subjects and --loop apply to takes, not recordings");
+      throw std::invalid_argument(
+          "replay: --corrupt, --subjects and --loop apply to takes, not recordings");
   } else if (c.take.empty()) {
-    source = mocapd::HumanoidReplaySource(c.humanoid.empty() ? "mixed" : c.humanoid, c.seconds, c.synth_rate_hz, c.noise_mm, c.options.seed);
+    source = mocapd::HumanoidReplaySource(c.humanoid.empty() ? "mixed" : c.humanoid, c.seconds,
+                                          c.synth_rate_hz, c.noise_mm, c.options.seed);
   } else if (c.take.size() > 4 && c.take.substr(c.take.size() - 4) == ".bvh") {
     source = mocapd::BvhReplaySource(c.take, c.synth_rate_hz, c.bvh_units);
   } else {
     source = mocapd::C3dReplaySource(c.take, c.subject);
   }
-  if (c.rate == "realtime") c.options.rate_hz = 0.0;
-  else if (c.rate == "max") c.options.rate_hz = -1.0;
+  if (c.rate == "realtime")
+    c.options.rate_hz = 0.0;
+  else if (c.rate == "max")
+    c.options.rate_hz = -1.0;
   else {
     try {
       c.options.rate_hz = std::stod(c.rate);
     } catch (const std::exception&) {
-      throw std::invalid_argument("replay: --rate must be realtime, max or a rate in Hz, got '" + c.rate + "'");
+      throw std::invalid_argument("replay: --rate must be realtime, max or a rate in Hz, got '" +
+                                  c.rate + "'");
     }
-    if (!(c.options.rate_hz > 0 && c.options.rate_hz <= 100000)) throw std::invalid_argument("replay: --rate out of range: " + c.rate);
+    if (!(c.options.rate_hz > 0 && c.options.rate_hz <= 100000))
+      throw std::invalid_argument("replay: --rate out of range: " + c.rate);
   }
   c.options.stop = &g_stop;
-  c.options.on_status = [](const std::string& line) { std::cout << "  " << line << "\n" << std::flush; };
+  c.options.on_status = [](const std::string& line) {
+    std::cout << "  " << line << "\n" << std::flush;
+  };
   std::signal(SIGINT, [](int) { g_stop = true; });
   std::signal(SIGTERM, [](int) { g_stop = true; });
   if (!recording)
-    std::cout << "replaying " << source.description << " to " << c.options.to << " (" << c.options.subjects << " subject(s), "
-            << c.options.loops << " loop(s), " << (c.options.corrupt.empty() ? "clean" : c.options.corrupt + " corruption") << ")\n"
-            << std::flush;
+    std::cout << "replaying " << source.description << " to " << c.options.to << " ("
+              << c.options.subjects << " subject(s), " << c.options.loops << " loop(s), "
+              << (c.options.corrupt.empty() ? "clean" : c.options.corrupt + " corruption") << ")\n"
+              << std::flush;
   mocapd::ReplayReport report;
   if (recording) {
     const mocapd::Recording rec = mocapd::ReadRecording(c.take);
     if (rec.ignored_tail_bytes > 0)
-      std::cout << "note: " << c.take << " ends in an interrupted record (" << rec.ignored_tail_bytes << " bytes ignored)\n";
-    std::cout << "replaying recording " << c.take << " (" << rec.messages.size() << " messages) to " << c.options.to << "\n" << std::flush;
+      std::cout << "note: " << c.take << " ends in an interrupted record ("
+                << rec.ignored_tail_bytes << " bytes ignored)\n";
+    std::cout << "replaying recording " << c.take << " (" << rec.messages.size() << " messages) to "
+              << c.options.to << "\n"
+              << std::flush;
     report = mocapd::RunRecordingReplay(rec, c.take, c.options);
   } else {
     report = mocapd::RunReplay(source, c.options);
@@ -164,7 +185,9 @@ int RunReplayCommand(ReplayCommand& c) {
   }
   if (!c.plot.empty()) {
     std::ofstream out(c.plot);
-    out << mocapd::LatencyHistogramSvg(report.processing_ms, "mocapd processing latency, " + std::to_string(report.processing.count) + " frames");
+    out << mocapd::LatencyHistogramSvg(
+        report.processing_ms,
+        "mocapd processing latency, " + std::to_string(report.processing.count) + " frames");
     if (!out) throw std::runtime_error(c.plot + ": cannot write");
     std::cout << "wrote " << c.plot << "\n";
   }
@@ -180,78 +203,151 @@ int main(int argc, char** argv) {
   std::string info_path;
   bool info_json = false;
   CLI::App* info = app.add_subcommand("info", "Summarise a C3D or BVH take");
-  info->add_option("FILE", info_path, "Take file (.c3d or .bvh)")->required()->check(CLI::ExistingFile);
+  info->add_option("FILE", info_path, "Take file (.c3d or .bvh)")
+      ->required()
+      ->check(CLI::ExistingFile);
   info->add_flag("--json", info_json, "Print JSON instead of a table");
 
   SynthOptions synth;
-  CLI::App* synth_cmd = app.add_subcommand("synth", "Synthesize a marker take (C3D) from skeletal motion");
-  auto* bvh_opt = synth_cmd->add_option("--bvh", synth.bvh, "Source motion (any humanoid BVH)")->check(CLI::ExistingFile);
-  synth_cmd->add_option("--humanoid", synth.humanoid_motion, "Use the built-in humanoid: walk | reach | turn | mixed")
+  CLI::App* synth_cmd =
+      app.add_subcommand("synth", "Synthesize a marker take (C3D) from skeletal motion");
+  auto* bvh_opt = synth_cmd->add_option("--bvh", synth.bvh, "Source motion (any humanoid BVH)")
+                      ->check(CLI::ExistingFile);
+  synth_cmd
+      ->add_option("--humanoid", synth.humanoid_motion,
+                   "Use the built-in humanoid: walk | reach | turn | mixed")
       ->check(CLI::IsMember({"walk", "reach", "turn", "mixed"}))
       ->excludes(bvh_opt);
-  synth_cmd->add_option("--seconds", synth.seconds, "Length of built-in humanoid motion")->check(CLI::Range(0.1, 3600.0))->capture_default_str();
+  synth_cmd->add_option("--seconds", synth.seconds, "Length of built-in humanoid motion")
+      ->check(CLI::Range(0.1, 3600.0))
+      ->capture_default_str();
   synth_cmd->add_option("--out", synth.out, "Marker take to write (.c3d)")->required();
-  synth_cmd->add_option("--rate", synth.rate_hz, "Output rate in Hz (default: the source's); motion is slerp-resampled")
+  synth_cmd
+      ->add_option("--rate", synth.rate_hz,
+                   "Output rate in Hz (default: the source's); motion is slerp-resampled")
       ->check(CLI::Range(1.0, 2000.0));
-  synth_cmd->add_option("--subject-out", synth.subject_out, "Also write the subject model (skeleton + markers)");
-  synth_cmd->add_option("--layout", synth.layout, "Marker layout TOML (default: built-in ~60-marker set)")->check(CLI::ExistingFile);
-  synth_cmd->add_option("--truth-bvh", synth.truth_bvh, "Also write the resampled ground-truth motion");
-  synth_cmd->add_option("--bvh-units", synth.bvh_units, "BVH length unit: mm, cm, m or in (default: guess)");
-  synth_cmd->add_option("--noise-mm", synth.noise_mm, "Gaussian marker noise (sigma, mm)")->check(CLI::Range(0.0, 100.0));
+  synth_cmd->add_option("--subject-out", synth.subject_out,
+                        "Also write the subject model (skeleton + markers)");
+  synth_cmd
+      ->add_option("--layout", synth.layout,
+                   "Marker layout TOML (default: built-in ~60-marker set)")
+      ->check(CLI::ExistingFile);
+  synth_cmd->add_option("--truth-bvh", synth.truth_bvh,
+                        "Also write the resampled ground-truth motion");
+  synth_cmd->add_option("--bvh-units", synth.bvh_units,
+                        "BVH length unit: mm, cm, m or in (default: guess)");
+  synth_cmd->add_option("--noise-mm", synth.noise_mm, "Gaussian marker noise (sigma, mm)")
+      ->check(CLI::Range(0.0, 100.0));
   synth_cmd->add_option("--seed", synth.seed, "Noise and corruption seed")->capture_default_str();
-  synth_cmd->add_option("--corrupt", synth.corrupt, "Corrupt the take: light | medium | heavy (about 5 / 15 / 30 % of samples)")
+  synth_cmd
+      ->add_option("--corrupt", synth.corrupt,
+                   "Corrupt the take: light | medium | heavy (about 5 / 15 / 30 % of samples)")
       ->check(CLI::IsMember({"light", "medium", "heavy"}));
-  synth_cmd->add_option("--truth", synth.truth_mask, "With --corrupt: write the ground-truth corruption mask (JSON)");
+  synth_cmd->add_option("--truth", synth.truth_mask,
+                        "With --corrupt: write the ground-truth corruption mask (JSON)");
 
   ReplayCommand replay;
-  CLI::App* replay_cmd = app.add_subcommand("replay", "Publish a take's marker frames to the daemon and measure latency and accuracy");
+  CLI::App* replay_cmd = app.add_subcommand(
+      "replay", "Publish a take's marker frames to the daemon and measure latency and accuracy");
   // Scripts pass defaults that a user's later arguments override.
   replay_cmd->option_defaults()->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);
-  replay_cmd->add_option("TAKE", replay.take, "Take to replay: .c3d (recorded markers) or .bvh (markers synthesized); default: --humanoid")
+  replay_cmd
+      ->add_option("TAKE", replay.take,
+                   "Take to replay: .c3d (recorded markers) or .bvh (markers synthesized); "
+                   "default: --humanoid")
       ->check(CLI::ExistingFile);
-  replay_cmd->add_option("--humanoid", replay.humanoid, "Replay the built-in humanoid: walk | reach | turn | mixed")
+  replay_cmd
+      ->add_option("--humanoid", replay.humanoid,
+                   "Replay the built-in humanoid: walk | reach | turn | mixed")
       ->check(CLI::IsMember({"walk", "reach", "turn", "mixed"}));
-  replay_cmd->add_option("--seconds", replay.seconds, "Length of the built-in humanoid's take")->check(CLI::Range(0.1, 3600.0))->capture_default_str();
-  replay_cmd->add_option("--synth-rate", replay.synth_rate_hz, "Rate markers are synthesized at (humanoid, BVH), Hz")
+  replay_cmd->add_option("--seconds", replay.seconds, "Length of the built-in humanoid's take")
+      ->check(CLI::Range(0.1, 3600.0))
+      ->capture_default_str();
+  replay_cmd
+      ->add_option("--synth-rate", replay.synth_rate_hz,
+                   "Rate markers are synthesized at (humanoid, BVH), Hz")
       ->check(CLI::Range(1.0, 2000.0))
       ->capture_default_str();
-  replay_cmd->add_option("--noise-mm", replay.noise_mm, "Marker noise of the built-in humanoid's take (sigma)")->check(CLI::Range(0.0, 100.0))->capture_default_str();
-  replay_cmd->add_option("--subject", replay.subject, "Subject model giving a C3D's marker order (default: the built-in humanoid)")
+  replay_cmd
+      ->add_option("--noise-mm", replay.noise_mm,
+                   "Marker noise of the built-in humanoid's take (sigma)")
+      ->check(CLI::Range(0.0, 100.0))
+      ->capture_default_str();
+  replay_cmd
+      ->add_option("--subject", replay.subject,
+                   "Subject model giving a C3D's marker order (default: the built-in humanoid)")
       ->check(CLI::ExistingFile);
-  replay_cmd->add_option("--bvh-units", replay.bvh_units, "BVH length unit: mm, cm, m or in (default: guess)");
-  replay_cmd->add_option("--to", replay.options.to, "Endpoint for marker frames (PUB binds; with --push, connects)")->capture_default_str();
-  replay_cmd->add_flag("--push", replay.options.push, "PUSH to a daemon whose input is a PULL socket");
-  replay_cmd->add_option("--from", replay.options.from, "The daemon's output endpoint to measure (\"\" to not listen)")->capture_default_str();
-  replay_cmd->add_option("--rate", replay.rate, "realtime (the take's rate) | max | HZ")->capture_default_str();
-  replay_cmd->add_option("--corrupt", replay.options.corrupt, "Corrupt each actor's copy: light | medium | heavy")
+  replay_cmd->add_option("--bvh-units", replay.bvh_units,
+                         "BVH length unit: mm, cm, m or in (default: guess)");
+  replay_cmd
+      ->add_option("--to", replay.options.to,
+                   "Endpoint for marker frames (PUB binds; with --push, connects)")
+      ->capture_default_str();
+  replay_cmd->add_flag("--push", replay.options.push,
+                       "PUSH to a daemon whose input is a PULL socket");
+  replay_cmd
+      ->add_option("--from", replay.options.from,
+                   "The daemon's output endpoint to measure (\"\" to not listen)")
+      ->capture_default_str();
+  replay_cmd->add_option("--rate", replay.rate, "realtime (the take's rate) | max | HZ")
+      ->capture_default_str();
+  replay_cmd
+      ->add_option("--corrupt", replay.options.corrupt,
+                   "Corrupt each actor's copy: light | medium | heavy")
       ->check(CLI::IsMember({"light", "medium", "heavy"}));
-  replay_cmd->add_option("--seed", replay.options.seed, "Corruption (and noise) seed; actor k uses seed + k")->capture_default_str();
-  replay_cmd->add_option("--subjects", replay.options.subjects, "Actors at once (actor1 .. actorN, 2.5 m apart)")->check(CLI::Range(1, 64))->capture_default_str();
-  replay_cmd->add_option("--subject-prefix", replay.options.subject_prefix, "Actor names are PREFIX1 .. PREFIXN")->capture_default_str();
-  replay_cmd->add_option("--loop", replay.options.loops, "Play the take this many times")->check(CLI::Range(1, 100000))->capture_default_str();
+  replay_cmd
+      ->add_option("--seed", replay.options.seed,
+                   "Corruption (and noise) seed; actor k uses seed + k")
+      ->capture_default_str();
+  replay_cmd
+      ->add_option("--subjects", replay.options.subjects,
+                   "Actors at once (actor1 .. actorN, 2.5 m apart)")
+      ->check(CLI::Range(1, 64))
+      ->capture_default_str();
+  replay_cmd
+      ->add_option("--subject-prefix", replay.options.subject_prefix,
+                   "Actor names are PREFIX1 .. PREFIXN")
+      ->capture_default_str();
+  replay_cmd->add_option("--loop", replay.options.loops, "Play the take this many times")
+      ->check(CLI::Range(1, 100000))
+      ->capture_default_str();
   replay_cmd->add_option("--report", replay.report, "Write the report as JSON");
   replay_cmd->add_option("--plot", replay.plot, "Write a processing-latency histogram (SVG)");
-  replay_cmd->add_option("--connect-timeout", replay.options.connect_timeout_s, "Seconds to wait for the daemon")->capture_default_str();
-  replay_cmd->add_option("--drain-timeout", replay.options.drain_timeout_s, "Seconds to wait for the last skeletons")->capture_default_str();
+  replay_cmd
+      ->add_option("--connect-timeout", replay.options.connect_timeout_s,
+                   "Seconds to wait for the daemon")
+      ->capture_default_str();
+  replay_cmd
+      ->add_option("--drain-timeout", replay.options.drain_timeout_s,
+                   "Seconds to wait for the last skeletons")
+      ->capture_default_str();
 
   mocapd::RecordOptions record;
   std::string record_subjects;
-  CLI::App* record_cmd = app.add_subcommand("record", "Record a capture publisher's marker stream with its timing (crash-safe)");
-  record_cmd->add_option("--from", record.from, "The capture publisher (PUB) to subscribe to")->capture_default_str();
+  CLI::App* record_cmd = app.add_subcommand(
+      "record", "Record a capture publisher's marker stream with its timing (crash-safe)");
+  record_cmd->add_option("--from", record.from, "The capture publisher (PUB) to subscribe to")
+      ->capture_default_str();
   record_cmd->add_option("--out", record.out, "Recording to write (.mcr)")->required();
-  record_cmd->add_option("--subjects", record_subjects, "Comma-separated subjects to record (default: all)");
-  record_cmd->add_option("--seconds", record.seconds, "Stop after this long (default: until Ctrl-C)")->check(CLI::NonNegativeNumber);
+  record_cmd->add_option("--subjects", record_subjects,
+                         "Comma-separated subjects to record (default: all)");
+  record_cmd
+      ->add_option("--seconds", record.seconds, "Stop after this long (default: until Ctrl-C)")
+      ->check(CLI::NonNegativeNumber);
 
   CLI11_PARSE(app, argc, argv);
   try {
     if (*info) {
       const mocapd::TakeInfo ti = mocapd::InspectTake(info_path);
-      if (info_json) std::cout << mocapd::TakeInfoJson(ti).dump(2) << "\n";
-      else std::cout << mocapd::FormatTakeInfo(ti);
+      if (info_json)
+        std::cout << mocapd::TakeInfoJson(ti).dump(2) << "\n";
+      else
+        std::cout << mocapd::FormatTakeInfo(ti);
       return 0;
     }
     if (*synth_cmd) {
-      if (synth.bvh.empty() && synth.humanoid_motion.empty()) throw std::invalid_argument("synth needs --bvh FILE or --humanoid MOTION");
+      if (synth.bvh.empty() && synth.humanoid_motion.empty())
+        throw std::invalid_argument("synth needs --bvh FILE or --humanoid MOTION");
       return RunSynth(synth);
     }
     if (*replay_cmd) return RunReplayCommand(replay);
@@ -265,7 +361,9 @@ int main(int argc, char** argv) {
       std::signal(SIGTERM, [](int) { g_stop = true; });
       record.stop = &g_stop;
       std::cout << "recording " << record.from << " to " << record.out << "\n" << std::flush;
-      const uint64_t n = mocapd::RecordStream(record, [](const std::string& line) { std::cout << "  " << line << "\n" << std::flush; });
+      const uint64_t n = mocapd::RecordStream(record, [](const std::string& line) {
+        std::cout << "  " << line << "\n" << std::flush;
+      });
       std::cout << "wrote " << record.out << ": " << n << " messages\n";
       return 0;
     }

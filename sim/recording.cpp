@@ -46,8 +46,9 @@ RecordingWriter::RecordingWriter(const std::string& path) : path_(path) {
   if (fd_ < 0) throw std::runtime_error(path + ": cannot create: " + std::strerror(errno));
   std::vector<uint8_t> header(kMagic, kMagic + sizeof(kMagic));
   ByteWriter w(&header);
-  w.WriteU64(static_cast<uint64_t>(
-      std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch()).count()));
+  w.WriteU64(static_cast<uint64_t>(std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                       std::chrono::system_clock::now().time_since_epoch())
+                                       .count()));
   WriteAll(fd_, header, path_);
 }
 
@@ -58,7 +59,8 @@ RecordingWriter::~RecordingWriter() {
   }
 }
 
-void RecordingWriter::Append(int64_t offset_ns, std::string_view topic, std::span<const uint8_t> message) {
+void RecordingWriter::Append(int64_t offset_ns, std::string_view topic,
+                             std::span<const uint8_t> message) {
   buffer_.clear();
   ByteWriter w(&buffer_);
   w.WriteU64(static_cast<uint64_t>(offset_ns));
@@ -70,17 +72,20 @@ void RecordingWriter::Append(int64_t offset_ns, std::string_view topic, std::spa
   const size_t payload_start = buffer_.size();
   buffer_.insert(buffer_.end(), topic.begin(), topic.end());
   buffer_.insert(buffer_.end(), message.begin(), message.end());
-  const uint32_t payload_crc = Crc({buffer_.data() + payload_start, buffer_.size() - payload_start});
+  const uint32_t payload_crc =
+      Crc({buffer_.data() + payload_start, buffer_.size() - payload_start});
   w.WriteU32(payload_crc);
   WriteAll(fd_, buffer_, path_);
   ++records_;
 }
 
 void RecordingWriter::Sync() {
-  if (::fsync(fd_) != 0) throw std::runtime_error(path_ + ": fsync failed: " + std::strerror(errno));
+  if (::fsync(fd_) != 0)
+    throw std::runtime_error(path_ + ": fsync failed: " + std::strerror(errno));
 }
 
-uint64_t RecordStream(const RecordOptions& o, const std::function<void(const std::string&)>& on_status) {
+uint64_t RecordStream(const RecordOptions& o,
+                      const std::function<void(const std::string&)>& on_status) {
   zmq::context_t context;
   zmq::socket_t in(context, zmq::socket_type::sub);
   in.set(zmq::sockopt::rcvhwm, 0);
@@ -109,15 +114,18 @@ uint64_t RecordStream(const RecordOptions& o, const std::function<void(const std
       if (!topic.more()) continue;  // capture topics always carry a message part
       (void)in.recv(body);
       while (body.more()) (void)in.recv(body);  // keep the last part, like the daemon
-      writer.Append(std::chrono::duration_cast<std::chrono::nanoseconds>(arrived - start).count(), topic.to_string_view(),
+      writer.Append(std::chrono::duration_cast<std::chrono::nanoseconds>(arrived - start).count(),
+                    topic.to_string_view(),
                     {static_cast<const uint8_t*>(body.data()), body.size()});
     }
     if (now - last_sync >= std::chrono::seconds(1)) {
       writer.Sync();
       last_sync = now;
       if (on_status)
-        on_status("t=" + std::to_string(static_cast<int>(std::chrono::duration<double>(now - start).count())) + "s  recorded " +
-                  std::to_string(writer.records()) + " messages");
+        on_status(
+            "t=" +
+            std::to_string(static_cast<int>(std::chrono::duration<double>(now - start).count())) +
+            "s  recorded " + std::to_string(writer.records()) + " messages");
     }
   }
   writer.Sync();
@@ -134,18 +142,23 @@ bool IsRecordingFile(const std::string& path) {
 Recording ReadRecording(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) throw std::runtime_error(path + ": cannot open for reading");
-  const std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)),
+                                   std::istreambuf_iterator<char>());
   if (bytes.size() < kHeaderBytes || std::memcmp(bytes.data(), kMagic, sizeof(kMagic)) != 0)
     throw std::runtime_error(path + ": not a mocap-sim recording (no MCPDREC1 header)");
   Recording r;
   ByteReader reader(bytes);
-  if (!reader.Seek(8) || !reader.ReadU64(&r.start_wall_ns)) throw std::runtime_error(path + ": truncated header");
+  if (!reader.Seek(8) || !reader.ReadU64(&r.start_wall_ns))
+    throw std::runtime_error(path + ": truncated header");
   for (;;) {
     const size_t start = reader.offset();
     uint64_t offset = 0;
     uint32_t topic_len = 0, message_len = 0, header_crc = 0, payload_crc = 0;
-    if (!reader.ReadU64(&offset) || !reader.ReadU32(&topic_len) || !reader.ReadU32(&message_len)) break;
-    if (!reader.ReadU32(&header_crc) || header_crc != Crc({bytes.data() + start, kRecordHeaderBytes - 4})) break;
+    if (!reader.ReadU64(&offset) || !reader.ReadU32(&topic_len) || !reader.ReadU32(&message_len))
+      break;
+    if (!reader.ReadU32(&header_crc) ||
+        header_crc != Crc({bytes.data() + start, kRecordHeaderBytes - 4}))
+      break;
     if (reader.remaining() < static_cast<size_t>(topic_len) + message_len + 4) break;
     RecordedMessage m;
     m.offset_ns = static_cast<int64_t>(offset);
@@ -159,7 +172,8 @@ Recording ReadRecording(const std::string& path) {
   }
   const size_t good_end = kHeaderBytes + [&] {
     size_t n = 0;
-    for (const RecordedMessage& m : r.messages) n += kRecordHeaderBytes + m.topic.size() + m.message.size() + 4;
+    for (const RecordedMessage& m : r.messages)
+      n += kRecordHeaderBytes + m.topic.size() + m.message.size() + 4;
     return n;
   }();
   r.ignored_tail_bytes = bytes.size() - good_end;

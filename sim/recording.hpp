@@ -5,9 +5,9 @@
 // File (little-endian): a 16-byte header ("MCPDREC1", then the recording's start as u64
 // wall-clock ns), then one record per message: u64 arrival offset from the start (ns),
 // u32 topic length, u32 message length, u32 CRC-32 of those 16 bytes, the topic, the
-// message, u32 CRC-32 of topic and message. Each record is appended with a single write(2), so a recorder that is killed
-// leaves at most one partial record at the end; the reader stops at the first record that
-// is incomplete or fails its CRC, and says so, keeping everything before it.
+// message, u32 CRC-32 of topic and message. Each record is appended with a single write(2), so a
+// recorder that is killed leaves at most one partial record at the end; the reader stops at the
+// first record that is incomplete or fails its CRC, and says so, keeping everything before it.
 #pragma once
 
 #include <atomic>
@@ -68,7 +68,8 @@ struct RecordOptions {
 /// Subscribes to a capture publisher and records what arrives until seconds pass or
 /// stop is set. Returns the number of messages recorded. The file is valid at every
 /// moment: a recorder killed mid-way leaves a readable recording.
-uint64_t RecordStream(const RecordOptions& options, const std::function<void(const std::string&)>& on_status);
+uint64_t RecordStream(const RecordOptions& options,
+                      const std::function<void(const std::string&)>& on_status);
 
 /// True if the file starts like a recording.
 bool IsRecordingFile(const std::string& path);

@@ -15,19 +15,23 @@ namespace mocapd {
 namespace {
 
 uint64_t WallNs() {
-  return static_cast<uint64_t>(
-      std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch()).count());
+  return static_cast<uint64_t>(std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                   std::chrono::system_clock::now().time_since_epoch())
+                                   .count());
 }
 
 // Actors stand this far apart along x, so that copies of one take never overlap.
 constexpr double kActorSpacingM = 2.5;
 
-std::string SubjectName(const ReplayOptions& o, int k) { return o.subject_prefix + std::to_string(k + 1); }
+std::string SubjectName(const ReplayOptions& o, int k) {
+  return o.subject_prefix + std::to_string(k + 1);
+}
 
 }  // namespace
 
 ReplayReport RunReplay(const ReplaySource& source, const ReplayOptions& o) {
-  if (o.subjects < 1 || o.loops < 1) throw std::invalid_argument("replay: subjects and loops must be at least 1");
+  if (o.subjects < 1 || o.loops < 1)
+    throw std::invalid_argument("replay: subjects and loops must be at least 1");
   const int n = source.take.num_frames;
   if (n < 1) throw std::invalid_argument("replay: the take has no frames");
   const size_t total = static_cast<size_t>(n) * static_cast<size_t>(o.loops);
@@ -112,7 +116,8 @@ ReplayReport RunReplay(const ReplaySource& source, const ReplayOptions& o) {
   return report;
 }
 
-ReplayReport RunRecordingReplay(const Recording& recording, const std::string& description, const ReplayOptions& o) {
+ReplayReport RunRecordingReplay(const Recording& recording, const std::string& description,
+                                const ReplayOptions& o) {
   // The subjects and frames in the recording: every marker frame and end of stream.
   std::vector<replay::SubjectLog> logs;
   std::vector<std::pair<size_t, uint64_t>> index(recording.messages.size(), {SIZE_MAX, 0});

@@ -21,9 +21,9 @@ namespace mocapd {
 
 struct ReplayOptions {
   std::string to = "tcp://127.0.0.1:5555";    ///< Where marker frames go.
-  bool push = false;                           ///< PUSH-connect instead of PUB-bind.
+  bool push = false;                          ///< PUSH-connect instead of PUB-bind.
   std::string from = "tcp://127.0.0.1:5556";  ///< The daemon's output; "" = do not listen.
-  double rate_hz = 0.0;                        ///< 0: the take's rate ("realtime"); < 0: as fast as possible.
+  double rate_hz = 0.0;  ///< 0: the take's rate ("realtime"); < 0: as fast as possible.
   int subjects = 1;
   std::string subject_prefix = "actor";  ///< Subjects are actor1 .. actorN.
   int loops = 1;
@@ -48,6 +48,7 @@ struct Recording;
 /// Replays a recorded stream (sim/recording.hpp) with its original timing (rate_hz < 0:
 /// as fast as possible), measuring like RunReplay (no ground truth). Messages that were
 /// not marker frames or ends of stream when recorded are skipped.
-ReplayReport RunRecordingReplay(const Recording& recording, const std::string& description, const ReplayOptions& options);
+ReplayReport RunRecordingReplay(const Recording& recording, const std::string& description,
+                                const ReplayOptions& options);
 
 }  // namespace mocapd

@@ -12,8 +12,9 @@ namespace mocapd {
 namespace {
 
 nlohmann::json SummaryJson(const LatencySummary& s) {
-  return {{"count", s.count}, {"p50_ms", s.p50_ms}, {"p90_ms", s.p90_ms}, {"p99_ms", s.p99_ms},
-          {"p99.9_ms", s.p999_ms}, {"max_ms", s.max_ms}, {"mean_ms", s.mean_ms}};
+  return {{"count", s.count},    {"p50_ms", s.p50_ms},    {"p90_ms", s.p90_ms},
+          {"p99_ms", s.p99_ms},  {"p99.9_ms", s.p999_ms}, {"max_ms", s.max_ms},
+          {"mean_ms", s.mean_ms}};
 }
 
 }  // namespace
@@ -67,19 +68,27 @@ std::string ReplayReport::FormatTable() const {
     return std::string(b);
   };
   s << "replay: " << source << "\n";
-  row("subjects x rate", std::to_string(subjects) + " x " + num(rate_hz, 0) + " Hz, lookahead K = " + std::to_string(lookahead));
+  row("subjects x rate", std::to_string(subjects) + " x " + num(rate_hz, 0) +
+                             " Hz, lookahead K = " + std::to_string(lookahead));
   if (!listened) {
-    row("frames sent", std::to_string(frames_sent) + " (the daemon's output was not measured: --from \"\")");
+    row("frames sent",
+        std::to_string(frames_sent) + " (the daemon's output was not measured: --from \"\")");
     return s.str();
   }
-  row("frames sent / received", std::to_string(frames_sent) + " / " + std::to_string(frames_received));
-  row("frames lost / duplicated / late", std::to_string(frames_lost) + " / " + std::to_string(frames_duplicated) + " / " + std::to_string(frames_late));
+  row("frames sent / received",
+      std::to_string(frames_sent) + " / " + std::to_string(frames_received));
+  row("frames lost / duplicated / late", std::to_string(frames_lost) + " / " +
+                                             std::to_string(frames_duplicated) + " / " +
+                                             std::to_string(frames_late));
   row("throughput (skeletons/s)", num(throughput_fps, 1));
-  std::snprintf(line, sizeof(line), "  %-34s %8s %8s %8s %8s %8s\n", "latency (ms)", "p50", "p90", "p99", "p99.9", "max");
+  std::snprintf(line, sizeof(line), "  %-34s %8s %8s %8s %8s %8s\n", "latency (ms)", "p50", "p90",
+                "p99", "p99.9", "max");
   s << line;
-  for (const auto& [name, l] : {std::pair<const char*, const LatencySummary&>{"  end to end (sent -> skeleton)", end_to_end},
+  for (const auto& [name, l] : {std::pair<const char*, const LatencySummary&>{
+                                    "  end to end (sent -> skeleton)", end_to_end},
                                 {"  processing (beyond lookahead)", processing}}) {
-    std::snprintf(line, sizeof(line), "  %-34s %8.3f %8.3f %8.3f %8.3f %8.3f\n", name, l.p50_ms, l.p90_ms, l.p99_ms, l.p999_ms, l.max_ms);
+    std::snprintf(line, sizeof(line), "  %-34s %8.3f %8.3f %8.3f %8.3f %8.3f\n", name, l.p50_ms,
+                  l.p90_ms, l.p99_ms, l.p999_ms, l.max_ms);
     s << line;
   }
   if (has_truth) {
@@ -103,33 +112,43 @@ std::string LatencyHistogramSvg(const std::vector<double>& latencies_ms, const s
   const double w = 720, h = 360, left = 60, right = 20, top = 40, bottom = 50;
   const double plot_w = w - left - right, plot_h = h - top - bottom;
   std::ostringstream s;
-  s << "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"" << w << "\" height=\"" << h << "\" font-family=\"sans-serif\" font-size=\"12\">\n";
+  s << "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"" << w << "\" height=\"" << h
+    << "\" font-family=\"sans-serif\" font-size=\"12\">\n";
   s << "<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n";
   std::string escaped;
   for (char c : title) escaped += c == '<' ? "&lt;" : c == '&' ? "&amp;" : std::string(1, c);
-  s << "<text x=\"" << w / 2 << "\" y=\"22\" text-anchor=\"middle\" font-size=\"14\">" << escaped << "</text>\n";
+  s << "<text x=\"" << w / 2 << "\" y=\"22\" text-anchor=\"middle\" font-size=\"14\">" << escaped
+    << "</text>\n";
   for (int b = 0; b < kBins; ++b) {
     const double bh = plot_h * counts[static_cast<size_t>(b)] / peak;
-    s << "<rect x=\"" << left + plot_w * b / kBins << "\" y=\"" << top + plot_h - bh << "\" width=\"" << plot_w / kBins - 1 << "\" height=\"" << bh
+    s << "<rect x=\"" << left + plot_w * b / kBins << "\" y=\"" << top + plot_h - bh
+      << "\" width=\"" << plot_w / kBins - 1 << "\" height=\"" << bh
       << "\" fill=\"#4878a8\"><title>" << counts[static_cast<size_t>(b)] << "</title></rect>\n";
   }
-  s << "<line x1=\"" << left << "\" y1=\"" << top + plot_h << "\" x2=\"" << left + plot_w << "\" y2=\"" << top + plot_h << "\" stroke=\"black\"/>\n";
-  s << "<line x1=\"" << left << "\" y1=\"" << top << "\" x2=\"" << left << "\" y2=\"" << top + plot_h << "\" stroke=\"black\"/>\n";
+  s << "<line x1=\"" << left << "\" y1=\"" << top + plot_h << "\" x2=\"" << left + plot_w
+    << "\" y2=\"" << top + plot_h << "\" stroke=\"black\"/>\n";
+  s << "<line x1=\"" << left << "\" y1=\"" << top << "\" x2=\"" << left << "\" y2=\""
+    << top + plot_h << "\" stroke=\"black\"/>\n";
   const char* ticks[] = {"0.01", "0.1", "1", "10", "100"};
   for (int d = 0; d <= 4; ++d) {
     const double x = left + plot_w * d / 4.0;
-    s << "<text x=\"" << x << "\" y=\"" << top + plot_h + 16 << "\" text-anchor=\"middle\">" << ticks[d] << "</text>\n";
+    s << "<text x=\"" << x << "\" y=\"" << top + plot_h + 16 << "\" text-anchor=\"middle\">"
+      << ticks[d] << "</text>\n";
   }
-  s << "<text x=\"" << left + plot_w / 2 << "\" y=\"" << h - 12 << "\" text-anchor=\"middle\">processing latency (ms, log scale)</text>\n";
-  s << "<text x=\"14\" y=\"" << top + plot_h / 2 << "\" transform=\"rotate(-90 14 " << top + plot_h / 2
-    << ")\" text-anchor=\"middle\">frames</text>\n";
+  s << "<text x=\"" << left + plot_w / 2 << "\" y=\"" << h - 12
+    << "\" text-anchor=\"middle\">processing latency (ms, log scale)</text>\n";
+  s << "<text x=\"14\" y=\"" << top + plot_h / 2 << "\" transform=\"rotate(-90 14 "
+    << top + plot_h / 2 << ")\" text-anchor=\"middle\">frames</text>\n";
   s << "<text x=\"" << left + 4 << "\" y=\"" << top + 12 << "\">peak " << peak << "</text>\n";
   if (!latencies_ms.empty()) {
     for (const auto& [q, name] : {std::pair{0.5, "p50"}, std::pair{0.99, "p99"}}) {
       const double v = Quantile(latencies_ms, q);
-      const double x = left + plot_w * std::log10(std::clamp(v, kLo, kHi) / kLo) / std::log10(kHi / kLo);
-      s << "<line x1=\"" << x << "\" y1=\"" << top << "\" x2=\"" << x << "\" y2=\"" << top + plot_h << "\" stroke=\"#c04040\" stroke-dasharray=\"4 3\"/>\n";
-      s << "<text x=\"" << x + 3 << "\" y=\"" << top + 26 + (q > 0.9 ? 14 : 0) << "\" fill=\"#c04040\">" << name << " " << v << " ms</text>\n";
+      const double x =
+          left + plot_w * std::log10(std::clamp(v, kLo, kHi) / kLo) / std::log10(kHi / kLo);
+      s << "<line x1=\"" << x << "\" y1=\"" << top << "\" x2=\"" << x << "\" y2=\"" << top + plot_h
+        << "\" stroke=\"#c04040\" stroke-dasharray=\"4 3\"/>\n";
+      s << "<text x=\"" << x + 3 << "\" y=\"" << top + 26 + (q > 0.9 ? 14 : 0)
+        << "\" fill=\"#c04040\">" << name << " " << v << " ms</text>\n";
     }
   }
   s << "</svg>\n";

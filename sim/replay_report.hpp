@@ -19,14 +19,14 @@ struct ReplayReport {
   std::string source;
   double rate_hz = 0.0;
   int subjects = 0;
-  bool listened = false;      ///< The daemon's output was measured (--from given).
-  int lookahead = 0;          ///< K, from the daemon's subject description.
-  uint64_t frames_sent = 0;   ///< Over all subjects.
+  bool listened = false;     ///< The daemon's output was measured (--from given).
+  int lookahead = 0;         ///< K, from the daemon's subject description.
+  uint64_t frames_sent = 0;  ///< Over all subjects.
   uint64_t frames_received = 0;
-  uint64_t frames_lost = 0;   ///< Sent, never received.
+  uint64_t frames_lost = 0;  ///< Sent, never received.
   uint64_t frames_duplicated = 0;
-  uint64_t frames_late = 0;   ///< Processing latency over one frame period.
-  double send_seconds = 0.0;  ///< Wall time spent sending.
+  uint64_t frames_late = 0;     ///< Processing latency over one frame period.
+  double send_seconds = 0.0;    ///< Wall time spent sending.
   double throughput_fps = 0.0;  ///< Skeleton frames received per second while sending.
   LatencySummary end_to_end;
   LatencySummary processing;

@@ -32,10 +32,13 @@ void OpenSockets(const ReplayOptions& o, Sockets* s) {
   s->out.set(zmq::sockopt::sndhwm, 0);  // never drop a frame on our side
   s->out.set(zmq::sockopt::linger, 2000);
   try {
-    if (o.push) s->out.connect(o.to);
-    else s->out.bind(o.to);
+    if (o.push)
+      s->out.connect(o.to);
+    else
+      s->out.bind(o.to);
   } catch (const zmq::error_t& e) {
-    throw std::runtime_error("replay: cannot " + std::string(o.push ? "connect to " : "bind ") + o.to + ": " + e.what());
+    throw std::runtime_error("replay: cannot " + std::string(o.push ? "connect to " : "bind ") +
+                             o.to + ": " + e.what());
   }
   if (o.from.empty()) return;
   s->in.emplace(s->context, zmq::socket_type::sub);
@@ -47,21 +50,26 @@ void OpenSockets(const ReplayOptions& o, Sockets* s) {
 
 // Waits until the daemon subscribed to every subject's topic (PUB) and described every
 // subject (when listening); returns the lookahead the descriptions give.
-int WaitForDaemon(Sockets& s, const std::vector<SubjectLog>& logs, const ScheduleSetup& setup, const ReplayOptions& o) {
+int WaitForDaemon(Sockets& s, const std::vector<SubjectLog>& logs, const ScheduleSetup& setup,
+                  const ReplayOptions& o) {
   int lookahead = 0;
   const int64_t deadline = SteadyNs() + static_cast<int64_t>(o.connect_timeout_s * 1e9);
   std::vector<bool> subscribed(logs.size(), o.push), described(logs.size(), !s.in.has_value());
-  auto all = [](const std::vector<bool>& v) { return std::all_of(v.begin(), v.end(), [](bool b) { return b; }); };
+  auto all = [](const std::vector<bool>& v) {
+    return std::all_of(v.begin(), v.end(), [](bool b) { return b; });
+  };
   while (!(all(subscribed) && all(described))) {
     if (SteadyNs() > deadline) {
       for (size_t k = 0; k < logs.size(); ++k) {
         if (!subscribed[k])
-          throw std::runtime_error("replay: nothing subscribed to " + logs[k].topic + " on " + o.to + " within " +
-                                   std::to_string(o.connect_timeout_s) + " s (is the daemon running with subject '" +
-                                   logs[k].name + "'?)");
+          throw std::runtime_error("replay: nothing subscribed to " + logs[k].topic + " on " +
+                                   o.to + " within " + std::to_string(o.connect_timeout_s) +
+                                   " s (is the daemon running with subject '" + logs[k].name +
+                                   "'?)");
         if (!described[k])
-          throw std::runtime_error("replay: no description of subject '" + logs[k].name + "' from " + o.from +
-                                   " within " + std::to_string(o.connect_timeout_s) +
+          throw std::runtime_error("replay: no description of subject '" + logs[k].name +
+                                   "' from " + o.from + " within " +
+                                   std::to_string(o.connect_timeout_s) +
                                    " s (is the daemon publishing there, with that subject?)");
       }
     }
@@ -81,14 +89,16 @@ int WaitForDaemon(Sockets& s, const std::vector<SubjectLog>& logs, const Schedul
       if (!m.more() || !s.in->recv(body)) continue;
       protocol::SubjectDescriptionMessage d;
       if (!m.to_string().starts_with("subject/") ||
-          protocol::DecodeSubjectDescription({static_cast<const uint8_t*>(body.data()), body.size()}, &d) !=
+          protocol::DecodeSubjectDescription(
+              {static_cast<const uint8_t*>(body.data()), body.size()}, &d) !=
               protocol::DecodeStatus::kOk)
         continue;
       for (size_t k = 0; k < logs.size(); ++k) {
         if (logs[k].name != d.subject) continue;
         if (setup.check_hash && d.marker_set_hash != setup.marker_hash)
-          throw std::runtime_error("replay: the daemon's subject '" + d.subject +
-                                   "' has another marker set than this take's (model hash mismatch)");
+          throw std::runtime_error(
+              "replay: the daemon's subject '" + d.subject +
+              "' has another marker set than this take's (model hash mismatch)");
         described[k] = true;
         lookahead = d.lookahead_frames;
       }
@@ -137,23 +147,28 @@ class SkeletonReceiver {
         if (!topic.more() || !in_.recv(body)) continue;
         const int64_t now = SteadyNs();
         if (!topic.to_string().starts_with("skeleton/")) continue;
-        if (protocol::DecodeSkeletonFrame({static_cast<const uint8_t*>(body.data()), body.size()}, &message) !=
-            protocol::DecodeStatus::kOk)
+        if (protocol::DecodeSkeletonFrame({static_cast<const uint8_t*>(body.data()), body.size()},
+                                          &message) != protocol::DecodeStatus::kOk)
           continue;
         size_t k = 0;
         while (k < logs_.size() && logs_[k].name != message.subject) ++k;
         if (k == logs_.size()) continue;
         const auto slot = logs_[k].received_ns.find(message.frame_number);
-        if (slot == logs_[k].received_ns.end()) continue;  // not one we sent (inserted by the daemon)
+        if (slot == logs_[k].received_ns.end())
+          continue;  // not one we sent (inserted by the daemon)
         if (slot->second != 0) {
           ++duplicated_;
           continue;
         }
         slot->second = now;
         ++received_;
-        const Pose* expected = setup_.truth ? setup_.truth(k, message.frame_number, &scratch) : nullptr;
-        if (expected == nullptr || static_cast<int>(message.rotations.size()) != skeleton->num_joints()) continue;
-        for (size_t j = 0; j < message.rotations.size(); ++j) solved.rotation[j] = message.rotations[j].normalized();
+        const Pose* expected =
+            setup_.truth ? setup_.truth(k, message.frame_number, &scratch) : nullptr;
+        if (expected == nullptr ||
+            static_cast<int>(message.rotations.size()) != skeleton->num_joints())
+          continue;
+        for (size_t j = 0; j < message.rotations.size(); ++j)
+          solved.rotation[j] = message.rotations[j].normalized();
         solved.translation[0] = message.root_translation;
         ForwardKinematics(*skeleton, solved, &*solved_fk);
         ForwardKinematics(*skeleton, *expected, &*truth_fk);
@@ -180,7 +195,9 @@ uint64_t SendAll(zmq::socket_t& out, std::vector<SubjectLog>& logs, const FrameP
   int64_t next_status = start + 1'000'000'000;
   uint64_t sent = 0;
   while (!(o.stop != nullptr && o.stop->load()) && produce(&next, &bytes)) {
-    if (next.due_ns >= 0) std::this_thread::sleep_until(Clock::time_point(std::chrono::nanoseconds(start + next.due_ns)));
+    if (next.due_ns >= 0)
+      std::this_thread::sleep_until(
+          Clock::time_point(std::chrono::nanoseconds(start + next.due_ns)));
     SubjectLog& log = logs[next.subject];
     const int64_t now = SteadyNs();
     log.sent.push_back({next.frame_number, now, next.end_of_stream});
@@ -189,9 +206,10 @@ uint64_t SendAll(zmq::socket_t& out, std::vector<SubjectLog>& logs, const FrameP
     if (!next.end_of_stream) ++sent;
     if (o.on_status && now >= next_status) {
       char line[160];
-      std::snprintf(line, sizeof(line), "t=%6.1fs  sent %8llu frames  received %8llu skeletons",
-                    static_cast<double>(now - start) * 1e-9, static_cast<unsigned long long>(sent),
-                    static_cast<unsigned long long>(receiver != nullptr ? receiver->received() : 0));
+      std::snprintf(
+          line, sizeof(line), "t=%6.1fs  sent %8llu frames  received %8llu skeletons",
+          static_cast<double>(now - start) * 1e-9, static_cast<unsigned long long>(sent),
+          static_cast<unsigned long long>(receiver != nullptr ? receiver->received() : 0));
       o.on_status(line);
       next_status += 1'000'000'000;
     }
@@ -201,7 +219,8 @@ uint64_t SendAll(zmq::socket_t& out, std::vector<SubjectLog>& logs, const FrameP
 
 // End-to-end latency (sent -> skeleton) and processing latency (the message that let the
 // frame out -> skeleton) from the logs, into the report.
-void MeasureLatencies(const std::vector<SubjectLog>& logs, double frame_period_s, ReplayReport* report) {
+void MeasureLatencies(const std::vector<SubjectLog>& logs, double frame_period_s,
+                      ReplayReport* report) {
   std::vector<double> e2e;
   e2e.reserve(report->frames_sent);
   report->processing_ms.reserve(report->frames_sent);
@@ -218,8 +237,10 @@ void MeasureLatencies(const std::vector<SubjectLog>& logs, double frame_period_s
       int64_t trigger_ns = 0;
       for (size_t j = i; j < log.sent.size(); ++j) {
         const SubjectLog::Sent& later = log.sent[j];
-        if (later.end_of_stream || later.frame_number < s.frame_number || later.frame_number >= s.frame_number + K) {
-          if (later.end_of_stream || later.frame_number >= s.frame_number + K) trigger_ns = later.sent_ns;
+        if (later.end_of_stream || later.frame_number < s.frame_number ||
+            later.frame_number >= s.frame_number + K) {
+          if (later.end_of_stream || later.frame_number >= s.frame_number + K)
+            trigger_ns = later.sent_ns;
           break;
         }
       }
@@ -236,11 +257,12 @@ void MeasureLatencies(const std::vector<SubjectLog>& logs, double frame_period_s
 }  // namespace
 
 int64_t SteadyNs() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch()).count();
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch())
+      .count();
 }
 
-ReplayReport RunSchedule(std::vector<SubjectLog>& logs, const FrameProducer& produce, const ScheduleSetup& setup,
-                         const ReplayOptions& o) {
+ReplayReport RunSchedule(std::vector<SubjectLog>& logs, const FrameProducer& produce,
+                         const ScheduleSetup& setup, const ReplayOptions& o) {
   Sockets sockets;
   OpenSockets(o, &sockets);
   ReplayReport report;
@@ -250,7 +272,8 @@ ReplayReport RunSchedule(std::vector<SubjectLog>& logs, const FrameProducer& pro
   std::optional<SkeletonReceiver> receiver;
   if (sockets.in) receiver.emplace(*sockets.in, logs, setup);
   const int64_t start = SteadyNs();
-  const uint64_t sent = SendAll(sockets.out, logs, produce, receiver ? &*receiver : nullptr, o, start);
+  const uint64_t sent =
+      SendAll(sockets.out, logs, produce, receiver ? &*receiver : nullptr, o, start);
   report.frames_sent = sent;
   report.send_seconds = static_cast<double>(SteadyNs() - start) * 1e-9;
   if (!receiver) return report;
@@ -264,8 +287,9 @@ ReplayReport RunSchedule(std::vector<SubjectLog>& logs, const FrameProducer& pro
   report.frames_duplicated = receiver->duplicated();
   report.frames_lost = sent - std::min<uint64_t>(sent, report.frames_received);
   MeasureLatencies(logs, setup.frame_period_s, &report);
-  report.throughput_fps =
-      report.send_seconds > 0 ? static_cast<double>(report.frames_received) / report.send_seconds : 0.0;
+  report.throughput_fps = report.send_seconds > 0
+                              ? static_cast<double>(report.frames_received) / report.send_seconds
+                              : 0.0;
   const auto& accuracy = receiver->accuracy();
   if (accuracy && accuracy->frames() > 0) {
     report.has_truth = true;

@@ -42,22 +42,23 @@ struct SubjectLog {
 /// Encodes the next message into bytes; false when there is nothing more to send.
 using FrameProducer = std::function<bool(Outgoing*, std::vector<uint8_t>*)>;
 /// The truth for a received skeleton frame, or nullptr when unknown.
-using TruthLookup = std::function<const Pose*(size_t subject, uint64_t frame_number, Pose* scratch)>;
+using TruthLookup =
+    std::function<const Pose*(size_t subject, uint64_t frame_number, Pose* scratch)>;
 
 /// What a schedule needs beyond its producer.
 struct ScheduleSetup {
   uint64_t marker_hash = 0;
-  bool check_hash = false;             ///< Refuse a daemon whose subject has another marker set.
-  TruthLookup truth;                   ///< May be empty.
-  const Skeleton* skeleton = nullptr;  ///< The truth's skeleton (nullptr: no accuracy).
+  bool check_hash = false;              ///< Refuse a daemon whose subject has another marker set.
+  TruthLookup truth;                    ///< May be empty.
+  const Skeleton* skeleton = nullptr;   ///< The truth's skeleton (nullptr: no accuracy).
   double frame_period_s = 1.0 / 120.0;  ///< A frame later than this is "late".
 };
 
 /// Runs the schedule: handshake with the daemon (it subscribed to every subject's topic
 /// and described every subject), send, drain, report. Throws std::runtime_error naming
 /// the endpoint when the handshake times out or a socket cannot be set up.
-ReplayReport RunSchedule(std::vector<SubjectLog>& logs, const FrameProducer& produce, const ScheduleSetup& setup,
-                         const ReplayOptions& options);
+ReplayReport RunSchedule(std::vector<SubjectLog>& logs, const FrameProducer& produce,
+                         const ScheduleSetup& setup, const ReplayOptions& options);
 
 /// Steady-clock time, ns.
 int64_t SteadyNs();

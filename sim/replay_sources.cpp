@@ -13,7 +13,8 @@
 
 namespace mocapd {
 
-ReplaySource HumanoidReplaySource(const std::string& motion, double seconds, double rate_hz, double noise_mm, uint64_t seed) {
+ReplaySource HumanoidReplaySource(const std::string& motion, double seconds, double rate_hz,
+                                  double noise_mm, uint64_t seed) {
   ReplaySource s;
   const SubjectModel model = MakeHumanoidSubject("actor1");
   s.skeleton = model.skeleton;
@@ -23,7 +24,8 @@ ReplaySource HumanoidReplaySource(const std::string& motion, double seconds, dou
   std::mt19937_64 rng(seed);
   s.take = SynthesizeMarkers(*s.skeleton, *s.markers, s.truth, rate_hz, noise_mm * 1e-3, &rng);
   char d[160];
-  std::snprintf(d, sizeof(d), "built-in humanoid, %s, %.1f s at %.0f Hz, %.1f mm noise", motion.c_str(), seconds, rate_hz, noise_mm);
+  std::snprintf(d, sizeof(d), "built-in humanoid, %s, %.1f s at %.0f Hz, %.1f mm noise",
+                motion.c_str(), seconds, rate_hz, noise_mm);
   s.description = d;
   return s;
 }
@@ -36,17 +38,20 @@ ReplaySource BvhReplaySource(const std::string& path, double rate_hz, const std:
   s.rate_hz = rate_hz > 0 ? rate_hz : bvh.rate_hz();
   s.skeleton = std::make_shared<const Skeleton>(bvh.skeleton);
   s.markers = std::make_shared<const MarkerSet>(
-      bvh.skeleton, PlaceMarkers(bvh.skeleton, MatchHumanoidRoles(bvh.skeleton), DefaultMarkerLayout(), bvh.end_sites));
+      bvh.skeleton, PlaceMarkers(bvh.skeleton, MatchHumanoidRoles(bvh.skeleton),
+                                 DefaultMarkerLayout(), bvh.end_sites));
   s.truth = ResampleMotion(bvh.skeleton, bvh.frames, bvh.rate_hz(), s.rate_hz);
   std::mt19937_64 rng(1);
   s.take = SynthesizeMarkers(*s.skeleton, *s.markers, s.truth, s.rate_hz, 0.0, &rng);
-  s.description = path + " (markers synthesized, " + std::to_string(static_cast<int>(s.rate_hz)) + " Hz)";
+  s.description =
+      path + " (markers synthesized, " + std::to_string(static_cast<int>(s.rate_hz)) + " Hz)";
   return s;
 }
 
 ReplaySource C3dReplaySource(const std::string& path, const std::string& subject_path) {
   ReplaySource s;
-  const SubjectModel model = subject_path.empty() ? MakeHumanoidSubject("actor1") : ReadSubjectModel(subject_path);
+  const SubjectModel model =
+      subject_path.empty() ? MakeHumanoidSubject("actor1") : ReadSubjectModel(subject_path);
   s.skeleton = model.skeleton;
   s.markers = model.markers;
   s.take = ReadC3d(path);

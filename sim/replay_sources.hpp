@@ -24,7 +24,8 @@ struct ReplaySource {
 };
 
 /// The built-in humanoid (config/demo_subject.toml) doing motion for seconds.
-ReplaySource HumanoidReplaySource(const std::string& motion, double seconds, double rate_hz, double noise_mm, uint64_t seed);
+ReplaySource HumanoidReplaySource(const std::string& motion, double seconds, double rate_hz,
+                                  double noise_mm, uint64_t seed);
 /// A BVH: markers synthesized on the fly from its motion (default layout), resampled to
 /// rate_hz (0: the file's rate); the truth is the motion.
 ReplaySource BvhReplaySource(const std::string& path, double rate_hz, const std::string& units);

@@ -6,8 +6,9 @@
 
 namespace mocapd {
 
-C3dTake SynthesizeMarkers(const Skeleton& skeleton, const MarkerSet& markers, const std::vector<Pose>& frames,
-                          double rate_hz, double noise_sigma_m, std::mt19937_64* rng) {
+C3dTake SynthesizeMarkers(const Skeleton& skeleton, const MarkerSet& markers,
+                          const std::vector<Pose>& frames, double rate_hz, double noise_sigma_m,
+                          std::mt19937_64* rng) {
   C3dTake take;
   for (const MarkerDefinition& m : markers.markers()) take.labels.push_back(m.name);
   take.rate_hz = rate_hz;
@@ -23,7 +24,8 @@ C3dTake SynthesizeMarkers(const Skeleton& skeleton, const MarkerSet& markers, co
       Vec3 p = EvaluateMarker(markers.marker(m), ws);
       if (add_noise) p += Vec3(noise(*rng), noise(*rng), noise(*rng));
       take.at(static_cast<int>(f), m) = p;
-      take.residuals[f * static_cast<size_t>(markers.num_markers()) + static_cast<size_t>(m)] = 0.0f;
+      take.residuals[f * static_cast<size_t>(markers.num_markers()) + static_cast<size_t>(m)] =
+          0.0f;
     }
   }
   return take;

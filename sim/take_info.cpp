@@ -16,7 +16,8 @@ std::string FileExtension(const std::string& path) {
   const size_t slash = path.find_last_of('/');
   if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) return "";
   std::string ext = path.substr(dot + 1);
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
   return ext;
 }
 
@@ -46,7 +47,8 @@ TakeInfo InspectTake(const std::string& path) {
           run = 0;
         }
       }
-      pi.missing_fraction = take.num_frames > 0 ? static_cast<double>(missing) / take.num_frames : 0.0;
+      pi.missing_fraction =
+          take.num_frames > 0 ? static_cast<double>(missing) / take.num_frames : 0.0;
       info.points.push_back(pi);
     }
   } else if (ext == "bvh") {
@@ -55,10 +57,12 @@ TakeInfo InspectTake(const std::string& path) {
     info.frames = take.num_frames();
     info.rate_hz = take.rate_hz();
     info.units = take.units;
-    for (const Joint& j : take.skeleton.joints()) info.joints.push_back(j.name + " (" + to_string(j.type) + ")");
+    for (const Joint& j : take.skeleton.joints())
+      info.joints.push_back(j.name + " (" + to_string(j.type) + ")");
     info.end_sites = static_cast<int>(take.end_sites.size());
   } else {
-    throw std::invalid_argument(path + ": unknown take format '." + ext + "' (expected .c3d or .bvh)");
+    throw std::invalid_argument(path + ": unknown take format '." + ext +
+                                "' (expected .c3d or .bvh)");
   }
   return info;
 }
@@ -66,32 +70,44 @@ TakeInfo InspectTake(const std::string& path) {
 std::string FormatTakeInfo(const TakeInfo& info) {
   char line[256];
   std::string out;
-  std::snprintf(line, sizeof(line), "%s\n  format  %s\n  frames  %d\n  rate    %.6g Hz (%.3f s)\n  units   %s\n", info.path.c_str(),
-                info.format.c_str(), info.frames, info.rate_hz, info.rate_hz > 0 ? info.frames / info.rate_hz : 0.0, info.units.c_str());
+  std::snprintf(line, sizeof(line),
+                "%s\n  format  %s\n  frames  %d\n  rate    %.6g Hz (%.3f s)\n  units   %s\n",
+                info.path.c_str(), info.format.c_str(), info.frames, info.rate_hz,
+                info.rate_hz > 0 ? info.frames / info.rate_hz : 0.0, info.units.c_str());
   out += line;
   if (info.format == "c3d") {
     out += "  processor " + info.processor + "\n";
-    std::snprintf(line, sizeof(line), "  %-24s %-8s %9s %6s %12s\n", "label", "kind", "missing%", "gaps", "longest gap");
+    std::snprintf(line, sizeof(line), "  %-24s %-8s %9s %6s %12s\n", "label", "kind", "missing%",
+                  "gaps", "longest gap");
     out += line;
     for (const PointInfo& p : info.points) {
-      std::snprintf(line, sizeof(line), "  %-24s %-8s %8.2f%% %6d %12d\n", p.label.c_str(), p.kind.c_str(), 100.0 * p.missing_fraction,
-                    p.gaps, p.longest_gap);
+      std::snprintf(line, sizeof(line), "  %-24s %-8s %8.2f%% %6d %12d\n", p.label.c_str(),
+                    p.kind.c_str(), 100.0 * p.missing_fraction, p.gaps, p.longest_gap);
       out += line;
     }
   } else {
-    out += "  joints  " + std::to_string(info.joints.size()) + " (+" + std::to_string(info.end_sites) + " end sites)\n";
+    out += "  joints  " + std::to_string(info.joints.size()) + " (+" +
+           std::to_string(info.end_sites) + " end sites)\n";
     for (const std::string& j : info.joints) out += "    " + j + "\n";
   }
   return out;
 }
 
 nlohmann::json TakeInfoJson(const TakeInfo& info) {
-  nlohmann::json j = {{"path", info.path}, {"format", info.format}, {"frames", info.frames}, {"rate_hz", info.rate_hz}, {"units", info.units}};
+  nlohmann::json j = {{"path", info.path},
+                      {"format", info.format},
+                      {"frames", info.frames},
+                      {"rate_hz", info.rate_hz},
+                      {"units", info.units}};
   if (info.format == "c3d") {
     j["processor"] = info.processor;
     j["points"] = nlohmann::json::array();
     for (const PointInfo& p : info.points)
-      j["points"].push_back({{"label", p.label}, {"kind", p.kind}, {"missing_fraction", p.missing_fraction}, {"gaps", p.gaps}, {"longest_gap", p.longest_gap}});
+      j["points"].push_back({{"label", p.label},
+                             {"kind", p.kind},
+                             {"missing_fraction", p.missing_fraction},
+                             {"gaps", p.gaps},
+                             {"longest_gap", p.longest_gap}});
   } else {
     j["joints"] = info.joints;
     j["end_sites"] = info.end_sites;

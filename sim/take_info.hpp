@@ -13,8 +13,8 @@ struct PointInfo {
   std::string label;
   std::string kind;  ///< "marker" or the model-output group (ANGLES, POWERS ...)
   double missing_fraction = 0.0;
-  int gaps = 0;             ///< Runs of consecutive missing frames.
-  int longest_gap = 0;      ///< Frames.
+  int gaps = 0;         ///< Runs of consecutive missing frames.
+  int longest_gap = 0;  ///< Frames.
 };
 
 struct TakeInfo {
@@ -23,8 +23,8 @@ struct TakeInfo {
   int frames = 0;
   double rate_hz = 0.0;
   std::string units;
-  std::string processor;  ///< C3D only
-  std::vector<PointInfo> points;  ///< C3D only
+  std::string processor;            ///< C3D only
+  std::vector<PointInfo> points;    ///< C3D only
   std::vector<std::string> joints;  ///< BVH only: "name (type)"
   int end_sites = 0;
 };

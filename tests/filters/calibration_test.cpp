@@ -15,7 +15,8 @@ class CalibrationTest : public ::testing::Test {
   CalibrationTest() : fixture_(testing::MakeHumanoidFixture("mixed", 9.0, 60.0)) {
     const Skeleton& sk = *fixture_.skeleton;
     fk_.assign(fixture_.motion.size(), KinematicsWorkspace(sk));
-    for (size_t f = 0; f < fixture_.motion.size(); ++f) ForwardKinematics(sk, fixture_.motion[f], &fk_[f]);
+    for (size_t f = 0; f < fixture_.motion.size(); ++f)
+      ForwardKinematics(sk, fixture_.motion[f], &fk_[f]);
     names_ = fixture_.take.labels;
     observed_ = fixture_.take.positions;
   }
@@ -38,7 +39,9 @@ TEST_F(CalibrationTest, FindsEveryMarkersJointAndOffset) {
     // The offsets reproduce the marker within 1 mm on every frame (blend weights are a
     // convention; the positions they give are what must match).
     for (size_t f = 0; f < fk_.size(); f += 17)
-      EXPECT_LT((EvaluateMarker(got.definition, fk_[f]) - EvaluateMarker(truth, fk_[f])).norm(), 1e-3) << got.name;
+      EXPECT_LT((EvaluateMarker(got.definition, fk_[f]) - EvaluateMarker(truth, fk_[f])).norm(),
+                1e-3)
+          << got.name;
     if (truth.num_attachments == 1) {
       EXPECT_LT((got.definition.attachments[0].offset - truth.attachments[0].offset).norm(), 1e-3);
     }
@@ -49,7 +52,8 @@ TEST_F(CalibrationTest, RejectsMarkersThatFitNothing) {
   std::mt19937_64 rng(2);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   const size_t stride = names_.size();
-  for (size_t f = 0; f < fk_.size(); ++f) observed_[f * stride + 3] = Vec3(u(rng), u(rng) + 1.0, u(rng));  // a stray
+  for (size_t f = 0; f < fk_.size(); ++f)
+    observed_[f * stride + 3] = Vec3(u(rng), u(rng) + 1.0, u(rng));  // a stray
   for (size_t f = 0; f < fk_.size(); ++f)
     if (f > 5) observed_[f * stride + 4] = Vec3::Constant(kNaN);  // almost never seen
   const auto result = CalibrateMarkers(*fixture_.skeleton, fk_, names_, observed_);
@@ -64,13 +68,16 @@ TEST_F(CalibrationTest, ToleratesNoiseAndGaps) {
   std::mt19937_64 rng(4);
   std::normal_distribution<double> noise(0.0, 0.5e-3);
   for (size_t i = 0; i < observed_.size(); ++i) {
-    if (i % 11 == 0) observed_[i] = Vec3::Constant(kNaN);
-    else observed_[i] += Vec3(noise(rng), noise(rng), noise(rng));
+    if (i % 11 == 0)
+      observed_[i] = Vec3::Constant(kNaN);
+    else
+      observed_[i] += Vec3(noise(rng), noise(rng), noise(rng));
   }
   const auto result = CalibrateMarkers(*fixture_.skeleton, fk_, names_, observed_);
   for (size_t m = 0; m < result.size(); ++m) {
     ASSERT_TRUE(result[m].accepted) << result[m].name;
-    EXPECT_EQ(result[m].definition.attachments[0].joint, fixture_.markers->marker(static_cast<int>(m)).attachments[0].joint)
+    EXPECT_EQ(result[m].definition.attachments[0].joint,
+              fixture_.markers->marker(static_cast<int>(m)).attachments[0].joint)
         << result[m].name;
     EXPECT_LT(result[m].rms_m, 1.5e-3);
   }

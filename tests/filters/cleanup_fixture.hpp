@@ -21,10 +21,13 @@ class CleanupFixture : public ::testing::Test {
   CleanupFixture() : fixture_(testing::MakeHumanoidFixture("mixed", 8.0, 120.0)) {
     frames_.resize(static_cast<size_t>(fixture_.take.num_frames));
     for (int f = 0; f < fixture_.take.num_frames; ++f)
-      for (int m = 0; m < fixture_.take.num_points(); ++m) frames_[static_cast<size_t>(f)].push_back(fixture_.take.at(f, m));
+      for (int m = 0; m < fixture_.take.num_points(); ++m)
+        frames_[static_cast<size_t>(f)].push_back(fixture_.take.at(f, m));
   }
   int Marker(const char* name) const { return fixture_.markers->FindMarker(name)->value; }
-  Vec3& Sample(int frame, int marker) { return frames_[static_cast<size_t>(frame)][static_cast<size_t>(marker)]; }
+  Vec3& Sample(int frame, int marker) {
+    return frames_[static_cast<size_t>(frame)][static_cast<size_t>(marker)];
+  }
   Vec3 Truth(int frame, int marker) const { return fixture_.take.at(frame, marker); }
 
   // Runs every frame through a pipeline and keeps every published frame.
@@ -40,14 +43,16 @@ class CleanupFixture : public ::testing::Test {
   // How much further a published marker moved into frame f than the truth did, metres.
   double ExtraStep(const std::vector<CleanFrame>& out, int f, int m) const {
     const auto uf = static_cast<size_t>(f), um = static_cast<size_t>(m);
-    return (out[uf].markers[um] - out[uf - 1].markers[um]).norm() - (Truth(f, m) - Truth(f - 1, m)).norm();
+    return (out[uf].markers[um] - out[uf - 1].markers[um]).norm() -
+           (Truth(f, m) - Truth(f - 1, m)).norm();
   }
   // How much further a joint of the published skeleton moved in one frame than it did in
   // `truth`, at worst over frames [from, to), metres.
-  double WorstExtraJointStep(const std::vector<CleanFrame>& out, const std::vector<Pose>& truth, const char* joint_name, int from,
-                             int to) const {
+  double WorstExtraJointStep(const std::vector<CleanFrame>& out, const std::vector<Pose>& truth,
+                             const char* joint_name, int from, int to) const {
     const auto joint = static_cast<size_t>(fixture_.skeleton->FindJoint(joint_name)->value);
-    KinematicsWorkspace t(*fixture_.skeleton), t_before(*fixture_.skeleton), e(*fixture_.skeleton), e_before(*fixture_.skeleton);
+    KinematicsWorkspace t(*fixture_.skeleton), t_before(*fixture_.skeleton), e(*fixture_.skeleton),
+        e_before(*fixture_.skeleton);
     double worst = 0.0;
     for (int f = from; f < to; ++f) {
       const auto uf = static_cast<size_t>(f);
@@ -55,7 +60,8 @@ class CleanupFixture : public ::testing::Test {
       ForwardKinematics(*fixture_.skeleton, truth[uf], &t);
       ForwardKinematics(*fixture_.skeleton, out[uf - 1].pose, &e_before);
       ForwardKinematics(*fixture_.skeleton, out[uf].pose, &e);
-      worst = std::max(worst, (e.p_WJ[joint] - e_before.p_WJ[joint]).norm() - (t.p_WJ[joint] - t_before.p_WJ[joint]).norm());
+      worst = std::max(worst, (e.p_WJ[joint] - e_before.p_WJ[joint]).norm() -
+                                  (t.p_WJ[joint] - t_before.p_WJ[joint]).norm());
     }
     return worst;
   }
@@ -68,11 +74,13 @@ class CleanupFixture : public ::testing::Test {
     const auto elbow = static_cast<size_t>(fixture_.skeleton->FindJoint("LeftForeArm")->value);
     for (size_t f = 300; f < bent.size(); ++f) {
       const double bend = M_PI / 2 * std::min(1.0, static_cast<double>(f - 300) / 100.0);
-      bent[f].rotation[elbow] = bent[f].rotation[elbow] * Quat(Eigen::AngleAxisd(bend, Vec3::UnitZ()));
+      bent[f].rotation[elbow] =
+          bent[f].rotation[elbow] * Quat(Eigen::AngleAxisd(bend, Vec3::UnitZ()));
     }
     const C3dTake moved = SynthesizeMarkers(*fixture_.skeleton, *fixture_.markers, bent, 120.0);
     for (int f = 300; f < static_cast<int>(frames_.size()); ++f)
-      for (const char* name : kLeftForearm) Sample(f, Marker(name)) = f < 420 ? Vec3::Constant(kNaN) : moved.at(f, Marker(name));
+      for (const char* name : kLeftForearm)
+        Sample(f, Marker(name)) = f < 420 ? Vec3::Constant(kNaN) : moved.at(f, Marker(name));
     return bent;
   }
   // RFOT2 stuck where it was at frame 699 for 60 frames, with Gaussian jitter of sigma
@@ -82,12 +90,15 @@ class CleanupFixture : public ::testing::Test {
     std::mt19937 rng(3);
     std::normal_distribution<double> jitter(0.0, jitter_sigma > 0.0 ? jitter_sigma : 1.0);
     for (int f = 700; f < 760; ++f)
-      Sample(f, m) = Truth(699, m) + (jitter_sigma > 0.0 ? Vec3(jitter(rng), jitter(rng), jitter(rng)) : Vec3::Zero());
+      Sample(f, m) =
+          Truth(699, m) +
+          (jitter_sigma > 0.0 ? Vec3(jitter(rng), jitter(rng), jitter(rng)) : Vec3::Zero());
     CleanupOptions options = Blind();
     options.frozen_frames = 6;
     const auto out = Run(options);
     int frozen = 0;
-    for (int f = 700; f < 760; ++f) frozen += out[static_cast<size_t>(f)].reason[static_cast<size_t>(m)] == MaskReason::kFrozen;
+    for (int f = 700; f < 760; ++f)
+      frozen += out[static_cast<size_t>(f)].reason[static_cast<size_t>(m)] == MaskReason::kFrozen;
     return frozen;
   }
   // Options with every outlier detector made blind, to test one at a time.

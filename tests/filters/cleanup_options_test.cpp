@@ -50,10 +50,12 @@ TEST(CleanupOptionsTest, EveryOptionIsInTheTableOnceWithItsDefaultInBounds) {
   std::set<std::string> names, keys;
   for (const CleanupOptionField& f : CleanupOptionFields()) {
     EXPECT_TRUE(names.insert(f.name).second) << f.name;
-    EXPECT_TRUE(keys.insert(std::string(f.section ? f.section : "-") + "." + f.key).second) << f.key;
+    EXPECT_TRUE(keys.insert(std::string(f.section ? f.section : "-") + "." + f.key).second)
+        << f.key;
     EXPECT_LE(f.min, f.max) << f.name;
     EXPECT_GT(f.to_si, 0.0) << f.name;
-    const double value = std::visit([&](auto member) { return static_cast<double>(defaults.*member); }, f.member);
+    const double value =
+        std::visit([&](auto member) { return static_cast<double>(defaults.*member); }, f.member);
     EXPECT_GE(value, f.min * f.to_si) << f.name;
     EXPECT_LE(value, f.max * f.to_si) << f.name;
   }

@@ -4,9 +4,9 @@
 
 #include <gtest/gtest.h>
 
+#include "filters/pose_error.hpp"
 #include "tests/filters/cleanup_fixture.hpp"
 #include "tests/support/allocation_counter.hpp"
-#include "filters/pose_error.hpp"
 
 namespace mocapd {
 namespace {
@@ -26,7 +26,8 @@ TEST_F(CleanupPipelineTest, PublishesEveryFrameKFramesLateWithUntouchedSamplesBi
   for (size_t f = 0; f < out.size(); ++f) {
     ASSERT_EQ(out[f].frame, static_cast<int64_t>(f));
     for (size_t m = 0; m < frames_[f].size(); ++m) {
-      ASSERT_EQ(out[f].status[m], MarkerStatus::kObserved) << f << " " << m << " " << to_string(out[f].reason[m]);
+      ASSERT_EQ(out[f].status[m], MarkerStatus::kObserved)
+          << f << " " << m << " " << to_string(out[f].reason[m]);
       ASSERT_EQ(out[f].markers[m], frames_[f][m]);  // bit for bit
     }
   }
@@ -39,7 +40,8 @@ TEST_F(CleanupPipelineTest, SolvedSkeletonStaysAccurateThroughRepairs) {
   PoseErrorAccumulator errors(*fixture_.skeleton);
   KinematicsWorkspace truth(*fixture_.skeleton), est(*fixture_.skeleton);
   for (const CleanFrame& frame : out) {
-    ForwardKinematics(*fixture_.skeleton, fixture_.motion[static_cast<size_t>(frame.frame)], &truth);
+    ForwardKinematics(*fixture_.skeleton, fixture_.motion[static_cast<size_t>(frame.frame)],
+                      &truth);
     ForwardKinematics(*fixture_.skeleton, frame.pose, &est);
     errors.Add(truth, est);
   }

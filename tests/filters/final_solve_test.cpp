@@ -4,8 +4,8 @@
 
 #include <gtest/gtest.h>
 
-#include "tests/filters/cleanup_fixture.hpp"
 #include "filters/pose_error.hpp"
+#include "tests/filters/cleanup_fixture.hpp"
 
 namespace mocapd {
 namespace {
@@ -25,18 +25,20 @@ TEST_F(FinalSolveTest, AFillGainsFinalSolveWeightGradually) {
   EXPECT_DOUBLE_EQ(out[299].weight[um], 1.0);                      // observed
   bool reached_full = false;
   for (int f = 301; f < 430; ++f) {
-    const double before = out[static_cast<size_t>(f - 1)].weight[um], now = out[static_cast<size_t>(f)].weight[um];
+    const double before = out[static_cast<size_t>(f - 1)].weight[um],
+                 now = out[static_cast<size_t>(f)].weight[um];
     if (out[static_cast<size_t>(f)].status[um] == MarkerStatus::kRepaired) {
       EXPECT_LE(now, before * options.fill_weight_ramp + 1e-12) << f;
     }
     reached_full |= out[static_cast<size_t>(f)].status[um] == MarkerStatus::kRepaired && now > 0.5;
   }
-  EXPECT_TRUE(reached_full);  // the interpolation near the return does get its weight
+  EXPECT_TRUE(reached_full);       // the interpolation near the return does get its weight
   options.fill_weight_ramp = 1.0;  // without the ramp the weight jumps
   const auto jumpy = Run(options);
   double biggest_jump = 0.0;
   for (int f = 301; f < 420; ++f)
-    biggest_jump = std::max(biggest_jump, jumpy[static_cast<size_t>(f)].weight[um] / jumpy[static_cast<size_t>(f - 1)].weight[um]);
+    biggest_jump = std::max(biggest_jump, jumpy[static_cast<size_t>(f)].weight[um] /
+                                              jumpy[static_cast<size_t>(f - 1)].weight[um]);
   EXPECT_GT(biggest_jump, 10.0);
 }
 
@@ -56,7 +58,9 @@ TEST_F(FinalSolveTest, ReturningMarkerEasesIntoTheSkeletonWithoutLookahead) {
   EXPECT_EQ(out[420].markers[um], Sample(420, m));
   EXPECT_LE(out[420].weight[um], options.repaired_weight * options.fill_weight_ramp + 1e-12);
   for (int f = 421; f < 440; ++f)
-    EXPECT_LE(out[static_cast<size_t>(f)].weight[um], out[static_cast<size_t>(f - 1)].weight[um] * options.fill_weight_ramp + 1e-12) << f;
+    EXPECT_LE(out[static_cast<size_t>(f)].weight[um],
+              out[static_cast<size_t>(f - 1)].weight[um] * options.fill_weight_ramp + 1e-12)
+        << f;
   EXPECT_DOUBLE_EQ(out[450].weight[um], 1.0);
 }
 
@@ -89,7 +93,8 @@ TEST_F(FinalSolveTest, CapturedJumpTheDetectorsMissIsClosedOnNotFollowed) {
   // detector caught: they are all blind here). The samples are published as captured,
   // but a jump is not motion: the skeleton's hand closes on them over several frames.
   for (int f = 300; f < static_cast<int>(frames_.size()); ++f)
-    for (const char* name : {"LHND1", "LHND2", "LHND3"}) Sample(f, Marker(name)) += Vec3(0.1, 0.0, 0.0);
+    for (const char* name : {"LHND1", "LHND2", "LHND3"})
+      Sample(f, Marker(name)) += Vec3(0.1, 0.0, 0.0);
   auto worst_extra_hand_step = [&](double motion_acceleration) {
     CleanupOptions options = Blind();
     options.lookahead = 0;
@@ -98,7 +103,8 @@ TEST_F(FinalSolveTest, CapturedJumpTheDetectorsMissIsClosedOnNotFollowed) {
     EXPECT_EQ(out[300].markers[static_cast<size_t>(Marker("LHND1"))], Sample(300, Marker("LHND1")));
     return WorstExtraJointStep(out, fixture_.motion, "LeftHand", 290, 340);
   };
-  EXPECT_LT(worst_extra_hand_step(CleanupOptions{}.data_motion_acceleration_m), 0.02);  // measured 0.3 cm
+  EXPECT_LT(worst_extra_hand_step(CleanupOptions{}.data_motion_acceleration_m),
+            0.02);                              // measured 0.3 cm
   EXPECT_GT(worst_extra_hand_step(1.0), 0.04);  // the jump taken as motion: measured 4.6 cm
 }
 
@@ -114,9 +120,10 @@ TEST_F(FinalSolveTest, GuessesPullTheSkeletonNoFurtherThanTheAnchorAllows) {
     options.fill_anchor_radius_m = radius;
     return WorstExtraJointStep(Run(options), bent, "LeftHand", 380, 520);
   };
-  const double anchored = worst_extra_hand_step(CleanupOptions{}.fill_anchor_radius_m), free = worst_extra_hand_step(0.0);
+  const double anchored = worst_extra_hand_step(CleanupOptions{}.fill_anchor_radius_m),
+               free = worst_extra_hand_step(0.0);
   EXPECT_LT(anchored, 0.02) << free;  // measured 1.1 cm
-  EXPECT_GT(free, 0.03) << anchored;   // measured 5.6 cm
+  EXPECT_GT(free, 0.03) << anchored;  // measured 5.6 cm
 }
 
 TEST_F(FinalSolveTest, UnseenLowerLegIsNotSwungByItsTurningThigh) {
@@ -128,7 +135,8 @@ TEST_F(FinalSolveTest, UnseenLowerLegIsNotSwungByItsTurningThigh) {
   const auto hip = static_cast<size_t>(fixture_.skeleton->FindJoint("LeftUpLeg")->value);
   const auto knee = static_cast<size_t>(fixture_.skeleton->FindJoint("LeftLeg")->value);
   for (size_t f = 300; f < turned.size(); ++f) {
-    const Quat turn(Eigen::AngleAxisd(M_PI / 3 * std::min(1.0, static_cast<double>(f - 300) / 20.0), Vec3::UnitX()));
+    const Quat turn(Eigen::AngleAxisd(M_PI / 3 * std::min(1.0, static_cast<double>(f - 300) / 20.0),
+                                      Vec3::UnitX()));
     turned[f].rotation[hip] = turned[f].rotation[hip] * turn;
     turned[f].rotation[knee] = turn.inverse() * turned[f].rotation[knee];
   }
@@ -136,7 +144,8 @@ TEST_F(FinalSolveTest, UnseenLowerLegIsNotSwungByItsTurningThigh) {
   for (int f = 0; f < static_cast<int>(frames_.size()); ++f)
     for (int m = 0; m < fixture_.markers->num_markers(); ++m) Sample(f, m) = moved.at(f, m);
   for (int f = 280; f < 420; ++f)
-    for (const char* name : {"LKNE", "LSHN1", "LSHN2", "LFOT1", "LFOT2", "LFOT3", "LTOE1", "LTOE2"}) Sample(f, Marker(name)) = Vec3::Constant(kNaN);
+    for (const char* name : {"LKNE", "LSHN1", "LSHN2", "LFOT1", "LFOT2", "LFOT3", "LTOE1", "LTOE2"})
+      Sample(f, Marker(name)) = Vec3::Constant(kNaN);
   auto worst_extra_ankle_step = [&](bool hold) {
     CleanupOptions options;
     options.lookahead = 0;

@@ -21,11 +21,15 @@ TEST_F(GapRepairTest, LongGapIsFilledAlongTheReferenceWithoutJumps) {
   for (int f = 200; f < 400; ++f) {
     ASSERT_EQ(out[static_cast<size_t>(f)].status[static_cast<size_t>(m)], MarkerStatus::kRepaired);
     EXPECT_EQ(out[static_cast<size_t>(f)].reason[static_cast<size_t>(m)], MaskReason::kMissing);
-    EXPECT_LT((out[static_cast<size_t>(f)].markers[static_cast<size_t>(m)] - Truth(f, m)).norm(), 0.01) << f;
+    EXPECT_LT((out[static_cast<size_t>(f)].markers[static_cast<size_t>(m)] - Truth(f, m)).norm(),
+              0.01)
+        << f;
   }
   // C0 at both ends: no step bigger than the marker's own motion allows.
   for (int f = 195; f < 405; ++f) {
-    const double step = (out[static_cast<size_t>(f)].markers[static_cast<size_t>(m)] - out[static_cast<size_t>(f - 1)].markers[static_cast<size_t>(m)]).norm();
+    const double step = (out[static_cast<size_t>(f)].markers[static_cast<size_t>(m)] -
+                         out[static_cast<size_t>(f - 1)].markers[static_cast<size_t>(m)])
+                            .norm();
     EXPECT_LT(step, (Truth(f, m) - Truth(f - 1, m)).norm() + 0.003) << f;
   }
   EXPECT_EQ(counters_.repaired_by[static_cast<size_t>(MaskReason::kMissing)], 200);
@@ -35,7 +39,9 @@ TEST_F(GapRepairTest, ShortGapGetsAPlainHermiteOnTheRawPath) {
   const int m = Marker("RTHI2");
   for (int f = 300; f < 303; ++f) Sample(f, m) = Vec3::Constant(kNaN);
   const auto out = Run(CleanupOptions{});
-  for (int f = 300; f < 303; ++f) EXPECT_LT((out[static_cast<size_t>(f)].markers[static_cast<size_t>(m)] - Truth(f, m)).norm(), 0.001);
+  for (int f = 300; f < 303; ++f)
+    EXPECT_LT((out[static_cast<size_t>(f)].markers[static_cast<size_t>(m)] - Truth(f, m)).norm(),
+              0.001);
 }
 
 TEST_F(GapRepairTest, ReturningMarkerBlendsInWithoutAPop) {
@@ -47,13 +53,16 @@ TEST_F(GapRepairTest, ReturningMarkerBlendsInWithoutAPop) {
   options.lookahead = 4;
   for (int f = 0; f < 400; ++f) Sample(f, m) += Vec3(0.009, 0.0, 0.0);
   for (int f = 400; f < 460; ++f) Sample(f, m) = Vec3::Constant(kNaN);
-  for (int f = 460; f < static_cast<int>(frames_.size()); ++f) Sample(f, m) -= Vec3(0.009, 0.0, 0.0);
+  for (int f = 460; f < static_cast<int>(frames_.size()); ++f)
+    Sample(f, m) -= Vec3(0.009, 0.0, 0.0);
   const auto out = Run(options);
   double worst_extra_step = 0.0;
-  for (int f = 440; f < 470; ++f) worst_extra_step = std::max(worst_extra_step, ExtraStep(out, f, m));
+  for (int f = 440; f < 470; ++f)
+    worst_extra_step = std::max(worst_extra_step, ExtraStep(out, f, m));
   EXPECT_LT(worst_extra_step, 0.008);
   EXPECT_EQ(out[460].status[static_cast<size_t>(m)], MarkerStatus::kObserved);
-  EXPECT_EQ(out[460].markers[static_cast<size_t>(m)], Sample(460, m));  // the returning sample itself is untouched
+  EXPECT_EQ(out[460].markers[static_cast<size_t>(m)],
+            Sample(460, m));  // the returning sample itself is untouched
 }
 
 TEST_F(GapRepairTest, FillsRideThroughAReferenceThatSnapsBack) {
@@ -65,11 +74,13 @@ TEST_F(GapRepairTest, FillsRideThroughAReferenceThatSnapsBack) {
   const char* leg[] = {"LKNE", "LSHN1", "LSHN2", "LFOT1", "LFOT2", "LFOT3", "LTOE1", "LTOE2"};
   for (int f = 300; f < 500; ++f)
     for (const char* name : leg)
-      if (f < 480 || std::string(name).rfind("LTOE", 0) != 0) Sample(f, Marker(name)) = Vec3::Constant(kNaN);
+      if (f < 480 || std::string(name).rfind("LTOE", 0) != 0)
+        Sample(f, Marker(name)) = Vec3::Constant(kNaN);
   const auto out = Run(CleanupOptions{});
   double worst_extra_step = 0.0;
   for (int f = 301; f < 510; ++f)
-    for (const char* name : leg) worst_extra_step = std::max(worst_extra_step, ExtraStep(out, f, Marker(name)));
+    for (const char* name : leg)
+      worst_extra_step = std::max(worst_extra_step, ExtraStep(out, f, Marker(name)));
   EXPECT_LT(worst_extra_step, 0.035);
 }
 
@@ -85,7 +96,10 @@ TEST_F(GapRepairTest, OneSidedFillTakesUpAReferenceMotionItHeldBack) {
     options.fill_snap_release = release;
     const auto out = Run(options);
     double worst = 0.0;
-    for (int f = 300; f < 540; ++f) worst = std::max(worst, (out[static_cast<size_t>(f)].markers[static_cast<size_t>(m)] - Truth(f, m)).norm());
+    for (int f = 300; f < 540; ++f)
+      worst = std::max(
+          worst,
+          (out[static_cast<size_t>(f)].markers[static_cast<size_t>(m)] - Truth(f, m)).norm());
     return worst;
   };
   EXPECT_LT(worst_error(0.1), 0.3);  // measured 0.15 m
@@ -139,12 +153,15 @@ class GapRepairAloneTest : public ::testing::Test {
   }
   CleanupOptions options_;
   CleanupCounters counters_;
-  std::function<Vec3(int)> bump_ = [](int) -> Vec3 { return Vec3::Zero(); };  // the reference's own deviation
+  std::function<Vec3(int)> bump_ = [](int) -> Vec3 {
+    return Vec3::Zero();
+  };  // the reference's own deviation
 };
 
 TEST_F(GapRepairAloneTest, TwoSidedFillRidesTheReferenceAtTheOffsetOfBothEnds) {
   const Vec3 offset(0.02, 0.0, 0.0);
-  const auto out = Run(12, 60, [&](int t) -> Vec3 { return t >= 20 && t < 30 ? Vec3::Constant(kNaN) : offset; });
+  const auto out =
+      Run(12, 60, [&](int t) -> Vec3 { return t >= 20 && t < 30 ? Vec3::Constant(kNaN) : offset; });
   ASSERT_EQ(out.size(), 60u);
   for (int t = 20; t < 30; ++t) {
     const CleanFrame& f = out[static_cast<size_t>(t)];
@@ -165,7 +182,7 @@ TEST_F(GapRepairAloneTest, TwoSidedFillMovesBetweenDifferentEndOffsetsWithoutJum
   double previous = 0.02;
   for (int t = 20; t < 30; ++t) {
     const double o = (out[static_cast<size_t>(t)].markers[0] - Reference(t)).x();
-    EXPECT_GT(o, previous - 1e-12) << t;  // monotone from one end's offset to the other's
+    EXPECT_GT(o, previous - 1e-12) << t;            // monotone from one end's offset to the other's
     EXPECT_LT(o - previous, 0.03 / 10 * 1.6) << t;  // no step much beyond the even share
     previous = o;
   }
@@ -174,7 +191,8 @@ TEST_F(GapRepairAloneTest, TwoSidedFillMovesBetweenDifferentEndOffsetsWithoutJum
 
 TEST_F(GapRepairAloneTest, OneSidedFillHoldsTheLastOffsetWhileTheGapIsOpen) {
   const Vec3 offset(0.0, 0.0, 0.03);
-  const auto out = Run(2, 60, [&](int t) -> Vec3 { return t >= 20 && t < 40 ? Vec3::Constant(kNaN) : offset; });
+  const auto out =
+      Run(2, 60, [&](int t) -> Vec3 { return t >= 20 && t < 40 ? Vec3::Constant(kNaN) : offset; });
   for (int t = 20; t < 37; ++t) {  // the end is not in the 2-frame lookahead yet
     const CleanFrame& f = out[static_cast<size_t>(t)];
     EXPECT_EQ(f.source[0], SampleSource::kExtrapolated) << t;
@@ -186,10 +204,14 @@ TEST_F(GapRepairAloneTest, ShortGapIsAPlainHermiteOnTheRawPath) {
   // The raw path bends; during the gap alone the reference bulges up to 8 mm away from
   // it (slowly enough that no snap rule hides it). A short gap interpolates the raw path
   // itself and ignores the bulge: an offset fill onto the reference would be 8 mm off.
-  bump_ = [](int t) -> Vec3 { return Vec3(0.0, t == 31 ? 0.008 : t == 30 || t == 32 ? 0.004 : 0.0, 0.0); };
+  bump_ = [](int t) -> Vec3 {
+    return Vec3(0.0, t == 31 ? 0.008 : t == 30 || t == 32 ? 0.004 : 0.0, 0.0);
+  };
   auto bend = [](int t) -> Vec3 { return Vec3(0.0, 0.0, 0.0001 * t * t); };
-  const auto out = Run(12, 60, [&](int t) -> Vec3 { return t >= 30 && t < 33 ? Vec3::Constant(kNaN) : bend(t); });
-  for (int t = 30; t < 33; ++t) EXPECT_EQ(out[static_cast<size_t>(t)].source[0], SampleSource::kInterpolated);
+  const auto out = Run(
+      12, 60, [&](int t) -> Vec3 { return t >= 30 && t < 33 ? Vec3::Constant(kNaN) : bend(t); });
+  for (int t = 30; t < 33; ++t)
+    EXPECT_EQ(out[static_cast<size_t>(t)].source[0], SampleSource::kInterpolated);
   EXPECT_LT((out[30].markers[0] - (Line(30) + bend(30))).norm(), 0.001);
 }
 

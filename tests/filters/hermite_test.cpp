@@ -8,7 +8,8 @@ namespace mocapd {
 namespace {
 
 TEST(HermiteTest, MeetsItsEndValuesAndDerivatives) {
-  const HermiteSegment dut{Vec3(1, 2, 3), Vec3(0.1, -0.2, 0.3), Vec3(-1, 0, 5), Vec3(0.4, 0.0, -0.1), 7.0};
+  const HermiteSegment dut{Vec3(1, 2, 3), Vec3(0.1, -0.2, 0.3), Vec3(-1, 0, 5),
+                           Vec3(0.4, 0.0, -0.1), 7.0};
   EXPECT_LT((dut.Value(0.0) - dut.p0).norm(), 1e-12);
   EXPECT_LT((dut.Value(7.0) - dut.p1).norm(), 1e-12);
   EXPECT_LT((dut.Derivative(0.0) - dut.m0).norm(), 1e-12);
@@ -29,7 +30,8 @@ TEST(HermiteTest, ReproducesACubicFromItsEndValuesAndSlopes) {
 }
 
 TEST(HermiteTest, EqualEndsWithZeroSlopesStayPut) {
-  const HermiteSegment dut{Vec3(0.2, 0.3, 0.4), Vec3::Zero(), Vec3(0.2, 0.3, 0.4), Vec3::Zero(), 13.0};
+  const HermiteSegment dut{Vec3(0.2, 0.3, 0.4), Vec3::Zero(), Vec3(0.2, 0.3, 0.4), Vec3::Zero(),
+                           13.0};
   for (double x = 0.0; x <= 13.0; x += 1.0) EXPECT_LT((dut.Value(x) - dut.p0).norm(), 1e-15) << x;
 }
 

@@ -27,16 +27,19 @@ class IkSolverTest : public ::testing::Test {
     map.Observe(fixture_.take, f, observed_, weights_);
   }
   // The dense Gauss-Newton system (J'WJ + P) dq = J'Wr - g_P in IntegratePose's axes.
-  void DenseNormalEquations(const IkOptions& options, const Pose& pose, Eigen::MatrixXd* H, Eigen::VectorXd* g) const {
+  void DenseNormalEquations(const IkOptions& options, const Pose& pose, Eigen::MatrixXd* H,
+                            Eigen::VectorXd* g) const {
     KinematicsWorkspace ws(skeleton());
     ForwardKinematics(skeleton(), pose, &ws);
     const Eigen::MatrixXd J = MarkerJacobian(skeleton(), markers(), ws);
     Eigen::VectorXd r(J.rows()), w(J.rows());
     for (int m = 0; m < markers().num_markers(); ++m) {
-      r.segment<3>(3 * m) = observed_[static_cast<size_t>(m)] - EvaluateMarker(markers().marker(m), ws);
+      r.segment<3>(3 * m) =
+          observed_[static_cast<size_t>(m)] - EvaluateMarker(markers().marker(m), ws);
       w.segment<3>(3 * m).setConstant(weights_[static_cast<size_t>(m)]);
     }
-    Eigen::VectorXd mask = Eigen::VectorXd::Zero(skeleton().num_dofs()), rest_error(skeleton().num_dofs());
+    Eigen::VectorXd mask = Eigen::VectorXd::Zero(skeleton().num_dofs()),
+                    rest_error(skeleton().num_dofs());
     for (int j = 0; j < skeleton().num_joints(); ++j) {
       const int k = skeleton().dof_offset(j);
       if (skeleton().joint(j).type == JointType::kBall) mask.segment<3>(k).setOnes();
@@ -44,7 +47,8 @@ class IkSolverTest : public ::testing::Test {
     }
     PoseDifference(skeleton(), RestPose(skeleton()), pose, rest_error);
     *H = J.transpose() * w.asDiagonal() * J;
-    H->diagonal() += (options.temporal_weight + options.rest_weight) * mask + Eigen::VectorXd::Constant(skeleton().num_dofs(), 1e-12);
+    H->diagonal() += (options.temporal_weight + options.rest_weight) * mask +
+                     Eigen::VectorXd::Constant(skeleton().num_dofs(), 1e-12);
     *g = J.transpose() * w.asDiagonal() * r - options.rest_weight * mask.cwiseProduct(rest_error);
   }
   const Skeleton& skeleton() const { return *fixture_.skeleton; }
@@ -70,7 +74,8 @@ TEST_F(IkSolverTest, TreeEliminationStepEqualsDenseGaussNewtonSolve) {
     const double damping = 0.0;
     IkState state(skeleton(), markers());
     Eigen::VectorXd dq;
-    ASSERT_TRUE(ComputeIkStep(skeleton(), markers(), options, observed_, weights_, pose, damping, &state, &dq));
+    ASSERT_TRUE(ComputeIkStep(skeleton(), markers(), options, observed_, weights_, pose, damping,
+                              &state, &dq));
 
     Eigen::MatrixXd H;
     Eigen::VectorXd g;
@@ -90,10 +95,12 @@ TEST_F(IkSolverTest, DampedStepStillDecreasesTheLinearisedCost) {
   DenseNormalEquations(IkOptions{}, pose, &H, &g);
   auto model = [&](const Eigen::VectorXd& dq) { return 0.5 * dq.dot(H * dq) - g.dot(dq); };
   Eigen::VectorXd gauss_newton, damped;
-  ASSERT_TRUE(ComputeIkStep(skeleton(), markers(), IkOptions{}, observed_, weights_, pose, 0.0, &state, &gauss_newton));
-  ASSERT_TRUE(ComputeIkStep(skeleton(), markers(), IkOptions{}, observed_, weights_, pose, 10.0, &state, &damped));
-  EXPECT_LT(model(damped), 0.0);                    // downhill
-  EXPECT_LE(model(gauss_newton), model(damped));    // the undamped step is the model's minimum
+  ASSERT_TRUE(ComputeIkStep(skeleton(), markers(), IkOptions{}, observed_, weights_, pose, 0.0,
+                            &state, &gauss_newton));
+  ASSERT_TRUE(ComputeIkStep(skeleton(), markers(), IkOptions{}, observed_, weights_, pose, 10.0,
+                            &state, &damped));
+  EXPECT_LT(model(damped), 0.0);                  // downhill
+  EXPECT_LE(model(gauss_newton), model(damped));  // the undamped step is the model's minimum
   EXPECT_LT(damped.norm(), 2.0 * gauss_newton.norm());
 }
 
@@ -112,7 +119,9 @@ TEST_F(IkSolverTest, ColdStartRecoversAPoseFromCleanMarkers) {
     KinematicsWorkspace truth(skeleton());
     ForwardKinematics(skeleton(), fixture_.motion[static_cast<size_t>(f)], &truth);
     for (int j = 0; j < skeleton().num_joints(); ++j)
-      EXPECT_LT((truth.p_WJ[static_cast<size_t>(j)] - dut.kinematics().p_WJ[static_cast<size_t>(j)]).norm(), 1e-5)
+      EXPECT_LT((truth.p_WJ[static_cast<size_t>(j)] - dut.kinematics().p_WJ[static_cast<size_t>(j)])
+                    .norm(),
+                1e-5)
           << "frame " << f << " joint " << skeleton().joint(j).name;
   }
 }
@@ -150,7 +159,8 @@ TEST_F(IkSolverTest, NoiseDoesNotMakeJointsDrift) {
   }
   EXPECT_LT(errors.mean_rotation_error_rad(), 2.0 * M_PI / 180);
   int worst = -1;
-  EXPECT_LT(errors.worst_joint_rotation_quantile_rad(0.99, &worst), 10.0 * M_PI / 180) << skeleton().joint(worst).name;
+  EXPECT_LT(errors.worst_joint_rotation_quantile_rad(0.99, &worst), 10.0 * M_PI / 180)
+      << skeleton().joint(worst).name;
 }
 
 TEST_F(IkSolverTest, MissingMarkersAreIgnored) {
@@ -165,7 +175,10 @@ TEST_F(IkSolverTest, MissingMarkersAreIgnored) {
   const IkSummary summary = SolveIk(skeleton(), markers(), IkOptions{}, observed_, weights_, &dut);
   EXPECT_EQ(summary.markers_used, markers().num_markers() - 2);
   for (int j = 0; j < skeleton().num_joints(); ++j)
-    EXPECT_LT((reference.kinematics().p_WJ[static_cast<size_t>(j)] - dut.kinematics().p_WJ[static_cast<size_t>(j)]).norm(), 2e-3);
+    EXPECT_LT((reference.kinematics().p_WJ[static_cast<size_t>(j)] -
+               dut.kinematics().p_WJ[static_cast<size_t>(j)])
+                  .norm(),
+              2e-3);
 }
 
 TEST_F(IkSolverTest, HuberLossResistsAWildMarker) {
@@ -178,7 +191,9 @@ TEST_F(IkSolverTest, HuberLossResistsAWildMarker) {
     SolveIk(skeleton(), markers(), options, observed_, weights_, &state);
     double worst = 0.0;
     for (int j = 0; j < skeleton().num_joints(); ++j)
-      worst = std::max(worst, (truth.p_WJ[static_cast<size_t>(j)] - state.kinematics().p_WJ[static_cast<size_t>(j)]).norm());
+      worst = std::max(worst, (truth.p_WJ[static_cast<size_t>(j)] -
+                               state.kinematics().p_WJ[static_cast<size_t>(j)])
+                                  .norm());
     return worst;
   };
   IkOptions plain;
@@ -200,7 +215,8 @@ TEST_F(IkSolverTest, TooFewMarkersHoldsTheLastSolution) {
   const IkSummary summary = SolveIk(skeleton(), markers(), IkOptions{}, observed_, weights_, &dut);
   EXPECT_EQ(summary.status, IkStatus::kTooFewMarkers);
   EXPECT_EQ(summary.iterations, 0);
-  for (size_t j = 0; j < before.rotation.size(); ++j) EXPECT_TRUE(before.rotation[j].isApprox(dut.pose().rotation[j]));
+  for (size_t j = 0; j < before.rotation.size(); ++j)
+    EXPECT_TRUE(before.rotation[j].isApprox(dut.pose().rotation[j]));
 }
 
 TEST_F(IkSolverTest, ResetMakesTheNextSolveCold) {

@@ -35,7 +35,8 @@ MarkerDefinition Rigid(const std::string& name, int joint, Vec3 offset) {
   return m;
 }
 
-MarkerDefinition Blend(const std::string& name, int child, int parent, double parent_weight, Vec3 child_offset, Vec3 parent_offset) {
+MarkerDefinition Blend(const std::string& name, int child, int parent, double parent_weight,
+                       Vec3 child_offset, Vec3 parent_offset) {
   MarkerDefinition m;
   m.name = name;
   m.num_attachments = 2;
@@ -46,9 +47,10 @@ MarkerDefinition Blend(const std::string& name, int child, int parent, double pa
 
 TEST(MarkerModelTest, AnalyticJacobianMatchesFiniteDifferences) {
   const Skeleton skeleton = MakeChain();
-  const MarkerSet dut(skeleton, {Rigid("m0", 0, Vec3(0.1, 0, 0)), Rigid("m1", 1, Vec3(0.02, 0.1, 0.05)),
-                                 Rigid("m2", 2, Vec3(0.1, 0.04, -0.03)), Rigid("m3", 3, Vec3(0.2, 0.0, 0.06)),
-                                 Blend("m4", 2, 1, 0.4, Vec3(0.0, 0.05, 0.0), Vec3(0.3, 0.05, 0.05))});
+  const MarkerSet dut(skeleton,
+                      {Rigid("m0", 0, Vec3(0.1, 0, 0)), Rigid("m1", 1, Vec3(0.02, 0.1, 0.05)),
+                       Rigid("m2", 2, Vec3(0.1, 0.04, -0.03)), Rigid("m3", 3, Vec3(0.2, 0.0, 0.06)),
+                       Blend("m4", 2, 1, 0.4, Vec3(0.0, 0.05, 0.0), Vec3(0.3, 0.05, 0.05))});
   std::mt19937_64 rng(3);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   for (int trial = 0; trial < 20; ++trial) {
@@ -70,7 +72,8 @@ TEST(MarkerModelTest, AnalyticJacobianMatchesFiniteDifferences) {
       ForwardKinematics(skeleton, plus, &wp);
       ForwardKinematics(skeleton, minus, &wm);
       for (int m = 0; m < dut.num_markers(); ++m) {
-        const Vec3 fd = (EvaluateMarker(dut.marker(m), wp) - EvaluateMarker(dut.marker(m), wm)) / (2 * h);
+        const Vec3 fd =
+            (EvaluateMarker(dut.marker(m), wp) - EvaluateMarker(dut.marker(m), wm)) / (2 * h);
         EXPECT_LT((J.block<3, 1>(3 * m, k) - fd).norm(), 1e-7) << "marker " << m << " dof " << k;
       }
     }
@@ -86,12 +89,14 @@ TEST(MarkerModelTest, BlendInterpolatesTheTwoRigidPositions) {
   ForwardKinematics(skeleton, pose, &ws);
   const Vec3 on_child = ws.R_WJ[3] * Vec3(0, 0.1, 0) + ws.p_WJ[3];
   const Vec3 on_parent = ws.R_WJ[2] * Vec3(0.25, 0.1, 0) + ws.p_WJ[2];
-  EXPECT_LT((EvaluateMarker(dut.marker(0), ws) - (0.75 * on_child + 0.25 * on_parent)).norm(), 1e-12);
+  EXPECT_LT((EvaluateMarker(dut.marker(0), ws) - (0.75 * on_child + 0.25 * on_parent)).norm(),
+            1e-12);
 }
 
 TEST(MarkerModelTest, NormalisesBlendOrderToChildThenParent) {
   const Skeleton skeleton = MakeChain();
-  const MarkerSet dut(skeleton, {Blend("k", 1, 2, 0.5, Vec3::Zero(), Vec3::Zero())});  // listed parent first
+  const MarkerSet dut(skeleton,
+                      {Blend("k", 1, 2, 0.5, Vec3::Zero(), Vec3::Zero())});  // listed parent first
   EXPECT_EQ(dut.marker(0).attachments[0].joint, 2);
   EXPECT_EQ(dut.marker(0).attachments[1].joint, 1);
 }

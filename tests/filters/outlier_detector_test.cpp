@@ -21,7 +21,8 @@ TEST_F(OutlierDetectorTest, ResidualDetectorCatchesAPop) {
   const auto out = Run(options);
   for (int f = 500; f < 502; ++f) {
     EXPECT_EQ(out[static_cast<size_t>(f)].reason[static_cast<size_t>(m)], MaskReason::kResidual);
-    EXPECT_LT((out[static_cast<size_t>(f)].markers[static_cast<size_t>(m)] - Truth(f, m)).norm(), 0.005);
+    EXPECT_LT((out[static_cast<size_t>(f)].markers[static_cast<size_t>(m)] - Truth(f, m)).norm(),
+              0.005);
   }
   EXPECT_EQ(out[499].status[static_cast<size_t>(m)], MarkerStatus::kObserved);
   EXPECT_EQ(out[502].status[static_cast<size_t>(m)], MarkerStatus::kObserved);
@@ -34,7 +35,8 @@ TEST_F(OutlierDetectorTest, SpikeDetectorCatchesAOneFrameJump) {
   options.spike_m = 0.03;
   const auto out = Run(options);
   EXPECT_EQ(out[600].reason[static_cast<size_t>(m)], MaskReason::kSpike);
-  EXPECT_EQ(out[601].status[static_cast<size_t>(m)], MarkerStatus::kObserved);  // the return is not a spike
+  EXPECT_EQ(out[601].status[static_cast<size_t>(m)],
+            MarkerStatus::kObserved);  // the return is not a spike
 }
 
 TEST_F(OutlierDetectorTest, RigidDistanceDetectorBlamesTheMarkerThatMoved) {
@@ -43,9 +45,13 @@ TEST_F(OutlierDetectorTest, RigidDistanceDetectorBlamesTheMarkerThatMoved) {
   CleanupOptions options = Blind();
   options.rigid_tolerance_m = 0.03;
   const auto out = Run(options);
-  for (int f = 400; f < 410; ++f) EXPECT_EQ(out[static_cast<size_t>(f)].reason[static_cast<size_t>(m)], MaskReason::kRigidDistance) << f;
   for (int f = 400; f < 410; ++f)
-    EXPECT_EQ(out[static_cast<size_t>(f)].status[static_cast<size_t>(Marker("PEL1"))], MarkerStatus::kObserved);
+    EXPECT_EQ(out[static_cast<size_t>(f)].reason[static_cast<size_t>(m)],
+              MaskReason::kRigidDistance)
+        << f;
+  for (int f = 400; f < 410; ++f)
+    EXPECT_EQ(out[static_cast<size_t>(f)].status[static_cast<size_t>(Marker("PEL1"))],
+              MarkerStatus::kObserved);
 }
 
 TEST_F(OutlierDetectorTest, DisagreementDetectorMarksTheJointsMarkers) {
@@ -62,7 +68,8 @@ TEST_F(OutlierDetectorTest, DisagreementDetectorMarksTheJointsMarkers) {
   const auto out = Run(options);
   int marked = 0;
   for (int f = 300; f < 320; ++f)
-    marked += out[static_cast<size_t>(f)].reason[static_cast<size_t>(a)] == MaskReason::kDisagreement;
+    marked +=
+        out[static_cast<size_t>(f)].reason[static_cast<size_t>(a)] == MaskReason::kDisagreement;
   EXPECT_GT(marked, 10);
   EXPECT_EQ(out[310].status[static_cast<size_t>(Marker("HED2"))], MarkerStatus::kObserved);
   EXPECT_EQ(out[290].status[static_cast<size_t>(a)], MarkerStatus::kObserved);
@@ -90,13 +97,13 @@ TEST_F(OutlierDetectorTest, SwapAcrossSegmentsIsCaughtByContinuity) {
   for (int f = start; f < start + 40; ++f) std::swap(Sample(f, a), Sample(f, b));
   const auto out = Run(CleanupOptions{});
   int right = 0;
-  for (int f = start; f < start + 40; ++f) right += (out[static_cast<size_t>(f)].markers[static_cast<size_t>(a)] - Truth(f, a)).norm() < 0.01;
+  for (int f = start; f < start + 40; ++f)
+    right +=
+        (out[static_cast<size_t>(f)].markers[static_cast<size_t>(a)] - Truth(f, a)).norm() < 0.01;
   EXPECT_GE(right, 36);
 }
 
-TEST_F(OutlierDetectorTest, FrozenMarkerIsDetected) {
-  EXPECT_GT(FramesFoundFrozen(0.0), 40);
-}
+TEST_F(OutlierDetectorTest, FrozenMarkerIsDetected) { EXPECT_GT(FramesFoundFrozen(0.0), 40); }
 
 TEST_F(OutlierDetectorTest, FrozenMarkerUnderCaptureJitterIsDetected) {
   // A stuck marker still jitters by the capture's noise: millimetres per frame, more
@@ -116,12 +123,14 @@ TEST_F(OutlierDetectorTest, StillMarkerIsNotFrozenWhenNoOtherMarkerShowsItsSegme
   CleanupOptions options = Blind();
   options.frozen_frames = 6;
   const auto out = Run(options);
-  for (int f = 700; f < 760; ++f) EXPECT_NE(out[static_cast<size_t>(f)].reason[static_cast<size_t>(m)], MaskReason::kFrozen) << f;
+  for (int f = 700; f < 760; ++f)
+    EXPECT_NE(out[static_cast<size_t>(f)].reason[static_cast<size_t>(m)], MaskReason::kFrozen) << f;
 }
 
 TEST_F(OutlierDetectorTest, FallenOffMarkerIsClassifiedAndExcluded) {
   const int m = Marker("RUPA2");
-  for (int f = 300; f < static_cast<int>(frames_.size()); ++f) Sample(f, m) = Vec3(Truth(299, m).x(), 0.0, Truth(299, m).z());
+  for (int f = 300; f < static_cast<int>(frames_.size()); ++f)
+    Sample(f, m) = Vec3(Truth(299, m).x(), 0.0, Truth(299, m).z());
   const auto out = Run(CleanupOptions{});
   // At first it is only a marker that stopped (frozen) or fits badly (residual); lying
   // far off for long makes it fallen off.
@@ -138,18 +147,21 @@ TEST_F(OutlierDetectorTest, StraySampleLeavesTheReferenceOfAnOccludedSegment) {
   const int stray = Marker("RTOE1"), good = Marker("RTOE2");
   for (int f = 300; f < 420; ++f) {
     Sample(f, stray) += Vec3(0.0, 0.5, 0.0);
-    for (const char* name : {"RFOT1", "RFOT2", "RFOT3"}) Sample(f, Marker(name)) = Vec3::Constant(kNaN);
+    for (const char* name : {"RFOT1", "RFOT2", "RFOT3"})
+      Sample(f, Marker(name)) = Vec3::Constant(kNaN);
   }
   auto good_marker_rejected = [&](int stray_frames) {
     CleanupOptions options;
     options.stray_frames = stray_frames;
     const auto out = Run(options);
     int rejected = 0;
-    for (int f = 330; f < 420; ++f) rejected += out[static_cast<size_t>(f)].status[static_cast<size_t>(good)] != MarkerStatus::kObserved;
+    for (int f = 330; f < 420; ++f)
+      rejected +=
+          out[static_cast<size_t>(f)].status[static_cast<size_t>(good)] != MarkerStatus::kObserved;
     return rejected;
   };
   EXPECT_LT(good_marker_rejected(CleanupOptions{}.stray_frames), 5);  // measured 0 of 90 frames
-  EXPECT_GT(good_marker_rejected(100000), 20);                       // without the rule: 90
+  EXPECT_GT(good_marker_rejected(100000), 20);                        // without the rule: 90
 }
 
 TEST_F(OutlierDetectorTest, ArmThatMovedWhileOccludedIsReacquired) {
@@ -161,18 +173,25 @@ TEST_F(OutlierDetectorTest, ArmThatMovedWhileOccludedIsReacquired) {
   const auto shoulder = static_cast<size_t>(fixture_.skeleton->FindJoint("LeftArm")->value);
   const auto elbow = static_cast<size_t>(fixture_.skeleton->FindJoint("LeftForeArm")->value);
   for (size_t f = 300; f < bent.size(); ++f) {
-    bent[f].rotation[shoulder] = bent[f].rotation[shoulder] * Quat(Eigen::AngleAxisd(M_PI / 2, Vec3::UnitX()));
-    bent[f].rotation[elbow] = bent[f].rotation[elbow] * Quat(Eigen::AngleAxisd(150.0 * M_PI / 180.0, Vec3::UnitZ()));
+    bent[f].rotation[shoulder] =
+        bent[f].rotation[shoulder] * Quat(Eigen::AngleAxisd(M_PI / 2, Vec3::UnitX()));
+    bent[f].rotation[elbow] =
+        bent[f].rotation[elbow] * Quat(Eigen::AngleAxisd(150.0 * M_PI / 180.0, Vec3::UnitZ()));
   }
   const C3dTake moved = SynthesizeMarkers(*fixture_.skeleton, *fixture_.markers, bent, 120.0);
-  const char* arm[] = {"LUPA1", "LUPA2", "LUPA3", "LELB", "LFRM1", "LFRM2", "LHND1", "LHND2", "LHND3"};
-  ASSERT_GT((moved.at(330, Marker("LHND1")) - Truth(330, Marker("LHND1"))).norm(), 0.3);  // far from the old path
+  const char* arm[] = {"LUPA1", "LUPA2", "LUPA3", "LELB", "LFRM1",
+                       "LFRM2", "LHND1", "LHND2", "LHND3"};
+  ASSERT_GT((moved.at(330, Marker("LHND1")) - Truth(330, Marker("LHND1"))).norm(),
+            0.3);  // far from the old path
   for (int f = 250; f < static_cast<int>(frames_.size()); ++f)
-    for (const char* name : arm) Sample(f, Marker(name)) = f < 330 ? Vec3::Constant(kNaN) : moved.at(f, Marker(name));
+    for (const char* name : arm)
+      Sample(f, Marker(name)) = f < 330 ? Vec3::Constant(kNaN) : moved.at(f, Marker(name));
   const auto out = Run(CleanupOptions{});
   int observed = 0;
   for (int f = 360; f < 500; ++f)
-    for (const char* name : arm) observed += out[static_cast<size_t>(f)].status[static_cast<size_t>(Marker(name))] == MarkerStatus::kObserved;
+    for (const char* name : arm)
+      observed += out[static_cast<size_t>(f)].status[static_cast<size_t>(Marker(name))] ==
+                  MarkerStatus::kObserved;
   EXPECT_GT(observed, 9 * 140 * 95 / 100);
 }
 
@@ -182,7 +201,8 @@ class OutlierDetectorAloneTest : public CleanupFixture {
  protected:
   static constexpr int kLookahead = 4;
   OutlierDetectorAloneTest()
-      : window_(fixture_.markers->num_markers(), kLookahead + 3), dut_(*fixture_.skeleton, *fixture_.markers, options_) {}
+      : window_(fixture_.markers->num_markers(), kLookahead + 3),
+        dut_(*fixture_.skeleton, *fixture_.markers, options_) {}
   void Feed(int t) {
     WindowFrame& s = window_.at(t);
     s.frame = t;
@@ -210,7 +230,8 @@ TEST_F(OutlierDetectorAloneTest, MasksAPopAndWritesTheReferenceOfTheNewestFrame)
   for (int m = 0; m < fixture_.markers->num_markers(); ++m) {
     if (m == pop) continue;
     fine += s.mask[static_cast<size_t>(m)] == MaskReason::kNone;
-    EXPECT_LT((s.reference[static_cast<size_t>(m)] - Truth(300, m)).norm(), 0.01) << m;  // X^ is not pulled by the pop
+    EXPECT_LT((s.reference[static_cast<size_t>(m)] - Truth(300, m)).norm(), 0.01)
+        << m;  // X^ is not pulled by the pop
   }
   EXPECT_EQ(fine, fixture_.markers->num_markers() - 1);
   EXPECT_GT(counters_.solve_iterations, 0);

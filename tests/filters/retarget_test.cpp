@@ -5,8 +5,8 @@
 
 #include <gtest/gtest.h>
 
-#include "sim/humanoid.hpp"
 #include "formats/retarget_map.hpp"
+#include "sim/humanoid.hpp"
 #include "tests/support/allocation_counter.hpp"
 
 namespace mocapd {
@@ -20,7 +20,8 @@ std::shared_ptr<const Skeleton> Scaled(const Skeleton& sk, double factor) {
 
 double MaxRotationDifferenceDeg(const Pose& a, const Pose& b) {
   double worst = 0.0;
-  for (size_t j = 0; j < a.rotation.size(); ++j) worst = std::max(worst, a.rotation[j].angularDistance(b.rotation[j]) * 180.0 / M_PI);
+  for (size_t j = 0; j < a.rotation.size(); ++j)
+    worst = std::max(worst, a.rotation[j].angularDistance(b.rotation[j]) * 180.0 / M_PI);
   return worst;
 }
 
@@ -64,7 +65,8 @@ TEST_F(RetargetTest, AUniformlyScaledRigGetsTheSameJointAngles) {
     const Pose& out = r.Retarget(motion_[f]);
     if (f < 5) continue;
     worst = std::max(worst, MaxRotationDifferenceDeg(out, motion_[f]));
-    worst_root = std::max(worst_root, (out.translation[0] - 1.25 * motion_[f].translation[0]).norm());
+    worst_root =
+        std::max(worst_root, (out.translation[0] - 1.25 * motion_[f].translation[0]).norm());
   }
   EXPECT_LT(worst, 2.0);
   EXPECT_LT(worst_root, 0.01);
@@ -75,7 +77,8 @@ TEST_F(RetargetTest, APlantedFootDoesNotSlide) {
   // keep its feet still.
   std::vector<Joint> joints(source_->joints().begin(), source_->joints().end());
   for (Joint& j : joints)
-    if (j.name.find("Leg") != std::string::npos || j.name.find("Foot") != std::string::npos) j.offset *= 1.3;
+    if (j.name.find("Leg") != std::string::npos || j.name.find("Foot") != std::string::npos)
+      j.offset *= 1.3;
   const auto leggy = std::make_shared<const Skeleton>(std::move(joints));
   Retargeter r(source_, leggy, MakeRetargetMap(*source_, {}, *leggy, {}), RetargetOptions{});
   const int ankle = leggy->FindJoint("LeftFoot")->value;
@@ -92,7 +95,9 @@ TEST_F(RetargetTest, APlantedFootDoesNotSlide) {
       start = ankle_at;
       ++contacts;
     }
-    if (planted) worst_slide = std::max(worst_slide, Vec3(ankle_at - start).cwiseProduct(Vec3(1, 0, 1)).norm());
+    if (planted)
+      worst_slide =
+          std::max(worst_slide, Vec3(ankle_at - start).cwiseProduct(Vec3(1, 0, 1)).norm());
     was = planted;
   }
   EXPECT_GE(contacts, 1);  // the procedural walk skates; its short true contacts count
@@ -101,10 +106,13 @@ TEST_F(RetargetTest, APlantedFootDoesNotSlide) {
 
 TEST_F(RetargetTest, TheMapReportsWhatMatchedAndRefusesUnknownOverrides) {
   const RetargetMap map = MakeRetargetMap(*source_, {}, *source_, {});
-  EXPECT_NE(map.report.find("hand_l: LeftHand -> LeftHand (position)"), std::string::npos) << map.report;
+  EXPECT_NE(map.report.find("hand_l: LeftHand -> LeftHand (position)"), std::string::npos)
+      << map.report;
   EXPECT_NE(map.report.find("chest:"), std::string::npos) << map.report;
-  EXPECT_THROW(MakeRetargetMap(*source_, {}, *source_, {}, {{"hand_l", "NoSuchJoint"}}), std::invalid_argument);
-  EXPECT_THROW(MakeRetargetMap(*source_, {}, *source_, {}, {{"tail", "Hips"}}), std::invalid_argument);
+  EXPECT_THROW(MakeRetargetMap(*source_, {}, *source_, {}, {{"hand_l", "NoSuchJoint"}}),
+               std::invalid_argument);
+  EXPECT_THROW(MakeRetargetMap(*source_, {}, *source_, {}, {{"tail", "Hips"}}),
+               std::invalid_argument);
 }
 
 TEST_F(RetargetTest, ARetargetedFrameAllocatesNothing) {

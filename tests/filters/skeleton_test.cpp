@@ -8,7 +8,8 @@
 namespace mocapd {
 namespace {
 
-Joint MakeJoint(const std::string& name, int parent, Vec3 offset, JointType type = JointType::kBall) {
+Joint MakeJoint(const std::string& name, int parent, Vec3 offset,
+                JointType type = JointType::kBall) {
   Joint j;
   j.name = name;
   j.parent = JointIndex(parent);
@@ -21,7 +22,8 @@ Joint MakeJoint(const std::string& name, int parent, Vec3 offset, JointType type
 Skeleton MakeArm() {
   Joint hinge = MakeJoint("lower", 1, Vec3(1, 0, 0), JointType::kHinge);
   hinge.hinge_axis = Vec3::UnitZ();
-  return Skeleton({MakeJoint("root", -1, Vec3::Zero(), JointType::kFree), MakeJoint("upper", 0, Vec3(0, 1, 0)), hinge});
+  return Skeleton({MakeJoint("root", -1, Vec3::Zero(), JointType::kFree),
+                   MakeJoint("upper", 0, Vec3(0, 1, 0)), hinge});
 }
 
 TEST(SkeletonTest, CountsDofsPerJointType) {
@@ -44,12 +46,14 @@ TEST(SkeletonTest, RejectsInvalidSkeletons) {
     EXPECT_NE(std::string(e.what()).find("'a' is repeated"), std::string::npos);
   }
   try {
-    Skeleton({MakeJoint("a", -1, Vec3::Zero()), MakeJoint("b", 2, Vec3::Zero()), MakeJoint("c", 0, Vec3::Zero())});
+    Skeleton({MakeJoint("a", -1, Vec3::Zero()), MakeJoint("b", 2, Vec3::Zero()),
+              MakeJoint("c", 0, Vec3::Zero())});
     FAIL();
   } catch (const std::invalid_argument& e) {
     EXPECT_NE(std::string(e.what()).find("'b' has parent index 2"), std::string::npos);
   }
-  EXPECT_THROW(Skeleton({MakeJoint("a", -1, Vec3::Zero()), MakeJoint("b", -1, Vec3::Zero())}), std::invalid_argument);
+  EXPECT_THROW(Skeleton({MakeJoint("a", -1, Vec3::Zero()), MakeJoint("b", -1, Vec3::Zero())}),
+               std::invalid_argument);
   Joint bad_hinge = MakeJoint("h", 0, Vec3::Zero(), JointType::kHinge);
   bad_hinge.hinge_axis = Vec3(1, 1, 0);
   EXPECT_THROW(Skeleton({MakeJoint("a", -1, Vec3::Zero()), bad_hinge}), std::invalid_argument);

@@ -23,7 +23,8 @@ std::string ReadText(const std::string& path) {
 
 Quat Euler(std::initializer_list<std::pair<int, double>> axes_deg) {
   Quat q = Quat::Identity();
-  for (const auto& [axis, deg] : axes_deg) q = q * Quat(Eigen::AngleAxisd(deg * M_PI / 180.0, Vec3::Unit(axis)));
+  for (const auto& [axis, deg] : axes_deg)
+    q = q * Quat(Eigen::AngleAxisd(deg * M_PI / 180.0, Vec3::Unit(axis)));
   return q;
 }
 
@@ -70,7 +71,8 @@ TEST(BvhTest, WriteThenReadReproducesGlobalPositions) {
   EXPECT_EQ(again.units, original.units);
   const auto a = GlobalPositions(original), b = GlobalPositions(again);
   for (size_t f = 0; f < a.size(); ++f)
-    for (size_t j = 0; j < a[f].size(); ++j) EXPECT_LT((a[f][j] - b[f][j]).norm() / original.metres_per_unit, 1e-6);
+    for (size_t j = 0; j < a[f].size(); ++j)
+      EXPECT_LT((a[f][j] - b[f][j]).norm() / original.metres_per_unit, 1e-6);
 }
 
 TEST(BvhTest, HumanoidMotionRoundTripsThroughBvh) {
@@ -81,7 +83,8 @@ TEST(BvhTest, HumanoidMotionRoundTripsThroughBvh) {
   EXPECT_EQ(again.skeleton.joint(0).type, JointType::kFree);
   const auto a = GlobalPositions(take), b = GlobalPositions(again);
   for (size_t f = 0; f < a.size(); ++f)
-    for (size_t j = 0; j < a[f].size(); ++j) ASSERT_LT((a[f][j] - b[f][j]).norm(), 1e-6) << f << " " << j;
+    for (size_t j = 0; j < a[f].size(); ++j)
+      ASSERT_LT((a[f][j] - b[f][j]).norm(), 1e-6) << f << " " << j;
 }
 
 TEST(BvhTest, UnitsCanBeForced) {
@@ -107,9 +110,12 @@ TEST(BvhTest, MalformedFilesGetErrorsNamingTheLine) {
   ExpectError("", "bad.bvh:1: unexpected end of file, expected HIERARCHY");
   ExpectError("HIERARCHIE", "bad.bvh:1: expected 'HIERARCHY', found 'HIERARCHIE'");
   ExpectError("HIERARCHY\nROOT a\n{\n  OFFSET 0 0\n", "bad.bvh:");
-  ExpectError("HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\nCHANNELS 3 Xrotation Qrotation Zrotation\n}\n", "bad.bvh:5: unknown channel");
-  ExpectError("HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\nCHANNELS 2 Xrotation Yrotation\n}\nMOTION\nFrames: 0\nFrame Time: 0.1\n",
-              "unsupported channel set");
+  ExpectError("HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\nCHANNELS 3 Xrotation Qrotation Zrotation\n}\n",
+              "bad.bvh:5: unknown channel");
+  ExpectError(
+      "HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\nCHANNELS 2 Xrotation Yrotation\n}\nMOTION\nFrames: "
+      "0\nFrame Time: 0.1\n",
+      "unsupported channel set");
   ExpectError("HIERARCHY\nROOT a\n{\nOFFSET 0 x 0\n}\n", "bad.bvh:4: expected a number");
   std::string truncated = good.substr(0, good.rfind("20 89"));
   ExpectError(truncated, "frame 3 of 3 is truncated");

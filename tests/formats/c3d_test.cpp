@@ -19,7 +19,8 @@ C3dTake MakeTake(int points, int frames) {
   std::uniform_real_distribution<double> u(-1500.0, 1500.0);
   for (int f = 0; f < frames; ++f) {
     for (int p = 0; p < points; ++p) {
-      const size_t i = static_cast<size_t>(f) * static_cast<size_t>(points) + static_cast<size_t>(p);
+      const size_t i =
+          static_cast<size_t>(f) * static_cast<size_t>(points) + static_cast<size_t>(p);
       if ((f + p) % 7 == 3) continue;  // missing
       // Values on a 0.1 mm grid so integer storage is exact too.
       take.positions[i] = Vec3(std::round(u(rng)), std::round(u(rng)), std::round(u(rng))) * 1e-4;
@@ -59,7 +60,8 @@ TEST(C3dTest, FloatIntelWriteThenReadIsExact) {
 
 TEST(C3dTest, ReadsDecMipsAndIntegerFiles) {
   const C3dTake take = MakeTake(5, 12);
-  for (auto processor : {C3dEncoding::Processor::kIntel, C3dEncoding::Processor::kDec, C3dEncoding::Processor::kMips}) {
+  for (auto processor : {C3dEncoding::Processor::kIntel, C3dEncoding::Processor::kDec,
+                         C3dEncoding::Processor::kMips}) {
     for (bool integer : {false, true}) {
       C3dEncoding encoding;
       encoding.processor = processor;
@@ -156,7 +158,9 @@ TEST(C3dTest, FramesWithNothingToStoreAreRejectedNotWalked) {
     ParseC3d(EncodeC3d(empty), "empty.c3d");
     FAIL();
   } catch (const C3dError& e) {
-    EXPECT_NE(std::string(e.what()).find("40000 frames declared but no points or analog channels"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("40000 frames declared but no points or analog channels"),
+              std::string::npos)
+        << e.what();
   }
 }
 
@@ -167,7 +171,9 @@ TEST(C3dTest, BadHeaderKeyIsReported) {
     ParseC3d(bytes, "x.c3d");
     FAIL();
   } catch (const C3dError& e) {
-    EXPECT_NE(std::string(e.what()).find("header section, byte 1: expected key byte 0x50"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("header section, byte 1: expected key byte 0x50"),
+              std::string::npos)
+        << e.what();
   }
 }
 

@@ -25,16 +25,23 @@ Skeleton Renamed(const std::map<std::string, std::string>& names) {
 }
 
 const std::map<std::string, std::string> kBandai = {
-    {"LeftShoulder", "Shoulder_L"}, {"LeftArm", "UpperArm_L"},   {"LeftForeArm", "LowerArm_L"}, {"LeftHand", "Hand_L"},
-    {"RightShoulder", "Shoulder_R"}, {"RightArm", "UpperArm_R"}, {"RightForeArm", "LowerArm_R"}, {"RightHand", "Hand_R"},
-    {"LeftUpLeg", "UpperLeg_L"},    {"LeftLeg", "LowerLeg_L"},   {"LeftFoot", "Foot_L"},         {"LeftToeBase", "Toes_L"},
-    {"RightUpLeg", "UpperLeg_R"},   {"RightLeg", "LowerLeg_R"},  {"RightFoot", "Foot_R"},        {"RightToeBase", "Toes_R"}};
+    {"LeftShoulder", "Shoulder_L"}, {"LeftArm", "UpperArm_L"},       {"LeftForeArm", "LowerArm_L"},
+    {"LeftHand", "Hand_L"},         {"RightShoulder", "Shoulder_R"}, {"RightArm", "UpperArm_R"},
+    {"RightForeArm", "LowerArm_R"}, {"RightHand", "Hand_R"},         {"LeftUpLeg", "UpperLeg_L"},
+    {"LeftLeg", "LowerLeg_L"},      {"LeftFoot", "Foot_L"},          {"LeftToeBase", "Toes_L"},
+    {"RightUpLeg", "UpperLeg_R"},   {"RightLeg", "LowerLeg_R"},      {"RightFoot", "Foot_R"},
+    {"RightToeBase", "Toes_R"}};
 const std::map<std::string, std::string> kUnreal = {
-    {"Hips", "pelvis"},          {"Spine", "spine_01"},        {"Chest", "spine_02"},         {"Neck", "neck_01"},
-    {"Head", "head"},            {"LeftShoulder", "clavicle_l"}, {"LeftArm", "upperarm_l"},   {"LeftForeArm", "lowerarm_l"},
-    {"LeftHand", "hand_l"},      {"RightShoulder", "clavicle_r"}, {"RightArm", "upperarm_r"}, {"RightForeArm", "lowerarm_r"},
-    {"RightHand", "hand_r"},     {"LeftUpLeg", "thigh_l"},     {"LeftLeg", "calf_l"},         {"LeftFoot", "foot_l"},
-    {"LeftToeBase", "ball_l"},   {"RightUpLeg", "thigh_r"},    {"RightLeg", "calf_r"},        {"RightFoot", "foot_r"},
+    {"Hips", "pelvis"},         {"Spine", "spine_01"},
+    {"Chest", "spine_02"},      {"Neck", "neck_01"},
+    {"Head", "head"},           {"LeftShoulder", "clavicle_l"},
+    {"LeftArm", "upperarm_l"},  {"LeftForeArm", "lowerarm_l"},
+    {"LeftHand", "hand_l"},     {"RightShoulder", "clavicle_r"},
+    {"RightArm", "upperarm_r"}, {"RightForeArm", "lowerarm_r"},
+    {"RightHand", "hand_r"},    {"LeftUpLeg", "thigh_l"},
+    {"LeftLeg", "calf_l"},      {"LeftFoot", "foot_l"},
+    {"LeftToeBase", "ball_l"},  {"RightUpLeg", "thigh_r"},
+    {"RightLeg", "calf_r"},     {"RightFoot", "foot_r"},
     {"RightToeBase", "ball_r"}};
 
 std::map<std::string, std::string> Mixamo() {
@@ -49,9 +56,12 @@ TEST(MarkerLayoutTest, MatchesRolesAcrossNamingSchemes) {
     const Skeleton sk = Renamed(names);
     const HumanoidRoles roles = MatchHumanoidRoles(sk);
     SCOPED_TRACE(roles.Describe(sk));
-    EXPECT_EQ(sk.joint(roles.joint_of_role.at("thigh_l")).name, names.empty() ? "LeftUpLeg" : names.at("LeftUpLeg"));
-    EXPECT_EQ(sk.joint(roles.joint_of_role.at("forearm_r")).name, names.empty() ? "RightForeArm" : names.at("RightForeArm"));
-    EXPECT_EQ(sk.joint(roles.joint_of_role.at("toe_l")).name, names.empty() ? "LeftToeBase" : names.at("LeftToeBase"));
+    EXPECT_EQ(sk.joint(roles.joint_of_role.at("thigh_l")).name,
+              names.empty() ? "LeftUpLeg" : names.at("LeftUpLeg"));
+    EXPECT_EQ(sk.joint(roles.joint_of_role.at("forearm_r")).name,
+              names.empty() ? "RightForeArm" : names.at("RightForeArm"));
+    EXPECT_EQ(sk.joint(roles.joint_of_role.at("toe_l")).name,
+              names.empty() ? "LeftToeBase" : names.at("LeftToeBase"));
     EXPECT_EQ(roles.joint_of_role.at("pelvis"), 0);
     EXPECT_EQ(roles.spine_chain.size(), 2u);
   }
@@ -81,15 +91,18 @@ TEST(MarkerLayoutTest, DefaultLayoutIsProductionLike) {
   // >= 3 markers carried by every major segment (blends count for both joints).
   std::map<int, int> per_joint;
   for (const MarkerDefinition& m : dut.markers())
-    for (int k = 0; k < m.num_attachments; ++k) ++per_joint[m.attachments[static_cast<size_t>(k)].joint];
-  for (const char* role : {"pelvis", "chest", "head", "upper_arm_l", "upper_arm_r", "forearm_l", "forearm_r", "hand_l", "hand_r",
-                           "thigh_l", "thigh_r", "shin_l", "shin_r", "foot_l", "foot_r"})
+    for (int k = 0; k < m.num_attachments; ++k)
+      ++per_joint[m.attachments[static_cast<size_t>(k)].joint];
+  for (const char* role :
+       {"pelvis", "chest", "head", "upper_arm_l", "upper_arm_r", "forearm_l", "forearm_r", "hand_l",
+        "hand_r", "thigh_l", "thigh_r", "shin_l", "shin_r", "foot_l", "foot_r"})
     EXPECT_GE(per_joint[roles.joint_of_role.at(role)], 3) << role;
   // 3-8 cm off the bone: measured from the segment's axis in the rest pose.
   KinematicsWorkspace rest(sk);
   ForwardKinematics(sk, RestPose(sk), &rest);
   const auto layout = DefaultMarkerLayout();
-  for (const LayoutMarker& lm : layout) EXPECT_TRUE(lm.radius_m >= 0.03 && lm.radius_m <= 0.08) << lm.name;
+  for (const LayoutMarker& lm : layout)
+    EXPECT_TRUE(lm.radius_m >= 0.03 && lm.radius_m <= 0.08) << lm.name;
   // Not mirror-symmetric: no left marker sits at the mirror image of its right twin.
   for (int m = 0; m < dut.num_markers(); ++m) {
     const std::string& name = dut.marker(m).name;
@@ -124,9 +137,11 @@ TEST(MarkerLayoutTest, DocumentedExampleLayoutPlacesOnTheHumanoid) {
 TEST(MarkerLayoutTest, ReadsLayoutFilesAndReportsBadFields) {
   const std::string dir = testing::TempDir("layout");
   {
-    std::ofstream(dir + "/good.toml") << "[[marker]]\nname = \"A\"\nsegment = \"thigh_l\"\nalong = 0.3\nangle_deg = 45\nradius_m = 0.06\n"
+    std::ofstream(dir + "/good.toml") << "[[marker]]\nname = \"A\"\nsegment = \"thigh_l\"\nalong = "
+                                         "0.3\nangle_deg = 45\nradius_m = 0.06\n"
                                          "[[marker]]\nname = \"B\"\nsegment = \"Head\"\n";
-    std::ofstream(dir + "/bad.toml") << "[[marker]]\nname = \"A\"\nsegment = \"thigh_l\"\nradius_m = 3.0\n";
+    std::ofstream(dir + "/bad.toml")
+        << "[[marker]]\nname = \"A\"\nsegment = \"thigh_l\"\nradius_m = 3.0\n";
     std::ofstream(dir + "/syntax.toml") << "[[marker]\nname = \n";
   }
   const auto layout = ReadMarkerLayout(dir + "/good.toml");
@@ -138,7 +153,9 @@ TEST(MarkerLayoutTest, ReadsLayoutFilesAndReportsBadFields) {
     ReadMarkerLayout(dir + "/bad.toml");
     FAIL();
   } catch (const std::runtime_error& e) {
-    EXPECT_NE(std::string(e.what()).find("bad.toml:4: field 'marker[0].radius_m': must be in [0, 0.999], got 3"), std::string::npos)
+    EXPECT_NE(std::string(e.what()).find(
+                  "bad.toml:4: field 'marker[0].radius_m': must be in [0, 0.999], got 3"),
+              std::string::npos)
         << e.what();
   }
   try {
@@ -152,9 +169,13 @@ TEST(MarkerLayoutTest, ReadsLayoutFilesAndReportsBadFields) {
 // A typo or a wrong type in a layout must stop the reader, never turn into a default.
 TEST(MarkerLayoutTest, UnknownKeysAndWrongTypesNameFileLineAndField) {
   const std::string dir = testing::TempDir("layout_strict");
-  std::ofstream(dir + "/typo.toml") << "[[marker]]\nname = \"A\"\nsegment = \"thigh_l\"\nradius = 0.06\n";
-  std::ofstream(dir + "/type.toml") << "[[marker]]\nname = \"A\"\nsegment = \"thigh_l\"\n\n[[marker]]\nname = \"B\"\nsegment = \"Head\"\nalong = \"0.4\"\n";
-  std::ofstream(dir + "/top.toml") << "version = 3\n[[marker]]\nname = \"A\"\nsegment = \"thigh_l\"\n";
+  std::ofstream(dir + "/typo.toml")
+      << "[[marker]]\nname = \"A\"\nsegment = \"thigh_l\"\nradius = 0.06\n";
+  std::ofstream(dir + "/type.toml")
+      << "[[marker]]\nname = \"A\"\nsegment = \"thigh_l\"\n\n[[marker]]\nname = \"B\"\nsegment = "
+         "\"Head\"\nalong = \"0.4\"\n";
+  std::ofstream(dir + "/top.toml")
+      << "version = 3\n[[marker]]\nname = \"A\"\nsegment = \"thigh_l\"\n";
   auto error_of = [&](const std::string& file) {
     try {
       ReadMarkerLayout(dir + "/" + file);
@@ -164,7 +185,8 @@ TEST(MarkerLayoutTest, UnknownKeysAndWrongTypesNameFileLineAndField) {
     return std::string("no error");
   };
   EXPECT_EQ(error_of("typo.toml"), dir + "/typo.toml:4: field 'marker[0].radius': unknown field");
-  EXPECT_EQ(error_of("type.toml"), dir + "/type.toml:8: field 'marker[1].along': expected a number");
+  EXPECT_EQ(error_of("type.toml"),
+            dir + "/type.toml:8: field 'marker[1].along': expected a number");
   EXPECT_EQ(error_of("top.toml"), dir + "/top.toml:1: field 'version': unknown field");
 }
 

@@ -29,7 +29,9 @@ TEST(SubjectFileTest, WriteThenReadReproducesTheModel) {
   ForwardKinematics(*dut.skeleton, f.motion[3], &b);
   for (int m = 0; m < f.markers->num_markers(); ++m) {
     EXPECT_EQ(dut.markers->marker(m).num_attachments, f.markers->marker(m).num_attachments);
-    EXPECT_LT((EvaluateMarker(dut.markers->marker(m), b) - EvaluateMarker(f.markers->marker(m), a)).norm(), 1e-8);
+    EXPECT_LT((EvaluateMarker(dut.markers->marker(m), b) - EvaluateMarker(f.markers->marker(m), a))
+                  .norm(),
+              1e-8);
   }
   EXPECT_NEAR(dut.fit_rms_m[0], 0.00025, 1e-12);
 }
@@ -44,16 +46,25 @@ void ExpectError(const std::string& text, const std::string& expected) {
 }
 
 TEST(SubjectFileTest, BadFilesNameTheLineAndField) {
-  const std::string head = "format_version = 1\n[[joint]]\nname = \"root\"\ntype = \"free\"\noffset = [0, 0, 0]\n";
+  const std::string head =
+      "format_version = 1\n[[joint]]\nname = \"root\"\ntype = \"free\"\noffset = [0, 0, 0]\n";
   const std::string marker = "[[marker]]\nname = \"m\"\njoint = \"root\"\noffset = [0, 0.1, 0]\n";
   ExpectError("format_version = 2\n", "field 'format_version': expected 1, found 2");
   ExpectError("format_version = 1\n", "field 'joint'");
-  ExpectError(head + "[[joint]]\nname = \"a\"\nparent = \"nope\"\noffset = [0, 0, 0]\n" + marker, "s.toml:8: field 'joint[1].parent'");
-  ExpectError(head + "[[joint]]\nname = \"a\"\nparent = \"root\"\ntype = \"spring\"\noffset = [0, 0, 0]\n" + marker, "joint[1].type");
-  ExpectError(head + "[[joint]]\nname = \"a\"\nparent = \"root\"\noffset = [0, 0]\n" + marker, "joint[1].offset");
+  ExpectError(head + "[[joint]]\nname = \"a\"\nparent = \"nope\"\noffset = [0, 0, 0]\n" + marker,
+              "s.toml:8: field 'joint[1].parent'");
+  ExpectError(
+      head + "[[joint]]\nname = \"a\"\nparent = \"root\"\ntype = \"spring\"\noffset = [0, 0, 0]\n" +
+          marker,
+      "joint[1].type");
+  ExpectError(head + "[[joint]]\nname = \"a\"\nparent = \"root\"\noffset = [0, 0]\n" + marker,
+              "joint[1].offset");
   ExpectError(head, "field 'marker'");
-  ExpectError(head + "[[marker]]\nname = \"m\"\njoint = \"elbow\"\noffset = [0, 0, 0]\n", "s.toml:8: field 'marker[0].joint': unknown joint 'elbow'");
-  ExpectError(head + "[[marker]]\nname = \"m\"\njoint = \"root\"\noffset = [0, 0, 0]\nparent_weight = 0.5\nparent_offset = [0,0,0]\n",
+  ExpectError(head + "[[marker]]\nname = \"m\"\njoint = \"elbow\"\noffset = [0, 0, 0]\n",
+              "s.toml:8: field 'marker[0].joint': unknown joint 'elbow'");
+  ExpectError(head +
+                  "[[marker]]\nname = \"m\"\njoint = \"root\"\noffset = [0, 0, 0]\nparent_weight = "
+                  "0.5\nparent_offset = [0,0,0]\n",
               "has no parent");
   ExpectError(head + marker + marker, "'m' is repeated");
   ExpectError("format_version = 1\n[[joint]\n", "s.toml:2");
@@ -62,20 +73,27 @@ TEST(SubjectFileTest, BadFilesNameTheLineAndField) {
 // A typo in a subject file must be an error, as it is in the daemon's config: a
 // misspelt field silently left at its default would solve the wrong skeleton.
 TEST(SubjectFileTest, UnknownKeysAndWrongTypesNameFileLineAndField) {
-  const std::string head = "format_version = 1\n[[joint]]\nname = \"root\"\ntype = \"free\"\noffset = [0, 0, 0]\n";
+  const std::string head =
+      "format_version = 1\n[[joint]]\nname = \"root\"\ntype = \"free\"\noffset = [0, 0, 0]\n";
   const std::string marker = "[[marker]]\nname = \"m\"\njoint = \"root\"\noffset = [0, 0.1, 0]\n";
-  ExpectError(head + "ofset = [0, 1, 0]\n" + marker, "s.toml:6: field 'joint[0].ofset': unknown field");
-  ExpectError(head + marker + "fit_rms_mm = \"0.2\"\n", "s.toml:10: field 'marker[0].fit_rms_mm': expected a number");
-  ExpectError(head + marker + "parent_weight = 0.5\n", "s.toml:10: field 'marker[0].parent_weight': the root joint");
-  ExpectError("format_version = 1\n[subject]\nname = \"a\"\nunits = \"cm\"\n" + head.substr(19) + marker,
-              "s.toml:4: field 'subject.units': unknown field");
+  ExpectError(head + "ofset = [0, 1, 0]\n" + marker,
+              "s.toml:6: field 'joint[0].ofset': unknown field");
+  ExpectError(head + marker + "fit_rms_mm = \"0.2\"\n",
+              "s.toml:10: field 'marker[0].fit_rms_mm': expected a number");
+  ExpectError(head + marker + "parent_weight = 0.5\n",
+              "s.toml:10: field 'marker[0].parent_weight': the root joint");
+  ExpectError(
+      "format_version = 1\n[subject]\nname = \"a\"\nunits = \"cm\"\n" + head.substr(19) + marker,
+      "s.toml:4: field 'subject.units': unknown field");
   ExpectError(head + marker + "[extra]\nx = 1\n", "s.toml:10: field 'extra': unknown field");
-  ExpectError(head + "[[joint]]\nname = \"a\"\nparent = \"root\"\noffset = [0, \"1\", 0]\n" + marker,
-              "s.toml:9: field 'joint[1].offset': expected finite numbers");
+  ExpectError(
+      head + "[[joint]]\nname = \"a\"\nparent = \"root\"\noffset = [0, \"1\", 0]\n" + marker,
+      "s.toml:9: field 'joint[1].offset': expected finite numbers");
 }
 
 TEST(SubjectFileTest, DocumentedExampleParses) {
-  const SubjectModel dut = ReadSubjectModel(std::string(MOCAPD_CONFIG_DIR) + "/subject.example.toml");
+  const SubjectModel dut =
+      ReadSubjectModel(std::string(MOCAPD_CONFIG_DIR) + "/subject.example.toml");
   EXPECT_EQ(dut.name, "example");
   EXPECT_EQ(dut.skeleton->num_joints(), 3);
   ASSERT_EQ(dut.markers->num_markers(), 3);
@@ -83,7 +101,9 @@ TEST(SubjectFileTest, DocumentedExampleParses) {
   EXPECT_NEAR(dut.fit_rms_m[0], 0.21e-3, 1e-12);
 }
 
-TEST(SubjectFileTest, MissingFileIsAClearError) { EXPECT_THROW(ReadSubjectModel("/nonexistent/s.toml"), std::runtime_error); }
+TEST(SubjectFileTest, MissingFileIsAClearError) {
+  EXPECT_THROW(ReadSubjectModel("/nonexistent/s.toml"), std::runtime_error);
+}
 
 }  // namespace
 }  // namespace mocapd

@@ -17,7 +17,8 @@ std::string ErrorOf(const std::function<void()>& read) {
 }
 
 TEST(TomlReaderTest, ReadsTypedFieldsWithDefaults) {
-  const toml::table doc = ParseToml("a = 1.5\nn = 3\nflag = true\nname = \"x\"\nv = [1, 2, 3]\n[sub]\nk = \"v\"\n", "t.toml");
+  const toml::table doc = ParseToml(
+      "a = 1.5\nn = 3\nflag = true\nname = \"x\"\nv = [1, 2, 3]\n[sub]\nk = \"v\"\n", "t.toml");
   TomlTable dut(doc, "", "t.toml");
   EXPECT_DOUBLE_EQ(dut.Number("a", 0, 0, 10), 1.5);
   EXPECT_DOUBLE_EQ(dut.Number("n", 0, 0, 10), 3.0);  // an integer is a number
@@ -31,24 +32,34 @@ TEST(TomlReaderTest, ReadsTypedFieldsWithDefaults) {
 }
 
 TEST(TomlReaderTest, WrongTypesAndRangesNameLineAndField) {
-  const toml::table doc = ParseToml("[pipeline]\nwindow = \"120\"\nlookahead = 2.5\nrate = 5000\nok = \"yes\"\n", "c.toml");
+  const toml::table doc = ParseToml(
+      "[pipeline]\nwindow = \"120\"\nlookahead = 2.5\nrate = 5000\nok = \"yes\"\n", "c.toml");
   TomlTable top(doc, "", "c.toml");
   TomlTable p = top.Table("pipeline");
-  EXPECT_EQ(ErrorOf([&] { p.Number("window", 0, 0, 1e6); }), "c.toml:2: field 'pipeline.window': expected a number");
-  EXPECT_EQ(ErrorOf([&] { p.Integer("lookahead", 0, 0, 100); }), "c.toml:3: field 'pipeline.lookahead': expected an integer");
-  EXPECT_EQ(ErrorOf([&] { p.Number("rate", 0, 1, 2000); }), "c.toml:4: field 'pipeline.rate': must be in [1, 2000], got 5000");
-  EXPECT_EQ(ErrorOf([&] { p.Bool("ok", false); }), "c.toml:5: field 'pipeline.ok': expected true or false");
-  EXPECT_EQ(ErrorOf([&] { p.Choice("ok", "a", {"a", "b"}); }), "c.toml:5: field 'pipeline.ok': expected a | b, got 'yes'");
+  EXPECT_EQ(ErrorOf([&] { p.Number("window", 0, 0, 1e6); }),
+            "c.toml:2: field 'pipeline.window': expected a number");
+  EXPECT_EQ(ErrorOf([&] { p.Integer("lookahead", 0, 0, 100); }),
+            "c.toml:3: field 'pipeline.lookahead': expected an integer");
+  EXPECT_EQ(ErrorOf([&] { p.Number("rate", 0, 1, 2000); }),
+            "c.toml:4: field 'pipeline.rate': must be in [1, 2000], got 5000");
+  EXPECT_EQ(ErrorOf([&] { p.Bool("ok", false); }),
+            "c.toml:5: field 'pipeline.ok': expected true or false");
+  EXPECT_EQ(ErrorOf([&] {
+              p.Choice("ok", "a", {"a", "b"});
+            }),
+            "c.toml:5: field 'pipeline.ok': expected a | b, got 'yes'");
 }
 
 TEST(TomlReaderTest, UnknownKeysAreErrorsInNestedTablesAndArraysOfTables) {
-  const toml::table doc = ParseToml("[[item]]\nname = \"a\"\n[[item]]\nname = \"b\"\nnmae = \"c\"\n", "l.toml");
+  const toml::table doc =
+      ParseToml("[[item]]\nname = \"a\"\n[[item]]\nname = \"b\"\nnmae = \"c\"\n", "l.toml");
   TomlTable top(doc, "", "l.toml");
   std::vector<TomlTable> items = top.Tables("item", true);
   ASSERT_EQ(items.size(), 2u);
   for (TomlTable& item : items) (void)item.String("name", "", true);
   EXPECT_NO_THROW(items[0].RejectUnknown());
-  EXPECT_EQ(ErrorOf([&] { items[1].RejectUnknown(); }), "l.toml:5: field 'item[1].nmae': unknown field");
+  EXPECT_EQ(ErrorOf([&] { items[1].RejectUnknown(); }),
+            "l.toml:5: field 'item[1].nmae': unknown field");
   EXPECT_NO_THROW(top.RejectUnknown());
   EXPECT_EQ(ErrorOf([&] { (void)top.Tables("missing", true); }),
             "l.toml:1: field 'missing': missing: expected one or more [[missing]] tables");
@@ -56,7 +67,8 @@ TEST(TomlReaderTest, UnknownKeysAreErrorsInNestedTablesAndArraysOfTables) {
 
 TEST(TomlReaderTest, SyntaxErrorsAndMissingFilesNameTheFile) {
   EXPECT_EQ(ErrorOf([] { (void)ParseToml("a = 1\nb = \n", "s.toml"); }).rfind("s.toml:2: ", 0), 0u);
-  EXPECT_EQ(ErrorOf([] { (void)ReadTomlFile("/nonexistent/x.toml"); }), "/nonexistent/x.toml: cannot open for reading");
+  EXPECT_EQ(ErrorOf([] { (void)ReadTomlFile("/nonexistent/x.toml"); }),
+            "/nonexistent/x.toml: cannot open for reading");
 }
 
 }  // namespace

@@ -7,7 +7,8 @@
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   try {
-    const mocapd::BvhTake take = mocapd::ParseBvh(std::string(reinterpret_cast<const char*>(data), size), "fuzz");
+    const mocapd::BvhTake take =
+        mocapd::ParseBvh(std::string(reinterpret_cast<const char*>(data), size), "fuzz");
     (void)mocapd::FormatBvh(take);
   } catch (const mocapd::BvhError&) {
   }

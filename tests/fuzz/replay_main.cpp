@@ -45,8 +45,8 @@ std::vector<std::vector<uint8_t>> Seeds() {
   skeleton.subject = "actor";
   skeleton.rotations.assign(3, mocapd::Quat::Identity());
   mocapd::protocol::EncodeSkeletonFrame(skeleton, &skeleton_bytes);
-  return {std::vector<uint8_t>(bvh.begin(), bvh.end()), mocapd::EncodeC3d(take), mocapd::EncodeC3d(take, dec), marker_bytes,
-          skeleton_bytes};
+  return {std::vector<uint8_t>(bvh.begin(), bvh.end()), mocapd::EncodeC3d(take),
+          mocapd::EncodeC3d(take, dec), marker_bytes, skeleton_bytes};
 }
 }  // namespace
 
@@ -74,7 +74,10 @@ int main(int argc, char** argv) {
         switch (rng() % 4) {
           case 0: bytes[at] = static_cast<uint8_t>(rng()); break;
           case 1: bytes.resize(at); break;
-          case 2: bytes.insert(bytes.begin() + static_cast<std::ptrdiff_t>(at), static_cast<uint8_t>(rng())); break;
+          case 2:
+            bytes.insert(bytes.begin() + static_cast<std::ptrdiff_t>(at),
+                         static_cast<uint8_t>(rng()));
+            break;
           default: bytes[at] ^= static_cast<uint8_t>(1u << (rng() % 8)); break;
         }
       }

@@ -23,7 +23,8 @@ TEST(ByteIoTest, RoundTripsEveryTypeInBothByteOrders) {
     uint64_t d;
     float e;
     double f;
-    ASSERT_TRUE(r.ReadU8(&a) && r.ReadI16(&b) && r.ReadU32(&c) && r.ReadU64(&d) && r.ReadF32(&e) && r.ReadF64(&f));
+    ASSERT_TRUE(r.ReadU8(&a) && r.ReadI16(&b) && r.ReadU32(&c) && r.ReadU64(&d) && r.ReadF32(&e) &&
+                r.ReadF64(&f));
     EXPECT_EQ(a, 0xab);
     EXPECT_EQ(b, -12345);
     EXPECT_EQ(c, 0xdeadbeefu);

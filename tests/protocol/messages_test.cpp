@@ -74,7 +74,8 @@ void ExpectEveryTruncationRejected(std::vector<uint8_t> bytes, Decode decode) {
   Message dut;
   for (size_t n = 0; n < bytes.size(); ++n) {
     const DecodeStatus s = decode(std::span<const uint8_t>(bytes.data(), n), &dut);
-    EXPECT_TRUE(s == DecodeStatus::kTooShort || s == DecodeStatus::kSizeMismatch) << n << " " << to_string(s);
+    EXPECT_TRUE(s == DecodeStatus::kTooShort || s == DecodeStatus::kSizeMismatch)
+        << n << " " << to_string(s);
   }
   bytes.push_back(0);
   EXPECT_EQ(decode(bytes, &dut), DecodeStatus::kSizeMismatch);
@@ -105,7 +106,8 @@ TEST(MessagesTest, HeaderIsLittleEndianWithMagicVersionTypeAndSize) {
   EXPECT_EQ(std::string(bytes.begin(), bytes.begin() + 4), "MCPD");
   EXPECT_EQ(bytes[4], 1);  // version
   EXPECT_EQ(bytes[6], 2);  // marker frame
-  const uint32_t payload = bytes[8] | (bytes[9] << 8) | (bytes[10] << 16) | (static_cast<uint32_t>(bytes[11]) << 24);
+  const uint32_t payload =
+      bytes[8] | (bytes[9] << 8) | (bytes[10] << 16) | (static_cast<uint32_t>(bytes[11]) << 24);
   EXPECT_EQ(payload, bytes.size() - kHeaderBytes);
 }
 
@@ -270,7 +272,8 @@ TEST(MessagesTest, EveryTruncationAndExtensionIsRejected) {
   MarkerFrameMessage dut;
   for (size_t n = 0; n < bytes.size(); ++n) {
     const DecodeStatus s = DecodeMarkerFrame(std::span<const uint8_t>(bytes.data(), n), &dut);
-    EXPECT_TRUE(s == DecodeStatus::kTooShort || s == DecodeStatus::kSizeMismatch) << n << " " << to_string(s);
+    EXPECT_TRUE(s == DecodeStatus::kTooShort || s == DecodeStatus::kSizeMismatch)
+        << n << " " << to_string(s);
   }
   bytes.push_back(0);
   EXPECT_EQ(DecodeMarkerFrame(bytes, &dut), DecodeStatus::kSizeMismatch);

@@ -6,8 +6,8 @@
 #include <sstream>
 
 #include "formats/bvh.hpp"
-#include "sim/humanoid.hpp"
 #include "formats/subject_file.hpp"
+#include "sim/humanoid.hpp"
 #include "sim/synthesis.hpp"
 #include "tests/support/test_takes.hpp"
 
@@ -18,7 +18,8 @@ TEST(CalibrateCommandTest, WritesASubjectWhoseMarkersMatchTheTruth) {
   const auto f = testing::MakeHumanoidFixture("mixed", 0.1, 120.0);
   const std::string dir = testing::TempDir("calibrate");
   // The skeleton's BVH at 30 Hz, the markers at 120 Hz: the command must resample.
-  const std::vector<Pose> motion30 = MakeHumanoidMotion(*f.skeleton, HumanoidMotion::kMixed, 9.0, 30.0);
+  const std::vector<Pose> motion30 =
+      MakeHumanoidMotion(*f.skeleton, HumanoidMotion::kMixed, 9.0, 30.0);
   const std::vector<Pose> motion = ResampleMotion(*f.skeleton, motion30, 30.0, 120.0);
   WriteBvh(dir + "/skel.bvh", MakeBvhTake(*f.skeleton, motion30, 1.0 / 30.0, "cm"));
   const C3dTake clean = SynthesizeMarkers(*f.skeleton, *f.markers, motion, 120.0);
@@ -29,8 +30,11 @@ TEST(CalibrateCommandTest, WritesASubjectWhoseMarkersMatchTheTruth) {
   take.Allocate(clean.num_frames);
   for (int fr = 0; fr < clean.num_frames; ++fr) {
     for (int p = 0; p < take.num_points(); ++p) {
-      take.at(fr, p) = p < clean.num_points() ? clean.at(fr, p) : Vec3(std::sin(fr * 0.37), 1.0 + std::cos(fr * 0.11), 0.0);
-      take.residuals[static_cast<size_t>(fr) * static_cast<size_t>(take.num_points()) + static_cast<size_t>(p)] = 0.0f;
+      take.at(fr, p) = p < clean.num_points()
+                           ? clean.at(fr, p)
+                           : Vec3(std::sin(fr * 0.37), 1.0 + std::cos(fr * 0.11), 0.0);
+      take.residuals[static_cast<size_t>(fr) * static_cast<size_t>(take.num_points()) +
+                     static_cast<size_t>(p)] = 0.0f;
     }
   }
   WriteC3d(dir + "/take.c3d", take);
@@ -55,7 +59,10 @@ TEST(CalibrateCommandTest, WritesASubjectWhoseMarkersMatchTheTruth) {
     for (int m = 0; m < f.markers->num_markers(); ++m) {
       const auto idx = model.markers->FindMarker(f.markers->marker(m).name);
       ASSERT_TRUE(idx.has_value());
-      EXPECT_LT((EvaluateMarker(model.markers->marker(idx->value), got) - EvaluateMarker(f.markers->marker(m), truth)).norm(), 1e-3)
+      EXPECT_LT((EvaluateMarker(model.markers->marker(idx->value), got) -
+                 EvaluateMarker(f.markers->marker(m), truth))
+                    .norm(),
+                1e-3)
           << f.markers->marker(m).name;
     }
   }
@@ -64,9 +71,12 @@ TEST(CalibrateCommandTest, WritesASubjectWhoseMarkersMatchTheTruth) {
 TEST(CalibrateCommandTest, RefusesTakesOfDifferentLengths) {
   const auto f = testing::MakeHumanoidFixture("walk", 2.0, 60.0);
   const std::string dir = testing::TempDir("calibrate_mismatch");
-  WriteBvh(dir + "/skel.bvh", MakeBvhTake(*f.skeleton, std::vector<Pose>(f.motion.begin(), f.motion.begin() + 50), 1.0 / 60.0));
+  WriteBvh(dir + "/skel.bvh",
+           MakeBvhTake(*f.skeleton, std::vector<Pose>(f.motion.begin(), f.motion.begin() + 50),
+                       1.0 / 60.0));
   WriteC3d(dir + "/take.c3d", f.take);
-  CalibrateCommandOptions options{dir + "/skel.bvh", dir + "/take.c3d", dir + "/out.toml", "", "", {}};
+  CalibrateCommandOptions options{
+      dir + "/skel.bvh", dir + "/take.c3d", dir + "/out.toml", "", "", {}};
   std::ostringstream out;
   try {
     RunCalibrateCommand(options, out);

@@ -58,46 +58,69 @@ TEST(DaemonConfigTest, ShippedDefaultParsesWithDocumentedValues) {
 }
 
 TEST(DaemonConfigTest, DemoSubjectFileIsTheBuiltInHumanoid) {
-  EXPECT_EQ(ReadText(std::string(MOCAPD_CONFIG_DIR) + "/demo_subject.toml"), FormatSubjectModel(MakeHumanoidSubject("actor1")))
+  EXPECT_EQ(ReadText(std::string(MOCAPD_CONFIG_DIR) + "/demo_subject.toml"),
+            FormatSubjectModel(MakeHumanoidSubject("actor1")))
       << "regenerate config/demo_subject.toml from MakeHumanoidSubject(\"actor1\")";
 }
 
 TEST(DaemonConfigTest, ErrorsNameFileLineAndField) {
   EXPECT_EQ(ErrorOf(kMinimal), "");
-  EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[input]\nendpont = \"tcp://127.0.0.1:1\"\n"), "test.toml:6: field 'input.endpont': unknown field");
-  EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[pipeline]\nlookahead = -3\n"), "test.toml:6: field 'pipeline.lookahead': must be in [0, 1000], got -3");
-  EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[input]\npattern = \"push\"\n"), "test.toml:6: field 'input.pattern': expected sub | pull, got 'push'");
-  EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[control]\nwatchdog_timeout_s = \"1s\"\n"), "test.toml:6: field 'control.watchdog_timeout_s': expected a number");
+  EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[input]\nendpont = \"tcp://127.0.0.1:1\"\n"),
+            "test.toml:6: field 'input.endpont': unknown field");
+  EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[pipeline]\nlookahead = -3\n"),
+            "test.toml:6: field 'pipeline.lookahead': must be in [0, 1000], got -3");
+  EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[input]\npattern = \"push\"\n"),
+            "test.toml:6: field 'input.pattern': expected sub | pull, got 'push'");
+  EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[control]\nwatchdog_timeout_s = \"1s\"\n"),
+            "test.toml:6: field 'control.watchdog_timeout_s': expected a number");
   EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[pipeline.detectors]\nspike_mm = 0.0\n"),
             "test.toml:6: field 'pipeline.detectors.spike_mm': must be in [1, 100000], got 0");
   EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[output]\nendpoint = \"udp://x\"\n"),
-            "test.toml:5: field 'output.endpoint': expected tcp://HOST:PORT, ipc://PATH or inproc://NAME, got 'udp://x'");
-  EXPECT_NE(ErrorOf("format_version = 1\n").find("field 'subject': no [[subject]] tables"), std::string::npos);
-  EXPECT_NE(ErrorOf("[[subject]]\nname = \"a\"\nmodel = \"demo_subject.toml\"\n").find("field 'format_version'"), std::string::npos);
-  EXPECT_NE(ErrorOf("format_version = 1\n[[subject]\n").find("test.toml:2:"), std::string::npos);  // TOML syntax
+            "test.toml:5: field 'output.endpoint': expected tcp://HOST:PORT, ipc://PATH or "
+            "inproc://NAME, got 'udp://x'");
+  EXPECT_NE(ErrorOf("format_version = 1\n").find("field 'subject': no [[subject]] tables"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf("[[subject]]\nname = \"a\"\nmodel = \"demo_subject.toml\"\n")
+                .find("field 'format_version'"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf("format_version = 1\n[[subject]\n").find("test.toml:2:"),
+            std::string::npos);  // TOML syntax
 }
 
 TEST(DaemonConfigTest, SubjectsAreValidatedOneByOne) {
-  EXPECT_EQ(ErrorOf("format_version = 1\n[[subject]]\nname = \"a/b\"\nmodel = \"demo_subject.toml\"\n"),
-            "test.toml:3: field 'subject[0].name': must be 1..63 characters without '/' or spaces");
-  EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[[subject]]\nname = \"actor1\"\nmodel = \"demo_subject.toml\"\n"),
+  EXPECT_EQ(
+      ErrorOf("format_version = 1\n[[subject]]\nname = \"a/b\"\nmodel = \"demo_subject.toml\"\n"),
+      "test.toml:3: field 'subject[0].name': must be 1..63 characters without '/' or spaces");
+  EXPECT_EQ(ErrorOf(std::string(kMinimal) +
+                    "[[subject]]\nname = \"actor1\"\nmodel = \"demo_subject.toml\"\n"),
             "test.toml:6: field 'subject[1].name': subject 'actor1' is listed twice");
-  const std::string missing = ErrorOf("format_version = 1\n[[subject]]\nname = \"a\"\nmodel = \"nope.toml\"\n");
+  const std::string missing =
+      ErrorOf("format_version = 1\n[[subject]]\nname = \"a\"\nmodel = \"nope.toml\"\n");
   EXPECT_NE(missing.find("test.toml:4: field 'subject[0].model':"), std::string::npos) << missing;
   EXPECT_NE(missing.find("nope.toml: cannot open"), std::string::npos) << missing;
-  EXPECT_EQ(ErrorOf("format_version = 1\n[[subject]]\nname = \"a\"\n"), "test.toml:2: field 'subject[0].model': missing");
-  EXPECT_EQ(ErrorOf(std::string(kMinimal) + "rate = 120\n"), "test.toml:5: field 'subject[0].rate': unknown field");
+  EXPECT_EQ(ErrorOf("format_version = 1\n[[subject]]\nname = \"a\"\n"),
+            "test.toml:2: field 'subject[0].model': missing");
+  EXPECT_EQ(ErrorOf(std::string(kMinimal) + "rate = 120\n"),
+            "test.toml:5: field 'subject[0].rate': unknown field");
 }
 
 TEST(DaemonConfigTest, NonLoopbackBindsMustBeAskedFor) {
   EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[output]\nendpoint = \"tcp://0.0.0.0:5556\"\n"),
-            "test.toml:6: field 'output.endpoint': binds a non-loopback address; set control.allow_remote = true to allow it");
-  EXPECT_NE(ErrorOf(std::string(kMinimal) + "[control]\nhttp_address = \"0.0.0.0\"\n").find("control.http_address"), std::string::npos);
-  EXPECT_NE(ErrorOf(std::string(kMinimal) + "[input]\npattern = \"pull\"\nendpoint = \"tcp://*:5555\"\n").find("input.endpoint"),
+            "test.toml:6: field 'output.endpoint': binds a non-loopback address; set "
+            "control.allow_remote = true to allow it");
+  EXPECT_NE(ErrorOf(std::string(kMinimal) + "[control]\nhttp_address = \"0.0.0.0\"\n")
+                .find("control.http_address"),
             std::string::npos);
+  EXPECT_NE(
+      ErrorOf(std::string(kMinimal) + "[input]\npattern = \"pull\"\nendpoint = \"tcp://*:5555\"\n")
+          .find("input.endpoint"),
+      std::string::npos);
   // Connecting a SUB to a remote capture publisher is fine: it binds nothing.
   EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[input]\nendpoint = \"tcp://10.0.0.5:5555\"\n"), "");
-  EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[output]\nendpoint = \"tcp://0.0.0.0:5556\"\n[control]\nallow_remote = true\n"), "");
+  EXPECT_EQ(
+      ErrorOf(std::string(kMinimal) +
+              "[output]\nendpoint = \"tcp://0.0.0.0:5556\"\n[control]\nallow_remote = true\n"),
+      "");
   EXPECT_TRUE(IsLocalEndpoint("ipc:///tmp/x"));
   EXPECT_TRUE(IsLocalEndpoint("tcp://[::1]:5"));
   EXPECT_FALSE(IsLocalEndpoint("tcp://*:5"));
@@ -107,27 +130,36 @@ TEST(DaemonConfigTest, ASubjectCanDriveACharacterFromABvh) {
   const std::string dir = testing::TempDir("config_character");
   const Skeleton humanoid = MakeHumanoidSkeleton(2.1);  // an ogre-sized character
   WriteBvh(dir + "/ogre.bvh", MakeBvhTake(humanoid, {RestPose(humanoid)}, 1.0 / 120.0, "cm"));
-  const std::string with = std::string(kMinimal) + "character = \"" + dir + "/ogre.bvh\"\ncharacter_joint_map = { head = \"Head\" }\n" +
+  const std::string with = std::string(kMinimal) + "character = \"" + dir +
+                           "/ogre.bvh\"\ncharacter_joint_map = { head = \"Head\" }\n" +
                            "[retarget]\ndamping = 0.05\ncontact_speed_m_s = 0.2\n";
   const DaemonConfig c = ParseDaemonConfig(with, "t.toml", MOCAPD_CONFIG_DIR);
   ASSERT_TRUE(c.subjects[0].character);
   EXPECT_EQ(c.subjects[0].character->num_joints(), humanoid.num_joints());
-  EXPECT_NEAR(c.subjects[0].character_map.target_leg_length_m / c.subjects[0].character_map.source_leg_length_m, 2.1 / 1.75, 0.01);
+  EXPECT_NEAR(c.subjects[0].character_map.target_leg_length_m /
+                  c.subjects[0].character_map.source_leg_length_m,
+              2.1 / 1.75, 0.01);
   EXPECT_DOUBLE_EQ(c.subjects[0].retarget.damping, 0.05);
   EXPECT_DOUBLE_EQ(c.subjects[0].retarget.contact_speed_m_s, 0.2);
-  const std::string missing = ErrorOf(std::string(kMinimal) + "character = \"" + dir + "/nope.bvh\"\n");
-  EXPECT_NE(missing.find("test.toml:5: field 'subject[0].character':"), std::string::npos) << missing;
-  const std::string bad_map =
-      ErrorOf(std::string(kMinimal) + "character = \"" + dir + "/ogre.bvh\"\ncharacter_joint_map = { hand_l = \"Paw\" }\n");
+  const std::string missing =
+      ErrorOf(std::string(kMinimal) + "character = \"" + dir + "/nope.bvh\"\n");
+  EXPECT_NE(missing.find("test.toml:5: field 'subject[0].character':"), std::string::npos)
+      << missing;
+  const std::string bad_map = ErrorOf(std::string(kMinimal) + "character = \"" + dir +
+                                      "/ogre.bvh\"\ncharacter_joint_map = { hand_l = \"Paw\" }\n");
   EXPECT_NE(bad_map.find("the character has no joint 'Paw'"), std::string::npos) << bad_map;
-  EXPECT_NE(ErrorOf(std::string(kMinimal) + "character_joint_map = { head = \"Head\" }\n").find("given without a character"),
+  EXPECT_NE(ErrorOf(std::string(kMinimal) + "character_joint_map = { head = \"Head\" }\n")
+                .find("given without a character"),
             std::string::npos);
 }
 
 TEST(DaemonConfigTest, ThresholdsAndOverridesReachThePipelineOptions) {
-  const DaemonConfig c = ParseDaemonConfig(std::string(kMinimal) + "lookahead = 3\nrate_hz = 240\n[pipeline.detectors]\nspike_mm = 45\n"
-                                                                     "disagreement_rotation_deg = 20\nstray_residual_mm = 150\nstray_frames = 24\n[pipeline]\nwindow = 60\n",
-                                           "t.toml", MOCAPD_CONFIG_DIR);
+  const DaemonConfig c =
+      ParseDaemonConfig(std::string(kMinimal) +
+                            "lookahead = 3\nrate_hz = 240\n[pipeline.detectors]\nspike_mm = 45\n"
+                            "disagreement_rotation_deg = 20\nstray_residual_mm = 150\nstray_frames "
+                            "= 24\n[pipeline]\nwindow = 60\n",
+                        "t.toml", MOCAPD_CONFIG_DIR);
   const CleanupOptions& o = c.subjects[0].cleanup;
   EXPECT_EQ(o.lookahead, 3);
   EXPECT_EQ(o.rate_hz, 240.0);
@@ -148,8 +180,10 @@ TEST(DaemonConfigTest, ShippedConfigDocumentsEveryCleanupOptionAtItsDefault) {
     if (f.section == nullptr) continue;
     const toml::node* node = doc.at_path(std::string(f.section) + "." + f.key).node();
     ASSERT_NE(node, nullptr) << f.section << "." << f.key << " is not in config/mocapd.toml";
-    const double code = std::visit([&](auto member) { return static_cast<double>(defaults.*member); }, f.member);
-    const double file = node->is_boolean() ? (*node->value<bool>() ? 1.0 : 0.0) : *node->value<double>() * f.to_si;
+    const double code =
+        std::visit([&](auto member) { return static_cast<double>(defaults.*member); }, f.member);
+    const double file =
+        node->is_boolean() ? (*node->value<bool>() ? 1.0 : 0.0) : *node->value<double>() * f.to_si;
     EXPECT_NEAR(file, code, 1e-12 * std::max(1.0, std::abs(code))) << f.section << "." << f.key;
     ++documented;
   }

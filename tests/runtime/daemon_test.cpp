@@ -12,17 +12,17 @@
 #include <boost/beast/http.hpp>
 #include <cmath>
 #include <cstring>
-#include <functional>
 #include <filesystem>
+#include <functional>
 #include <map>
 #include <thread>
 #include <zmq.hpp>
 
 #include "filters/pose_error.hpp"
-#include "sim/corruption.hpp"
-#include "sim/humanoid_subject.hpp"
 #include "formats/retarget_map.hpp"
 #include "formats/take_frames.hpp"
+#include "sim/corruption.hpp"
+#include "sim/humanoid_subject.hpp"
 #include "tests/support/test_takes.hpp"
 
 namespace mocapd {
@@ -53,7 +53,8 @@ DaemonConfig TestConfig(const std::string& input, const std::string& output, int
 // Runs a daemon on a thread for the length of a test.
 class RunningDaemon {
  public:
-  RunningDaemon(zmq::context_t& context, DaemonConfig config) : daemon_(std::move(config), "", &context) {
+  RunningDaemon(zmq::context_t& context, DaemonConfig config)
+      : daemon_(std::move(config), "", &context) {
     thread_ = std::thread([this] {
       try {
         daemon_.Run(false);
@@ -81,7 +82,8 @@ class RunningDaemon {
 // Everything the daemon publishes, decoded by kind, received on its own thread.
 class Subscriber {
  public:
-  Subscriber(zmq::context_t& context, const std::string& endpoint, bool read = true) : socket_(context, zmq::socket_type::sub) {
+  Subscriber(zmq::context_t& context, const std::string& endpoint, bool read = true)
+      : socket_(context, zmq::socket_type::sub) {
     socket_.set(zmq::sockopt::rcvhwm, 0);
     socket_.set(zmq::sockopt::subscribe, "");
     socket_.connect(endpoint);
@@ -130,15 +132,18 @@ class Subscriber {
         std::lock_guard lock(mutex);
         if (t.starts_with("skeleton/")) {
           protocol::SkeletonFrameMessage m;
-          if (protocol::DecodeSkeletonFrame(bytes, &m) != protocol::DecodeStatus::kOk) ++undecodable;
+          if (protocol::DecodeSkeletonFrame(bytes, &m) != protocol::DecodeStatus::kOk)
+            ++undecodable;
           skeletons[m.subject].push_back(std::move(m));
         } else if (t.starts_with("cleaned/")) {
           protocol::CleanedMarkersMessage m;
-          if (protocol::DecodeCleanedMarkers(bytes, &m) != protocol::DecodeStatus::kOk) ++undecodable;
+          if (protocol::DecodeCleanedMarkers(bytes, &m) != protocol::DecodeStatus::kOk)
+            ++undecodable;
           cleaned[m.subject].push_back(std::move(m));
         } else if (t.starts_with("subject/")) {
           protocol::SubjectDescriptionMessage m;
-          if (protocol::DecodeSubjectDescription(bytes, &m) != protocol::DecodeStatus::kOk) ++undecodable;
+          if (protocol::DecodeSubjectDescription(bytes, &m) != protocol::DecodeStatus::kOk)
+            ++undecodable;
           descriptions[m.subject] = m;
         } else if (t.starts_with("status/")) {
           ++statuses;
@@ -164,7 +169,8 @@ class Subscriber {
 // A capture sender: marker frames of a take, as the subject's model orders them.
 class Sender {
  public:
-  Sender(zmq::context_t& context, const std::string& endpoint, const C3dTake& take, const SubjectModel& model, zmq::socket_type type)
+  Sender(zmq::context_t& context, const std::string& endpoint, const C3dTake& take,
+         const SubjectModel& model, zmq::socket_type type)
       : socket_(context, type), take_(take), map_(*model.markers, take) {
     socket_.set(zmq::sockopt::linger, 5000);
     if (type == zmq::socket_type::pub) {
@@ -197,7 +203,8 @@ class Sender {
   std::vector<uint8_t> bytes_;
 };
 
-bool WaitForStats(Daemon& daemon, const std::function<bool(const DaemonStats&)>& done, std::chrono::milliseconds timeout = 20s) {
+bool WaitForStats(Daemon& daemon, const std::function<bool(const DaemonStats&)>& done,
+                  std::chrono::milliseconds timeout = 20s) {
   const auto end = std::chrono::steady_clock::now() + timeout;
   while (std::chrono::steady_clock::now() < end) {
     if (done(daemon.Stats())) return true;
@@ -207,18 +214,21 @@ bool WaitForStats(Daemon& daemon, const std::function<bool(const DaemonStats&)>&
 }
 
 // Mean global joint position error of published skeletons against the truth, metres.
-double MeanJointError(const std::vector<protocol::SkeletonFrameMessage>& frames, const testing::HumanoidFixture& f) {
+double MeanJointError(const std::vector<protocol::SkeletonFrameMessage>& frames,
+                      const testing::HumanoidFixture& f) {
   const Skeleton& sk = *f.skeleton;
   KinematicsWorkspace solved(sk), truth(sk);
   double sum = 0.0;
   int n = 0;
   for (const auto& m : frames) {
     Pose pose = RestPose(sk);
-    for (int j = 0; j < sk.num_joints(); ++j) pose.rotation[static_cast<size_t>(j)] = m.rotations[static_cast<size_t>(j)].normalized();
+    for (int j = 0; j < sk.num_joints(); ++j)
+      pose.rotation[static_cast<size_t>(j)] = m.rotations[static_cast<size_t>(j)].normalized();
     pose.translation[0] = m.root_translation;
     ForwardKinematics(sk, pose, &solved);
     ForwardKinematics(sk, f.motion[m.frame_number], &truth);
-    for (int j = 0; j < sk.num_joints(); ++j, ++n) sum += (solved.p_WJ[static_cast<size_t>(j)] - truth.p_WJ[static_cast<size_t>(j)]).norm();
+    for (int j = 0; j < sk.num_joints(); ++j, ++n)
+      sum += (solved.p_WJ[static_cast<size_t>(j)] - truth.p_WJ[static_cast<size_t>(j)]).norm();
   }
   return n > 0 ? sum / n : 1e9;
 }
@@ -252,7 +262,9 @@ TEST_P(DaemonTransportTest, EveryFrameOfACorruptedTakeComesOutSolved) {
   const int frames = corrupted.take.num_frames;
   for (int t = 0; t < frames; ++t) sender.Send(t, static_cast<uint64_t>(t));
   // All but the lookahead come out while running; the rest at shutdown.
-  ASSERT_TRUE(WaitForStats(*daemon, [&](const DaemonStats& s) { return s.messages_in == static_cast<uint64_t>(frames); }));
+  ASSERT_TRUE(WaitForStats(*daemon, [&](const DaemonStats& s) {
+    return s.messages_in == static_cast<uint64_t>(frames);
+  }));
   daemon.Stop();
   const DaemonStats stats = daemon->Stats();
   EXPECT_TRUE(stats.Balanced());
@@ -260,11 +272,13 @@ TEST_P(DaemonTransportTest, EveryFrameOfACorruptedTakeComesOutSolved) {
   EXPECT_EQ(stats.dropped_total(), 0u);
   // A frame's cleaned markers follow its skeleton on the socket: wait for both streams.
   ASSERT_TRUE(sub.WaitFor([&] {
-    return sub.skeletons["actor1"].size() == static_cast<size_t>(frames) && sub.cleaned["actor1"].size() == static_cast<size_t>(frames);
+    return sub.skeletons["actor1"].size() == static_cast<size_t>(frames) &&
+           sub.cleaned["actor1"].size() == static_cast<size_t>(frames);
   }));
   std::lock_guard lock(sub.mutex);
   const auto& skeletons = sub.skeletons["actor1"];
-  for (int t = 0; t < frames; ++t) ASSERT_EQ(skeletons[static_cast<size_t>(t)].frame_number, static_cast<uint64_t>(t));
+  for (int t = 0; t < frames; ++t)
+    ASSERT_EQ(skeletons[static_cast<size_t>(t)].frame_number, static_cast<uint64_t>(t));
   EXPECT_EQ(sub.cleaned["actor1"].size(), static_cast<size_t>(frames));
   EXPECT_EQ(sub.undecodable, 0);
   EXPECT_LT(MeanJointError(skeletons, f), 0.02);
@@ -279,7 +293,8 @@ TEST_P(DaemonTransportTest, EveryFrameOfACorruptedTakeComesOutSolved) {
   EXPECT_EQ(sub.descriptions["actor1"].joint_names.size(), skeletons[0].rotations.size());
 }
 
-INSTANTIATE_TEST_SUITE_P(Transports, DaemonTransportTest, ::testing::Values("inproc", "ipc", "tcp"));
+INSTANTIATE_TEST_SUITE_P(Transports, DaemonTransportTest,
+                         ::testing::Values("inproc", "ipc", "tcp"));
 
 TEST(DaemonTest, MalformedMessagesAreCountedByReasonAndTheStreamGoesOn) {
   const testing::HumanoidFixture f = testing::MakeHumanoidFixture("walk", 1.0, 120.0);
@@ -300,14 +315,14 @@ TEST(DaemonTest, MalformedMessagesAreCountedByReasonAndTheStreamGoesOn) {
     sender.SendRaw(b);
     ++sent;
   };
-  variant([](auto& b) { b.resize(b.size() - 3); });                   // truncated
-  variant([](auto& b) { b[0] = 'X'; });                                // bad magic
-  variant([](auto& b) { b[4] = 2; });                                  // version
-  variant([](auto& b) { b.clear(); });                                 // empty
-  variant([](auto& b) { b.resize(8000, 0); });                         // oversized
-  variant([](auto& b) { b[17] = 'X'; });                               // unknown subject "Xctor1"
-  variant([](auto& b) { b[protocol::kHeaderBytes + 7] ^= 1;});           // model hash
-  variant([](auto& b) {                                                // NaN in a valid marker
+  variant([](auto& b) { b.resize(b.size() - 3); });              // truncated
+  variant([](auto& b) { b[0] = 'X'; });                          // bad magic
+  variant([](auto& b) { b[4] = 2; });                            // version
+  variant([](auto& b) { b.clear(); });                           // empty
+  variant([](auto& b) { b.resize(8000, 0); });                   // oversized
+  variant([](auto& b) { b[17] = 'X'; });                         // unknown subject "Xctor1"
+  variant([](auto& b) { b[protocol::kHeaderBytes + 7] ^= 1; });  // model hash
+  variant([](auto& b) {                                          // NaN in a valid marker
     const float nan = std::nanf("");
     std::memcpy(&b[b.size() - 13], &nan, 4);
     b[b.size() - 1] = 1;
@@ -326,12 +341,16 @@ TEST(DaemonTest, MalformedMessagesAreCountedByReasonAndTheStreamGoesOn) {
   sender.Send(9, 9);  // duplicate
   ++sent;
   for (int t = 10; t < 20; ++t, ++sent) sender.Send(t, static_cast<uint64_t>(t));
-  ASSERT_TRUE(WaitForStats(*daemon, [&](const DaemonStats& s) { return s.messages_in == static_cast<uint64_t>(sent); }));
+  ASSERT_TRUE(WaitForStats(
+      *daemon, [&](const DaemonStats& s) { return s.messages_in == static_cast<uint64_t>(sent); }));
   daemon.Stop();
   const DaemonStats s = daemon->Stats();
   auto unattributed = [&](DropReason r) { return s.unattributed_dropped[static_cast<size_t>(r)]; };
-  auto subject = [&](DropReason r) { return s.subjects[0].counters.dropped[static_cast<size_t>(r)]; };
-  EXPECT_EQ(unattributed(DropReason::kMalformed), 5u);  // truncated, magic, version, empty, three parts
+  auto subject = [&](DropReason r) {
+    return s.subjects[0].counters.dropped[static_cast<size_t>(r)];
+  };
+  EXPECT_EQ(unattributed(DropReason::kMalformed),
+            5u);  // truncated, magic, version, empty, three parts
   EXPECT_EQ(unattributed(DropReason::kOversized), 1u);
   EXPECT_EQ(unattributed(DropReason::kUnknownSubject), 1u);
   EXPECT_EQ(unattributed(DropReason::kNotMarkerFrame), 1u);
@@ -349,8 +368,10 @@ TEST(DaemonTest, ShutdownPublishesEverythingTheLookaheadHolds) {
   RunningDaemon daemon(context, TestConfig("inproc://flush-in", "inproc://flush-out", 30));
   Subscriber sub(context, "inproc://flush-out");
   ASSERT_TRUE(sub.WaitConnected());
-  Sender sender(context, "inproc://flush-in", f.take, MakeHumanoidSubject("actor1"), zmq::socket_type::push);
-  for (int t = 0; t < 25; ++t) sender.Send(t, static_cast<uint64_t>(t));  // fewer than K: nothing is out yet
+  Sender sender(context, "inproc://flush-in", f.take, MakeHumanoidSubject("actor1"),
+                zmq::socket_type::push);
+  for (int t = 0; t < 25; ++t)
+    sender.Send(t, static_cast<uint64_t>(t));  // fewer than K: nothing is out yet
   ASSERT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) { return s.messages_in == 25; }));
   EXPECT_EQ(daemon->Stats().published_total(), 0u);
   daemon.Stop();
@@ -363,7 +384,8 @@ TEST(DaemonTest, EndOfStreamPublishesTheLookaheadAtOnceAndTheNextTakeStartsAfres
   const testing::HumanoidFixture f = testing::MakeHumanoidFixture("reach", 0.5, 120.0);
   zmq::context_t context;
   RunningDaemon daemon(context, TestConfig("inproc://eos-in", "inproc://eos-out", 30));
-  Sender sender(context, "inproc://eos-in", f.take, MakeHumanoidSubject("actor1"), zmq::socket_type::push);
+  Sender sender(context, "inproc://eos-in", f.take, MakeHumanoidSubject("actor1"),
+                zmq::socket_type::push);
   auto end_of_stream = [&](uint64_t last) {
     std::vector<uint8_t> bytes;
     protocol::EncodeEndOfStream({"actor1", last}, &bytes);
@@ -371,11 +393,13 @@ TEST(DaemonTest, EndOfStreamPublishesTheLookaheadAtOnceAndTheNextTakeStartsAfres
   };
   for (int t = 0; t < 25; ++t) sender.Send(t, static_cast<uint64_t>(t));
   end_of_stream(24);
-  EXPECT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) { return s.published_total() == 25; }));
+  EXPECT_TRUE(
+      WaitForStats(*daemon, [](const DaemonStats& s) { return s.published_total() == 25; }));
   // The same take again, numbered from 0: a new stream, not late frames.
   for (int t = 0; t < 25; ++t) sender.Send(t, static_cast<uint64_t>(t));
   end_of_stream(24);
-  EXPECT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) { return s.published_total() == 50; }));
+  EXPECT_TRUE(
+      WaitForStats(*daemon, [](const DaemonStats& s) { return s.published_total() == 50; }));
   const DaemonStats s = daemon->Stats();
   EXPECT_EQ(s.dropped_total(), 0u);
   EXPECT_EQ(s.subjects[0].counters.restarts, 0u);
@@ -389,7 +413,8 @@ TEST(DaemonTest, ACaptureRestartAndLostFramesKeepEveryFrameAccountedFor) {
   RunningDaemon daemon(context, TestConfig("inproc://restart-in", "inproc://restart-out", 6));
   Subscriber sub(context, "inproc://restart-out");
   ASSERT_TRUE(sub.WaitConnected());
-  Sender sender(context, "inproc://restart-in", f.take, MakeHumanoidSubject("actor1"), zmq::socket_type::push);
+  Sender sender(context, "inproc://restart-in", f.take, MakeHumanoidSubject("actor1"),
+                zmq::socket_type::push);
   // Frames 5000..5059 with 5020..5024 lost on the way, then the capture restarts at 0.
   for (int t = 0; t < 60; ++t)
     if (t < 20 || t >= 25) sender.Send(t, 5000 + static_cast<uint64_t>(t));
@@ -404,7 +429,8 @@ TEST(DaemonTest, ACaptureRestartAndLostFramesKeepEveryFrameAccountedFor) {
   ASSERT_TRUE(sub.WaitFor([&] { return sub.skeletons["actor1"].size() == 100; }));
   std::lock_guard lock(sub.mutex);
   const auto& out = sub.skeletons["actor1"];
-  for (size_t k = 0; k < 60; ++k) EXPECT_EQ(out[k].frame_number, 5000 + k);  // the lost ones filled in
+  for (size_t k = 0; k < 60; ++k)
+    EXPECT_EQ(out[k].frame_number, 5000 + k);  // the lost ones filled in
   for (size_t k = 60; k < 100; ++k) EXPECT_EQ(out[k].frame_number, k - 60);
 }
 
@@ -415,7 +441,8 @@ TEST(DaemonTest, ReloadKeepsUnchangedSubjectsRebuildsChangedOnesAndLosesNoFrame)
   RunningDaemon daemon(context, first);
   Subscriber sub(context, "inproc://reload-out");
   ASSERT_TRUE(sub.WaitConnected());
-  Sender sender(context, "inproc://reload-in", f.take, MakeHumanoidSubject("actor1"), zmq::socket_type::push);
+  Sender sender(context, "inproc://reload-in", f.take, MakeHumanoidSubject("actor1"),
+                zmq::socket_type::push);
   int t = 0;
   for (; t < 60; ++t) sender.Send(t, static_cast<uint64_t>(t));
   ASSERT_TRUE(WaitForStats(*daemon, [&](const DaemonStats& s) { return s.messages_in == 60; }));
@@ -462,9 +489,12 @@ TEST(DaemonTest, ASubscribingDaemonTakesOnlyItsSubjectsTopics) {
     return s.messages_in > 0;
   }));
   const uint64_t before = daemon->Stats().messages_in;
-  for (int k = 0; k < 10; ++k) capture.Send(k, 1000 + k, "markers/actor10/");  // another daemon's actor
+  for (int k = 0; k < 10; ++k)
+    capture.Send(k, 1000 + k, "markers/actor10/");  // another daemon's actor
   for (int k = 0; k < 10; ++k) capture.Send(k, static_cast<uint64_t>(t++), "markers/actor1/");
-  ASSERT_TRUE(WaitForStats(*daemon, [&](const DaemonStats& s) { return s.subjects[0].counters.frames_in >= before + 10; }));
+  ASSERT_TRUE(WaitForStats(*daemon, [&](const DaemonStats& s) {
+    return s.subjects[0].counters.frames_in >= before + 10;
+  }));
   daemon.Stop();
   const DaemonStats s = daemon->Stats();
   EXPECT_EQ(s.unattributed_dropped[static_cast<size_t>(DropReason::kUnknownSubject)], 0u);
@@ -480,11 +510,14 @@ TEST(DaemonTest, ASubscriberThatNeverReadsDoesNotSlowTheDataPlane) {
   RunningDaemon daemon(context, config);
   Subscriber stuck(context, "inproc://slow-out", /*read=*/false);
   std::this_thread::sleep_for(100ms);
-  Sender sender(context, "inproc://slow-in", f.take, MakeHumanoidSubject("actor1"), zmq::socket_type::push);
+  Sender sender(context, "inproc://slow-in", f.take, MakeHumanoidSubject("actor1"),
+                zmq::socket_type::push);
   for (int t = 0; t < f.take.num_frames; ++t) sender.Send(t, static_cast<uint64_t>(t));
   // Every frame is processed and published (the PUB drops what the subscriber cannot
   // take) instead of the data plane waiting for it.
-  EXPECT_TRUE(WaitForStats(*daemon, [&](const DaemonStats& s) { return s.published_total() == static_cast<uint64_t>(f.take.num_frames); }));
+  EXPECT_TRUE(WaitForStats(*daemon, [&](const DaemonStats& s) {
+    return s.published_total() == static_cast<uint64_t>(f.take.num_frames);
+  }));
   daemon.Stop();
   EXPECT_TRUE(daemon->Stats().Balanced());
 }
@@ -501,9 +534,12 @@ TEST(DaemonTest, ARetargetedCharacterIsPublishedBesideTheActor) {
   RunningDaemon daemon(context, config);
   Subscriber sub(context, "inproc://char-out");
   ASSERT_TRUE(sub.WaitConnected());
-  Sender sender(context, "inproc://char-in", f.take, MakeHumanoidSubject("actor1"), zmq::socket_type::push);
+  Sender sender(context, "inproc://char-in", f.take, MakeHumanoidSubject("actor1"),
+                zmq::socket_type::push);
   for (int t = 0; t < f.take.num_frames; ++t) sender.Send(t, static_cast<uint64_t>(t));
-  ASSERT_TRUE(WaitForStats(*daemon, [&](const DaemonStats& st) { return st.messages_in == static_cast<uint64_t>(f.take.num_frames); }));
+  ASSERT_TRUE(WaitForStats(*daemon, [&](const DaemonStats& st) {
+    return st.messages_in == static_cast<uint64_t>(f.take.num_frames);
+  }));
   daemon.Stop();
   ASSERT_TRUE(sub.WaitFor([&] {
     const auto frames = static_cast<size_t>(f.take.num_frames);
@@ -521,7 +557,9 @@ TEST(DaemonTest, ARetargetedCharacterIsPublishedBesideTheActor) {
   for (size_t k = 30; k < characters.size(); ++k) {
     EXPECT_EQ(characters[k].frame_number, actors[k].frame_number);
     for (size_t j = 0; j < characters[k].rotations.size(); ++j)
-      worst_deg = std::max(worst_deg, characters[k].rotations[j].angularDistance(actors[k].rotations[j]) * 180.0 / M_PI);
+      worst_deg =
+          std::max(worst_deg, characters[k].rotations[j].angularDistance(actors[k].rotations[j]) *
+                                  180.0 / M_PI);
     EXPECT_LT((characters[k].root_translation - 1.2 * actors[k].root_translation).norm(), 0.03);
   }
   EXPECT_LT(worst_deg, 10.0);  // planted feet are held, so not exactly the actor's angles
@@ -547,9 +585,11 @@ TEST(DaemonTest, HttpServesHealthSubjectsAndMetrics) {
   zmq::context_t context;
   RunningDaemon daemon(context, TestConfig("inproc://http-in", "inproc://http-out", 4));
   ASSERT_GT(daemon->http_port(), 0);
-  Sender sender(context, "inproc://http-in", f.take, MakeHumanoidSubject("actor1"), zmq::socket_type::push);
+  Sender sender(context, "inproc://http-in", f.take, MakeHumanoidSubject("actor1"),
+                zmq::socket_type::push);
   for (int t = 0; t < 50; ++t) sender.Send(t, static_cast<uint64_t>(t));
-  ASSERT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) { return s.published_total() == 46; }));
+  ASSERT_TRUE(
+      WaitForStats(*daemon, [](const DaemonStats& s) { return s.published_total() == 46; }));
   std::this_thread::sleep_for(50ms);  // one more snapshot
   const auto [health_code, health] = HttpGet(daemon->http_port(), "/health");
   EXPECT_EQ(health_code, 200);
@@ -559,12 +599,17 @@ TEST(DaemonTest, HttpServesHealthSubjectsAndMetrics) {
   EXPECT_NE(subjects.find("\"frames_published\": 46"), std::string::npos) << subjects;
   const auto [metrics_code, metrics] = HttpGet(daemon->http_port(), "/metrics");
   EXPECT_EQ(metrics_code, 200);
-  EXPECT_NE(metrics.find("mocapd_frames_published_total{subject=\"actor1\"} 46"), std::string::npos) << metrics;
-  EXPECT_NE(metrics.find("mocapd_processing_latency_seconds_count{subject=\"actor1\"} 46"), std::string::npos);
+  EXPECT_NE(metrics.find("mocapd_frames_published_total{subject=\"actor1\"} 46"), std::string::npos)
+      << metrics;
+  EXPECT_NE(metrics.find("mocapd_processing_latency_seconds_count{subject=\"actor1\"} 46"),
+            std::string::npos);
   EXPECT_EQ(HttpGet(daemon->http_port(), "/nope").first, 404);
   // The watchdog: no input for longer than its timeout.
-  EXPECT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) { return s.subjects[0].state == protocol::SubjectState::kStalled; }));
-  EXPECT_NE(HttpGet(daemon->http_port(), "/health").second.find("\"status\": \"degraded\""), std::string::npos);
+  EXPECT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) {
+    return s.subjects[0].state == protocol::SubjectState::kStalled;
+  }));
+  EXPECT_NE(HttpGet(daemon->http_port(), "/health").second.find("\"status\": \"degraded\""),
+            std::string::npos);
 }
 
 }  // namespace

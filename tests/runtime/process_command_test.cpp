@@ -10,8 +10,8 @@
 #include "filters/pose_error.hpp"
 #include "formats/bvh.hpp"
 #include "formats/c3d.hpp"
-#include "sim/corruption.hpp"
 #include "formats/subject_file.hpp"
+#include "sim/corruption.hpp"
 #include "tests/support/test_takes.hpp"
 
 namespace mocapd {

@@ -5,8 +5,8 @@
 
 #include <gtest/gtest.h>
 
-#include "sim/humanoid_subject.hpp"
 #include "formats/take_frames.hpp"
+#include "sim/humanoid_subject.hpp"
 #include "tests/support/allocation_counter.hpp"
 #include "tests/support/test_takes.hpp"
 
@@ -41,7 +41,9 @@ class RecordingSink : public OutputSink {
 
 class SubjectRunnerTest : public ::testing::Test {
  protected:
-  SubjectRunnerTest() : fixture_(testing::MakeHumanoidFixture("walk", 2.0, 120.0)), map_(*fixture_.markers, fixture_.take) {
+  SubjectRunnerTest()
+      : fixture_(testing::MakeHumanoidFixture("walk", 2.0, 120.0)),
+        map_(*fixture_.markers, fixture_.take) {
     subject_.name = "actor1";
     subject_.model = MakeHumanoidSubject("actor1");
     subject_.rate_hz = 120.0;
@@ -49,7 +51,8 @@ class SubjectRunnerTest : public ::testing::Test {
     subject_.cleanup.lookahead = 4;
   }
 
-  protocol::MarkerFrameMessage Frame(int take_frame, uint64_t frame_number, uint64_t capture_ns) const {
+  protocol::MarkerFrameMessage Frame(int take_frame, uint64_t frame_number,
+                                     uint64_t capture_ns) const {
     protocol::MarkerFrameMessage m;
     m.subject = "actor1";
     m.model_hash = protocol::MarkerSetHash(*subject_.model.markers);
@@ -74,7 +77,8 @@ class SubjectRunnerTest : public ::testing::Test {
 
 TEST_F(SubjectRunnerTest, EveryFrameComesOutInOrderWithItsNumberAndCaptureTime) {
   SubjectRunner runner(subject_, daemon_);
-  for (int f = 0; f < 100; ++f) EXPECT_FALSE(runner.Accept(Frame(f, 5000 + f, 1000 * f), f, sink_).has_value());
+  for (int f = 0; f < 100; ++f)
+    EXPECT_FALSE(runner.Accept(Frame(f, 5000 + f, 1000 * f), f, sink_).has_value());
   EXPECT_EQ(sink_.skeletons.size(), 96u);  // K = 4 held back
   EXPECT_EQ(runner.pending(), 4u);
   ExpectBalanced(runner);
@@ -119,7 +123,8 @@ TEST_F(SubjectRunnerTest, MissingFrameNumbersBecomeRepairedFrames) {
 
 TEST_F(SubjectRunnerTest, DuplicatesAndLateFramesAreDroppedAndCounted) {
   SubjectRunner runner(subject_, daemon_);
-  for (int f = 0; f < 30; ++f) ASSERT_FALSE(runner.Accept(Frame(f, f, 1000 + f), 0, sink_).has_value());
+  for (int f = 0; f < 30; ++f)
+    ASSERT_FALSE(runner.Accept(Frame(f, f, 1000 + f), 0, sink_).has_value());
   EXPECT_EQ(runner.Accept(Frame(29, 29, 1029), 0, sink_), DropReason::kDuplicate);
   EXPECT_EQ(runner.Accept(Frame(25, 25, 1025), 0, sink_), DropReason::kOutOfOrder);
   EXPECT_FALSE(runner.Accept(Frame(30, 30, 1030), 0, sink_).has_value());
@@ -151,9 +156,11 @@ TEST_F(SubjectRunnerTest, FramesForAnotherModelOrRateAreNeverApplied) {
 
 TEST_F(SubjectRunnerTest, CaptureRestartFlushesAndStartsOver) {
   SubjectRunner runner(subject_, daemon_);
-  for (int f = 0; f < 50; ++f) ASSERT_FALSE(runner.Accept(Frame(f, 1000 + f, 1'000'000ull * f), 0, sink_).has_value());
+  for (int f = 0; f < 50; ++f)
+    ASSERT_FALSE(runner.Accept(Frame(f, 1000 + f, 1'000'000ull * f), 0, sink_).has_value());
   // The capture restarts: frame numbers from 0 again, its clock going on.
-  for (int f = 0; f < 50; ++f) ASSERT_FALSE(runner.Accept(Frame(50 + f, f, 1'000'000ull * (100 + f)), 0, sink_).has_value());
+  for (int f = 0; f < 50; ++f)
+    ASSERT_FALSE(runner.Accept(Frame(50 + f, f, 1'000'000ull * (100 + f)), 0, sink_).has_value());
   runner.Flush(sink_);
   ASSERT_EQ(sink_.skeletons.size(), 100u);
   EXPECT_EQ(sink_.skeletons[49].frame_number, 1049u);
@@ -168,7 +175,8 @@ TEST_F(SubjectRunnerTest, ALongJumpAheadResynchronisesInsteadOfInsertingFrames) 
   daemon_.max_gap_frames = 10;
   SubjectRunner runner(subject_, daemon_);
   for (int f = 0; f < 20; ++f) ASSERT_FALSE(runner.Accept(Frame(f, f, 0), 0, sink_).has_value());
-  for (int f = 20; f < 40; ++f) ASSERT_FALSE(runner.Accept(Frame(f, 1000 + f, 0), 0, sink_).has_value());
+  for (int f = 20; f < 40; ++f)
+    ASSERT_FALSE(runner.Accept(Frame(f, 1000 + f, 0), 0, sink_).has_value());
   runner.Flush(sink_);
   EXPECT_EQ(sink_.skeletons.size(), 40u);
   EXPECT_EQ(runner.counters().frames_inserted, 0u);
@@ -178,7 +186,8 @@ TEST_F(SubjectRunnerTest, ALongJumpAheadResynchronisesInsteadOfInsertingFrames) 
 
 TEST_F(SubjectRunnerTest, WatchdogMarksAStalledSubjectOnceAndPublishesIt) {
   SubjectRunner runner(subject_, daemon_);
-  EXPECT_FALSE(runner.CheckStall(10'000'000'000, 500'000'000, sink_));  // nothing received yet: waiting, not stalled
+  EXPECT_FALSE(runner.CheckStall(10'000'000'000, 500'000'000,
+                                 sink_));  // nothing received yet: waiting, not stalled
   EXPECT_EQ(runner.state(), protocol::SubjectState::kWaiting);
   ASSERT_FALSE(runner.Accept(Frame(0, 0, 0), 1'000'000'000, sink_).has_value());
   EXPECT_FALSE(runner.CheckStall(1'400'000'000, 500'000'000, sink_));

@@ -18,7 +18,8 @@ class CorruptionTest : public ::testing::Test {
 };
 
 TEST_F(CorruptionTest, ReachesEachSeveritysTargetFraction) {
-  for (auto severity : {CorruptionSeverity::kLight, CorruptionSeverity::kMedium, CorruptionSeverity::kHeavy}) {
+  for (auto severity :
+       {CorruptionSeverity::kLight, CorruptionSeverity::kMedium, CorruptionSeverity::kHeavy}) {
     CorruptionOptions options;
     options.severity = severity;
     const CorruptedTake dut = CorruptTake(fixture_.take, fixture_.markers.get(), options);
@@ -34,7 +35,8 @@ TEST_F(CorruptionTest, ProducesEveryKindAndATruthThatMatchesTheData) {
   const CorruptedTake dut = CorruptTake(fixture_.take, fixture_.markers.get(), options);
   std::map<CorruptionKind, int> kinds;
   for (const CorruptionEvent& e : dut.events) ++kinds[e.kind];
-  for (auto kind : {CorruptionKind::kGap, CorruptionKind::kSwap, CorruptionKind::kPop, CorruptionKind::kFrozen, CorruptionKind::kFallenOff})
+  for (auto kind : {CorruptionKind::kGap, CorruptionKind::kSwap, CorruptionKind::kPop,
+                    CorruptionKind::kFrozen, CorruptionKind::kFallenOff})
     EXPECT_GT(kinds[kind], 0) << to_string(kind);
   bool gap_at_end = false;
   for (int f = 0; f < dut.take.num_frames; ++f) {
@@ -48,7 +50,8 @@ TEST_F(CorruptionTest, ProducesEveryKindAndATruthThatMatchesTheData) {
         gap_at_end = gap_at_end || f == dut.take.num_frames - 1;
       } else {
         ASSERT_TRUE(dut.take.valid(f, p));
-        ASSERT_GT((dut.take.at(f, p) - fixture_.take.at(f, p)).norm(), 1e-9) << to_string(truth) << " " << f << " " << p;
+        ASSERT_GT((dut.take.at(f, p) - fixture_.take.at(f, p)).norm(), 1e-9)
+            << to_string(truth) << " " << f << " " << p;
       }
     }
   }

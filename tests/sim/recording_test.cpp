@@ -76,7 +76,8 @@ TEST(RecordingTest, OtherFilesAreRefusedWithTheirName) {
     ReadRecording(dir + "/x.mcr");
     FAIL() << "expected an error";
   } catch (const std::runtime_error& e) {
-    EXPECT_NE(std::string(e.what()).find("x.mcr: not a mocap-sim recording"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("x.mcr: not a mocap-sim recording"), std::string::npos)
+        << e.what();
   }
   EXPECT_THROW(ReadRecording(dir + "/missing.mcr"), std::runtime_error);
 }

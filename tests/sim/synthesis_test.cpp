@@ -27,14 +27,16 @@ TEST(SynthesisTest, NoiseHasTheRequestedSpread) {
   const auto clean = testing::MakeHumanoidFixture("walk", 2.0, 120.0, 0.0);
   const auto noisy = testing::MakeHumanoidFixture("walk", 2.0, 120.0, 2e-3);
   double sum_sq = 0.0;
-  for (size_t i = 0; i < clean.take.positions.size(); ++i) sum_sq += (clean.take.positions[i] - noisy.take.positions[i]).squaredNorm();
+  for (size_t i = 0; i < clean.take.positions.size(); ++i)
+    sum_sq += (clean.take.positions[i] - noisy.take.positions[i]).squaredNorm();
   const double sigma = std::sqrt(sum_sq / (3.0 * static_cast<double>(clean.take.positions.size())));
   EXPECT_NEAR(sigma, 2e-3, 1e-4);
 }
 
 TEST(SynthesisTest, HumanoidMotionIsFiniteAndMoves) {
   const Skeleton sk = MakeHumanoidSkeleton();
-  for (auto motion : {HumanoidMotion::kWalk, HumanoidMotion::kReach, HumanoidMotion::kTurn, HumanoidMotion::kMixed}) {
+  for (auto motion : {HumanoidMotion::kWalk, HumanoidMotion::kReach, HumanoidMotion::kTurn,
+                      HumanoidMotion::kMixed}) {
     const auto frames = MakeHumanoidMotion(sk, motion, 3.0, 60.0);
     ASSERT_EQ(frames.size(), 180u);
     double travelled = 0.0;

@@ -11,8 +11,9 @@ thread_local std::size_t g_count = 0;
 void* CountedAllocate(std::size_t size, std::size_t alignment) {
   if (g_counting) ++g_count;
   if (size == 0) size = 1;
-  void* p = alignment > alignof(std::max_align_t) ? std::aligned_alloc(alignment, (size + alignment - 1) / alignment * alignment)
-                                                  : std::malloc(size);
+  void* p = alignment > alignof(std::max_align_t)
+                ? std::aligned_alloc(alignment, (size + alignment - 1) / alignment * alignment)
+                : std::malloc(size);
   if (p == nullptr) throw std::bad_alloc();
   return p;
 }
@@ -20,8 +21,12 @@ void* CountedAllocate(std::size_t size, std::size_t alignment) {
 
 void* operator new(std::size_t size) { return CountedAllocate(size, 0); }
 void* operator new[](std::size_t size) { return CountedAllocate(size, 0); }
-void* operator new(std::size_t size, std::align_val_t a) { return CountedAllocate(size, static_cast<std::size_t>(a)); }
-void* operator new[](std::size_t size, std::align_val_t a) { return CountedAllocate(size, static_cast<std::size_t>(a)); }
+void* operator new(std::size_t size, std::align_val_t a) {
+  return CountedAllocate(size, static_cast<std::size_t>(a));
+}
+void* operator new[](std::size_t size, std::align_val_t a) {
+  return CountedAllocate(size, static_cast<std::size_t>(a));
+}
 void operator delete(void* p) noexcept { std::free(p); }
 void operator delete[](void* p) noexcept { std::free(p); }
 void operator delete(void* p, std::size_t) noexcept { std::free(p); }

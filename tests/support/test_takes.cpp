@@ -1,21 +1,23 @@
 // Shared humanoid fixtures for tests.
 #include "tests/support/test_takes.hpp"
 
+#include <unistd.h>
 #include <filesystem>
 #include <random>
-#include <unistd.h>
 
-#include "sim/humanoid.hpp"
 #include "formats/marker_layout.hpp"
+#include "sim/humanoid.hpp"
 #include "sim/synthesis.hpp"
 
 namespace mocapd::testing {
 
-HumanoidFixture MakeHumanoidFixture(const char* motion, double seconds, double rate_hz, double noise_m, uint64_t seed) {
+HumanoidFixture MakeHumanoidFixture(const char* motion, double seconds, double rate_hz,
+                                    double noise_m, uint64_t seed) {
   HumanoidFixture f;
   f.skeleton = std::make_shared<const Skeleton>(MakeHumanoidSkeleton());
   f.markers = std::make_shared<const MarkerSet>(
-      *f.skeleton, PlaceMarkers(*f.skeleton, MatchHumanoidRoles(*f.skeleton), DefaultMarkerLayout(), {}));
+      *f.skeleton,
+      PlaceMarkers(*f.skeleton, MatchHumanoidRoles(*f.skeleton), DefaultMarkerLayout(), {}));
   f.motion = MakeHumanoidMotion(*f.skeleton, ParseHumanoidMotion(motion), seconds, rate_hz);
   std::mt19937_64 rng(seed);
   f.take = SynthesizeMarkers(*f.skeleton, *f.markers, f.motion, rate_hz, noise_m, &rng);
@@ -23,7 +25,8 @@ HumanoidFixture MakeHumanoidFixture(const char* motion, double seconds, double r
 }
 
 std::string TempDir(const std::string& name) {
-  const auto dir = std::filesystem::temp_directory_path() / ("mocapd_test_" + name + "_" + std::to_string(::getpid()));
+  const auto dir = std::filesystem::temp_directory_path() /
+                   ("mocapd_test_" + name + "_" + std::to_string(::getpid()));
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
   return dir.string();

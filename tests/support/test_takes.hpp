@@ -18,7 +18,8 @@ struct HumanoidFixture {
 
 /// The built-in humanoid doing `motion` (walk|reach|turn|mixed) at rate_hz, with
 /// Gaussian marker noise sigma noise_m from a fixed seed.
-HumanoidFixture MakeHumanoidFixture(const char* motion, double seconds, double rate_hz, double noise_m = 0.0, uint64_t seed = 7);
+HumanoidFixture MakeHumanoidFixture(const char* motion, double seconds, double rate_hz,
+                                    double noise_m = 0.0, uint64_t seed = 7);
 
 /// A unique empty directory under the build tree for files a test writes.
 std::string TempDir(const std::string& name);
