@@ -8,6 +8,7 @@
 
 #include "filters/marker_model.hpp"
 #include "formats/bvh.hpp"
+#include "formats/c3d.hpp"
 
 namespace mocapd::bench {
 
@@ -25,5 +26,10 @@ std::vector<std::string> SharedBvhTakes();
 /// Loads a BVH take (or, for an empty path, 20 s of the humanoid's mixed motion) and
 /// prepares it at rate_hz.
 BenchTake LoadBenchTake(const std::string& bvh_path, double rate_hz);
+
+/// The baselines' gap fill, offline over the whole take: each gap of each point filled
+/// linearly, or by a cubic Hermite with Catmull-Rom slopes (cubic), between its ends;
+/// a gap open at either end holds the nearest sample.
+C3dTake FillGaps(const C3dTake& in, bool cubic);
 
 }  // namespace mocapd::bench

@@ -104,54 +104,6 @@ class Scorer {
   std::map<int, Pose> estimates_;
 };
 
-// Offline gap fill of every missing sample, linear or Catmull-Rom between the valid
-// samples around the gap (held at the take's ends).
-C3dTake FillGaps(const C3dTake& in, bool cubic) {
-  C3dTake out = in;
-  for (int p = 0; p < in.num_points(); ++p) {
-    int f = 0;
-    while (f < in.num_frames) {
-      if (in.valid(f, p)) {
-        ++f;
-        continue;
-      }
-      const int s = f - 1;
-      int e = f;
-      while (e < in.num_frames && !in.valid(e, p)) ++e;
-      for (int g = f; g < e; ++g) {
-        Vec3 v;
-        if (s < 0 && e >= in.num_frames) break;
-        if (s < 0)
-          v = in.at(e, p);
-        else if (e >= in.num_frames)
-          v = in.at(s, p);
-        else {
-          const double u = static_cast<double>(g - s) / (e - s);
-          const Vec3 a = in.at(s, p), b = in.at(e, p);
-          if (!cubic) {
-            v = (1 - u) * a + u * b;
-          } else {
-            const Vec3 ma = (s > 0 && in.valid(s - 1, p))
-                                ? Vec3((b - in.at(s - 1, p)) * 0.5 * (e - s) / (e - s + 1.0))
-                                : Vec3(b - a);
-            const Vec3 mb = (e + 1 < in.num_frames && in.valid(e + 1, p))
-                                ? Vec3((in.at(e + 1, p) - a) * 0.5 * (e - s) / (e - s + 1.0))
-                                : Vec3(b - a);
-            const double u2 = u * u, u3 = u2 * u;
-            v = (2 * u3 - 3 * u2 + 1) * a + (u3 - 2 * u2 + u) * ma + (-2 * u3 + 3 * u2) * b +
-                (u3 - u2) * mb;
-          }
-        }
-        out.at(g, p) = v;
-        out.residuals[static_cast<size_t>(g) * static_cast<size_t>(in.num_points()) +
-                      static_cast<size_t>(p)] = 0.0f;
-      }
-      f = e;
-    }
-  }
-  return out;
-}
-
 Scores SolveBaseline(const bench::BenchTake& take, const C3dTake& markers) {
   const Skeleton& sk = take.bvh.skeleton;
   IkState ik(sk, *take.markers);
@@ -434,8 +386,9 @@ int main(int argc, char** argv) {
           continue;
         }
         results["raw IK"].push_back(SolveBaseline(take, bad.take));
-        results["linear fill + IK"].push_back(SolveBaseline(take, FillGaps(bad.take, false)));
-        results["cubic fill + IK"].push_back(SolveBaseline(take, FillGaps(bad.take, true)));
+        results["linear fill + IK"].push_back(
+            SolveBaseline(take, bench::FillGaps(bad.take, false)));
+        results["cubic fill + IK"].push_back(SolveBaseline(take, bench::FillGaps(bad.take, true)));
         for (int k : {0, 4, 12})
           results["mocapd K=" + std::to_string(k)].push_back(RunPipeline(take, bad, clean, k));
       }

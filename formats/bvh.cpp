@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <fstream>
 #include <sstream>
@@ -149,18 +150,29 @@ void ParseJoint(Tokens& t, int parent, std::vector<RawJoint>* joints,
   }
 }
 
+// Guesses the length unit from the skeleton's bones, never from where it stands: the
+// longest chain of bones from the root, leaving out the root's OFFSET and any bone far
+// longer than the typical one (exporters write the take's start position, metres away,
+// into the root's or the hips' OFFSET).
 std::string GuessUnits(const std::vector<RawJoint>& joints) {
-  std::vector<Vec3> p(joints.size());
-  Vec3 lo = Vec3::Constant(1e300), hi = Vec3::Constant(-1e300);
+  std::vector<double> lengths;
+  for (const RawJoint& j : joints)
+    if (j.parent >= 0 && j.offset.norm() > 0.0) lengths.push_back(j.offset.norm());
+  if (lengths.empty()) return "cm";
+  std::vector<double> sorted = lengths;
+  std::nth_element(sorted.begin(), sorted.begin() + static_cast<long>(sorted.size() / 2),
+                   sorted.end());
+  const double typical = sorted[sorted.size() / 2];
+  std::vector<double> chain(joints.size(), 0.0);
+  double longest = 0.0;
   for (size_t j = 0; j < joints.size(); ++j) {
-    p[j] = joints[j].parent < 0 ? Vec3::Zero()
-                                : Vec3(p[static_cast<size_t>(joints[j].parent)] + joints[j].offset);
-    lo = lo.cwiseMin(p[j]);
-    hi = hi.cwiseMax(p[j]);
+    if (joints[j].parent < 0) continue;  // parents come before children
+    const double bone = joints[j].offset.norm();
+    chain[j] = chain[static_cast<size_t>(joints[j].parent)] + (bone <= 5.0 * typical ? bone : 0.0);
+    longest = std::max(longest, chain[j]);
   }
-  const double extent = (hi - lo).maxCoeff();
-  if (extent < 5.0) return "m";
-  if (extent < 400.0) return "cm";
+  if (longest < 5.0) return "m";
+  if (longest < 400.0) return "cm";
   return "mm";
 }
 
@@ -219,50 +231,64 @@ BvhTake ParseBvh(const std::string& text, const std::string& source_name,
   take.frame_time_s = frame_time;
   const double s = take.metres_per_unit;
 
-  // Decide each joint's type from how its channels move over the take.
-  std::vector<Joint> joints;
-  size_t first_channel = 0;
+  // Which channels move over the take, per joint.
   std::vector<size_t> channel_start;
+  std::vector<uint8_t> moves(raw.size(), 0), translation_moves(raw.size(), 0);
+  std::vector<Vec3> constant_translation(raw.size());
+  size_t first_channel = 0;
   for (size_t j = 0; j < raw.size(); ++j) {
     const RawJoint& r = raw[j];
     channel_start.push_back(first_channel);
+    constant_translation[j] = r.offset;
+    for (size_t c = 0; c < r.channels.size(); ++c) {
+      const double v0 = num_frames > 0 ? values[first_channel + c] : 0.0;
+      bool moving = false;
+      for (size_t f = 1; f < num_frames && !moving; ++f)
+        moving = std::abs(values[f * total_channels + first_channel + c] - v0) >
+                 1e-9 * std::max(1.0, std::abs(v0));
+      moves[j] = moves[j] || moving;
+      if (!IsRotation(r.channels[c])) {
+        translation_moves[j] = translation_moves[j] || moving;
+        if (num_frames > 0) constant_translation[j][Axis(r.channels[c])] = v0;
+      }
+    }
+    first_channel += r.channels.size();
+  }
+  std::vector<uint8_t> below_moves(raw.size(), 0);  // some joint below moves
+  for (size_t j = raw.size(); j-- > 1;)
+    if (moves[j] || below_moves[j]) below_moves[static_cast<size_t>(raw[j].parent)] = 1;
+
+  // Each joint's type. The channel list says what a joint may do; the take says which of
+  // those freedoms a skeleton really uses: a bone whose translation channels never change
+  // is a bone of fixed length, and a root that never moves while a joint below it
+  // carries the motion (Bandai's joint_Root above Hips) is a fixed frame. A take that
+  // shows no motion at all (a one-frame character T-pose) cannot say that, so there the
+  // channels decide: a root with position channels may translate.
+  std::vector<Joint> joints;
+  for (size_t j = 0; j < raw.size(); ++j) {
+    const RawJoint& r = raw[j];
     Joint joint;
     joint.name = r.name;
     joint.parent = JointIndex(r.parent);
     joint.offset = r.offset * s;
-    bool translation_moves = false, anything_moves = false;
-    Vec3 constant_translation = r.offset;
-    for (size_t c = 0; c < r.channels.size(); ++c) {
-      const double v0 = num_frames > 0 ? values[first_channel + c] : 0.0;
-      bool moves = false;
-      for (size_t f = 1; f < num_frames && !moves; ++f)
-        moves = std::abs(values[f * total_channels + first_channel + c] - v0) >
-                1e-9 * std::max(1.0, std::abs(v0));
-      anything_moves = anything_moves || moves;
-      if (!IsRotation(r.channels[c])) {
-        translation_moves = translation_moves || moves;
-        if (num_frames > 0) constant_translation[Axis(r.channels[c])] = v0;
-      }
-    }
     const bool has_translation = std::any_of(r.channels.begin(), r.channels.end(),
                                              [](BvhChannel c) { return !IsRotation(c); });
     if (r.channels.empty()) {
       joint.type = JointType::kFixed;
-    } else if (r.parent < 0 && !anything_moves) {
+    } else if (r.parent < 0 && !moves[j] && below_moves[j]) {
       joint.type = JointType::kFixed;
       if (num_frames > 0)
-        joint.rest_rotation = RotationFromChannels(r.channels, &values[first_channel]);
-      joint.offset = constant_translation * s;
-    } else if (has_translation && translation_moves) {
+        joint.rest_rotation = RotationFromChannels(r.channels, &values[channel_start[j]]);
+      joint.offset = constant_translation[j] * s;
+    } else if (has_translation && (translation_moves[j] || r.parent < 0)) {
       joint.type = JointType::kFree;
     } else {
       joint.type = JointType::kBall;
-      joint.offset = constant_translation * s;
+      joint.offset = constant_translation[j] * s;
     }
     joints.push_back(std::move(joint));
     take.channels.push_back(r.channels);
     take.file_offsets.push_back(r.offset * s);
-    first_channel += r.channels.size();
   }
   try {
     take.skeleton = Skeleton(std::move(joints));

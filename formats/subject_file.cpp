@@ -60,6 +60,15 @@ SubjectModel ParseSubjectModel(const std::string& text, const std::string& sourc
     subject.Fail(subject.Find("bvh_units"), "bvh_units", e.what());
   }
   subject.RejectUnknown();
+  if (top.Has("calibration")) {
+    TomlTable c = top.Table("calibration");
+    SubjectCalibrationRecord record;
+    record.marker_set = c.String("marker_set", "");
+    record.poses = c.Integer("poses", 0, 0, 1 << 30);
+    record.median_residual_mm = c.Number("median_residual_mm", 0.0, 0.0, 1e6);
+    c.RejectUnknown();
+    model.calibration = record;
+  }
 
   std::vector<Joint> js;
   for (TomlTable& t : top.Tables("joint", /*required=*/true)) {
@@ -97,6 +106,13 @@ SubjectModel ParseSubjectModel(const std::string& text, const std::string& sourc
     }
     if (const auto limit = t.OptionalNumber("max_angle_deg", 1e-9, 1e12))
       j.max_angle_rad = *limit * M_PI / 180.0;
+    // How a markers-only calibration found this joint (recorded, not used by solves).
+    const std::string method = t.String("calibration", "");
+    const double uncertainty = t.Number("uncertainty_mm", kNaN, 0.0, 1e6);
+    if (model.calibration) {
+      model.calibration->joint_method.push_back(method);
+      model.calibration->joint_uncertainty_mm.push_back(uncertainty);
+    }
     t.RejectUnknown();
     js.push_back(std::move(j));
   }
@@ -156,6 +172,13 @@ std::string FormatSubjectModel(const SubjectModel& model) {
       "# Units: metres; rotations: quaternions [w, x, y, z]. Format: config/subject.example.toml.\n"
       "format_version = 1\n\n[subject]\nname = " +
       Quoted(model.name) + "\nbvh_units = " + Quoted(model.bvh_units) + "\n";
+  const SubjectCalibrationRecord* record = model.calibration ? &*model.calibration : nullptr;
+  if (record != nullptr)
+    out +=
+        "\n# Calibrated from markers alone: per joint, how its centre was found and its\n"
+        "# uncertainty (mm); per marker, its fit (mm).\n[calibration]\nmarker_set = " +
+        Quoted(record->marker_set) + "\nposes = " + std::to_string(record->poses) +
+        "\nmedian_residual_mm = " + Num(record->median_residual_mm) + "\n";
   for (const Joint& j : sk.joints()) {
     out += "\n[[joint]]\nname = " + Quoted(j.name) + "\n";
     out +=
@@ -172,6 +195,12 @@ std::string FormatSubjectModel(const SubjectModel& model) {
       out += "hinge_axis = " + Array({j.hinge_axis.x(), j.hinge_axis.y(), j.hinge_axis.z()}) + "\n";
     if (j.max_angle_rad < 1e8)
       out += "max_angle_deg = " + Num(j.max_angle_rad * 180.0 / M_PI) + "\n";
+    const auto uj = static_cast<size_t>(&j - sk.joints().data());
+    if (record != nullptr && uj < record->joint_method.size() && !record->joint_method[uj].empty())
+      out += "calibration = " + Quoted(record->joint_method[uj]) + "\n";
+    if (record != nullptr && uj < record->joint_uncertainty_mm.size() &&
+        std::isfinite(record->joint_uncertainty_mm[uj]))
+      out += "uncertainty_mm = " + Num(record->joint_uncertainty_mm[uj]) + "\n";
   }
   const MarkerSet& ms = *model.markers;
   for (int m = 0; m < ms.num_markers(); ++m) {

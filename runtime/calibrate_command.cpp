@@ -1,23 +1,168 @@
 // `mocapd calibrate` implementation.
 #include "runtime/calibrate_command.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
 #include <stdexcept>
 
 #include "filters/resample.hpp"
 #include "formats/bvh.hpp"
 #include "formats/c3d.hpp"
 #include "formats/subject_file.hpp"
+#include "formats/subject_from_markers.hpp"
 
 namespace mocapd {
 
+namespace {
+
+std::string Fixed(double v, int decimals) {
+  char b[48];
+  std::snprintf(b, sizeof(b), "%.*f", decimals, v);
+  return b;
+}
+
+// The calibration from markers alone: summary on the terminal, JSON report, subject file.
+int CalibrateFromMarkersOnly(const CalibrateCommandOptions& options, std::ostream& out) {
+  std::vector<C3dTake> takes;
+  for (const std::string& path : options.markers_c3d) takes.push_back(ReadC3d(path));
+  MarkersOnlyOptions mo;
+  mo.marker_set = options.marker_set;
+  const std::string name = options.subject_name.empty()
+                               ? std::filesystem::path(options.out_subject).stem().string()
+                               : options.subject_name;
+  MarkersOnlyCalibration cal = CalibrateFromMarkers(takes, mo, name);
+  const SubjectCalibrationResult& r = cal.solve;
+  const Skeleton& sk = *cal.model.skeleton;
+
+  out << "calibrate: " << takes.size() << " take(s), " << cal.frames_total << " frames; marker set "
+      << cal.marker_set << " (" << cal.markers.size() << " markers";
+  if (!cal.studio_markers.empty())
+    out << ", " << cal.studio_markers.size() << " of the studio's own";
+  out << "); " << cal.skipped.size() << " channels skipped; " << r.frames_used.size()
+      << " varied poses solved in " << r.iterations << " iterations\n";
+  if (!cal.set_missing.empty()) {
+    out << "  the set's markers missing from the take:";
+    for (const std::string& m : cal.set_missing) out << " " << m;
+    out << "\n";
+  }
+  for (const ChannelNote& n : cal.skipped)
+    out << "  skipped " << n.label << ": " << n.reason << "\n";
+  if (cal.hip_regression)
+    out << "  hip centre prior: Harrington 2007 regression on the pelvis markers\n";
+  char line[256];
+  std::snprintf(line, sizeof(line), "%-12s %-17s %26s %11s %9s %8s\n", "joint", "method",
+                "motion-only sigma (mm)", "uncert. mm", "bone mm", "L/R %");
+  out << line;
+  nlohmann::json joints = nlohmann::json::array();
+  for (int j = 0; j < sk.num_joints(); ++j) {
+    const JointCalibrationReport& jr = r.joints[static_cast<size_t>(j)];
+    const std::string mirror = MirrorRole(jr.name);
+    double asymmetry = kNaN;
+    if (!mirror.empty()) {
+      const double a = jr.bone_length_m;
+      const double b = r.joints[static_cast<size_t>(sk.FindJoint(mirror)->value)].bone_length_m;
+      asymmetry = 200.0 * std::abs(a - b) / std::max(1e-9, a + b);
+    }
+    auto sigma = [](double v) { return v > 1.0 ? std::string(">1000") : Fixed(v * 1e3, 1); };
+    const std::string sigmas = j == 0
+                                   ? "-"
+                                   : sigma(jr.data_sigma_m[0]) + " / " + sigma(jr.data_sigma_m[1]) +
+                                         " / " + sigma(jr.data_sigma_m[2]);
+    std::snprintf(line, sizeof(line), "%-12s %-17s %26s %11s %9s %8s\n", jr.name.c_str(),
+                  jr.method.c_str(), sigmas.c_str(),
+                  j == 0 ? "-" : Fixed(jr.uncertainty_m * 1e3, 1).c_str(),
+                  j == 0 ? "-" : Fixed(jr.bone_length_m * 1e3, 1).c_str(),
+                  std::isfinite(asymmetry) ? Fixed(asymmetry, 1).c_str() : "-");
+    out << line;
+    nlohmann::json jj = {{"joint", jr.name}, {"method", jr.method}};
+    if (j > 0) {
+      jj["motion_only_sigma_mm"] = {jr.data_sigma_m[0] * 1e3, jr.data_sigma_m[1] * 1e3,
+                                    jr.data_sigma_m[2] * 1e3};
+      jj["directions_covered"] = jr.directions_covered;
+      jj["rotation_range_deg"] = {jr.rotation_spread_deg[0], jr.rotation_spread_deg[1],
+                                  jr.rotation_spread_deg[2]};
+      jj["uncertainty_mm"] = jr.uncertainty_m * 1e3;
+      jj["bone_length_mm"] = jr.bone_length_m * 1e3;
+      jj["centre_in_parent_mm"] = {sk.joint(j).offset.x() * 1e3, sk.joint(j).offset.y() * 1e3,
+                                   sk.joint(j).offset.z() * 1e3};
+      if (std::isfinite(asymmetry)) jj["left_right_asymmetry_percent"] = asymmetry;
+    }
+    joints.push_back(jj);
+  }
+  nlohmann::json markers = nlohmann::json::array();
+  std::vector<double> rms;
+  for (size_t m = 0; m < cal.markers.size(); ++m) {
+    rms.push_back(r.marker_rms_m[m]);
+    markers.push_back(
+        {{"marker", cal.markers[m]},
+         {"segment", sk.joint(cal.model.markers->primary_joint(static_cast<int>(m))).name},
+         {"residual_rms_mm", r.marker_rms_m[m] * 1e3},
+         {"samples", r.marker_frames[m]}});
+  }
+  std::vector<double> sorted = rms;
+  std::sort(sorted.begin(), sorted.end());
+  out << "marker residual RMS: median " << Fixed(sorted[sorted.size() / 2] * 1e3, 1)
+      << " mm, worst " << Fixed(sorted.back() * 1e3, 1) << " mm; per sample: median "
+      << Fixed(r.median_residual_m * 1e3, 1) << " mm, RMS " << Fixed(r.rms_m * 1e3, 1) << " mm\n";
+  for (const ChannelNote& n : cal.rejected)
+    out << "  REJECTED " << n.label << ": " << n.reason << "\n";
+
+  SubjectCalibrationRecord record;
+  record.marker_set = cal.marker_set;
+  record.poses = static_cast<int>(r.frames_used.size());
+  record.median_residual_mm = r.median_residual_m * 1e3;
+  for (const JointCalibrationReport& jr : r.joints) {
+    record.joint_method.push_back(jr.method);
+    record.joint_uncertainty_mm.push_back(jr.method == "root" ? kNaN : jr.uncertainty_m * 1e3);
+  }
+  cal.model.calibration = record;
+  WriteSubjectModel(options.out_subject, cal.model);
+  out << "wrote " << options.out_subject << ": " << sk.num_joints() << " joints, "
+      << cal.markers.size() << " markers\n";
+  if (!options.report_json.empty()) {
+    nlohmann::json report = {{"takes", options.markers_c3d},
+                             {"frames", cal.frames_total},
+                             {"marker_set", cal.marker_set},
+                             {"set_markers_missing", cal.set_missing},
+                             {"studio_markers", cal.studio_markers},
+                             {"hip_prior_from_pelvis_regression", cal.hip_regression},
+                             {"poses_solved", r.frames_used.size()},
+                             {"iterations", r.iterations},
+                             {"median_residual_mm", r.median_residual_m * 1e3},
+                             {"rms_residual_mm", r.rms_m * 1e3},
+                             {"joints", joints},
+                             {"markers", markers}};
+    nlohmann::json skipped = nlohmann::json::array(), rejected = nlohmann::json::array();
+    for (const ChannelNote& n : cal.skipped)
+      skipped.push_back({{"label", n.label}, {"reason", n.reason}});
+    for (const ChannelNote& n : cal.rejected)
+      rejected.push_back({{"label", n.label}, {"reason", n.reason}});
+    report["skipped"] = skipped;
+    report["rejected"] = rejected;
+    std::ofstream file(options.report_json);
+    if (!file) throw std::runtime_error(options.report_json + ": cannot open for writing");
+    file << report.dump(1) << "\n";
+    out << "wrote " << options.report_json << "\n";
+  }
+  return static_cast<int>(cal.markers.size());
+}
+
+}  // namespace
+
 int RunCalibrateCommand(const CalibrateCommandOptions& options, std::ostream& out) {
+  if (options.markers_c3d.empty()) throw std::runtime_error("calibrate: no --markers take given");
+  if (options.skeleton_bvh.empty()) return CalibrateFromMarkersOnly(options, out);
+  if (options.markers_c3d.size() != 1)
+    throw std::runtime_error(
+        "calibrate: with --skeleton, give the one --markers take of the same motion");
   BvhReadOptions bvh_options;
   bvh_options.units = options.bvh_units;
   const BvhTake bvh = ReadBvh(options.skeleton_bvh, bvh_options);
-  const C3dTake c3d = ReadC3d(options.markers_c3d);
+  const C3dTake c3d = ReadC3d(options.markers_c3d.front());
   std::vector<Pose> motion = bvh.frames;
   if (std::abs(bvh.rate_hz() - c3d.rate_hz) > 1e-6 * c3d.rate_hz) {
     out << "resampling " << options.skeleton_bvh << " from " << bvh.rate_hz()
@@ -29,8 +174,9 @@ int RunCalibrateCommand(const CalibrateCommandOptions& options, std::ostream& ou
   // Resampling can round the last frame either way; anything more means different takes.
   if (frames == 0 || longer - frames > 1)
     throw std::runtime_error("calibrate: the skeleton motion has " + std::to_string(motion.size()) +
-                             " frames at the capture's rate but " + options.markers_c3d + " has " +
-                             std::to_string(c3d.num_frames) + ": they are not the same take");
+                             " frames at the capture's rate but " + options.markers_c3d.front() +
+                             " has " + std::to_string(c3d.num_frames) +
+                             ": they are not the same take");
 
   std::vector<KinematicsWorkspace> fk(static_cast<size_t>(frames),
                                       KinematicsWorkspace(bvh.skeleton));
@@ -71,9 +217,15 @@ int RunCalibrateCommand(const CalibrateCommandOptions& options, std::ostream& ou
       rms.push_back(r.rms_m);
     }
   }
-  if (accepted.size() < 3)
-    throw std::runtime_error("calibrate: only " + std::to_string(accepted.size()) +
-                             " markers fit the skeleton; a subject needs at least 3");
+  // A skeleton that most markers do not fit is the wrong skeleton (or the wrong units):
+  // writing a subject from the few that happen to fit would solve with metres of error.
+  if (accepted.size() < 3 || 2 * accepted.size() < results.size())
+    throw std::runtime_error(
+        "calibrate: only " + std::to_string(accepted.size()) + " of " +
+        std::to_string(results.size()) + " markers fit the skeleton " + options.skeleton_bvh +
+        " (read in " + bvh.units +
+        "; see the REJECTED lines above): is it the same take, in the units guessed "
+        "(--bvh-units)? No subject written");
   SubjectModel model;
   model.name = options.subject_name.empty()
                    ? std::filesystem::path(options.out_subject).stem().string()

@@ -1,6 +1,6 @@
 // mocapd: the motion-capture cleanup daemon's command line. Subcommands:
 //   demo       synthesize a take and solve it live (the README's main job)
-//   calibrate  build a subject model from a BVH and the C3D capture of the same take
+//   calibrate  build a subject model from labelled markers alone (or a BVH and its C3D)
 //   process    clean a recorded C3D through the streaming pipeline; write BVH (+ C3D)
 //   run        the daemon: marker frames in over ZeroMQ, cleaned skeletons out
 #include <CLI/CLI.hpp>
@@ -40,14 +40,25 @@ int main(int argc, char** argv) {
   mocapd::CalibrateCommandOptions cal;
   double max_rms_mm = cal.calibration.max_rms_m * 1e3;
   CLI::App* cal_cmd = app.add_subcommand(
-      "calibrate", "Attach a C3D take's markers to a BVH skeleton and write a subject model");
+      "calibrate",
+      "Build a subject model (skeleton + markers) from labelled markers alone, or from a BVH "
+      "skeleton and the C3D of the same take");
   cal_cmd
-      ->add_option("--skeleton", cal.skeleton_bvh,
-                   "BVH with the hierarchy and the motion of the captured take")
+      ->add_option("--markers", cal.markers_c3d,
+                   "C3D marker take(s) of the actor (repeat for several takes)")
       ->required()
       ->check(CLI::ExistingFile);
-  cal_cmd->add_option("--markers", cal.markers_c3d, "C3D marker capture of the same take")
-      ->required()
+  cal_cmd
+      ->add_option("--marker-set", cal.marker_set,
+                   "auto (recognise from the labels), a built-in set (plug-in-gait-full, "
+                   "plug-in-gait-lower, cmu-41, optitrack-baseline, qualisys-sports, "
+                   "mocapd-default) or a set file")
+      ->capture_default_str();
+  cal_cmd->add_option("--report", cal.report_json,
+                      "Markers alone: write the calibration report (JSON)");
+  cal_cmd
+      ->add_option("--skeleton", cal.skeleton_bvh,
+                   "Optional: BVH with the hierarchy and the motion of the captured take")
       ->check(CLI::ExistingFile);
   cal_cmd->add_option("--out", cal.out_subject, "Subject model to write (TOML)")->required();
   cal_cmd->add_option("--name", cal.subject_name, "Subject name (default: the output file's stem)");

@@ -45,10 +45,22 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
   times_us.reserve(static_cast<size_t>(take.num_frames));
   C3dTake cleaned = take;  // untouched samples keep their exact file values
 
+  KinematicsWorkspace solved(*subject.skeleton);
+  std::vector<double> residuals, sum_sq(observed.size(), 0.0);
+  std::vector<int> residual_count(observed.size(), 0);
   auto collect = [&]() {
     const CleanFrame& frame = pipeline.output();
     const auto f = static_cast<int>(frame.frame);
     poses[static_cast<size_t>(f)] = frame.pose;
+    ForwardKinematics(*subject.skeleton, frame.pose, &solved);
+    for (size_t m = 0; m < observed.size(); ++m) {
+      if (frame.status[m] != MarkerStatus::kObserved) continue;
+      const double r =
+          (frame.markers[m] - EvaluateMarker(markers.marker(static_cast<int>(m)), solved)).norm();
+      residuals.push_back(r);
+      sum_sq[m] += r * r;
+      ++residual_count[m];
+    }
     for (size_t m = 0; m < point_of_marker.size(); ++m) {
       const int p = point_of_marker[m];
       if (p < 0 || frame.status[m] != MarkerStatus::kRepaired) continue;
@@ -81,6 +93,14 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
   if (options.progress) out << "\n";
 
   summary.counters = pipeline.counters();
+  std::vector<double> marker_rms;
+  for (size_t m = 0; m < observed.size(); ++m)
+    if (residual_count[m] > 0) marker_rms.push_back(std::sqrt(sum_sq[m] / residual_count[m]));
+  if (!residuals.empty()) summary.residual_median_mm = Quantile(residuals, 0.5) * 1e3;
+  if (!marker_rms.empty()) {
+    summary.marker_rms_median_mm = Quantile(marker_rms, 0.5) * 1e3;
+    summary.marker_rms_worst_mm = *std::max_element(marker_rms.begin(), marker_rms.end()) * 1e3;
+  }
   if (!times_us.empty()) {
     double sum = 0.0, worst = 0.0;
     for (double t : times_us) {
@@ -160,6 +180,12 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
                 "p99 %.1f us, max %.1f us\n",
                 summary.mean_us, summary.p50_us, summary.p99_us, summary.max_us);
   out << line;
+  std::snprintf(line, sizeof(line),
+                "solved skeleton against the observed samples: median %.1f mm per sample; per "
+                "marker RMS median %.1f mm, worst %.1f mm\n",
+                summary.residual_median_mm, summary.marker_rms_median_mm,
+                summary.marker_rms_worst_mm);
+  out << line;
   if (!options.report_json.empty()) {
     std::ofstream report(options.report_json);
     if (!report) throw std::runtime_error(options.report_json + ": cannot open for writing");
@@ -191,6 +217,10 @@ nlohmann::json ProcessSummaryJson(const ProcessSummary& summary,
             {"p50", summary.p50_us},
             {"p99", summary.p99_us},
             {"max", summary.max_us}}},
+          {"residual_mm",
+           {{"median_per_sample", summary.residual_median_mm},
+            {"marker_rms_median", summary.marker_rms_median_mm},
+            {"marker_rms_worst", summary.marker_rms_worst_mm}}},
           {"retarget_per_frame_us",
            {{"p50", summary.retarget_p50_us}, {"p99", summary.retarget_p99_us}}}};
 }

@@ -34,6 +34,9 @@ struct ProcessSummary {
   CleanupCounters counters;
   double mean_us = 0.0, p50_us = 0.0, p99_us = 0.0, max_us = 0.0;  ///< Per-frame pipeline time.
   double retarget_p50_us = 0.0, retarget_p99_us = 0.0;  ///< Per-frame retarget time, if any.
+  /// How well the solved skeleton fits the captured samples it published as observed:
+  /// per sample (median), and per marker (the RMS of each, their median and worst), mm.
+  double residual_median_mm = 0.0, marker_rms_median_mm = 0.0, marker_rms_worst_mm = 0.0;
 };
 
 /// Runs the command, printing progress and the summary to out. Throws std::runtime_error

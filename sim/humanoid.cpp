@@ -65,27 +65,127 @@ HumanoidMotion ParseHumanoidMotion(const std::string& name) {
   if (name == "reach") return HumanoidMotion::kReach;
   if (name == "turn") return HumanoidMotion::kTurn;
   if (name == "mixed") return HumanoidMotion::kMixed;
+  if (name == "rom") return HumanoidMotion::kRom;
   throw std::invalid_argument("unknown motion '" + name +
-                              "' (expected walk, reach, turn or mixed)");
+                              "' (expected walk, reach, turn, mixed or rom)");
 }
+
+namespace {
+
+// The humanoid's joints a motion drives, by index (left first).
+struct HumanoidJoints {
+  explicit HumanoidJoints(const Skeleton& skeleton) : skeleton_(skeleton) {
+    hips = Index("Hips");
+    spine = Index("Spine");
+    chest = Index("Chest");
+    neck = Index("Neck");
+    head = Index("Head");
+    for (int s = 0; s < 2; ++s) {
+      const std::string side = s == 0 ? "Left" : "Right";
+      shoulder[s] = Index(side + "Shoulder");
+      arm[s] = Index(side + "Arm");
+      forearm[s] = Index(side + "ForeArm");
+      hand[s] = Index(side + "Hand");
+      upleg[s] = Index(side + "UpLeg");
+      leg[s] = Index(side + "Leg");
+      foot[s] = Index(side + "Foot");
+      toe[s] = Index(side + "ToeBase");
+    }
+  }
+  size_t hips, spine, chest, neck, head;
+  size_t shoulder[2], arm[2], forearm[2], hand[2], upleg[2], leg[2], foot[2], toe[2];
+
+ private:
+  size_t Index(const std::string& name) const {
+    const auto j = skeleton_.FindJoint(name);
+    if (!j) throw std::invalid_argument("humanoid motion needs joint '" + name + "'");
+    return static_cast<size_t>(j->value);
+  }
+  const Skeleton& skeleton_;
+};
+
+// A calibration's range-of-motion take, standing in place, 20 s per cycle: star arcs of
+// each hip, knee bends, shoulder circles, elbow bends with forearm twists and wrist
+// circles, then trunk twists and bends, nods and head turns with ankle circles. Each
+// phase fades in and out over half a second, so the motion stays smooth.
+std::vector<Pose> MakeRangeOfMotion(const Skeleton& skeleton, double seconds, double rate_hz) {
+  const HumanoidJoints J(skeleton);
+  const size_t hips = J.hips, spine = J.spine, chest = J.chest, neck = J.neck, head = J.head;
+  const size_t* arm = J.arm;
+  const size_t* forearm = J.forearm;
+  const size_t* hand = J.hand;
+  const size_t* upleg = J.upleg;
+  const size_t* leg = J.leg;
+  const size_t* foot = J.foot;
+  const Vec3 X = Vec3::UnitX(), Y = Vec3::UnitY(), Z = Vec3::UnitZ();
+  const auto frames = static_cast<size_t>(std::max(1.0, std::round(seconds * rate_hz)));
+  const Pose rest = RestPose(skeleton);
+  std::vector<Pose> out;
+  out.reserve(frames);
+  auto phase = [](double t, double from, double to) {
+    return SmoothStep(from, from + 0.5, t) * (1.0 - SmoothStep(to - 0.5, to, t));
+  };
+  for (size_t f = 0; f < frames; ++f) {
+    const double time = static_cast<double>(f) / rate_hz;
+    const double t = std::fmod(time, 20.0);
+    const double w = M_PI;  // one circle per 2 s
+    Pose pose = rest;
+    pose.translation[hips] = rest.translation[hips] + Vec3(0.01 * std::sin(0.5 * time), 0, 0);
+    const double trunk = phase(t, 16.0, 20.0);
+    pose.rotation[hips] = AxisAngle(Y, 0.15 * trunk * std::sin(0.8 * w * t));
+    pose.rotation[spine] = AxisAngle(Y, 0.35 * trunk * std::sin(0.5 * w * t)) *
+                           AxisAngle(X, 0.25 * trunk * std::sin(0.7 * w * t)) *
+                           AxisAngle(Z, 0.2 * trunk * std::cos(0.6 * w * t));
+    pose.rotation[chest] = AxisAngle(Y, 0.3 * trunk * std::sin(0.5 * w * t + 0.4)) *
+                           AxisAngle(Z, 0.15 * trunk * std::sin(0.6 * w * t));
+    pose.rotation[neck] = AxisAngle(X, 0.3 * trunk * std::sin(0.9 * w * t));
+    pose.rotation[head] = AxisAngle(Y, 0.6 * trunk * std::sin(0.4 * w * t)) *
+                          AxisAngle(Z, 0.2 * trunk * std::cos(0.5 * w * t));
+    for (int side = 0; side < 2; ++side) {
+      const double s = side == 0 ? 1.0 : -1.0;
+      // Hip star arcs: the thigh circles around a cone, the knee a little bent.
+      const double star = phase(t, side == 0 ? 0.0 : 4.0, side == 0 ? 4.0 : 8.0);
+      const double bend = phase(t, 8.0, 10.0) * (0.5 - 0.5 * std::cos(w * t + side * M_PI));
+      pose.rotation[upleg[side]] =
+          AxisAngle(X, -0.65 * star * (0.6 + std::sin(w * t)) - 0.6 * bend) *
+          AxisAngle(Z, s * 0.45 * star * (0.5 + std::cos(w * t))) *
+          AxisAngle(Y, s * 0.3 * star * std::sin(0.5 * w * t));
+      pose.rotation[leg[side]] = AxisAngle(X, 0.3 * star + 1.4 * bend);
+      const double ankle = trunk;
+      pose.rotation[foot[side]] = AxisAngle(X, 0.35 * ankle * std::sin(w * t + side)) *
+                                  AxisAngle(Z, s * 0.25 * ankle * std::cos(w * t + side));
+      // Arms hang; shoulder circles, then elbow bends with forearm twists and wrist circles.
+      const double circle = phase(t, 10.0, 14.0);
+      const double elbow = phase(t, 14.0, 16.0);
+      pose.rotation[arm[side]] = AxisAngle(Y, -s * 0.8 * circle * std::sin(w * t)) *
+                                 AxisAngle(Z, -s * (1.3 - circle * (0.6 + 0.5 * std::cos(w * t)))) *
+                                 AxisAngle(X, 0.5 * circle * std::sin(0.5 * w * t));
+      pose.rotation[forearm[side]] =
+          AxisAngle(Y, -s * (0.15 + 1.1 * elbow * (0.5 - 0.5 * std::cos(w * t)))) *
+          AxisAngle(X, 0.9 * elbow * std::sin(0.5 * w * t));
+      pose.rotation[hand[side]] = AxisAngle(Z, s * 0.5 * elbow * std::sin(w * t)) *
+                                  AxisAngle(Y, 0.4 * elbow * std::cos(w * t));
+    }
+    out.push_back(std::move(pose));
+  }
+  return out;
+}
+
+}  // namespace
 
 std::vector<Pose> MakeHumanoidMotion(const Skeleton& skeleton, HumanoidMotion motion,
                                      double seconds, double rate_hz) {
-  auto idx = [&](const char* name) {
-    const auto j = skeleton.FindJoint(name);
-    if (!j) throw std::invalid_argument(std::string("humanoid motion needs joint '") + name + "'");
-    return static_cast<size_t>(j->value);
-  };
-  const size_t hips = idx("Hips"), spine = idx("Spine"), chest = idx("Chest"), neck = idx("Neck"),
-               head = idx("Head");
-  const size_t shoulder[2] = {idx("LeftShoulder"), idx("RightShoulder")};
-  const size_t arm[2] = {idx("LeftArm"), idx("RightArm")};
-  const size_t forearm[2] = {idx("LeftForeArm"), idx("RightForeArm")};
-  const size_t hand[2] = {idx("LeftHand"), idx("RightHand")};
-  const size_t upleg[2] = {idx("LeftUpLeg"), idx("RightUpLeg")};
-  const size_t leg[2] = {idx("LeftLeg"), idx("RightLeg")};
-  const size_t foot[2] = {idx("LeftFoot"), idx("RightFoot")};
-  const size_t toe[2] = {idx("LeftToeBase"), idx("RightToeBase")};
+  if (motion == HumanoidMotion::kRom) return MakeRangeOfMotion(skeleton, seconds, rate_hz);
+  const HumanoidJoints J(skeleton);
+  const size_t hips = J.hips, spine = J.spine, chest = J.chest, neck = J.neck, head = J.head;
+  const size_t* shoulder = J.shoulder;
+  const size_t* arm = J.arm;
+  const size_t* forearm = J.forearm;
+  const size_t* hand = J.hand;
+  const size_t* upleg = J.upleg;
+  const size_t* leg = J.leg;
+  const size_t* foot = J.foot;
+  const size_t* toe = J.toe;
   const Vec3 X = Vec3::UnitX(), Y = Vec3::UnitY(), Z = Vec3::UnitZ();
   const double leg_length = -(skeleton.joint(static_cast<int>(leg[0])).offset.y() +
                               skeleton.joint(static_cast<int>(foot[0])).offset.y());
@@ -108,6 +208,7 @@ std::vector<Pose> MakeHumanoidMotion(const Skeleton& skeleton, HumanoidMotion mo
         turn_rate = 1.2 * SmoothStep(0.0, 0.5, t);
         walk = 0.4 * SmoothStep(0.0, 0.5, t);
         break;
+      case HumanoidMotion::kRom: break;  // MakeRangeOfMotion
       case HumanoidMotion::kMixed: {
         const double cycle = std::fmod(t, 9.0);
         walk = SmoothStep(0.0, 0.6, cycle) * (1.0 - SmoothStep(5.0, 5.6, cycle));

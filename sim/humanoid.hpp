@@ -14,8 +14,10 @@ namespace mocapd {
 /// Joint names follow the Mixamo/CMU convention (Hips, LeftUpLeg, LeftArm, ...).
 Skeleton MakeHumanoidSkeleton(double height_m = 1.75);
 
-enum class HumanoidMotion { kWalk, kReach, kTurn, kMixed };
-/// Parses walk|reach|turn|mixed; throws std::invalid_argument otherwise.
+/// kRom: a calibration's range of motion (hip star arcs, knee bends, shoulder circles,
+/// elbow bends, trunk twists, nods, ankle circles), standing in place.
+enum class HumanoidMotion { kWalk, kReach, kTurn, kMixed, kRom };
+/// Parses walk|reach|turn|mixed|rom; throws std::invalid_argument otherwise.
 HumanoidMotion ParseHumanoidMotion(const std::string& name);
 
 /// Generates `seconds` of motion at `rate_hz` for MakeHumanoidSkeleton's skeleton.

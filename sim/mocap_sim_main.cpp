@@ -15,6 +15,7 @@
 #include "formats/bvh.hpp"
 #include "formats/c3d.hpp"
 #include "formats/marker_layout.hpp"
+#include "formats/marker_set.hpp"
 #include "formats/subject_file.hpp"
 #include "sim/corruption.hpp"
 #include "sim/humanoid.hpp"
@@ -33,6 +34,8 @@ struct SynthOptions {
   double rate_hz = 0.0;
   std::string subject_out;
   std::string layout;
+  std::string marker_set;
+  double soft_tissue_mm = 0.0;
   std::string truth_bvh;
   std::string bvh_units;
   double noise_mm = 0.0;
@@ -58,13 +61,23 @@ int RunSynth(const SynthOptions& o) {
   std::vector<mocapd::Pose> motion =
       mocapd::ResampleMotion(source.skeleton, source.frames, source.rate_hz(), rate);
   const auto roles = mocapd::MatchHumanoidRoles(source.skeleton);
-  const auto layout =
-      o.layout.empty() ? mocapd::DefaultMarkerLayout() : mocapd::ReadMarkerLayout(o.layout);
-  auto markers = std::make_shared<const mocapd::MarkerSet>(
-      source.skeleton, mocapd::PlaceMarkers(source.skeleton, roles, layout, source.end_sites));
-  std::mt19937_64 rng(o.seed);
-  mocapd::C3dTake take =
-      mocapd::SynthesizeMarkers(source.skeleton, *markers, motion, rate, o.noise_mm * 1e-3, &rng);
+  std::shared_ptr<const mocapd::MarkerSet> markers;
+  if (!o.marker_set.empty()) {
+    markers = std::make_shared<const mocapd::MarkerSet>(
+        source.skeleton,
+        mocapd::PlaceMarkerSet(source.skeleton, roles, mocapd::FindMarkerSet(o.marker_set),
+                               source.end_sites));
+  } else {
+    const auto layout =
+        o.layout.empty() ? mocapd::DefaultMarkerLayout() : mocapd::ReadMarkerLayout(o.layout);
+    markers = std::make_shared<const mocapd::MarkerSet>(
+        source.skeleton, mocapd::PlaceMarkers(source.skeleton, roles, layout, source.end_sites));
+  }
+  mocapd::SynthesisNoise noise;
+  noise.noise_sigma_m = o.noise_mm * 1e-3;
+  noise.soft_tissue_m = o.soft_tissue_mm * 1e-3;
+  noise.seed = o.seed;
+  mocapd::C3dTake take = mocapd::SynthesizeMarkers(source.skeleton, *markers, motion, rate, noise);
   if (!o.corrupt.empty()) {
     mocapd::CorruptionOptions corruption;
     corruption.severity = mocapd::ParseCorruptionSeverity(o.corrupt);
@@ -215,8 +228,9 @@ int main(int argc, char** argv) {
                       ->check(CLI::ExistingFile);
   synth_cmd
       ->add_option("--humanoid", synth.humanoid_motion,
-                   "Use the built-in humanoid: walk | reach | turn | mixed")
-      ->check(CLI::IsMember({"walk", "reach", "turn", "mixed"}))
+                   "Use the built-in humanoid: walk | reach | turn | mixed | rom (range of "
+                   "motion, for calibration)")
+      ->check(CLI::IsMember({"walk", "reach", "turn", "mixed", "rom"}))
       ->excludes(bvh_opt);
   synth_cmd->add_option("--seconds", synth.seconds, "Length of built-in humanoid motion")
       ->check(CLI::Range(0.1, 3600.0))
@@ -232,6 +246,15 @@ int main(int argc, char** argv) {
       ->add_option("--layout", synth.layout,
                    "Marker layout TOML (default: built-in ~60-marker set)")
       ->check(CLI::ExistingFile);
+  auto* set_opt = synth_cmd->add_option(
+      "--marker-set", synth.marker_set,
+      "Place an industry marker set instead of a layout: plug-in-gait-full, plug-in-gait-lower, "
+      "cmu-41, optitrack-baseline, qualisys-sports, or a set file");
+  set_opt->excludes("--layout");
+  synth_cmd
+      ->add_option("--soft-tissue-mm", synth.soft_tissue_mm,
+                   "Soft-tissue wobble of markers on fleshy segments, mm (pose-correlated)")
+      ->check(CLI::Range(0.0, 100.0));
   synth_cmd->add_option("--truth-bvh", synth.truth_bvh,
                         "Also write the resampled ground-truth motion");
   synth_cmd->add_option("--bvh-units", synth.bvh_units,

@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include "formats/bvh.hpp"
 #include "formats/retarget_map.hpp"
 #include "sim/humanoid.hpp"
 #include "tests/support/allocation_counter.hpp"
@@ -54,6 +55,23 @@ TEST_F(RetargetTest, IdenticalRigsRetargetToTheIdentity) {
   }
   EXPECT_LT(worst, 2.0);
   EXPECT_LT(worst_root, 0.005);
+}
+
+// The usual character file is one frame of its T-pose: read from such a file, the
+// character's root must still translate with the actor's (it stood 2.3 m off).
+TEST_F(RetargetTest, ACharacterFromAOneFrameFileFollowsTheRoot) {
+  const BvhTake file = ParseBvh(
+      FormatBvh(MakeBvhTake(*source_, {RestPose(*source_)}, 1.0 / 30.0, "cm")), "character.bvh");
+  const auto character = std::make_shared<const Skeleton>(file.skeleton);
+  Retargeter r(source_, character, MakeRetargetMap(*source_, {}, *character, file.end_sites),
+               NoContacts());
+  double worst_root = 0.0;
+  for (size_t f = 0; f < motion_.size(); ++f) {
+    const Pose& out = r.Retarget(motion_[f]);
+    if (f >= 5)
+      worst_root = std::max(worst_root, (out.translation[0] - motion_[f].translation[0]).norm());
+  }
+  EXPECT_LT(worst_root, 0.01);
 }
 
 TEST_F(RetargetTest, AUniformlyScaledRigGetsTheSameJointAngles) {

@@ -87,6 +87,47 @@ TEST(BvhTest, HumanoidMotionRoundTripsThroughBvh) {
       ASSERT_LT((a[f][j] - b[f][j]).norm(), 1e-6) << f << " " << j;
 }
 
+// Exporters often write the take's start position into the hips' OFFSET (here 4 m away
+// under a static root): the unit guess must come from the bones, not from where the
+// actor stands, or a cm file is read as mm and every solve is off by metres.
+TEST(BvhTest, UnitsAreGuessedFromBonesNotFromAFarRootOffset) {
+  Skeleton sk = MakeHumanoidSkeleton();
+  const BvhTake take = MakeBvhTake(sk, {RestPose(sk)}, 1.0 / 30.0, "cm");
+  std::string text = FormatBvh(take);
+  // Put the humanoid under a static root, its hips 4 m away.
+  const size_t root = text.find("ROOT ");
+  const size_t brace = text.find('{', root);
+  const size_t offset = text.find("OFFSET", brace);
+  const size_t line_end = text.find('\n', offset);
+  text = text.substr(0, offset) + "OFFSET -400.0 93.0 250.0" + text.substr(line_end);
+  text.replace(
+      root, 5,
+      "ROOT joint_Root\n{\n  OFFSET 0 0 0\n  CHANNELS 3 Zrotation Xrotation Yrotation\n  JOINT ");
+  const size_t motion = text.find("MOTION");
+  text.insert(motion, "}\n");
+  const size_t frame_line = text.find('\n', text.find("Frame Time:"));
+  text.insert(frame_line + 1, "0 0 0 ");
+  const BvhTake dut = ParseBvh(text, "far_root.bvh");
+  EXPECT_EQ(dut.units, "cm");
+  ASSERT_EQ(dut.skeleton.num_joints(), sk.num_joints() + 1);
+  // The thigh bone comes out in metres as the humanoid has it.
+  const int knee = dut.skeleton.FindJoint("LeftLeg")->value;
+  EXPECT_NEAR(dut.skeleton.joint(knee).offset.norm(),
+              sk.joint(sk.FindJoint("LeftLeg")->value).offset.norm(), 1e-6);
+}
+
+// A character file is usually one frame (its T-pose): nothing moves, so the channel list
+// alone says what each joint may do, and a root with position channels may translate.
+TEST(BvhTest, AOneFrameFileTypesTheRootByItsChannels) {
+  Skeleton sk = MakeHumanoidSkeleton();
+  const BvhTake one_frame =
+      ParseBvh(FormatBvh(MakeBvhTake(sk, {RestPose(sk)}, 1.0 / 30.0, "cm")), "character.bvh");
+  EXPECT_EQ(one_frame.skeleton.joint(0).type, JointType::kFree);
+  EXPECT_EQ(one_frame.skeleton.joint(1).type, JointType::kBall);
+  // The tiny take's static root stays fixed: a joint below it carries the motion.
+  EXPECT_EQ(ReadBvh(kTinyPath).skeleton.joint(0).type, JointType::kFixed);
+}
+
 TEST(BvhTest, UnitsCanBeForced) {
   BvhReadOptions options;
   options.units = "mm";

@@ -3,6 +3,8 @@
 
 #include <gtest/gtest.h>
 
+#include <filesystem>
+
 #include <sstream>
 
 #include "formats/bvh.hpp"
@@ -41,7 +43,7 @@ TEST(CalibrateCommandTest, WritesASubjectWhoseMarkersMatchTheTruth) {
 
   CalibrateCommandOptions options;
   options.skeleton_bvh = dir + "/skel.bvh";
-  options.markers_c3d = dir + "/take.c3d";
+  options.markers_c3d = {dir + "/take.c3d"};
   options.out_subject = dir + "/actor.toml";
   std::ostringstream out;
   const int accepted = RunCalibrateCommand(options, out);
@@ -76,7 +78,7 @@ TEST(CalibrateCommandTest, RefusesTakesOfDifferentLengths) {
                        1.0 / 60.0));
   WriteC3d(dir + "/take.c3d", f.take);
   CalibrateCommandOptions options{
-      dir + "/skel.bvh", dir + "/take.c3d", dir + "/out.toml", "", "", {}};
+      dir + "/skel.bvh", {dir + "/take.c3d"}, dir + "/out.toml", "", "", {}, "auto", ""};
   std::ostringstream out;
   try {
     RunCalibrateCommand(options, out);
@@ -84,6 +86,30 @@ TEST(CalibrateCommandTest, RefusesTakesOfDifferentLengths) {
   } catch (const std::runtime_error& e) {
     EXPECT_NE(std::string(e.what()).find("not the same take"), std::string::npos) << e.what();
   }
+}
+
+// A skeleton read in the wrong units fits almost no marker: the command must fail and
+// write nothing, never a subject made of the few markers that happened to fit.
+TEST(CalibrateCommandTest, FailsWithoutWritingWhenMostMarkersDoNotFit) {
+  const auto f = testing::MakeHumanoidFixture("mixed", 3.0, 60.0);
+  const std::string dir = testing::TempDir("calibrate_units");
+  WriteBvh(dir + "/skel.bvh", MakeBvhTake(*f.skeleton, f.motion, 1.0 / 60.0, "cm"));
+  WriteC3d(dir + "/take.c3d", f.take);
+  CalibrateCommandOptions options;
+  options.skeleton_bvh = dir + "/skel.bvh";
+  options.markers_c3d = {dir + "/take.c3d"};
+  options.out_subject = dir + "/out.toml";
+  options.bvh_units = "mm";  // a cm file read as mm: the skeleton is 10x too small
+  std::ostringstream out;
+  try {
+    RunCalibrateCommand(options, out);
+    FAIL() << out.str();
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("markers fit the skeleton"), std::string::npos)
+        << e.what();
+    EXPECT_NE(std::string(e.what()).find("No subject written"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir + "/out.toml"));
 }
 
 }  // namespace

@@ -1,0 +1,377 @@
+// Markers-only calibration: channels, marker set, template, priors, bundle adjustment.
+#include "formats/subject_from_markers.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <stdexcept>
+
+namespace mocapd {
+namespace {
+
+double Median(std::vector<double> v) {
+  if (v.empty()) return kNaN;
+  const auto mid = v.begin() + static_cast<long>(v.size() / 2);
+  std::nth_element(v.begin(), mid, v.end());
+  return *mid;
+}
+
+// Every take's samples of the kept labels, frame-major, the takes one after another with
+// an all-missing frame between them (so no solve mistakes the cut for motion).
+struct Observations {
+  std::vector<std::string> labels;
+  std::vector<Vec3> positions;
+  int frames = 0;
+  const Vec3& at(int f, int m) const {
+    return positions[static_cast<size_t>(f) * labels.size() + static_cast<size_t>(m)];
+  }
+};
+
+Observations Gather(std::span<const C3dTake> takes, const std::vector<std::string>& labels) {
+  Observations o;
+  o.labels = labels;
+  for (size_t k = 0; k < takes.size(); ++k) {
+    const C3dTake& take = takes[k];
+    std::vector<int> point(labels.size(), -1);
+    for (int p = 0; p < take.num_points(); ++p) {
+      const std::string bare = BareLabel(take.labels[static_cast<size_t>(p)]);
+      for (size_t m = 0; m < labels.size(); ++m)
+        if (labels[m] == bare && point[m] < 0) point[m] = p;
+    }
+    if (k > 0) {
+      o.positions.insert(o.positions.end(), labels.size(), Vec3::Constant(kNaN));
+      ++o.frames;
+    }
+    for (int f = 0; f < take.num_frames; ++f) {
+      for (size_t m = 0; m < labels.size(); ++m) {
+        Vec3 p = Vec3::Constant(kNaN);
+        if (point[m] >= 0 && take.valid(f, point[m])) p = take.at(f, point[m]);
+        o.positions.push_back(p);
+      }
+      ++o.frames;
+    }
+  }
+  return o;
+}
+
+// The spread (standard deviation over frames) of the distance between two markers.
+double DistanceSpread(const Observations& o, int a, int b, int stride) {
+  double sum = 0.0, sum_sq = 0.0;
+  int n = 0;
+  for (int f = 0; f < o.frames; f += stride) {
+    if (!o.at(f, a).allFinite() || !o.at(f, b).allFinite()) continue;
+    const double d = (o.at(f, a) - o.at(f, b)).norm();
+    sum += d;
+    sum_sq += d * d;
+    ++n;
+  }
+  if (n < 10) return kNaN;
+  const double mean = sum / n;
+  return std::sqrt(std::max(0.0, sum_sq / n - mean * mean));
+}
+
+HumanoidRoles TemplateRolesOf(const Skeleton& skeleton) {
+  HumanoidRoles roles;
+  for (int j = 0; j < skeleton.num_joints(); ++j) roles.joint_of_role[skeleton.joint(j).name] = j;
+  roles.spine_chain = {roles.joint_of_role.at("spine"), roles.joint_of_role.at("chest")};
+  return roles;
+}
+
+// End sites for the template's end segments, so markers on them are placed along the
+// template's own bones.
+std::vector<BvhEndSite> TemplateEndSites(const Skeleton& skeleton, double height) {
+  std::vector<BvhEndSite> sites;
+  for (const char* role : {"head", "hand_l", "hand_r", "toe_l", "toe_r"})
+    sites.push_back({skeleton.FindJoint(role)->value, TemplateBone(role, height)});
+  return sites;
+}
+
+// One calibration over a chosen list of markers (labels with their template joint and
+// offset); fills what the caller reports.
+struct Candidate {
+  std::string label;
+  int joint = -1;
+  Vec3 offset = Vec3::Zero();
+  double prior_sigma = 0.0;  // <= 0: default
+  bool unknown = false;      // a studio marker: offset from the data
+};
+
+}  // namespace
+
+std::string MirrorRole(const std::string& role) {
+  if (role.ends_with("_l")) return role.substr(0, role.size() - 2) + "_r";
+  if (role.ends_with("_r")) return role.substr(0, role.size() - 2) + "_l";
+  return "";
+}
+
+MarkersOnlyCalibration CalibrateFromMarkers(std::span<const C3dTake> takes,
+                                            const MarkersOnlyOptions& options,
+                                            const std::string& subject_name) {
+  if (takes.empty()) throw std::runtime_error("calibrate: no marker take given");
+  MarkersOnlyCalibration out;
+  // The labels of every take, with how often each is seen and whether any file calls it
+  // a model output.
+  std::vector<std::string> labels;
+  std::map<std::string, std::pair<long, bool>> seen;  // valid samples, model output
+  long total_frames = 0;
+  for (const C3dTake& take : takes) {
+    total_frames += take.num_frames;
+    for (int p = 0; p < take.num_points(); ++p) {
+      const std::string bare = BareLabel(take.labels[static_cast<size_t>(p)]);
+      if (!seen.count(bare)) labels.push_back(bare);
+      auto& [valid, model_output] = seen[bare];
+      model_output = model_output || !take.is_marker(p);
+      for (int f = 0; f < take.num_frames; ++f)
+        valid += take.valid(f, p) && take.at(f, p).allFinite();
+    }
+  }
+  out.frames_total = static_cast<int>(total_frames);
+  if (labels.empty() || total_frames == 0)
+    throw std::runtime_error("calibrate: the takes hold no markers");
+  std::vector<std::string> markers;
+  for (const std::string& label : labels) {
+    const auto& [valid, model_output] = seen[label];
+    const ChannelKind kind = ClassifyChannel(
+        label, model_output, static_cast<double>(valid) / total_frames, options.min_valid_fraction);
+    if (kind == ChannelKind::kMarker)
+      markers.push_back(label);
+    else
+      out.skipped.push_back({label, to_string(kind)});
+  }
+  if (markers.size() < 3)
+    throw std::runtime_error(
+        "calibrate: only " + std::to_string(markers.size()) + " markers are seen in at least " +
+        std::to_string(static_cast<int>(options.min_valid_fraction * 100)) + " % of the frames (" +
+        std::to_string(out.skipped.size()) + " channels skipped): nothing to calibrate from");
+
+  // The marker set.
+  MarkerSetDefinition chosen;
+  MarkerSetMatch match;
+  if (options.marker_set == "auto") {
+    match = RecognizeMarkerSet(BuiltInMarkerSets(), markers);
+    if (match.set != nullptr) chosen = *match.set;
+  } else {
+    chosen = FindMarkerSet(options.marker_set);
+    match = MatchMarkerSet(chosen, markers);
+    match.set = &chosen;
+  }
+  if (match.set == nullptr)
+    throw std::runtime_error(
+        "calibrate: the " + std::to_string(markers.size()) +
+        " labels match no known marker set well enough (built in: see config/marker_sets/); "
+        "name one with --marker-set NAME or FILE.toml");
+  out.marker_set = chosen.name;
+  {
+    std::vector<uint8_t> found(chosen.markers.size(), 0);
+    for (const std::string& label : markers)
+      if (const auto m = chosen.Find(label)) found[static_cast<size_t>(*m)] = 1;
+    for (size_t m = 0; m < chosen.markers.size(); ++m)
+      if (!found[m] && !chosen.markers[m].optional)
+        out.set_missing.push_back(chosen.markers[m].name);
+  }
+
+  // A take with no motion cannot show where any joint turns.
+  {
+    const Observations moving = Gather(takes, markers);
+    const int stride = std::max(1, moving.frames / 600);
+    std::vector<double> travel;
+    for (size_t m = 0; m < markers.size(); ++m) {
+      Vec3 lo = Vec3::Constant(1e300), hi = Vec3::Constant(-1e300);
+      for (int f = 0; f < moving.frames; f += stride) {
+        const Vec3& p = moving.at(f, static_cast<int>(m));
+        if (!p.allFinite()) continue;
+        lo = lo.cwiseMin(p);
+        hi = hi.cwiseMax(p);
+      }
+      if (hi.x() >= lo.x()) travel.push_back((hi - lo).norm());
+    }
+    if (travel.empty() || Median(travel) < 0.03)
+      throw std::runtime_error(
+          "calibrate: the take shows no motion (markers move " +
+          std::to_string(
+              static_cast<int>(std::round((travel.empty() ? 0.0 : Median(travel)) * 1e3))) +
+          " mm at the median): calibration needs the joints to move, e.g. a range-of-motion take");
+  }
+
+  const Skeleton templ = MakeTemplateHumanoid(1.75);
+  const HumanoidRoles roles = TemplateRolesOf(templ);
+  const std::vector<MarkerDefinition> placed =
+      PlaceMarkerSet(templ, roles, chosen, TemplateEndSites(templ, 1.75));
+  const Observations all = Gather(takes, markers);
+  const int stride = std::max(1, all.frames / 600);
+
+  // Set markers ride their segment; a studio's own marker rides the segment it keeps its
+  // distances to.
+  std::vector<Candidate> candidates;
+  std::vector<int> studio;
+  for (size_t i = 0; i < markers.size(); ++i) {
+    if (const auto m = chosen.Find(markers[i])) {
+      const MarkerDefinition& d = placed[static_cast<size_t>(*m)];
+      candidates.push_back(
+          {markers[i], d.attachments[0].joint, d.attachments[0].offset, 0.0, false});
+    } else {
+      studio.push_back(static_cast<int>(i));
+    }
+  }
+  for (int u : studio) {
+    double best = kNaN;
+    int best_joint = -1;
+    for (int j = 0; j < templ.num_joints(); ++j) {
+      std::vector<double> spreads;
+      for (size_t c = 0; c < candidates.size(); ++c) {
+        if (candidates[c].joint != j || candidates[c].unknown) continue;
+        const int k = static_cast<int>(
+            std::find(markers.begin(), markers.end(), candidates[c].label) - markers.begin());
+        const double s = DistanceSpread(all, u, k, stride);
+        if (std::isfinite(s)) spreads.push_back(s);
+      }
+      if (spreads.size() < 2) continue;
+      std::sort(spreads.begin(), spreads.end());
+      const double score = 0.5 * (spreads[0] + spreads[1]);
+      if (!(score >= best)) {
+        best = score;
+        best_joint = j;
+      }
+    }
+    const std::string& label = markers[static_cast<size_t>(u)];
+    if (best_joint < 0 || !(best <= options.rigid_std_m)) {
+      char why[160];
+      std::snprintf(why, sizeof(why),
+                    "not in the %s set and rides no segment rigidly (best: %.1f mm spread)",
+                    chosen.name.c_str(), std::isfinite(best) ? best * 1e3 : 0.0);
+      out.rejected.push_back({label, why});
+      continue;
+    }
+    candidates.push_back({label, best_joint, Vec3::Zero(), 0.0, true});
+    out.studio_markers.push_back(label);
+  }
+
+  // The hip centres: Harrington et al. 2007 from the pelvis markers' width and depth,
+  // where the set has two front and at least one back pelvis marker.
+  std::vector<Vec3> joint_prior;
+  for (int j = 0; j < templ.num_joints(); ++j) joint_prior.push_back(templ.joint(j).offset);
+  std::vector<double> joint_sigma(static_cast<size_t>(templ.num_joints()), 0.0);
+  {
+    int front_l = -1, front_r = -1;
+    std::vector<int> back;
+    for (size_t c = 0; c < candidates.size(); ++c) {
+      if (candidates[c].unknown || candidates[c].joint != 0) continue;
+      const auto m = chosen.Find(candidates[c].label);
+      const Vec3& o = chosen.markers[static_cast<size_t>(*m)].offset_m;
+      if (o.z() > 0.03 && o.x() > 0.05) front_l = static_cast<int>(c);
+      if (o.z() > 0.03 && o.x() < -0.05) front_r = static_cast<int>(c);
+      if (o.z() < -0.03) back.push_back(static_cast<int>(c));
+    }
+    auto index = [&](int c) {
+      return static_cast<int>(
+          std::find(markers.begin(), markers.end(), candidates[static_cast<size_t>(c)].label) -
+          markers.begin());
+    };
+    if (front_l >= 0 && front_r >= 0 && !back.empty()) {
+      std::vector<double> widths, depths;
+      for (int f = 0; f < all.frames; f += stride) {
+        const Vec3& l = all.at(f, index(front_l));
+        const Vec3& r = all.at(f, index(front_r));
+        Vec3 mid_back = Vec3::Zero();
+        int nb = 0;
+        for (int b : back)
+          if (all.at(f, index(b)).allFinite()) {
+            mid_back += all.at(f, index(b));
+            ++nb;
+          }
+        if (!l.allFinite() || !r.allFinite() || nb == 0) continue;
+        const Vec3 across = (l - r).normalized();
+        const Vec3 d = 0.5 * (l + r) - mid_back / nb;
+        widths.push_back((l - r).norm());
+        depths.push_back((d - d.dot(across) * across).norm());
+      }
+      if (widths.size() >= 10) {
+        const double pw = Median(widths), pd = Median(depths);
+        // Mid-ASIS relative to the mid-hip point, [left, up, forward].
+        const Vec3 mid_front(0.0, 0.30 * pw + 0.0109, 0.24 * pd + 0.0099);
+        candidates[static_cast<size_t>(front_l)].offset = mid_front + Vec3(0.5 * pw, 0, 0);
+        candidates[static_cast<size_t>(front_r)].offset = mid_front - Vec3(0.5 * pw, 0, 0);
+        candidates[static_cast<size_t>(front_l)].prior_sigma =
+            candidates[static_cast<size_t>(front_r)].prior_sigma = 0.012;
+        const double half = 0.33 * pw + 0.0073;
+        const int tl = templ.FindJoint("thigh_l")->value, tr = templ.FindJoint("thigh_r")->value;
+        joint_prior[static_cast<size_t>(tl)] = Vec3(half, 0, 0);
+        joint_prior[static_cast<size_t>(tr)] = Vec3(-half, 0, 0);
+        joint_sigma[static_cast<size_t>(tl)] = joint_sigma[static_cast<size_t>(tr)] = 0.012;
+        out.hip_regression = true;
+      }
+    }
+  }
+
+  // Calibrate; reject markers that do not fit and calibrate again without them.
+  for (int pass = 0; pass < 2; ++pass) {
+    if (candidates.size() < 3)
+      throw std::runtime_error("calibrate: fewer than 3 markers could be placed; nothing written");
+    CalibrationTemplate t;
+    t.skeleton = templ;
+    t.joint_prior = joint_prior;
+    t.joint_prior_sigma_m = joint_sigma;
+    for (int j = 0; j < templ.num_joints(); ++j) {
+      const std::string mirror = MirrorRole(templ.joint(j).name);
+      t.mirror.push_back(mirror.empty() ? -1 : templ.FindJoint(mirror)->value);
+    }
+    t.gauge_left = templ.FindJoint("thigh_l")->value;
+    t.gauge_right = templ.FindJoint("thigh_r")->value;
+    std::vector<std::string> used;
+    for (const Candidate& c : candidates) {
+      MarkerDefinition d;
+      d.name = c.label;
+      d.attachments[0] = {c.joint, 1.0, c.offset};
+      t.markers.push_back(d);
+      t.marker_prior_sigma_m.push_back(c.prior_sigma);
+      t.offset_unknown.push_back(c.unknown);
+      used.push_back(c.label);
+    }
+    const Observations obs = Gather(takes, used);
+    try {
+      out.solve = CalibrateSubject(t, obs.positions, obs.frames, options.solve);
+    } catch (const std::invalid_argument& e) {
+      throw std::runtime_error(std::string("calibrate: ") + e.what());
+    }
+    std::vector<Candidate> kept;
+    for (size_t m = 0; m < candidates.size(); ++m) {
+      const double rms = out.solve.marker_rms_m[m];
+      const int frames = out.solve.marker_frames[m];
+      if (frames >= 10 && rms <= options.max_marker_rms_m) {
+        kept.push_back(candidates[m]);
+        continue;
+      }
+      char why[160];
+      if (frames < 10)
+        std::snprintf(why, sizeof(why), "seen in %d of the calibration's poses (10 needed)",
+                      frames);
+      else
+        std::snprintf(why, sizeof(why), "fits its segment to %.1f mm RMS only (limit %.0f mm)",
+                      rms * 1e3, options.max_marker_rms_m * 1e3);
+      out.rejected.push_back({candidates[m].label, why});
+    }
+    if (kept.size() == candidates.size()) break;
+    if (2 * kept.size() < markers.size() || kept.size() < 3)
+      throw std::runtime_error(
+          "calibrate: only " + std::to_string(kept.size()) + " of " +
+          std::to_string(markers.size()) +
+          " markers fit a skeleton; is the marker set right (--marker-set)? Nothing written");
+    candidates = std::move(kept);
+    if (pass == 1)
+      throw std::runtime_error("calibrate: markers still fail to fit after rejecting the worst");
+  }
+  if (2 * candidates.size() < markers.size())
+    throw std::runtime_error("calibrate: only " + std::to_string(candidates.size()) + " of " +
+                             std::to_string(markers.size()) +
+                             " markers could be placed; nothing written");
+  out.model.name = subject_name;
+  out.model.bvh_units = "cm";
+  out.model.skeleton = std::make_shared<const Skeleton>(out.solve.skeleton);
+  out.model.markers = std::make_shared<const MarkerSet>(*out.model.skeleton, out.solve.markers);
+  out.model.fit_rms_m = out.solve.marker_rms_m;
+  for (const Candidate& c : candidates) out.markers.push_back(c.label);
+  return out;
+}
+
+}  // namespace mocapd

@@ -1,0 +1,63 @@
+// A subject from labelled markers alone (`mocapd calibrate --markers`, and the daemon's
+// live calibration): recognises the marker set from the labels, skips what is not a
+// marker, starts from the template humanoid with the set's markers placed on it (a
+// studio's own markers attached to the segment they ride rigidly with; the hip centres'
+// prior from the pelvis markers by Harrington et al. 2007's regression where the set has
+// them), and runs the bundle adjustment of filters/subject_calibration.hpp.
+#pragma once
+
+#include <span>
+#include <string>
+#include <vector>
+
+#include "filters/subject_calibration.hpp"
+#include "formats/c3d.hpp"
+#include "formats/marker_set.hpp"
+#include "formats/subject_file.hpp"
+
+namespace mocapd {
+
+struct MarkersOnlyOptions {
+  /// "auto" (recognise from the labels), a built-in set's name, or a path to a set file.
+  std::string marker_set = "auto";
+  double min_valid_fraction = 0.5;  ///< Markers seen in fewer frames are skipped.
+  /// A studio's marker joins the segment whose set markers keep their distances to it
+  /// within this (standard deviation over the take), or is rejected.
+  double rigid_std_m = 0.012;
+  /// Markers whose residual RMS after calibration exceeds this are rejected (and the
+  /// calibration re-run without them).
+  double max_marker_rms_m = 0.03;
+  SubjectCalibrationOptions solve;
+};
+
+struct ChannelNote {
+  std::string label;
+  std::string reason;
+};
+
+struct MarkersOnlyCalibration {
+  SubjectModel model;
+  SubjectCalibrationResult solve;
+  std::string marker_set;                   ///< The set's name, or "none (rigid clusters)".
+  std::vector<std::string> markers;         ///< The calibrated markers' labels (model order).
+  std::vector<std::string> set_missing;     ///< The set's required markers the takes lack.
+  std::vector<ChannelNote> skipped;         ///< Not markers (model outputs, joint centres, sparse).
+  std::vector<ChannelNote> rejected;        ///< Markers that could not be placed, and why.
+  std::vector<std::string> studio_markers;  ///< Labels outside the set, placed by rigidity.
+  bool hip_regression = false;              ///< The hip prior came from the pelvis markers.
+  int frames_total = 0;
+};
+
+/// Calibrates a subject from one or more takes of the same actor (the same labels,
+/// rates may differ). Throws std::runtime_error with a clear message (and nothing is
+/// calibrated) when: no take has markers, every marker is NaN or sparse, the labels match
+/// no set and too few markers remain to cluster, the take shows no motion, or most
+/// markers cannot be placed.
+MarkersOnlyCalibration CalibrateFromMarkers(std::span<const C3dTake> takes,
+                                            const MarkersOnlyOptions& options,
+                                            const std::string& subject_name);
+
+/// The name of a joint's mirror image ("thigh_l" <-> "thigh_r"), or "" if it has none.
+std::string MirrorRole(const std::string& role);
+
+}  // namespace mocapd

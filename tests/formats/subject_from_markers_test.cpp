@@ -1,0 +1,144 @@
+// Tests for calibrating a subject from labelled markers alone: a Plug-in Gait range of
+// motion synthesized on the humanoid (with soft tissue) calibrates to a skeleton whose
+// joint centres follow the truth's, non-marker channels are skipped and counted, a
+// studio's own marker joins the segment it rides, the same input gives the same subject
+// byte for byte, and bad input is a clear error.
+#include "formats/subject_from_markers.hpp"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+
+#include "sim/humanoid.hpp"
+#include "sim/synthesis.hpp"
+
+namespace mocapd {
+namespace {
+
+class SubjectFromMarkersTest : public ::testing::Test {
+ protected:
+  SubjectFromMarkersTest()
+      : truth_(MakeHumanoidSkeleton(1.7)),
+        roles_(MatchHumanoidRoles(truth_)),
+        markers_(truth_, PlaceMarkerSet(truth_, roles_, FindMarkerSet("plug-in-gait-full"))) {
+    motion_ = MakeHumanoidMotion(truth_, HumanoidMotion::kRom, 20.0, 60.0);
+    SynthesisNoise noise;
+    noise.noise_sigma_m = 0.001;
+    noise.soft_tissue_m = 0.005;
+    take_ = SynthesizeMarkers(truth_, markers_, motion_, 60.0, noise);
+  }
+  // A point added to the take, from a function of the frame.
+  void AddPoint(const std::string& label, const std::function<Vec3(int)>& at,
+                const std::string& model_output = "") {
+    C3dTake out;
+    out.labels = take_.labels;
+    out.labels.push_back(label);
+    out.rate_hz = take_.rate_hz;
+    out.Allocate(take_.num_frames);
+    out.model_output_kind.back() = model_output;
+    for (int f = 0; f < take_.num_frames; ++f) {
+      for (int p = 0; p < out.num_points(); ++p) {
+        const Vec3 v = p < take_.num_points() ? take_.at(f, p) : at(f);
+        out.at(f, p) = v;
+        out.residuals[static_cast<size_t>(f) * static_cast<size_t>(out.num_points()) +
+                      static_cast<size_t>(p)] = v.allFinite() ? 0.0f : -1.0f;
+      }
+    }
+    take_ = std::move(out);
+  }
+  MarkersOnlyCalibration Calibrate() const {
+    return CalibrateFromMarkers(std::span<const C3dTake>(&take_, 1), MarkersOnlyOptions{}, "actor");
+  }
+  Skeleton truth_;
+  HumanoidRoles roles_;
+  MarkerSet markers_;
+  std::vector<Pose> motion_;
+  C3dTake take_;
+};
+
+TEST_F(SubjectFromMarkersTest, RangeOfMotionGivesJointCentresThatFollowTheTruth) {
+  const MarkersOnlyCalibration cal = Calibrate();
+  EXPECT_EQ(cal.marker_set, "plug-in-gait-full");
+  EXPECT_EQ(cal.markers.size(), markers_.markers().size());
+  EXPECT_TRUE(cal.rejected.empty());
+  const Skeleton& sk = *cal.model.skeleton;
+  IkState state(sk, *cal.model.markers);
+  KinematicsWorkspace truth(truth_), solved(sk);
+  std::vector<Vec3> targets(cal.markers.size());
+  std::vector<double> weights(targets.size(), 1.0), errors;
+  for (int f = 0; f < take_.num_frames; ++f) {
+    for (size_t m = 0; m < targets.size(); ++m)
+      targets[m] = take_.at(f, take_.FindLabel(cal.markers[m]));
+    (void)SolveIk(sk, *cal.model.markers, IkOptions{}, targets, weights, &state);
+    if (f < 20 || f % 5 != 0) continue;
+    ForwardKinematics(truth_, motion_[static_cast<size_t>(f)], &truth);
+    ForwardKinematics(sk, state.pose(), &solved);
+    for (const char* role :
+         {"thigh_l", "thigh_r", "shin_l", "shin_r", "foot_l", "foot_r", "upper_arm_l",
+          "upper_arm_r", "forearm_l", "forearm_r", "hand_l", "hand_r"})
+      errors.push_back((solved.p_WJ[static_cast<size_t>(sk.FindJoint(role)->value)] -
+                        truth.p_WJ[static_cast<size_t>(roles_.joint_of_role.at(role))])
+                           .norm());
+  }
+  std::sort(errors.begin(), errors.end());
+  // The template's centres start 2-6 cm off on this 1.7 m body; the calibration must
+  // bring them close (bench/README.md "Calibration from markers alone" has the figures).
+  EXPECT_LT(errors[errors.size() / 2], 0.012);
+  EXPECT_LT(errors[errors.size() * 95 / 100], 0.03);
+  EXPECT_LT(cal.solve.median_residual_m, 0.006);
+}
+
+TEST_F(SubjectFromMarkersTest, NonMarkersAreSkippedAndAStudioMarkerJoinsItsSegment) {
+  const int thigh = roles_.joint_of_role.at("thigh_l");
+  KinematicsWorkspace fk(truth_);
+  auto on_thigh = [&](int f) {
+    ForwardKinematics(truth_, motion_[static_cast<size_t>(f)], &fk);
+    return Vec3(fk.p_WJ[static_cast<size_t>(thigh)] +
+                fk.R_WJ[static_cast<size_t>(thigh)] * Vec3(0.0, -0.2, 0.08));
+  };
+  AddPoint("LThighFront", on_thigh);
+  AddPoint(
+      "LHipAngles", [](int f) { return Vec3(0.1 * f, 0, 0); }, "ANGLES");
+  AddPoint("LHJC", [&](int f) { return on_thigh(f); });
+  AddPoint("Loose", [](int f) { return f % 10 == 0 ? Vec3(0, 1, 0) : Vec3::Constant(kNaN); });
+  const MarkersOnlyCalibration cal = Calibrate();
+  EXPECT_EQ(cal.skipped.size(), 3u);
+  ASSERT_EQ(cal.studio_markers, std::vector<std::string>{"LThighFront"});
+  const auto m = cal.model.markers->FindMarker("LThighFront");
+  ASSERT_TRUE(m.has_value());
+  EXPECT_EQ(cal.model.skeleton->joint(cal.model.markers->primary_joint(m->value)).name, "thigh_l");
+}
+
+TEST_F(SubjectFromMarkersTest, TheSameInputGivesTheSameSubjectByteForByte) {
+  EXPECT_EQ(FormatSubjectModel(Calibrate().model), FormatSubjectModel(Calibrate().model));
+}
+
+TEST_F(SubjectFromMarkersTest, BadInputIsAClearErrorAndCalibratesNothing) {
+  auto error_of = [](const C3dTake& take, const std::string& set = "auto") {
+    MarkersOnlyOptions o;
+    o.marker_set = set;
+    try {
+      CalibrateFromMarkers(std::span<const C3dTake>(&take, 1), o, "x");
+    } catch (const std::runtime_error& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  C3dTake empty;
+  empty.rate_hz = 60;
+  EXPECT_NE(error_of(empty).find("hold no markers"), std::string::npos);
+  C3dTake nan = take_;
+  for (float& r : nan.residuals) r = -1.0f;
+  EXPECT_NE(error_of(nan).find("markers are seen in at least"), std::string::npos);
+  C3dTake still = take_;
+  for (int f = 0; f < still.num_frames; ++f)
+    for (int p = 0; p < still.num_points(); ++p) still.at(f, p) = take_.at(0, p);
+  EXPECT_NE(error_of(still).find("shows no motion"), std::string::npos);
+  C3dTake unknown = take_;
+  for (size_t p = 0; p < unknown.labels.size(); ++p) unknown.labels[p] = "M" + std::to_string(p);
+  EXPECT_NE(error_of(unknown).find("match no known marker set"), std::string::npos);
+  EXPECT_NE(error_of(take_, "no-such-set").find("unknown marker set"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace mocapd
