@@ -145,10 +145,15 @@ struct Daemon::DataPlane final : OutputSink {
     runner->Accept(frame, receive_ns, *this);
   }
 
-  // Receives every message waiting on the input socket; returns how many.
+  // Receives the messages waiting on the input socket, at most a batch of them, so a
+  // backlog (a burst, a replay at full speed) never keeps the loop from its housekeeping:
+  // the watchdog, the statistics the control plane serves, reloads. Returns how many.
+  static constexpr size_t kBatchMessages = 512;
+  static constexpr int64_t kBatchNs = 4'000'000;
   size_t DrainInput() {
     size_t n = 0;
-    while (input.recv(body, zmq::recv_flags::dontwait)) {
+    const int64_t until = SteadyNs() + kBatchNs;
+    while (n < kBatchMessages && input.recv(body, zmq::recv_flags::dontwait)) {
       size_t parts = 1;
       while (body.more()) {
         // The rest of a multipart message arrives with its first part; keep the last.
@@ -156,9 +161,14 @@ struct Daemon::DataPlane final : OutputSink {
         std::swap(body, extra);
         ++parts;
       }
-      Handle(parts, body, SteadyNs());
+      const int64_t now = SteadyNs();
+      Handle(parts, body, now);
       ++n;
+      if (now > until) break;
     }
+    const bool full = n >= kBatchMessages || (n > 0 && SteadyNs() > until);
+    stats.catching_up = full;
+    stats.full_batches += full;
     return n;
   }
 
@@ -253,7 +263,8 @@ struct Daemon::DataPlane final : OutputSink {
       if (has_pending_reload.load(std::memory_order_acquire)) ApplyPendingReload();
       // A short poll so the watchdog, the stats tick and a stop request are seen promptly.
       zmq::poll(items, 1, std::chrono::milliseconds(2));
-      if ((items[0].revents & ZMQ_POLLIN) != 0) DrainInput();
+      // A backlog is read batch by batch without waiting on the poll.
+      if ((items[0].revents & ZMQ_POLLIN) != 0 || stats.catching_up) DrainInput();
       const int64_t now = SteadyNs();
       for (auto& r : runners) r->CheckStall(now, Seconds(config.watchdog_timeout_s), *this);
       if (now >= next_tick) {
@@ -268,11 +279,16 @@ struct Daemon::DataPlane final : OutputSink {
         next_snapshot = now + 20'000'000;  // 20 ms
       }
     }
-    // Graceful shutdown: take what already arrived (waiting briefly for stragglers in
-    // flight), publish everything the lookahead holds, then let PUB linger to send it.
-    for (int quiet = 0; quiet < 5;) {
-      zmq::poll(items, 1, std::chrono::milliseconds(20));
+    // Graceful shutdown: read what has already arrived (a live feed never falls silent,
+    // so reading stops at once the queue is empty, or after kShutdownReadNs at most),
+    // publish everything the lookahead holds, then let PUB linger to send it.
+    stats.stopping = true;
+    Snapshot(true);
+    const int64_t read_until = SteadyNs() + kShutdownReadNs;
+    for (int quiet = 0; quiet < 2 && SteadyNs() < read_until;) {
+      zmq::poll(items, 1, std::chrono::milliseconds(5));
       quiet = (items[0].revents & ZMQ_POLLIN) != 0 && DrainInput() > 0 ? 0 : quiet + 1;
+      Snapshot(false);
     }
     for (auto& r : runners) {
       r->Flush(*this);
@@ -282,7 +298,10 @@ struct Daemon::DataPlane final : OutputSink {
     Snapshot(true);
     input.close();
     output.close();
+    finished.store(true, std::memory_order_release);
   }
+
+  static constexpr int64_t kShutdownReadNs = 300'000'000;
 
   struct PendingReload {
     DaemonConfig config;
@@ -302,6 +321,7 @@ struct Daemon::DataPlane final : OutputSink {
   int64_t start_ns = 0;
   std::thread thread;
   std::atomic<bool> stop{false};
+  std::atomic<bool> finished{false};  // Loop has returned: the thread can be joined at once
   std::mutex mailbox_mutex;
   std::unique_ptr<PendingReload> pending_reload;
   std::atomic<bool> has_pending_reload{false};
@@ -323,6 +343,8 @@ struct Daemon::ControlPlane {
   std::array<uint64_t, kDropReasonCount> logged_drops{};
   int64_t last_log_ns = 0;
   bool data_plane_alive = true;
+  bool stopping = false;
+  std::optional<boost::asio::steady_timer> shutdown;  // polls the data plane's flush
 };
 
 Daemon::Daemon(DaemonConfig config, std::string config_path, zmq::context_t* context)
@@ -342,13 +364,29 @@ Daemon::~Daemon() {
 
 void Daemon::Stop() {
   boost::asio::post(control_->io, [this] {
-    spdlog::info("shutting down: flushing the lookahead and publishing what is pending");
+    ControlPlane& cp = *control_;
+    if (cp.stopping) return;
+    cp.stopping = true;
+    spdlog::info("shutting down: reading what has arrived, flushing the lookahead");
     data_->stop.store(true, std::memory_order_release);
-    if (data_->thread.joinable()) data_->thread.join();
-    if (control_->http) control_->http->Stop();
-    if (control_->tick) control_->tick->cancel();
-    if (control_->signals) control_->signals->cancel();
-    control_->io.stop();
+    // The control plane keeps serving (/health says "stopping") and a second signal is
+    // still heard while the data plane flushes; it is joined once it has finished.
+    cp.shutdown.emplace(cp.io);
+    auto wait = std::make_shared<std::function<void(const boost::system::error_code&)>>();
+    *wait = [this, wait](const boost::system::error_code&) {
+      ControlPlane& c = *control_;
+      if (!data_->finished.load(std::memory_order_acquire)) {
+        c.shutdown->expires_after(std::chrono::milliseconds(5));
+        c.shutdown->async_wait(*wait);
+        return;
+      }
+      if (data_->thread.joinable()) data_->thread.join();
+      if (c.http) c.http->Stop();
+      if (c.tick) c.tick->cancel();
+      if (c.signals) c.signals->cancel();
+      c.io.stop();
+    };
+    (*wait)({});
   });
 }
 
@@ -446,8 +484,8 @@ void Daemon::Run(bool handle_signals) {
       cp.http = std::make_unique<HttpServer>(
           cp.io, cp.config.http_address, cp.config.http_port, [this](const std::string& target) {
             const DaemonStats stats = Stats();
-            const bool alive =
-                stats.running && SteadyNs() - stats.data_plane_heartbeat_ns < 1'000'000'000;
+            const bool alive = (stats.running || stats.stopping) &&
+                               SteadyNs() - stats.data_plane_heartbeat_ns < 1'000'000'000;
             if (target == "/metrics")
               return HttpResponse{200, "text/plain; version=0.0.4; charset=utf-8",
                                   FormatPrometheusMetrics(stats)};
@@ -485,8 +523,16 @@ void Daemon::Run(bool handle_signals) {
         control_->signals->async_wait(on_signal);
         return;
       }
+      if (control_->stopping) {
+        // A second SIGINT/SIGTERM: the operator (or a service manager) wants out now.
+        spdlog::warn("{} received again while flushing: exiting at once, the flush unfinished",
+                     sig == SIGINT ? "SIGINT" : "SIGTERM");
+        spdlog::shutdown();
+        std::_Exit(130);
+      }
       spdlog::info("{} received", sig == SIGINT ? "SIGINT" : "SIGTERM");
       Stop();
+      control_->signals->async_wait(on_signal);
     };
     cp.signals->async_wait(on_signal);
   }

@@ -41,6 +41,10 @@ struct SubjectStats {
 
 struct DaemonStats {
   bool running = false;
+  bool stopping = false;  ///< A stop was asked for: the lookahead is being flushed.
+  /// The input drains in batches; true while the last ones were full (a backlog).
+  bool catching_up = false;
+  uint64_t full_batches = 0;  ///< Input batches that hit their limit (a backlog was read).
   double uptime_s = 0.0;
   uint64_t messages_in = 0;       ///< Every message received on the input socket.
   uint64_t control_messages = 0;  ///< Accepted end-of-stream messages (not frames).

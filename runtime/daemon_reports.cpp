@@ -157,7 +157,13 @@ std::string FormatHealthJson(const DaemonStats& stats, bool data_plane_alive) {
     subjects[s.name] = protocol::to_string(s.state);
     stalled |= s.state == protocol::SubjectState::kStalled;
   }
-  const char* status = !data_plane_alive ? "down" : stalled ? "degraded" : "ok";
+  // A data plane reading a backlog is busy, not dead; one flushing its lookahead on the
+  // way out is stopping.
+  const char* status = stats.stopping      ? "stopping"
+                       : !data_plane_alive ? "down"
+                       : stats.catching_up ? "catching up"
+                       : stalled           ? "degraded"
+                                           : "ok";
   const nlohmann::json health = {{"status", status},
                                  {"uptime_s", stats.uptime_s},
                                  {"messages_received", stats.messages_in},
@@ -165,6 +171,7 @@ std::string FormatHealthJson(const DaemonStats& stats, bool data_plane_alive) {
                                  {"frames_dropped", stats.dropped_total()},
                                  {"frames_pending", stats.pending_total()},
                                  {"accounted", stats.Balanced()},
+                                 {"catching_up", stats.catching_up},
                                  {"subjects", subjects}};
   return health.dump(2) + "\n";
 }

@@ -298,6 +298,9 @@ bool SubjectRunner::CheckStall(int64_t now_ns, int64_t timeout_ns, OutputSink& s
   if (last_receive_ns_ < 0 || state_ == protocol::SubjectState::kStalled ||
       now_ns - last_receive_ns_ <= timeout_ns)
     return false;
+  // The frames the lookahead holds go out now (their open gaps one-sided): a consumer
+  // must not wait for a feed that may never come back to see them.
+  Flush(sink);
   state_ = protocol::SubjectState::kStalled;
   ++counters_.stalls;
   PublishStatus(now_ns, sink);

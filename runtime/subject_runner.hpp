@@ -90,8 +90,9 @@ class SubjectRunner {
   void Flush(OutputSink& sink);
   /// The sender says the stream ended: publish the lookahead now; the next frame starts afresh.
   void EndOfStream(OutputSink& sink);
-  /// Marks the subject stalled if no input came for timeout_ns (publishing a status
-  /// message once when it happens); returns true on that transition.
+  /// Marks the subject stalled if no input came for timeout_ns: publishes the frames the
+  /// lookahead holds (open gaps one-sided) and a status message, once when it happens;
+  /// returns true on that transition.
   bool CheckStall(int64_t now_ns, int64_t timeout_ns, OutputSink& sink);
   /// Publishes the subject's description and status (every stats tick).
   void PublishDescription(OutputSink& sink);

@@ -308,6 +308,9 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   replay_cmd->add_flag("--push", replay.options.push,
                        "PUSH to a daemon whose input is a PULL socket");
+  bool no_end_of_stream = false;
+  replay_cmd->add_flag("--no-end-of-stream", no_end_of_stream,
+                       "Stop without an end of stream, as a capture that is cut off would");
   replay_cmd
       ->add_option("--from", replay.options.from,
                    "The daemon's output endpoint to measure (\"\" to not listen)")
@@ -368,6 +371,7 @@ int main(int argc, char** argv) {
         std::cout << mocapd::FormatTakeInfo(ti);
       return 0;
     }
+    replay.options.end_of_stream = !no_end_of_stream;
     if (*synth_cmd) {
       if (synth.bvh.empty() && synth.humanoid_motion.empty())
         throw std::invalid_argument("synth needs --bvh FILE or --humanoid MOTION");

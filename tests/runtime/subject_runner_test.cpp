@@ -201,6 +201,26 @@ TEST_F(SubjectRunnerTest, WatchdogMarksAStalledSubjectOnceAndPublishesIt) {
   EXPECT_NE(runner.state(), protocol::SubjectState::kStalled);
 }
 
+// A stalled subject must not keep its last K frames until a next stream arrives that
+// may never come: the stall flushes them, and frames after it go on as usual.
+TEST_F(SubjectRunnerTest, AStallPublishesTheFramesTheLookaheadHeld) {
+  SubjectRunner runner(subject_, daemon_);
+  for (int f = 0; f < 30; ++f)
+    ASSERT_FALSE(runner.Accept(Frame(f, f, 0), 1'000'000'000 + f, sink_).has_value());
+  const size_t before = sink_.skeletons.size();
+  ASSERT_LT(before, 30u);  // the lookahead holds the newest frames
+  EXPECT_TRUE(runner.CheckStall(2'000'000'000, 500'000'000, sink_));
+  ASSERT_EQ(sink_.skeletons.size(), 30u);
+  EXPECT_EQ(sink_.skeletons.back().frame_number, 29u);
+  EXPECT_EQ(runner.state(), protocol::SubjectState::kStalled);
+  for (int f = 30; f < 60; ++f)
+    ASSERT_FALSE(runner.Accept(Frame(f, f, 0), 3'000'000'000 + f, sink_).has_value());
+  runner.Flush(sink_);
+  ASSERT_EQ(sink_.skeletons.size(), 60u);
+  for (size_t i = 0; i < 60; ++i) EXPECT_EQ(sink_.skeletons[i].frame_number, i);
+  ExpectBalanced(runner);
+}
+
 TEST_F(SubjectRunnerTest, SteadyStateAcceptAllocatesNothing) {
   SubjectRunner runner(subject_, daemon_);
   for (int f = 0; f < 40; ++f) ASSERT_FALSE(runner.Accept(Frame(f, f, 0), 0, sink_).has_value());

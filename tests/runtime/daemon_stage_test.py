@@ -1,0 +1,124 @@
+"""`mocapd run` as a stage uses it: SIGTERM while a capture keeps streaming at 120 Hz
+finishes within 1 s with every frame it read accounted for, and /health answers
+"stopping" meanwhile; a second SIGTERM exits at once; during a burst (a replay as fast
+as possible) /health keeps answering within 100 ms and never says "down".
+
+usage: daemon_stage_test.py MOCAPD MOCAP_SIM CONFIG_DIR WORK_DIR
+"""
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+import urllib.request
+
+from daemon_harness import Daemon
+
+
+def health(port, timeout=1.0):
+    """(seconds it took, status field) of one /health request."""
+    t0 = time.monotonic()
+    try:
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/health", timeout=timeout) as r:
+            body = json.loads(r.read().decode())
+            return time.monotonic() - t0, body["status"]
+    except urllib.error.HTTPError as e:
+        return time.monotonic() - t0, json.loads(e.read().decode()).get("status", str(e.code))
+    except OSError as e:
+        return time.monotonic() - t0, f"no answer: {e}"
+
+
+def replay(mocap_sim, d, *extra):
+    return subprocess.Popen([mocap_sim, "replay", "--humanoid", "walk", "--to", d.input, "--from", "",
+                             "--no-end-of-stream", *extra],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+
+def sigterm_under_a_live_feed(mocapd, mocap_sim, config_dir, work):
+    d = Daemon(mocapd, config_dir, os.path.join(work, "sigterm"))
+    feed = replay(mocap_sim, d, "--seconds", "60")
+    try:
+        time.sleep(2.0)
+        assert feed.poll() is None, "the feed ended early:\n" + feed.stdout.read()
+        t0 = time.monotonic()
+        d.signal(signal.SIGTERM)
+        statuses = []
+        while d.process.poll() is None and time.monotonic() - t0 < 5.0:
+            statuses.append(health(d.http_port, timeout=0.5)[1])
+            time.sleep(0.01)
+        code = d.process.wait(timeout=10)
+        took = time.monotonic() - t0
+        log = d.read_log()
+        print(f"SIGTERM under a 120 Hz feed: exit {code} after {took:.3f} s; health meanwhile: {sorted(set(statuses))}")
+        assert code == 0, log
+        assert took <= 1.0, f"shutdown took {took:.3f} s (at most 1 s)\n" + log
+        assert "every frame accounted for" in log, log
+        assert "stopping" in statuses or took < 0.05, statuses
+    finally:
+        feed.kill()
+        if d.process.poll() is None:
+            d.process.kill()
+
+
+def second_signal_exits_at_once(mocapd, mocap_sim, config_dir, work):
+    d = Daemon(mocapd, config_dir, os.path.join(work, "twice"))
+    feed = replay(mocap_sim, d, "--seconds", "60")
+    try:
+        time.sleep(1.0)
+        t0 = time.monotonic()
+        d.signal(signal.SIGTERM)
+        d.signal(signal.SIGTERM)
+        code = d.process.wait(timeout=5)
+        took = time.monotonic() - t0
+        print(f"two SIGTERMs: exit {code} after {took:.3f} s")
+        assert took < 1.0, took
+        assert code in (0, 130), (code, d.read_log())
+    finally:
+        feed.kill()
+        if d.process.poll() is None:
+            d.process.kill()
+
+
+def health_answers_during_a_burst(mocapd, mocap_sim, config_dir, work):
+    d = Daemon(mocapd, config_dir, os.path.join(work, "burst"), subjects=("actor1", "actor2", "actor3", "actor4"))
+    samples = []
+    done = threading.Event()
+
+    def probe():
+        while not done.is_set():
+            samples.append(health(d.http_port, timeout=2.0))
+            time.sleep(0.01)
+
+    prober = threading.Thread(target=probe)
+    prober.start()
+    try:
+        feed = replay(mocap_sim, d, "--seconds", "60", "--subjects", "4", "--rate", "max")
+        out, _ = feed.communicate(timeout=120)
+        time.sleep(0.3)
+    finally:
+        done.set()
+        prober.join()
+    try:
+        worst = max(t for t, _ in samples)
+        statuses = sorted(set(s for _, s in samples))
+        print(f"burst: {len(samples)} /health requests, slowest {worst * 1e3:.1f} ms, statuses {statuses}")
+        assert feed.returncode == 0, out
+        assert all(not s.startswith("no answer") and s != "down" for _, s in samples), statuses
+        assert worst <= 0.1, f"/health took {worst * 1e3:.1f} ms during the burst (at most 100 ms)"
+        assert d.stop() == 0, d.read_log()
+    finally:
+        if d.process.poll() is None:
+            d.process.kill()
+
+
+def main(mocapd, mocap_sim, config_dir, work):
+    sigterm_under_a_live_feed(mocapd, mocap_sim, config_dir, work)
+    second_signal_exits_at_once(mocapd, mocap_sim, config_dir, work)
+    health_answers_during_a_burst(mocapd, mocap_sim, config_dir, work)
+    print("daemon stage test passed")
+
+
+if __name__ == "__main__":
+    main(*sys.argv[1:5])
