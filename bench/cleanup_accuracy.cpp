@@ -6,8 +6,10 @@
 // Reports the solved skeleton's mean global joint position (cm) and rotation (deg) error,
 // the cleaned-marker RMSE on corrupted samples (mm), the jerk ratio against the truth and
 // the number of pops (a joint moving > 2 cm per frame beyond the truth's own motion).
-// Usage: cleanup_accuracy [--seeds N] [--severity light|medium|heavy]... [--lookahead K (ours
-// only)] [--explain-pops] [--trace TAKE:FROM:TO:MARKER,...] [--digest] [TAKE.bvh ...]
+// Usage: cleanup_accuracy [--seeds N] [--severity light|medium|heavy]... [--rates 60,120,240]
+// [--lookahead K (ours only)] [--explain-pops] [--explain-worst] [--trace
+// TAKE:FROM:TO:MARKER,...] [--digest] [TAKE.bvh ...]
+// --explain-worst explains each run's worst frame (over 3 cm) the way --explain-pops does.
 // --digest prints, per row of ours, a hash of every published bit (markers, status,
 // reasons, weights, poses): a change meant to alter no arithmetic must keep it.
 // MOCAPD_EXPLAIN_BACK=N shows N frames before each pop (default 4); MOCAPD_EXP_<FIELD>
@@ -22,7 +24,9 @@
 #include <map>
 #include <sstream>
 #include <string>
+#include <type_traits>
 #include <utility>
+#include <variant>
 
 #include "bench/bench_takes.hpp"
 #include "filters/cleanup_pipeline.hpp"
@@ -44,6 +48,10 @@ struct Scores {
   std::vector<Pop> pop_frames;                                   ///< each pop's worst joint
   std::vector<std::vector<Vec3>> estimated_joints, true_joints;  ///< per frame (for --explain-pops)
   double p50_us = 0, p99_us = 0;
+  /// The per-frame joint error (the worst joint's in each frame): its maximum over the
+  /// take, the frame and joint where it is, and its 99.9th percentile.
+  double worst_frame_cm = 0, p999_frame_cm = 0;
+  int worst_frame = -1, worst_joint = -1;
   uint64_t digest = 0;  ///< FNV-1a over every published frame (--digest)
 };
 
@@ -92,6 +100,25 @@ class Scorer {
         s.pop_frames.push_back({static_cast<int>(f), worst_joint, worst});
       }
     }
+    std::vector<double> frame_errors;
+    for (size_t f = 0; f < est_p.size(); ++f) {
+      double worst = 0.0;
+      int joint = -1;
+      for (size_t j = 0; j < est_p[f].size(); ++j) {
+        const double error = (est_p[f][j] - tru_p[f][j]).norm();
+        if (error > worst) {
+          worst = error;
+          joint = static_cast<int>(j);
+        }
+      }
+      frame_errors.push_back(worst * 100);
+      if (worst * 100 > s.worst_frame_cm) {
+        s.worst_frame_cm = worst * 100;
+        s.worst_frame = static_cast<int>(f);
+        s.worst_joint = joint;
+      }
+    }
+    s.p999_frame_cm = Quantile(frame_errors, 0.999);
     s.estimated_joints = std::move(est_p);
     s.true_joints = std::move(tru_p);
     return s;
@@ -123,6 +150,7 @@ Scores SolveBaseline(const bench::BenchTake& take, const C3dTake& markers) {
 
 bool g_explain_pops = false;
 bool g_digest = false;
+bool g_explain_worst = false;
 
 // FNV-1a over raw bytes: a refactoring that claims to change no arithmetic must leave
 // every published bit, and so this digest, as it was.
@@ -165,10 +193,11 @@ bool ParseTrace(const std::string& spec, Trace* trace) {
 }
 
 Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const C3dTake& clean,
-                   int lookahead) {
+                   int lookahead, double rate_hz) {
   const auto skeleton = std::make_shared<const Skeleton>(take.bvh.skeleton);
   CleanupOptions options;
   options.lookahead = lookahead;
+  options.rate_hz = rate_hz;
   // Experiments without rebuilding: MOCAPD_EXP_<FIELD>=value for a few options.
   if (const char* v = std::getenv("MOCAPD_EXP_REPAIRED_WEIGHT"))
     options.repaired_weight = std::atof(v);
@@ -184,25 +213,18 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
     options.naive_ik.max_iterations = std::atoi(v);
   if (const char* v = std::getenv("MOCAPD_EXP_ROBUST_ITERS"))
     options.robust_ik.max_iterations = std::atoi(v);
-  if (const char* v = std::getenv("MOCAPD_EXP_FILL_ACCEL"))
-    options.fill_reference_acceleration_mps2 = std::atof(v);
-  if (const char* v = std::getenv("MOCAPD_EXP_SNAP_RELEASE"))
-    options.fill_snap_release = std::atof(v);
-  if (const char* v = std::getenv("MOCAPD_EXP_CATCHUP")) options.data_catchup_m = std::atof(v);
-  if (const char* v = std::getenv("MOCAPD_EXP_MOTION_ACCEL"))
-    options.data_motion_acceleration_m = std::atof(v);
-  if (const char* v = std::getenv("MOCAPD_EXP_ANCHOR")) options.fill_anchor_radius_m = std::atof(v);
-  if (const char* v = std::getenv("MOCAPD_EXP_ANCHOR_ITERS"))
-    options.anchor_ik.max_iterations = std::atoi(v);
-  if (const char* v = std::getenv("MOCAPD_EXP_HOLD_LIMBS"))
-    options.anchor_holds_unseen_limbs = std::atoi(v) != 0;
-  if (const char* v = std::getenv("MOCAPD_EXP_SMALL_TRACK"))
-    options.small_track_frames = std::atoi(v);
-  if (const char* v = std::getenv("MOCAPD_EXP_TRIM")) options.max_trim_frames = std::atoi(v);
-  if (const char* v = std::getenv("MOCAPD_EXP_WEIGHT_RAMP"))
-    options.fill_weight_ramp = std::atof(v);
-  if (const char* v = std::getenv("MOCAPD_EXP_STRAY_FRAMES")) options.stray_frames = std::atoi(v);
-  if (const char* v = std::getenv("MOCAPD_EXP_STRAY_M")) options.stray_residual_m = std::atof(v);
+  // Any scalar cleanup option by its C++ name, in SI units: MOCAPD_EXP_SPIKE_M=0.05.
+  for (const CleanupOptionField& f : CleanupOptionFields()) {
+    std::string name = "MOCAPD_EXP_";
+    for (const char* c = f.name; *c != '\0'; ++c) name += static_cast<char>(std::toupper(*c));
+    if (const char* v = std::getenv(name.c_str()))
+      std::visit(
+          [&](auto member) {
+            options.*member =
+                static_cast<std::remove_reference_t<decltype(options.*member)>>(std::atof(v));
+          },
+          f.member);
+  }
   CleanupPipeline pipeline(skeleton, take.markers, options);
   Scorer scorer(*skeleton, take.motion);
   std::vector<Vec3> obs(static_cast<size_t>(take.markers->num_markers()));
@@ -251,6 +273,12 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
   }
   while (pipeline.Flush()) collect();
   Scores s = scorer.Finish();
+  if (g_explain_worst && s.worst_frame > 0 && s.worst_frame_cm > 3.0) {
+    std::printf("worst frame %s K=%d %.0f Hz: frame %d joint %s %.1f cm off\n", take.name.c_str(),
+                lookahead, rate_hz, s.worst_frame, skeleton->joint(s.worst_joint).name.c_str(),
+                s.worst_frame_cm);
+    s.pop_frames.push_back({s.worst_frame, s.worst_joint, s.worst_frame_cm / 100});
+  }
   if (g_trace.take.empty() ? false : take.name.find(g_trace.take) != std::string::npos) {
     // Frame by frame: each traced marker's published status (as in --explain-pops) with
     // the injected truth, its error against the clean take (cm) and final-solve weight.
@@ -340,12 +368,15 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
 int main(int argc, char** argv) {
   int seeds = 2;
   int only_lookahead = -1;  // -1: the baselines and K = 0, 4, 12
+  std::vector<double> rates;
   std::vector<std::string> severities, paths;
   for (int i = 1; i < argc; ++i) {
     if (std::strcmp(argv[i], "--seeds") == 0 && i + 1 < argc)
       seeds = std::atoi(argv[++i]);
     else if (std::strcmp(argv[i], "--explain-pops") == 0)
       g_explain_pops = true;
+    else if (std::strcmp(argv[i], "--explain-worst") == 0)
+      g_explain_pops = g_explain_worst = true;
     else if (std::strcmp(argv[i], "--digest") == 0)
       g_digest = true;
     else if (std::strcmp(argv[i], "--trace") == 0 && i + 1 < argc) {
@@ -359,72 +390,85 @@ int main(int argc, char** argv) {
       only_lookahead = std::atoi(argv[++i]);
     else if (std::strcmp(argv[i], "--severity") == 0 && i + 1 < argc)
       severities.emplace_back(argv[++i]);
-    else
+    else if (std::strcmp(argv[i], "--rates") == 0 && i + 1 < argc) {
+      std::stringstream list(argv[++i]);
+      for (std::string r; std::getline(list, r, ',');) rates.push_back(std::atof(r.c_str()));
+    } else
       paths.emplace_back(argv[i]);
   }
   if (severities.empty()) severities = {"light", "medium", "heavy"};
+  if (rates.empty()) rates = {120.0};
   if (paths.empty()) paths = bench::SharedBvhTakes();
   if (paths.empty()) paths.emplace_back("");
   std::printf(
-      "| severity | method | Δpos (cm) | Δrot (deg) | marker RMSE on corrupted samples (mm) | jerk "
-      "ratio | pops | per-frame p50 / p99 (us) |\n");
-  std::printf("|---|---|---|---|---|---|---|---|\n");
-  std::vector<bench::BenchTake> takes;
-  for (const auto& p : paths) takes.push_back(bench::LoadBenchTake(p, 120.0));
+      "| severity | rate (Hz) | method | Δpos (cm) | Δrot (deg) | marker RMSE on corrupted samples "
+      "(mm) | worst frame / p99.9 (cm) | jerk ratio | pops | per-frame p50 / p99 (us) |\n");
+  std::printf("|---|---|---|---|---|---|---|---|---|---|\n");
   for (const std::string& severity_name : severities) {
-    std::map<std::string, std::vector<Scores>> results;
-    for (const bench::BenchTake& take : takes) {
-      const C3dTake clean = SynthesizeMarkers(take.bvh.skeleton, *take.markers, take.motion, 120.0);
-      for (int seed = 1; seed <= seeds; ++seed) {
-        CorruptionOptions co;
-        co.severity = ParseCorruptionSeverity(severity_name);
-        co.seed = static_cast<uint64_t>(seed);
-        const CorruptedTake bad = CorruptTake(clean, take.markers.get(), co);
-        if (only_lookahead >= 0) {
-          results["mocapd K=" + std::to_string(only_lookahead)].push_back(
-              RunPipeline(take, bad, clean, only_lookahead));
-          continue;
+    for (const double rate : rates) {
+      std::vector<bench::BenchTake> takes;
+      for (const auto& p : paths) takes.push_back(bench::LoadBenchTake(p, rate));
+      std::map<std::string, std::vector<Scores>> results;
+      for (const bench::BenchTake& take : takes) {
+        const C3dTake clean =
+            SynthesizeMarkers(take.bvh.skeleton, *take.markers, take.motion, rate);
+        for (int seed = 1; seed <= seeds; ++seed) {
+          CorruptionOptions co;
+          co.severity = ParseCorruptionSeverity(severity_name);
+          co.seed = static_cast<uint64_t>(seed);
+          const CorruptedTake bad = CorruptTake(clean, take.markers.get(), co);
+          if (only_lookahead >= 0) {
+            results["mocapd K=" + std::to_string(only_lookahead)].push_back(
+                RunPipeline(take, bad, clean, only_lookahead, rate));
+            continue;
+          }
+          results["raw IK"].push_back(SolveBaseline(take, bad.take));
+          results["linear fill + IK"].push_back(
+              SolveBaseline(take, bench::FillGaps(bad.take, false)));
+          results["cubic fill + IK"].push_back(
+              SolveBaseline(take, bench::FillGaps(bad.take, true)));
+          for (int k : {0, 4, 12})
+            results["mocapd K=" + std::to_string(k)].push_back(
+                RunPipeline(take, bad, clean, k, rate));
         }
-        results["raw IK"].push_back(SolveBaseline(take, bad.take));
-        results["linear fill + IK"].push_back(
-            SolveBaseline(take, bench::FillGaps(bad.take, false)));
-        results["cubic fill + IK"].push_back(SolveBaseline(take, bench::FillGaps(bad.take, true)));
-        for (int k : {0, 4, 12})
-          results["mocapd K=" + std::to_string(k)].push_back(RunPipeline(take, bad, clean, k));
       }
-    }
-    for (const char* method : {"raw IK", "linear fill + IK", "cubic fill + IK", "mocapd K=0",
-                               "mocapd K=4", "mocapd K=12"}) {
-      const auto& v = results[method];
-      if (v.empty()) continue;
-      Scores mean;
-      uint64_t digest = 14695981039346656037ull;
-      for (const Scores& s : v) {
-        Digest(&digest, &s.digest, sizeof(s.digest));
-        mean.pos_cm += s.pos_cm / v.size();
-        mean.rot_deg += s.rot_deg / v.size();
-        mean.marker_rmse_mm += s.marker_rmse_mm / v.size();
-        mean.jerk_ratio += s.jerk_ratio / v.size();
-        mean.pops += s.pops;
-        mean.p50_us += s.p50_us / v.size();
-        mean.p99_us = std::max(mean.p99_us, s.p99_us);
+      for (const char* method : {"raw IK", "linear fill + IK", "cubic fill + IK", "mocapd K=0",
+                                 "mocapd K=4", "mocapd K=12"}) {
+        const auto& v = results[method];
+        if (v.empty()) continue;
+        Scores mean;
+        uint64_t digest = 14695981039346656037ull;
+        for (const Scores& s : v) {
+          Digest(&digest, &s.digest, sizeof(s.digest));
+          mean.pos_cm += s.pos_cm / v.size();
+          mean.rot_deg += s.rot_deg / v.size();
+          mean.marker_rmse_mm += s.marker_rmse_mm / v.size();
+          mean.jerk_ratio += s.jerk_ratio / v.size();
+          mean.pops += s.pops;
+          mean.p50_us += s.p50_us / v.size();
+          mean.p99_us = std::max(mean.p99_us, s.p99_us);
+          mean.worst_frame_cm = std::max(mean.worst_frame_cm, s.worst_frame_cm);
+          mean.p999_frame_cm = std::max(mean.p999_frame_cm, s.p999_frame_cm);
+        }
+        const bool ours = std::string(method).rfind("mocapd", 0) == 0;
+        char rmse[32] = "-", timing[48] = "-";
+        if (ours) {
+          std::snprintf(rmse, sizeof(rmse), "%.1f", mean.marker_rmse_mm);
+          std::snprintf(timing, sizeof(timing), "%.0f / %.0f", mean.p50_us, mean.p99_us);
+        }
+        std::printf("| %s | %.0f | %s | %.2f | %.2f | %s | %.1f / %.1f | %.2f | %d | %s |\n",
+                    severity_name.c_str(), rate, method, mean.pos_cm, mean.rot_deg, rmse,
+                    mean.worst_frame_cm, mean.p999_frame_cm, mean.jerk_ratio, mean.pops, timing);
+        if (g_digest && ours)
+          std::printf("digest %s %.0f %s: %016llx\n", severity_name.c_str(), rate, method,
+                      static_cast<unsigned long long>(digest));
+        std::fflush(stdout);
       }
-      const bool ours = std::string(method).rfind("mocapd", 0) == 0;
-      char rmse[32] = "-", timing[48] = "-";
-      if (ours) {
-        std::snprintf(rmse, sizeof(rmse), "%.1f", mean.marker_rmse_mm);
-        std::snprintf(timing, sizeof(timing), "%.0f / %.0f", mean.p50_us, mean.p99_us);
-      }
-      std::printf("| %s | %s | %.2f | %.2f | %s | %.2f | %d | %s |\n", severity_name.c_str(),
-                  method, mean.pos_cm, mean.rot_deg, rmse, mean.jerk_ratio, mean.pops, timing);
-      if (g_digest && ours)
-        std::printf("digest %s %s: %016llx\n", severity_name.c_str(), method,
-                    static_cast<unsigned long long>(digest));
-      std::fflush(stdout);
     }
   }
   std::printf(
-      "\n%zu takes x %d seeds per severity; pops summed over all runs; p99 is the worst run's.\n",
-      takes.size(), seeds);
+      "\n%zu takes x %d seeds per severity and rate; pops summed over all runs; worst frame, "
+      "p99.9 and p99 are the worst run's (a frame's error: its worst joint's).\n",
+      paths.size(), seeds);
   return 0;
 }

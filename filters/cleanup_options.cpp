@@ -1,6 +1,7 @@
 // Defaults, bounds and validation of the cleanup's options.
 #include "filters/cleanup_options.hpp"
 
+#include <algorithm>
 #include <array>
 #include <sstream>
 #include <stdexcept>
@@ -11,6 +12,7 @@ namespace {
 
 constexpr double kMm = 1e-3;
 constexpr double kDeg = M_PI / 180.0;
+constexpr double kMs = 1e-3;
 constexpr double kNone = 1.0;  // the key's unit is SI already
 
 using O = CleanupOptions;
@@ -20,7 +22,7 @@ constexpr const char* kDetectors = "pipeline.detectors";
 const std::array kFields = {
     F{"rate_hz", nullptr, "rate_hz", kNone, 1, 10000, &O::rate_hz},
     F{"lookahead", kPipeline, "lookahead", kNone, 0, 1000, &O::lookahead},
-    F{"window", kPipeline, "window", kNone, 1, 100000, &O::window},
+    F{"window_s", kPipeline, "window_ms", kMs, 1, 1e7, &O::window_s},
     F{"disagreement_position_m", kDetectors, "disagreement_position_mm", kMm, 1, 1e5,
       &O::disagreement_position_m},
     F{"disagreement_rotation_rad", kDetectors, "disagreement_rotation_deg", kDeg, 1, 1000,
@@ -38,27 +40,27 @@ const std::array kFields = {
     F{"frozen_radius_m", nullptr, "frozen_radius_mm", kMm, 0.1, 1e5, &O::frozen_radius_m},
     F{"frozen_reference_motion_m", nullptr, "frozen_reference_motion_mm", kMm, 0.1, 1e5,
       &O::frozen_reference_motion_m},
-    F{"frozen_frames", kDetectors, "frozen_frames", kNone, 1, 1e6, &O::frozen_frames},
+    F{"frozen_s", kDetectors, "frozen_ms", kMs, 1, 1e7, &O::frozen_s},
     F{"stray_residual_m", kDetectors, "stray_residual_mm", kMm, 1, 1e5, &O::stray_residual_m},
-    F{"stray_frames", kDetectors, "stray_frames", kNone, 1, 1e6, &O::stray_frames},
-    F{"fallen_frames", kDetectors, "fallen_frames", kNone, 1, 1e6, &O::fallen_frames},
+    F{"stray_s", kDetectors, "stray_ms", kMs, 1, 1e7, &O::stray_s},
+    F{"fallen_s", kDetectors, "fallen_ms", kMs, 1, 1e7, &O::fallen_s},
     F{"fallen_residual_m", kDetectors, "fallen_residual_mm", kMm, 1, 1e5, &O::fallen_residual_m},
-    F{"small_gap_frames", kDetectors, "small_gap_frames", kNone, 0, 1000, &O::small_gap_frames},
-    F{"small_track_frames", kDetectors, "small_track_frames", kNone, 0, 1000,
-      &O::small_track_frames},
-    F{"trim_slope_m", nullptr, "trim_slope_mm", kMm, 0.001, 1000, &O::trim_slope_m},
-    F{"max_trim_frames", kDetectors, "max_trim_frames", kNone, 0, 1000, &O::max_trim_frames},
-    F{"max_offset_velocity_m", nullptr, "max_offset_velocity_mm", kMm, 0.001, 1000,
-      &O::max_offset_velocity_m},
+    F{"small_gap_s", kDetectors, "small_gap_ms", kMs, 0, 1e5, &O::small_gap_s},
+    F{"small_track_s", kDetectors, "small_track_ms", kMs, 0, 1e5, &O::small_track_s},
+    F{"trim_slope_mps", nullptr, "trim_slope_mps", kNone, 1e-3, 1e3, &O::trim_slope_mps},
+    F{"max_trim_s", kDetectors, "max_trim_ms", kMs, 0, 1e5, &O::max_trim_s},
+    F{"max_offset_velocity_mps", nullptr, "max_offset_velocity_mps", kNone, 1e-3, 1e3,
+      &O::max_offset_velocity_mps},
     F{"fill_reference_acceleration_mps2", nullptr, "fill_reference_acceleration_mps2", kNone, 0,
       1e6, &O::fill_reference_acceleration_mps2},
-    F{"fill_snap_release", nullptr, "fill_snap_release", kNone, 0, 1, &O::fill_snap_release},
+    F{"fill_snap_release_s", nullptr, "fill_snap_release_ms", kMs, 0, 1e6, &O::fill_snap_release_s},
     F{"repaired_weight", nullptr, "repaired_weight", kNone, 0, 1, &O::repaired_weight},
     F{"interpolated_weight", nullptr, "interpolated_weight", kNone, 0, 1, &O::interpolated_weight},
-    F{"fill_weight_ramp", nullptr, "fill_weight_ramp", kNone, 1e-6, 1e6, &O::fill_weight_ramp},
-    F{"data_catchup_m", nullptr, "data_catchup_mm", kMm, 0, 1000, &O::data_catchup_m},
-    F{"data_motion_acceleration_m", nullptr, "data_motion_acceleration_mm", kMm, 0.001, 1000,
-      &O::data_motion_acceleration_m},
+    F{"fill_weight_growth_per_s", nullptr, "fill_weight_growth_per_s", kNone, 0, 1e6,
+      &O::fill_weight_growth_per_s},
+    F{"data_catchup_mps", nullptr, "data_catchup_mps", kNone, 0, 1e3, &O::data_catchup_mps},
+    F{"data_motion_acceleration_mps2", nullptr, "data_motion_acceleration_mps2", kNone, 1e-3, 1e7,
+      &O::data_motion_acceleration_mps2},
     F{"fill_anchor_radius_m", nullptr, "fill_anchor_radius_mm", kMm, 0, 1000,
       &O::fill_anchor_radius_m},
     F{"anchor_holds_unseen_limbs", nullptr, "anchor_holds_unseen_limbs", kNone, 0, 1,
@@ -111,6 +113,30 @@ void CleanupOptions::Validate() const {
   robust_ik.Validate();
   final_ik.Validate();
   anchor_ik.Validate();
+}
+
+CleanupFrameRules FrameRules(const CleanupOptions& o) {
+  const double rate = o.rate_hz, dt = 1.0 / rate;
+  auto frames = [&](double seconds, int at_least) {
+    return std::max(at_least, static_cast<int>(std::lround(seconds * rate)));
+  };
+  CleanupFrameRules r;
+  r.statistics_weight = 2.0 / (std::max(1.0, o.window_s * rate) + 1.0);
+  r.frozen_frames = frames(o.frozen_s, 1);
+  r.stray_frames = frames(o.stray_s, 1);
+  r.fallen_frames = frames(o.fallen_s, 1);
+  r.small_gap_frames = frames(o.small_gap_s, 0);
+  r.small_track_frames = frames(o.small_track_s, 0);
+  r.max_trim_frames = frames(o.max_trim_s, 0);
+  r.trim_slope_m = o.trim_slope_mps / rate;
+  r.max_offset_velocity_m = o.max_offset_velocity_mps / rate;
+  r.fill_snap_release =
+      o.fill_snap_release_s > 0.0 ? 1.0 - std::exp(-dt / o.fill_snap_release_s) : 1.0;
+  r.fill_weight_ramp =
+      o.fill_weight_growth_per_s > 0.0 ? std::exp(o.fill_weight_growth_per_s * dt) : 1.0;
+  r.data_catchup_m = o.data_catchup_mps / rate;
+  r.data_motion_acceleration_m = o.data_motion_acceleration_mps2 / (rate * rate);
+  return r;
 }
 
 }  // namespace mocapd

@@ -14,8 +14,8 @@ namespace mocapd {
 
 struct CleanupOptions {
   double rate_hz = 120.0;
-  int lookahead = 12;  ///< K: frames of delay; 0 allowed.
-  int window = 120;    ///< W: time constant, in frames, of the running statistics.
+  int lookahead = 12;     ///< K: frames of delay; 0 allowed.
+  double window_s = 1.0;  ///< W: time constant of the running statistics.
 
   // Detection (filters/outlier_detector.hpp).
   double disagreement_position_m = 0.10;                   ///< Delta P max (thesis: 10 cm).
@@ -34,29 +34,28 @@ struct CleanupOptions {
   /// for capture jitter, which a per-frame motion test mistakes for motion)...
   double frozen_radius_m = 0.015;
   double frozen_reference_motion_m = 0.04;  ///< ...while its reference moves on this far...
-  int frozen_frames = 6;                    ///< ...and for at least this many frames.
-  /// A residual outlier this far off for stray_frames in a row leaves the robust solve
+  double frozen_s = 0.05;                   ///< ...and for at least this long.
+  /// A residual outlier this far off for stray_s in a row leaves the robust solve
   /// until it fits again: a swapped or stray sample on a segment whose neighbours are
   /// occluded would otherwise drag the reference, and the segment's good markers, along.
   double stray_residual_m = 0.20;
-  int stray_frames = 12;
-  int fallen_frames = 60;           ///< Residual outliers this long in a row...
+  double stray_s = 0.1;
+  double fallen_s = 0.5;            ///< Residual outliers this long in a row...
   double fallen_residual_m = 0.10;  ///< ...and this far off: fallen off (excluded from Y^).
   // Mask clean-up, bounded by the lookahead.
-  int small_gap_frames = 5;     ///< Gaps up to this long between observed samples: plain Hermite.
-  int small_track_frames = 10;  ///< Observed runs up to this long between gaps are dropped.
-  double trim_slope_m =
-      0.01;  ///< A returning track is trimmed while its per-frame slope differs more.
-  int max_trim_frames = 6;
+  double small_gap_s = 0.042;    ///< Gaps up to this long between observed samples: plain Hermite.
+  double small_track_s = 0.083;  ///< Observed runs up to this long between gaps are dropped.
+  double trim_slope_mps = 1.2;  ///< A returning track is trimmed while its velocity differs more...
+  double max_trim_s = 0.05;     ///< ...for at most this long.
 
   // Repair (filters/gap_repair.hpp).
-  double max_offset_velocity_m = 0.01;  ///< Clamp on boundary offset velocities, m per frame.
+  double max_offset_velocity_mps = 1.2;  ///< Clamp on boundary offset velocities.
   /// A fill follows its reference's path only up to this acceleration (m/s^2); beyond it
   /// the reference is snapping (a segment re-entering its solve), not moving. 0 disables.
   double fill_reference_acceleration_mps2 = 75.0;
-  /// The fraction of the snaps a one-sided fill has not followed that it takes up each
-  /// frame, so a reference that really moved fast is caught up smoothly.
-  double fill_snap_release = 0.1;
+  /// The snaps a one-sided fill has not followed are taken up with this time constant,
+  /// so a reference that really moved fast is caught up smoothly (0: at once).
+  double fill_snap_release_s = 0.079;
 
   // Final solve (filters/final_solve.hpp).
   /// Weight of a one-sided repair in the final solve (observed samples weigh 1): it is
@@ -65,16 +64,17 @@ struct CleanupOptions {
   /// Weight of a sample filled between two known ends: an interpolation of real data,
   /// and what keeps the skeleton from jumping when a segment's markers come back.
   double interpolated_weight = 1.0;
-  /// A repaired sample's weight may grow by at most this factor per frame (<= 1: no limit).
-  double fill_weight_ramp = 1.5;
+  /// A repaired sample's weight may grow at most by this rate: by exp(rate x dt) per
+  /// frame (0: no limit).
+  double fill_weight_growth_per_s = 48.66;
   /// A captured sample is fitted through a target that starts at the skeleton's marker,
-  /// moves with the sample's own motion and closes on it by at most this much per frame
-  /// (m; 0: the sample itself, its weight ramped like a fill's): a sample that comes back
-  /// away from the skeleton is reached without a pop.
-  double data_catchup_m = 0.005;
-  /// The sample's motion that the catch-up target follows may change by at most this
-  /// much per frame (m): a swap or pop the detectors missed is a jump, not motion.
-  double data_motion_acceleration_m = 0.015;
+  /// moves with the sample's own motion and closes on it at most this fast (0: the sample
+  /// itself, its weight ramped like a fill's): a sample that comes back away from the
+  /// skeleton is reached without a pop.
+  double data_catchup_mps = 0.6;
+  /// The sample's motion that the catch-up target follows accelerates at most this much
+  /// (216 m/s^2 is past a punch): a swap or pop the detectors missed is a jump, not motion.
+  double data_motion_acceleration_mps2 = 216.0;
   /// A repaired sample pulls the skeleton at most this far (m) from the anchor, the pose
   /// the trusted samples alone give: a fill is a guess, and a guess can jump. 0: no anchor.
   double fill_anchor_radius_m = 0.002;
@@ -109,5 +109,22 @@ struct CleanupOptionField {
 
 /// Every scalar option, in declaration order. The one place their bounds are written.
 std::span<const CleanupOptionField> CleanupOptionFields();
+
+/// The time-based options at a capture rate: every rule is stated in seconds (or m/s,
+/// m/s^2) and converted here, once per rate, so the cleanup behaves alike at 60 and
+/// 360 Hz.
+struct CleanupFrameRules {
+  double statistics_weight;  ///< The running statistics' weight per frame, 2 / (W + 1).
+  int frozen_frames, stray_frames, fallen_frames;
+  int small_gap_frames, small_track_frames, max_trim_frames;
+  double trim_slope_m;                ///< Per frame.
+  double max_offset_velocity_m;       ///< Per frame.
+  double fill_snap_release;           ///< Share taken up per frame.
+  double fill_weight_ramp;            ///< Factor per frame (<= 1: no limit).
+  double data_catchup_m;              ///< Per frame.
+  double data_motion_acceleration_m;  ///< Change of the per-frame motion, per frame.
+};
+/// The rules for options.rate_hz. The options must be valid.
+CleanupFrameRules FrameRules(const CleanupOptions& options);
 
 }  // namespace mocapd

@@ -9,6 +9,7 @@ FinalSolve::FinalSolve(const Skeleton& skeleton, const MarkerSet& markers,
     : skeleton_(skeleton),
       markers_(markers),
       options_(options),
+      rules_(FrameRules(options)),
       final_(skeleton, markers),
       anchor_(skeleton, markers),
       held_kinematics_(skeleton) {
@@ -29,7 +30,7 @@ void FinalSolve::Reset() {
 
 void FinalSolve::Solve(CleanFrame* frame, CleanupCounters* counters) {
   const int64_t tau = frame->frame;
-  const double catchup = options_.data_catchup_m;
+  const double catchup = rules_.data_catchup_m;
   for (size_t m = 0; m < tracks_.size(); ++m) {
     Track& track = tracks_[m];
     const Vec3& x = frame->markers[m];
@@ -49,7 +50,7 @@ void FinalSolve::Solve(CleanFrame* frame, CleanupCounters* counters) {
       Vec3 motion = Vec3::Zero();  // unknown on a sample's first frame back
       if (track.last_captured == tau - 1)
         motion = track.data_motion + ClampNorm(Vec3(x - track.output - track.data_motion),
-                                               options_.data_motion_acceleration_m);
+                                               rules_.data_motion_acceleration_m);
       track.data_motion = motion;
       const Vec3 from = final_.predicted_markers()[m] + motion;
       if ((x - from).norm() > catchup) {
@@ -67,10 +68,10 @@ void FinalSolve::Solve(CleanFrame* frame, CleanupCounters* counters) {
     // A sample handed from a guess (a one-sided fill, weak) to data (an interpolation,
     // or a captured sample when the catch-up is off) gains weight gradually, so the final
     // solve does not snap to it in one frame.
-    if (options_.fill_weight_ramp > 1.0 && status != MarkerStatus::kUnrecoverable &&
+    if (rules_.fill_weight_ramp > 1.0 && status != MarkerStatus::kUnrecoverable &&
         weight > track.weight && !eased)
-      weight = std::min(
-          weight, std::max(track.weight, options_.repaired_weight) * options_.fill_weight_ramp);
+      weight = std::min(weight,
+                        std::max(track.weight, options_.repaired_weight) * rules_.fill_weight_ramp);
     track.weight = weight;
     weights_[m] = weight;
     frame->weight[m] = weight;

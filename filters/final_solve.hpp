@@ -46,6 +46,7 @@ class FinalSolve {
   const Skeleton& skeleton_;
   const MarkerSet& markers_;
   const CleanupOptions options_;
+  const CleanupFrameRules rules_;
   IkState final_, anchor_;
   std::vector<Track> tracks_;
   std::vector<double> weights_, anchor_weights_;

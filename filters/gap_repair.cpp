@@ -7,14 +7,14 @@
 
 namespace mocapd {
 GapRepair::GapRepair(int markers, const CleanupOptions& options)
-    : options_(options), tracks_(static_cast<size_t>(markers)) {}
+    : options_(options), rules_(FrameRules(options)), tracks_(static_cast<size_t>(markers)) {}
 
 void GapRepair::Reset() { std::fill(tracks_.begin(), tracks_.end(), Track{}); }
 
 void GapRepair::Repair(const CleanupWindow& window, int64_t tau, int64_t newest, CleanFrame* out,
                        CleanupCounters* counters) {
   const WindowFrame& s = window.at(tau);
-  const double max_v = options_.max_offset_velocity_m;
+  const double max_v = rules_.max_offset_velocity_m;
   const double dt = 1.0 / options_.rate_hz;
   const double max_reference_step_change = options_.fill_reference_acceleration_mps2 * dt * dt;
   const bool has_reference_before = window.Holds(tau - 1);
@@ -75,7 +75,7 @@ void GapRepair::Repair(const CleanupWindow& window, int64_t tau, int64_t newest,
           track.output_velocity = Vec3::Zero();
         }
       } else if (end >= 0 && track.last_observed == tau - 1 &&
-                 end - tau <= options_.small_gap_frames) {
+                 end - tau <= rules_.small_gap_frames) {
         interpolated = true;
         // A short gap right after an observed sample: a plain Hermite on the raw path.
         const HermiteSegment h{track.output, track.output_velocity, window.at(end).raw[m],
@@ -120,7 +120,7 @@ void GapRepair::Repair(const CleanupWindow& window, int64_t tau, int64_t newest,
           // A held snap is taken up a little each frame: a reference that kept up a real
           // fast motion is followed again, with no jump.
           track.held_snap += snap_now;
-          const Vec3 released = options_.fill_snap_release * track.held_snap;
+          const Vec3 released = rules_.fill_snap_release * track.held_snap;
           track.held_snap -= released;
           x += released;
         } else {

@@ -44,6 +44,7 @@ class GapRepair {
   };
 
   const CleanupOptions options_;
+  const CleanupFrameRules rules_;
   std::vector<Track> tracks_;
 };
 

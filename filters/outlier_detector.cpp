@@ -11,6 +11,7 @@ OutlierDetector::OutlierDetector(const Skeleton& skeleton, const MarkerSet& mark
     : skeleton_(skeleton),
       markers_(markers),
       options_(options),
+      rules_(FrameRules(options)),
       naive_(skeleton, markers),
       robust_(skeleton, markers) {
   const auto m = static_cast<size_t>(markers_.num_markers());
@@ -178,7 +179,7 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
   const bool has_previous = t > 0 && window.at(t - 1).frame == t - 1;
   const WindowFrame& prev = window.at(t - 1 >= 0 ? t - 1 : 0);
   const auto m_count = static_cast<size_t>(markers_.num_markers());
-  const double alpha = 2.0 / (options_.window + 1.0);
+  const double alpha = rules_.statistics_weight;
 
   // Residuals against X^ and each marker's adaptive threshold.
   auto threshold = [&](size_t m) {
@@ -259,11 +260,11 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
       if (s.mask[m] == MaskReason::kNone || s.mask[m] == MaskReason::kDisagreement)
         s.mask[m] = MaskReason::kResidual;
       // Fallen off: far from where it belongs (not a reference a few cm off) for long.
-      if (track.residual_run >= options_.fallen_frames && r > options_.fallen_residual_m) {
+      if (track.residual_run >= rules_.fallen_frames && r > options_.fallen_residual_m) {
         track.fallen = true;
         s.mask[m] = MaskReason::kFallenOff;
       }
-      if (track.residual_run >= options_.stray_frames && r > options_.stray_residual_m)
+      if (track.residual_run >= rules_.stray_frames && r > options_.stray_residual_m)
         track.stray = true;
     } else {
       track.residual_run = 0;
@@ -280,7 +281,7 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
       track.still_anchor = s.raw[m];
       track.still_reference = s.reference[m];
       track.frozen = false;
-    } else if (t - track.still_since + 1 >= options_.frozen_frames &&
+    } else if (t - track.still_since + 1 >= rules_.frozen_frames &&
                (s.reference[m] - track.still_reference).norm() >
                    options_.frozen_reference_motion_m &&
                has_fitting_neighbour(m)) {
@@ -334,12 +335,12 @@ void OutlierDetector::CleanMask(CleanupWindow& window, int64_t t, int64_t first_
     for (int64_t g = first; g + 1 <= t; ++g) {
       if (g == 0 || good(g - 1, m) || !good(g, m)) continue;
       if (g - 1 < first - 1) continue;
-      for (int n = 0; n < options_.max_trim_frames && g + 1 <= t && good(g, m) && good(g + 1, m);
+      for (int n = 0; n < rules_.max_trim_frames && g + 1 <= t && good(g, m) && good(g + 1, m);
            ++n, ++g) {
         const WindowFrame& a = window.at(g);
         const WindowFrame& b = window.at(g + 1);
         const Vec3 slope = (b.raw[m] - a.raw[m]) - (b.reference[m] - a.reference[m]);
-        if (slope.norm() <= options_.trim_slope_m) break;
+        if (slope.norm() <= rules_.trim_slope_m) break;
         window.at(g).mask[m] = MaskReason::kTrimmed;
       }
     }
@@ -351,7 +352,7 @@ void OutlierDetector::CleanMask(CleanupWindow& window, int64_t t, int64_t first_
         continue;
       }
       if (run_start > first && !good(run_start - 1, m) &&
-          f - run_start <= options_.small_track_frames)
+          f - run_start <= rules_.small_track_frames)
         for (int64_t g = run_start; g < f; ++g) window.at(g).mask[m] = MaskReason::kSmallTrack;
       run_start = -1;
     }

@@ -68,6 +68,7 @@ class OutlierDetector {
   const Skeleton& skeleton_;
   const MarkerSet& markers_;
   const CleanupOptions options_;
+  const CleanupFrameRules rules_;
   IkState naive_, robust_;
   bool naive_solved_ = false;  // Y was solved for the newest frame
   bool naive_fresh_ = false;   // Y's warm start is the previous frame's solution

@@ -94,7 +94,7 @@ class CleanupFixture : public ::testing::Test {
           Truth(699, m) +
           (jitter_sigma > 0.0 ? Vec3(jitter(rng), jitter(rng), jitter(rng)) : Vec3::Zero());
     CleanupOptions options = Blind();
-    options.frozen_frames = 6;
+    options.frozen_s = 0.05;
     const auto out = Run(options);
     int frozen = 0;
     for (int f = 700; f < 760; ++f)
@@ -110,7 +110,7 @@ class CleanupFixture : public ::testing::Test {
     o.spike_m = 10.0;
     o.rigid_tolerance_m = 10.0;
     o.swap_margin_m = 10.0;
-    o.frozen_frames = 100000;
+    o.frozen_s = 1e4;
     return o;
   }
 

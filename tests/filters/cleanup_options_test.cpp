@@ -35,7 +35,7 @@ TEST(CleanupOptionsTest, ValidateGivesTheBoundsAndTheValue) {
     EXPECT_EQ(std::string(e.what()), "CleanupOptions.spike_m: must be in [0.001, 100], got 0");
   }
   options = CleanupOptions{};
-  options.fill_snap_release = std::nan("");
+  options.fill_snap_release_s = std::nan("");
   EXPECT_THROW(options.Validate(), std::invalid_argument);
   options = CleanupOptions{};
   options.frozen_reference_motion_m = options.frozen_radius_m;

@@ -28,12 +28,12 @@ TEST_F(FinalSolveTest, AFillGainsFinalSolveWeightGradually) {
     const double before = out[static_cast<size_t>(f - 1)].weight[um],
                  now = out[static_cast<size_t>(f)].weight[um];
     if (out[static_cast<size_t>(f)].status[um] == MarkerStatus::kRepaired) {
-      EXPECT_LE(now, before * options.fill_weight_ramp + 1e-12) << f;
+      EXPECT_LE(now, before * FrameRules(options).fill_weight_ramp + 1e-12) << f;
     }
     reached_full |= out[static_cast<size_t>(f)].status[um] == MarkerStatus::kRepaired && now > 0.5;
   }
-  EXPECT_TRUE(reached_full);       // the interpolation near the return does get its weight
-  options.fill_weight_ramp = 1.0;  // without the ramp the weight jumps
+  EXPECT_TRUE(reached_full);               // the interpolation near the return does get its weight
+  options.fill_weight_growth_per_s = 0.0;  // without the ramp the weight jumps
   const auto jumpy = Run(options);
   double biggest_jump = 0.0;
   for (int f = 301; f < 420; ++f)
@@ -51,15 +51,17 @@ TEST_F(FinalSolveTest, ReturningMarkerEasesIntoTheSkeletonWithoutLookahead) {
   for (int f = 300; f < 420; ++f) Sample(f, m) = Vec3::Constant(kNaN);
   CleanupOptions options;
   options.lookahead = 0;
-  options.data_catchup_m = 0.0;
+  options.data_catchup_mps = 0.0;
   const auto out = Run(options);
   const auto um = static_cast<size_t>(m);
   ASSERT_EQ(out[420].status[um], MarkerStatus::kObserved);
   EXPECT_EQ(out[420].markers[um], Sample(420, m));
-  EXPECT_LE(out[420].weight[um], options.repaired_weight * options.fill_weight_ramp + 1e-12);
+  EXPECT_LE(out[420].weight[um],
+            options.repaired_weight * FrameRules(options).fill_weight_ramp + 1e-12);
   for (int f = 421; f < 440; ++f)
-    EXPECT_LE(out[static_cast<size_t>(f)].weight[um],
-              out[static_cast<size_t>(f - 1)].weight[um] * options.fill_weight_ramp + 1e-12)
+    EXPECT_LE(
+        out[static_cast<size_t>(f)].weight[um],
+        out[static_cast<size_t>(f - 1)].weight[um] * FrameRules(options).fill_weight_ramp + 1e-12)
         << f;
   EXPECT_DOUBLE_EQ(out[450].weight[um], 1.0);
 }
@@ -73,10 +75,10 @@ TEST_F(FinalSolveTest, ForearmThatBentWhileOccludedIsCaughtUpWithoutAPop) {
   auto worst_extra_hand_step = [&](double catchup) {
     CleanupOptions options;
     options.lookahead = 0;
-    options.data_catchup_m = catchup;
+    options.data_catchup_mps = catchup;
     return WorstExtraJointStep(Run(options), bent, "LeftHand", 400, 520);
   };
-  EXPECT_LT(worst_extra_hand_step(CleanupOptions{}.data_catchup_m), 0.02);
+  EXPECT_LT(worst_extra_hand_step(CleanupOptions{}.data_catchup_mps), 0.02);
   EXPECT_GT(worst_extra_hand_step(0.0), 0.03);  // the weight ramp alone: measured 0.22 m
   CleanupOptions options;
   options.lookahead = 0;
@@ -98,14 +100,14 @@ TEST_F(FinalSolveTest, CapturedJumpTheDetectorsMissIsClosedOnNotFollowed) {
   auto worst_extra_hand_step = [&](double motion_acceleration) {
     CleanupOptions options = Blind();
     options.lookahead = 0;
-    options.data_motion_acceleration_m = motion_acceleration;
+    options.data_motion_acceleration_mps2 = motion_acceleration;
     const auto out = Run(options);
     EXPECT_EQ(out[300].markers[static_cast<size_t>(Marker("LHND1"))], Sample(300, Marker("LHND1")));
     return WorstExtraJointStep(out, fixture_.motion, "LeftHand", 290, 340);
   };
-  EXPECT_LT(worst_extra_hand_step(CleanupOptions{}.data_motion_acceleration_m),
-            0.02);                              // measured 0.3 cm
-  EXPECT_GT(worst_extra_hand_step(1.0), 0.04);  // the jump taken as motion: measured 4.6 cm
+  EXPECT_LT(worst_extra_hand_step(CleanupOptions{}.data_motion_acceleration_mps2),
+            0.02);                                  // measured 0.3 cm
+  EXPECT_GT(worst_extra_hand_step(14400.0), 0.04);  // the jump taken as motion: measured 4.6 cm
 }
 
 TEST_F(FinalSolveTest, GuessesPullTheSkeletonNoFurtherThanTheAnchorAllows) {

@@ -121,7 +121,7 @@ TEST_F(OutlierDetectorTest, StillMarkerIsNotFrozenWhenNoOtherMarkerShowsItsSegme
     Sample(f, Marker("RFOT3")) = Vec3::Constant(kNaN);
   }
   CleanupOptions options = Blind();
-  options.frozen_frames = 6;
+  options.frozen_s = 0.05;
   const auto out = Run(options);
   for (int f = 700; f < 760; ++f)
     EXPECT_NE(out[static_cast<size_t>(f)].reason[static_cast<size_t>(m)], MaskReason::kFrozen) << f;
@@ -150,9 +150,9 @@ TEST_F(OutlierDetectorTest, StraySampleLeavesTheReferenceOfAnOccludedSegment) {
     for (const char* name : {"RFOT1", "RFOT2", "RFOT3"})
       Sample(f, Marker(name)) = Vec3::Constant(kNaN);
   }
-  auto good_marker_rejected = [&](int stray_frames) {
+  auto good_marker_rejected = [&](double stray_s) {
     CleanupOptions options;
-    options.stray_frames = stray_frames;
+    options.stray_s = stray_s;
     const auto out = Run(options);
     int rejected = 0;
     for (int f = 330; f < 420; ++f)
@@ -160,8 +160,8 @@ TEST_F(OutlierDetectorTest, StraySampleLeavesTheReferenceOfAnOccludedSegment) {
           out[static_cast<size_t>(f)].status[static_cast<size_t>(good)] != MarkerStatus::kObserved;
     return rejected;
   };
-  EXPECT_LT(good_marker_rejected(CleanupOptions{}.stray_frames), 5);  // measured 0 of 90 frames
-  EXPECT_GT(good_marker_rejected(100000), 20);                        // without the rule: 90
+  EXPECT_LT(good_marker_rejected(CleanupOptions{}.stray_s), 5);  // measured 0 of 90 frames
+  EXPECT_GT(good_marker_rejected(1e4), 20);                      // without the rule: 90
 }
 
 TEST_F(OutlierDetectorTest, ArmThatMovedWhileOccludedIsReacquired) {

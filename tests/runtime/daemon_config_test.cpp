@@ -154,20 +154,20 @@ TEST(DaemonConfigTest, ASubjectCanDriveACharacterFromABvh) {
 }
 
 TEST(DaemonConfigTest, ThresholdsAndOverridesReachThePipelineOptions) {
-  const DaemonConfig c =
-      ParseDaemonConfig(std::string(kMinimal) +
-                            "lookahead = 3\nrate_hz = 240\n[pipeline.detectors]\nspike_mm = 45\n"
-                            "disagreement_rotation_deg = 20\nstray_residual_mm = 150\nstray_frames "
-                            "= 24\n[pipeline]\nwindow = 60\n",
-                        "t.toml", MOCAPD_CONFIG_DIR);
+  const DaemonConfig c = ParseDaemonConfig(
+      std::string(kMinimal) +
+          "lookahead = 3\nrate_hz = 240\n[pipeline.detectors]\nspike_mm = 45\n"
+          "disagreement_rotation_deg = 20\nstray_residual_mm = 150\nstray_ms = 200\n"
+          "[pipeline]\nwindow_ms = 500\n",
+      "t.toml", MOCAPD_CONFIG_DIR);
   const CleanupOptions& o = c.subjects[0].cleanup;
   EXPECT_EQ(o.lookahead, 3);
   EXPECT_EQ(o.rate_hz, 240.0);
   EXPECT_DOUBLE_EQ(o.spike_m, 0.045);
   EXPECT_NEAR(o.disagreement_rotation_rad, 20.0 * M_PI / 180.0, 1e-12);
-  EXPECT_EQ(o.window, 60);
+  EXPECT_DOUBLE_EQ(o.window_s, 0.5);
   EXPECT_DOUBLE_EQ(o.stray_residual_m, 0.15);
-  EXPECT_EQ(o.stray_frames, 24);
+  EXPECT_DOUBLE_EQ(o.stray_s, 0.2);
 }
 
 // config/mocapd.toml promises that its values are the defaults: every cleanup option a
