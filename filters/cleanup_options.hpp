@@ -17,6 +17,17 @@ struct CleanupOptions {
   int lookahead = 12;     ///< K: frames of delay; 0 allowed.
   double window_s = 1.0;  ///< W: time constant of the running statistics.
 
+  // Ingest gates (filters/cleanup_pipeline.hpp).
+  /// A sample further than this from the capture's origin along any axis is not a
+  /// position (1e30, FLT_MAX, an exporter's sentinel): missing, kept out of every solve.
+  double capture_volume_m = 100.0;
+  /// A frame whose markers (the median of them) moved faster than this since the last
+  /// frame taken is a capture glitch: all its samples are missing...
+  double glitch_speed_mps = 40.0;
+  /// ...unless the jump persists this long: then it is a re-synchronisation (the world
+  /// frame moved), taken as it is, the solves starting afresh.
+  double glitch_resync_s = 0.1;
+
   // Detection (filters/outlier_detector.hpp).
   double disagreement_position_m = 0.10;                   ///< Delta P max (thesis: 10 cm).
   double disagreement_rotation_rad = 30.0 * M_PI / 180.0;  ///< Delta R max (thesis: 30 deg).

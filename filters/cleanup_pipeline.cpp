@@ -1,6 +1,8 @@
 // The cleanup's window and the order of its stages (see the header).
 #include "filters/cleanup_pipeline.hpp"
 
+#include <algorithm>
+
 namespace mocapd {
 namespace {
 
@@ -30,6 +32,9 @@ CleanupPipeline::CleanupPipeline(std::shared_ptr<const Skeleton> skeleton,
   out_.source.assign(m, SampleSource::kNone);
   out_.weight.assign(m, 0.0);
   out_.pose = RestPose(*skeleton_);
+  last_taken_.assign(m, Vec3::Zero());
+  has_last_taken_.assign(m, 0);
+  displacement_.assign(m, 0.0);
 }
 
 void CleanupPipeline::Reset() {
@@ -37,6 +42,9 @@ void CleanupPipeline::Reset() {
   detector_.Reset();
   repair_.Reset();
   final_.Reset();
+  std::fill(has_last_taken_.begin(), has_last_taken_.end(), 0);
+  last_taken_frame_ = -1;
+  glitch_since_ = -1;
   next_in_ = next_out_ = 0;
 }
 
@@ -45,18 +53,67 @@ bool CleanupPipeline::Push(std::span<const Vec3> p_WM) {
   ++counters_.frames_in;
   WindowFrame& s = window_.at(t);
   s.frame = t;
+  s.resync = false;
   const auto m_count = static_cast<size_t>(markers_->num_markers());
   for (size_t m = 0; m < m_count; ++m) {
-    const bool valid = m < p_WM.size() && p_WM[m].allFinite();
+    bool valid = m < p_WM.size() && p_WM[m].allFinite();
+    if (valid && p_WM[m].cwiseAbs().maxCoeff() > options_.capture_volume_m) {
+      valid = false;
+      ++counters_.samples_out_of_volume;
+    }
     s.raw[m] = valid ? p_WM[m] : Vec3::Constant(kNaN);
     s.valid[m] = valid;
     s.relabelled[m] = 0;
     s.mask[m] = valid ? MaskReason::kNone : MaskReason::kMissing;
   }
+  GateGlitch(s);
   detector_.Process(window_, t, next_out_, &counters_);
   if (t - options_.lookahead < next_out_) return false;
   Publish(next_out_, t);
   return true;
+}
+
+// A frame whose markers all jumped further than a body can move since the last frame
+// taken is the capture's glitch (a broken frame, a world-frame hiccup): published as
+// missing, it harms no solver's history. A jump that persists is a re-synchronisation.
+void CleanupPipeline::GateGlitch(WindowFrame& s) {
+  const size_t m_count = s.raw.size();
+  int moved_count = 0;
+  for (size_t m = 0; m < m_count; ++m)
+    if (s.valid[m] && has_last_taken_[m])
+      displacement_[static_cast<size_t>(moved_count++)] = (s.raw[m] - last_taken_[m]).norm();
+  const double seconds = static_cast<double>(s.frame - last_taken_frame_) / options_.rate_hz;
+  bool glitch = false;
+  if (moved_count >= 3 && last_taken_frame_ >= 0) {
+    const auto mid = displacement_.begin() + moved_count / 2;
+    std::nth_element(displacement_.begin(), mid, displacement_.begin() + moved_count);
+    glitch = *mid > options_.glitch_speed_mps * seconds + 0.05;
+  }
+  if (glitch) {
+    glitch_since_ = glitch_since_ < 0 ? s.frame : glitch_since_;
+    if (static_cast<double>(s.frame - glitch_since_ + 1) / options_.rate_hz <=
+        options_.glitch_resync_s) {
+      ++counters_.glitch_frames;
+      for (size_t m = 0; m < m_count; ++m) {
+        s.raw[m] = Vec3::Constant(kNaN);
+        s.valid[m] = 0;
+        s.mask[m] = MaskReason::kMissing;
+      }
+      return;
+    }
+    // It persisted: the world moved. Take it, the solves starting from it afresh (the
+    // repair and the final solve when this frame is published).
+    ++counters_.resyncs;
+    detector_.Reset();
+    s.resync = true;
+  }
+  glitch_since_ = -1;
+  for (size_t m = 0; m < m_count; ++m) {
+    if (!s.valid[m]) continue;
+    last_taken_[m] = s.raw[m];
+    has_last_taken_[m] = 1;
+  }
+  last_taken_frame_ = s.frame;
 }
 
 bool CleanupPipeline::Flush() {
@@ -67,6 +124,10 @@ bool CleanupPipeline::Flush() {
 
 void CleanupPipeline::Publish(int64_t tau, int64_t newest) {
   out_.frame = tau;
+  if (window_.at(tau).resync) {
+    repair_.Reset();
+    final_.Reset();
+  }
   repair_.Repair(window_, tau, newest, &out_, &counters_);
   final_.Solve(&out_, &counters_);
   ++counters_.frames_out;

@@ -1,7 +1,10 @@
 // The per-subject streaming cleanup pipeline: push marker frame t, get frame t-K out once
 // it is final. Follows Perepichka 2020, ch. 3 ("Robust marker trajectory repair using
-// kinematic reference"), turned from a batch method into a streaming one. The pipeline
-// keeps the window of buffered frames and calls three stages in order:
+// kinematic reference"), turned from a batch method into a streaming one. Each frame
+// first passes the ingest gates: a sample beyond the capture volume (1e30, FLT_MAX) is
+// missing, and a whole frame that jumped further than a body moves (a capture glitch) is
+// missing too, unless the jump persists (a re-synchronisation, taken afresh). The
+// pipeline keeps the window of buffered frames and calls three stages in order:
 //  - OutlierDetector (filters/outlier_detector.hpp) on each frame as it arrives: swap
 //    relabelling, the naive Y and robust reference Y^ (X^ = LBS(Y^)), the detectors that
 //    mask bad samples, and the mask clean-up over the lookahead;
@@ -16,6 +19,7 @@
 
 #include <memory>
 #include <span>
+#include <vector>
 
 #include "filters/cleanup_options.hpp"
 #include "filters/cleanup_window.hpp"
@@ -48,6 +52,7 @@ class CleanupPipeline {
 
  private:
   void Publish(int64_t tau, int64_t newest);
+  void GateGlitch(WindowFrame& s);
 
   std::shared_ptr<const Skeleton> skeleton_;
   std::shared_ptr<const MarkerSet> markers_;
@@ -58,6 +63,12 @@ class CleanupPipeline {
   FinalSolve final_;
   CleanFrame out_;
   CleanupCounters counters_;
+  std::vector<Vec3>
+      last_taken_;  ///< Per marker, its last sample in a frame taken (the glitch gate).
+  std::vector<uint8_t> has_last_taken_;
+  std::vector<double> displacement_;  ///< GateGlitch's scratch.
+  int64_t last_taken_frame_ = -1;
+  int64_t glitch_since_ = -1;
   int64_t next_in_ = 0;   ///< Frame number of the next Push.
   int64_t next_out_ = 0;  ///< Frame number of the next publication.
 };

@@ -63,9 +63,12 @@ struct CleanupCounters {
   std::array<int64_t, kMaskReasonCount> repaired_by{};  ///< Published repaired samples, per reason.
   int64_t unrecoverable = 0;
   int64_t swaps_relabelled = 0;
-  int64_t cold_starts = 0;       ///< IK solves that started cold.
-  int64_t solve_failures = 0;    ///< IK solves that reported a numerical failure.
-  int64_t solve_iterations = 0;  ///< LM iterations over all solves.
+  int64_t samples_out_of_volume = 0;  ///< Samples beyond the capture volume: taken as missing.
+  int64_t glitch_frames = 0;          ///< Whole frames taken as missing (a jump no body makes).
+  int64_t resyncs = 0;                ///< Jumps that persisted: taken, the solves started afresh.
+  int64_t cold_starts = 0;            ///< IK solves that started cold.
+  int64_t solve_failures = 0;         ///< IK solves that reported a numerical failure.
+  int64_t solve_iterations = 0;       ///< LM iterations over all solves.
   void CountSolve(const IkSummary& summary) {
     cold_starts += summary.cold_start;
     solve_failures += summary.status == IkStatus::kNumericalFailure;
@@ -81,6 +84,7 @@ struct WindowFrame {
   std::vector<uint8_t> relabelled;
   std::vector<MaskReason> mask;
   std::vector<Vec3> reference;  ///< X^ = LBS(Y^), metres.
+  bool resync = false;          ///< The capture re-synchronised here: nothing before carries over.
 };
 
 /// A ring of frames addressed by frame number, allocated once.

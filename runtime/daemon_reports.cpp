@@ -69,6 +69,13 @@ std::string FormatPrometheusMetrics(const DaemonStats& stats) {
   auto& iterations = counter("mocapd_solve_iterations_total", "IK iterations over all solves");
   auto& failures = counter("mocapd_solve_failures_total", "IK solves that failed numerically");
   auto& cold = counter("mocapd_solve_cold_starts_total", "IK solves that started cold");
+  auto& out_of_volume =
+      counter("mocapd_samples_out_of_volume_total",
+              "Samples beyond the capture volume (1e30, FLT_MAX), taken as missing");
+  auto& glitches = counter("mocapd_glitch_frames_total",
+                           "Whole frames that jumped further than a body moves, taken as missing");
+  auto& resyncs = counter("mocapd_capture_resyncs_total",
+                          "Whole-frame jumps that persisted, taken as a re-synchronisation");
   auto& latency = BuildHistogram()
                       .Name("mocapd_processing_latency_seconds")
                       .Help("From receiving the frame that completes a publication to sending it")
@@ -91,6 +98,9 @@ std::string FormatPrometheusMetrics(const DaemonStats& stats) {
     iterations.Add(subject).Increment(static_cast<double>(s.cleanup.solve_iterations));
     failures.Add(subject).Increment(static_cast<double>(s.cleanup.solve_failures));
     cold.Add(subject).Increment(static_cast<double>(s.cleanup.cold_starts));
+    out_of_volume.Add(subject).Increment(static_cast<double>(s.cleanup.samples_out_of_volume));
+    glitches.Add(subject).Increment(static_cast<double>(s.cleanup.glitch_frames));
+    resyncs.Add(subject).Increment(static_cast<double>(s.cleanup.resyncs));
     for (int r = 0; r < kDropReasonCount; ++r)
       dropped.Add({{"subject", s.name}, {"reason", to_string(static_cast<DropReason>(r))}})
           .Increment(static_cast<double>(s.counters.dropped[static_cast<size_t>(r)]));
@@ -139,6 +149,9 @@ nlohmann::json SubjectJson(const SubjectStats& s) {
           {"seconds_since_last_input", s.since_last_input_s},
           {"samples_repaired", repaired},
           {"samples_unrecoverable", s.cleanup.unrecoverable},
+          {"samples_out_of_volume", s.cleanup.samples_out_of_volume},
+          {"glitch_frames", s.cleanup.glitch_frames},
+          {"capture_resyncs", s.cleanup.resyncs},
           {"mean_processing_latency_us", mean_latency_us}};
 }
 

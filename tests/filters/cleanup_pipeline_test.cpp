@@ -4,6 +4,8 @@
 
 #include <gtest/gtest.h>
 
+#include <limits>
+
 #include "filters/pose_error.hpp"
 #include "tests/filters/cleanup_fixture.hpp"
 #include "tests/support/allocation_counter.hpp"
@@ -63,6 +65,54 @@ TEST_F(CleanupPipelineTest, PushAndFlushAllocateNothingAfterWarmUp) {
     allocations = counter.count();
   }
   EXPECT_EQ(allocations, 0u);
+}
+
+// One absurd frame (every marker at 1e30, or FLT_MAX) is not a position: it is missing,
+// it enters no solver's history, and not one good sample after it changes.
+TEST_F(CleanupPipelineTest, AnAbsurdFrameHarmsNoGoodSampleAfterIt) {
+  const auto clean = Run(CleanupOptions{});
+  for (const double absurd : {1e30, static_cast<double>(std::numeric_limits<float>::max())}) {
+    for (auto& p : frames_[300]) p = Vec3::Constant(absurd);
+    const auto out = Run(CleanupOptions{});
+    EXPECT_EQ(counters_.samples_out_of_volume, fixture_.markers->num_markers());
+    for (size_t m = 0; m < frames_[300].size(); ++m)
+      EXPECT_NE(out[300].status[m], MarkerStatus::kObserved) << m;
+    int changed = 0;
+    for (size_t f = 301; f < 420; ++f)
+      for (size_t m = 0; m < frames_[f].size(); ++m)
+        changed +=
+            out[f].status[m] != MarkerStatus::kObserved || out[f].markers[m] != clean[f].markers[m];
+    EXPECT_EQ(changed, 0) << absurd;
+    for (size_t m = 0; m < frames_[300].size(); ++m)
+      frames_[300][m] = Truth(300, static_cast<int>(m));
+  }
+}
+
+// A frame whose every marker is shifted 10 m is a capture glitch: never published as
+// observed; the frames after it are.
+TEST_F(CleanupPipelineTest, AWholeFrameJumpIsAGlitchNotObserved) {
+  for (auto& p : frames_[300]) p += Vec3(10.0, 0.0, 0.0);
+  const auto out = Run(CleanupOptions{});
+  EXPECT_EQ(counters_.glitch_frames, 1);
+  EXPECT_EQ(counters_.resyncs, 0);
+  for (size_t m = 0; m < frames_[300].size(); ++m) {
+    EXPECT_NE(out[300].status[m], MarkerStatus::kObserved) << m;
+    EXPECT_EQ(out[305].status[m], MarkerStatus::kObserved) << m;
+  }
+}
+
+// A jump that persists is the world frame moving (a re-synchronisation): taken after
+// glitch_resync_s, the solves starting afresh, and the subject tracked where it now is.
+TEST_F(CleanupPipelineTest, AJumpThatPersistsIsAResynchronisation) {
+  for (size_t f = 300; f < frames_.size(); ++f)
+    for (auto& p : frames_[f]) p += Vec3(10.0, 0.0, 0.0);
+  const auto out = Run(CleanupOptions{});
+  EXPECT_EQ(counters_.resyncs, 1);
+  EXPECT_EQ(counters_.glitch_frames, 12);  // 0.1 s at 120 Hz
+  KinematicsWorkspace truth(*fixture_.skeleton), solved(*fixture_.skeleton);
+  ForwardKinematics(*fixture_.skeleton, fixture_.motion[500], &truth);
+  ForwardKinematics(*fixture_.skeleton, out[500].pose, &solved);
+  EXPECT_LT((solved.p_WJ[0] - (truth.p_WJ[0] + Vec3(10.0, 0.0, 0.0))).norm(), 0.01);
 }
 
 }  // namespace
