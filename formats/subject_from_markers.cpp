@@ -186,12 +186,16 @@ MarkersOnlyCalibration CalibrateFromMarkers(std::span<const C3dTake> takes,
       }
       if (hi.x() >= lo.x()) travel.push_back((hi - lo).norm());
     }
-    if (travel.empty() || Median(travel) < 0.03)
+    // Standing in place, most markers stay put while one limb moves: motion anywhere
+    // counts (the 90th percentile of how far markers travel).
+    std::sort(travel.begin(), travel.end());
+    const double moved = travel.empty() ? 0.0 : travel[travel.size() * 9 / 10];
+    if (moved < 0.03)
       throw std::runtime_error(
-          "calibrate: the take shows no motion (markers move " +
-          std::to_string(
-              static_cast<int>(std::round((travel.empty() ? 0.0 : Median(travel)) * 1e3))) +
-          " mm at the median): calibration needs the joints to move, e.g. a range-of-motion take");
+          "calibrate: the take shows no motion (its markers travel " +
+          std::to_string(static_cast<int>(std::round(moved * 1e3))) +
+          " mm at most, 90th percentile): calibration needs the joints to move, e.g. a "
+          "range-of-motion take");
   }
 
   const Skeleton templ = MakeTemplateHumanoid(1.75);

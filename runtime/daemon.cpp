@@ -344,7 +344,8 @@ struct Daemon::ControlPlane {
   int64_t last_log_ns = 0;
   bool data_plane_alive = true;
   bool stopping = false;
-  std::optional<boost::asio::steady_timer> shutdown;  // polls the data plane's flush
+  std::optional<boost::asio::steady_timer> shutdown;  // polls the data plane's flush...
+  std::function<void(const boost::system::error_code&)> on_shutdown_poll;  // ...with this
 };
 
 Daemon::Daemon(DaemonConfig config, std::string config_path, zmq::context_t* context)
@@ -372,12 +373,11 @@ void Daemon::Stop() {
     // The control plane keeps serving (/health says "stopping") and a second signal is
     // still heard while the data plane flushes; it is joined once it has finished.
     cp.shutdown.emplace(cp.io);
-    auto wait = std::make_shared<std::function<void(const boost::system::error_code&)>>();
-    *wait = [this, wait](const boost::system::error_code&) {
+    cp.on_shutdown_poll = [this](const boost::system::error_code&) {
       ControlPlane& c = *control_;
       if (!data_->finished.load(std::memory_order_acquire)) {
         c.shutdown->expires_after(std::chrono::milliseconds(5));
-        c.shutdown->async_wait(*wait);
+        c.shutdown->async_wait(c.on_shutdown_poll);
         return;
       }
       if (data_->thread.joinable()) data_->thread.join();
@@ -386,7 +386,7 @@ void Daemon::Stop() {
       if (c.signals) c.signals->cancel();
       c.io.stop();
     };
-    (*wait)({});
+    cp.on_shutdown_poll({});
   });
 }
 

@@ -58,11 +58,15 @@ class SubjectCalibrationTest : public ::testing::Test {
     truth_ = MakeHumanoidSkeleton();
     const auto fixture = testing::MakeHumanoidFixture("walk", 0.1, 120.0);
     markers_ = RigidMarkers(truth_, *fixture.markers);
-    motion_ = MakeHumanoidMotion(truth_, motion, seconds, 120.0);
+    // 60 Hz and 100 poses keep the test quick under the sanitizers.
+    motion_ = MakeHumanoidMotion(truth_, motion, seconds, 60.0);
     SynthesisNoise noise;
     noise.noise_sigma_m = 0.001;
-    const C3dTake take = SynthesizeMarkers(truth_, *markers_, motion_, 120.0, noise);
-    result_ = CalibrateSubject(WrongTemplate(truth_, *markers_), take.positions, take.num_frames);
+    const C3dTake take = SynthesizeMarkers(truth_, *markers_, motion_, 60.0, noise);
+    SubjectCalibrationOptions options;
+    options.max_frames = 100;
+    result_ = CalibrateSubject(WrongTemplate(truth_, *markers_), take.positions, take.num_frames,
+                               options);
   }
   // The calibrated joint's world position against the truth's, over every 10th frame.
   std::vector<double> CentreErrors(const char* joint) const {
@@ -78,7 +82,7 @@ class SubjectCalibrationTest : public ::testing::Test {
       ForwardKinematics(truth_, motion_[f], &truth);
       EvaluateMarkers(*markers_, truth, targets);
       (void)SolveIk(sk, calibrated, IkOptions{}, targets, weights, &state);
-      if (f % 10 != 0 || f < 20) continue;
+      if (f % 5 != 0 || f < 10) continue;
       ForwardKinematics(sk, state.pose(), &solved);
       errors.push_back(
           (solved.p_WJ[static_cast<size_t>(j)] - truth.p_WJ[static_cast<size_t>(j)]).norm());
@@ -148,12 +152,15 @@ TEST(SubjectCalibrationInputTest, BadInputIsAClearError) {
 
 TEST(SubjectCalibrationInputTest, TheSameInputGivesTheSameSubjectBitForBit) {
   const Skeleton sk = MakeHumanoidSkeleton();
-  const auto fixture = testing::MakeHumanoidFixture("mixed", 4.0, 60.0, 0.001);
+  const auto fixture = testing::MakeHumanoidFixture("mixed", 2.0, 30.0, 0.001);
   const auto markers = RigidMarkers(sk, *fixture.markers);
-  const C3dTake take = SynthesizeMarkers(sk, *markers, fixture.motion, 60.0);
+  const C3dTake take = SynthesizeMarkers(sk, *markers, fixture.motion, 30.0);
   const CalibrationTemplate t = WrongTemplate(sk, *markers);
-  const SubjectCalibrationResult a = CalibrateSubject(t, take.positions, take.num_frames);
-  const SubjectCalibrationResult b = CalibrateSubject(t, take.positions, take.num_frames);
+  SubjectCalibrationOptions options;
+  options.max_frames = 30;
+  options.iterations = 4;
+  const SubjectCalibrationResult a = CalibrateSubject(t, take.positions, take.num_frames, options);
+  const SubjectCalibrationResult b = CalibrateSubject(t, take.positions, take.num_frames, options);
   for (int j = 0; j < sk.num_joints(); ++j)
     EXPECT_EQ(a.skeleton.joint(j).offset, b.skeleton.joint(j).offset);
   for (size_t m = 0; m < a.markers.size(); ++m)

@@ -28,6 +28,39 @@ run(${MOCAPD} calibrate --skeleton ${WORK_DIR}/walk.bvh --markers ${WORK_DIR}/wa
 if(NOT OUT MATCHES "markers accepted, 0 rejected")
   message(FATAL_ERROR "calibrate did not accept every marker:\n${OUT}")
 endif()
+# From markers alone: a Plug-in Gait range of motion with soft tissue, calibrated with no
+# skeleton given (the set recognised from the labels), then a corrupted take of the same
+# body cleaned with that subject; the subject keeps the role names in its BVH.
+run(${MOCAP_SIM} synth --humanoid rom --seconds 10 --rate 120 --marker-set plug-in-gait-full --noise-mm 1
+    --soft-tissue-mm 5 --out ${WORK_DIR}/rom.c3d)
+run(${MOCAPD} calibrate --markers ${WORK_DIR}/rom.c3d --out ${WORK_DIR}/markers_only.toml
+    --report ${WORK_DIR}/calibration.json)
+if(NOT OUT MATCHES "marker set plug-in-gait-full \\(40 markers\\)")
+  message(FATAL_ERROR "calibrate --markers did not recognise the set:\n${OUT}")
+endif()
+file(READ ${WORK_DIR}/calibration.json calibration)
+string(JSON joint0 GET "${calibration}" joints 0 joint)
+string(JSON residual GET "${calibration}" median_residual_mm)
+if(NOT joint0 STREQUAL "pelvis" OR residual GREATER 5)
+  message(FATAL_ERROR "calibration report: first joint ${joint0}, median residual ${residual} mm")
+endif()
+run(${MOCAP_SIM} synth --humanoid mixed --seconds 3 --rate 120 --marker-set plug-in-gait-full --out
+    ${WORK_DIR}/pig_bad.c3d --corrupt medium --seed 3)
+run(${MOCAPD} process --subject ${WORK_DIR}/markers_only.toml --in ${WORK_DIR}/pig_bad.c3d --out-bvh
+    ${WORK_DIR}/pig_solved.bvh)
+run(${MOCAP_SIM} info ${WORK_DIR}/pig_solved.bvh)
+if(NOT OUT MATCHES "thigh_l \\(ball\\)" OR NOT OUT MATCHES "pelvis \\(free\\)")
+  message(FATAL_ERROR "the solved BVH does not keep the role names:\n${OUT}")
+endif()
+# A take too short to calibrate from: a clear error, nothing written (a take with no
+# motion is the unit tests' case).
+run(${MOCAP_SIM} synth --humanoid walk --seconds 0.1 --rate 60 --marker-set cmu-41 --out ${WORK_DIR}/still.c3d)
+execute_process(COMMAND ${MOCAPD} calibrate --markers ${WORK_DIR}/still.c3d --out ${WORK_DIR}/still.toml
+                RESULT_VARIABLE rc ERROR_VARIABLE err)
+if(NOT rc EQUAL 1 OR EXISTS ${WORK_DIR}/still.toml OR NOT err MATCHES "mocapd: error: calibrate: ")
+  message(FATAL_ERROR "calibrating a still take: rc=${rc} err=${err}")
+endif()
+
 # A corrupted take, cleaned through the streaming pipeline.
 run(${MOCAP_SIM} synth --humanoid mixed --seconds 5 --rate 120 --out ${WORK_DIR}/bad.c3d --corrupt medium --seed 2
     --truth ${WORK_DIR}/truth.json)
