@@ -36,6 +36,8 @@ OutlierDetector::OutlierDetector(const Skeleton& skeleton, const MarkerSet& mark
     }
   }
   weights_.assign(m, 0.0);
+  trusted_on_joint_.assign(static_cast<size_t>(skeleton_.num_joints()), 0);
+  readmit_on_joint_.assign(static_cast<size_t>(skeleton_.num_joints()), 0);
   residual_.assign(m, Vec3::Zero());
   marker_flags_.assign(m, 0);
   swap_candidates_.reserve(m);
@@ -72,6 +74,7 @@ void OutlierDetector::SolveReferences(WindowFrame& s, CleanupCounters* counters)
   for (size_t m = 0; m < m_count; ++m)
     weights_[m] =
         s.valid[m] && !tracks_[m].frozen && !tracks_[m].fallen && !tracks_[m].stray ? 1.0 : 0.0;
+  ReadmitConsistentSegments(s);
   counters->CountSolve(SolveIk(skeleton_, markers_, options_.robust_ik, s.raw, weights_, &robust_));
   const auto predicted = robust_.predicted_markers();
   std::copy(predicted.begin(), predicted.end(), s.reference.begin());
@@ -88,6 +91,41 @@ void OutlierDetector::SolveReferences(WindowFrame& s, CleanupCounters* counters)
     counters->CountSolve(SolveIk(skeleton_, markers_, options_.naive_ik, s.raw, weights_, &naive_));
   }
   naive_fresh_ = naive_solved_;
+}
+
+// Excluding a stray or fallen-off sample protects its segment's good markers from it. When
+// every marker of a segment is excluded, there is nothing left to protect, and the
+// exclusion only keeps the segment's data out while the reference guesses it (a foot
+// whose shin is occluded: the guessed shin takes the foot away from its clean markers,
+// they turn stray, and stay out because the reference never comes back to them). Two or
+// more such markers that keep the segment's rigid distances to each other are the
+// segment, not strays: they are taken back into the reference. A lone one, or ones that
+// disagree (a swapped sample among them), stay out.
+void OutlierDetector::ReadmitConsistentSegments(const WindowFrame& s) {
+  std::fill(trusted_on_joint_.begin(), trusted_on_joint_.end(), 0);
+  std::fill(readmit_on_joint_.begin(), readmit_on_joint_.end(), 0);
+  for (int m = 0; m < markers_.num_markers(); ++m)
+    if (weights_[static_cast<size_t>(m)] > 0.0)
+      ++trusted_on_joint_[static_cast<size_t>(markers_.primary_joint(m))];
+  // A joint's excluded samples are readmitted when at least one pair of them is present
+  // and every such pair keeps its rigid distance.
+  for (size_t k = 0; k < rigid_pairs_.size(); ++k) {
+    const auto i = static_cast<size_t>(rigid_pairs_[k].first),
+               j = static_cast<size_t>(rigid_pairs_[k].second);
+    const auto joint = static_cast<size_t>(markers_.primary_joint(rigid_pairs_[k].first));
+    if (trusted_on_joint_[joint] > 0 || !s.valid[i] || !s.valid[j] || tracks_[i].frozen ||
+        tracks_[j].frozen)
+      continue;
+    const bool rigid =
+        std::abs((s.raw[i] - s.raw[j]).norm() - rigid_distance_[k]) <= options_.rigid_tolerance_m;
+    if (readmit_on_joint_[joint] >= 0) readmit_on_joint_[joint] = rigid ? 1 : -1;
+  }
+  for (size_t m = 0; m < weights_.size(); ++m) {
+    const auto joint = static_cast<size_t>(markers_.primary_joint(static_cast<int>(m)));
+    if (readmit_on_joint_[joint] > 0 && s.valid[m] && !tracks_[m].frozen &&
+        markers_.marker(static_cast<int>(m)).num_attachments == 1)
+      weights_[m] = 1.0;
+  }
 }
 
 // Relabels swapped pairs before the frame is solved, so the reference is computed from

@@ -3,7 +3,8 @@
 //  - relabels swapped pairs (rigid-segment distances, trajectory continuity, and a pair
 //    that each fit the other's reference position);
 //  - solves the robust reference Y^ (Huber IRLS, temporal prior, frozen / fallen-off /
-//    stray markers excluded) and writes X^ = LBS(Y^) into the window, and the naive Y
+//    stray markers excluded, unless they are all a segment has and keep its rigid
+//    distances: then they are the segment, and taken back) and writes X^ = LBS(Y^) into the window, and the naive Y
 //    (plain IK on the markers as they are) on frames where some sample is off X^;
 //  - marks bad samples with a reason: missing, kinematic disagreement of Y and Y^ per
 //    joint mapped to markers through skin weights, residual against X^ beyond an adaptive
@@ -60,6 +61,7 @@ class OutlierDetector {
 
   void RelabelSwaps(CleanupWindow& window, int64_t t, CleanupCounters* counters);
   void SolveReferences(WindowFrame& s, CleanupCounters* counters);
+  void ReadmitConsistentSegments(const WindowFrame& s);
   void Detect(CleanupWindow& window, int64_t t, int64_t first_unpublished,
               CleanupCounters* counters);
   void CleanMask(CleanupWindow& window, int64_t t, int64_t first_unpublished);
@@ -77,6 +79,8 @@ class OutlierDetector {
   std::vector<double> rigid_distance_;            // ...and their distance in the model
   std::vector<std::vector<int>> markers_of_joint_;
   std::vector<double> weights_;
+  std::vector<int> trusted_on_joint_;  // ReadmitConsistentSegments scratch: trusted samples...
+  std::vector<int> readmit_on_joint_;  // ...and 1 readmit / -1 a pair disagrees / 0 no pair
   std::vector<Vec3> residual_;         // per marker, of the newest frame
   std::vector<uint8_t> marker_flags_;  // CleanMask scratch
   std::vector<int>
