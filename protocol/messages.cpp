@@ -429,7 +429,7 @@ void EncodeSubjectStatus(const SubjectStatusMessage& m, std::vector<uint8_t>* ou
   WriteHeader(w, MessageType::kSubjectStatus);
   WriteSubject(w, m.subject);
   w.WriteU8(static_cast<uint8_t>(m.state));
-  w.WriteU8(0);
+  w.WriteU8(m.problems);
   w.WriteU16(0);  // reserved
   w.WriteU64(m.last_frame_number);
   w.WriteU64(m.since_last_input_ns);
@@ -444,9 +444,9 @@ DecodeStatus DecodeSubjectStatus(std::span<const uint8_t> bytes, SubjectStatusMe
   if (const DecodeStatus s = ReadPrelude(r, MessageType::kSubjectStatus, &m->subject);
       s != DecodeStatus::kOk)
     return s;
-  uint8_t state = 0, reserved8 = 0;
+  uint8_t state = 0;
   uint16_t reserved16 = 0;
-  if (!r.ReadU8(&state) || !r.ReadU8(&reserved8) || !r.ReadU16(&reserved16) ||
+  if (!r.ReadU8(&state) || !r.ReadU8(&m->problems) || !r.ReadU16(&reserved16) ||
       !r.ReadU64(&m->last_frame_number) || !r.ReadU64(&m->since_last_input_ns) ||
       !r.ReadU64(&m->frames_in) || !r.ReadU64(&m->frames_out) || !r.ReadU64(&m->frames_dropped))
     return DecodeStatus::kTooShort;

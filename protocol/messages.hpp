@@ -116,9 +116,15 @@ struct CleanedMarkersMessage {
 
 /// Published by the daemon for each subject on every stats tick and when the watchdog
 /// sees its input stall, so a consumer learns a subject is stalled even with no frames.
+/// Bits of SubjectStatusMessage::problems. Readers ignore bits they do not know, so a
+/// newer daemon may add some.
+inline constexpr uint8_t kProblemModelSuspect = 1;    ///< Observed samples far from the model.
+inline constexpr uint8_t kProblemRejectingInput = 2;  ///< Every recent frame dropped.
+
 struct SubjectStatusMessage {
   std::string subject;
   SubjectState state = SubjectState::kWaiting;
+  uint8_t problems = 0;            ///< kProblem* bits.
   uint64_t last_frame_number = 0;  ///< Last frame received (0 before any).
   uint64_t since_last_input_ns = 0;
   uint64_t frames_in = 0;

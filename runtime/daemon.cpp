@@ -8,6 +8,7 @@
 #include <boost/asio/signal_set.hpp>
 #include <boost/asio/steady_timer.hpp>
 #include <csignal>
+#include <map>
 #include <optional>
 #include <zmq.hpp>
 
@@ -250,6 +251,11 @@ struct Daemon::DataPlane final : OutputSink {
       s.lookahead = d.lookahead_frames;
       s.marker_set_hash = d.marker_set_hash;
       s.skeleton_hash = d.skeleton_hash;
+      const auto rejecting = r.rejecting();
+      s.rejecting_input = rejecting.has_value();
+      if (rejecting) s.rejecting_reason = *rejecting;
+      s.model_suspect = r.model_suspect();
+      s.model_distance_mm = r.model_distance_m() * 1e3;
     }
   }
 
@@ -341,6 +347,8 @@ struct Daemon::ControlPlane {
   DaemonStats last_logged;
   std::array<int64_t, kDropReasonCount> last_drop_log_ns{};
   std::array<uint64_t, kDropReasonCount> logged_drops{};
+  // Per subject, the drops the last warning covered: the next one names who dropped what.
+  std::map<std::string, std::array<uint64_t, kDropReasonCount>> logged_subject_drops;
   int64_t last_log_ns = 0;
   bool data_plane_alive = true;
   bool stopping = false;
@@ -570,6 +578,17 @@ void Daemon::Run(bool handle_signals) {
                 "subject '{}': capture restart or jump in frame numbers; pipeline re-synchronised "
                 "at frame {}",
                 s.name, s.counters.last_frame_number);
+          if (s.rejecting_input && (before == nullptr || !before->rejecting_input))
+            spdlog::warn("subject '{}': every frame dropped as {} for over 0.5 s", s.name,
+                         to_string(s.rejecting_reason));
+          if (s.model_suspect && (before == nullptr || !before->model_suspect))
+            spdlog::warn(
+                "subject '{}': model suspect: the received markers sit {:.0f} mm (median) from "
+                "the model's; is this the actor's calibrated model, at the right scale?",
+                s.name, s.model_distance_mm);
+          if (!s.model_suspect && before != nullptr && before->model_suspect)
+            spdlog::info("subject '{}': the model fits again ({:.0f} mm median)", s.name,
+                         s.model_distance_mm);
         }
         // Drops: at most one line per reason per log interval, with the count since the last.
         for (int reason = 0; reason < kDropReasonCount; ++reason) {
@@ -585,9 +604,16 @@ void Daemon::Run(bool handle_signals) {
           auto& logged = c.logged_drops;
           const uint64_t n = total(now);
           if (n > logged[static_cast<size_t>(reason)]) {
-            spdlog::warn("dropped {} input message(s): {} (total {})",
+            std::string who;
+            for (const SubjectStats& s : now.subjects) {
+              uint64_t& seen = c.logged_subject_drops[s.name][static_cast<size_t>(reason)];
+              const uint64_t count = s.counters.dropped[static_cast<size_t>(reason)];
+              if (count > seen) who += fmt::format(", subject '{}' {}", s.name, count - seen);
+              seen = count;
+            }
+            spdlog::warn("dropped {} input message(s): {} (total {}){}",
                          n - logged[static_cast<size_t>(reason)],
-                         to_string(static_cast<DropReason>(reason)), n);
+                         to_string(static_cast<DropReason>(reason)), n, who);
             logged[static_cast<size_t>(reason)] = n;
             c.last_drop_log_ns[static_cast<size_t>(reason)] = t;
           }

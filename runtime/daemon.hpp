@@ -37,6 +37,10 @@ struct SubjectStats {
   int lookahead = 0;
   uint64_t marker_set_hash = 0;
   uint64_t skeleton_hash = 0;
+  bool rejecting_input = false;                          ///< Every recent frame dropped...
+  DropReason rejecting_reason = DropReason::kMalformed;  ///< ...the last one for this.
+  bool model_suspect = false;      ///< Received samples persistently far from the model.
+  double model_distance_mm = 0.0;  ///< Median sample-to-model distance, over about a second.
 };
 
 struct DaemonStats {

@@ -69,6 +69,28 @@ void ReadCleanupOptions(TomlTable& table, const std::string& section, CleanupOpt
   }
 }
 
+// What keeps a model off the wire (too many markers or joints, a name too long for the
+// subject description), or empty: refused at load, so the data plane never meets it.
+std::string WireProblem(const Skeleton& skeleton, const MarkerSet* markers) {
+  const auto too_long = [](const std::string& name) {
+    return name.size() > protocol::kMaxSubjectName;
+  };
+  if (skeleton.num_joints() > static_cast<int>(protocol::kMaxJoints))
+    return "more joints than the wire protocol carries (" + std::to_string(protocol::kMaxJoints) +
+           ")";
+  for (int j = 0; j < skeleton.num_joints(); ++j)
+    if (too_long(skeleton.joint(j).name))
+      return "joint name '" + skeleton.joint(j).name + "' is longer than 63 bytes";
+  if (!markers) return {};
+  if (markers->num_markers() > static_cast<int>(protocol::kMaxMarkers))
+    return "more markers than the wire protocol carries (" + std::to_string(protocol::kMaxMarkers) +
+           ")";
+  for (int m = 0; m < markers->num_markers(); ++m)
+    if (too_long(markers->marker(m).name))
+      return "marker name '" + markers->marker(m).name + "' is longer than 63 bytes";
+  return {};
+}
+
 const CleanupOptionField& OptionField(const char* name) {
   for (const CleanupOptionField& f : CleanupOptionFields())
     if (std::string(f.name) == name) return f;
@@ -138,6 +160,7 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
   c.stats_interval_s = control.Number("stats_interval_s", c.stats_interval_s, 0.05, 3600);
   c.watchdog_timeout_s = control.Number("watchdog_timeout_s", c.watchdog_timeout_s, 0.01, 3600);
   c.log_interval_s = control.Number("log_interval_s", c.log_interval_s, 0.1, 86400);
+  c.model_suspect_mm = control.Number("model_suspect_mm", c.model_suspect_mm, 1.0, 10000.0);
   c.allow_remote = control.Bool("allow_remote", c.allow_remote);
   control.RejectUnknown();
   // Anything reachable from other machines must be asked for: a stage network is shared.
@@ -212,9 +235,9 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
     } catch (const std::exception& e) {
       t.Fail(table->get("model"), "model", e.what());
     }
-    if (s.model.markers->num_markers() > static_cast<int>(protocol::kMaxMarkers) ||
-        s.model.skeleton->num_joints() > static_cast<int>(protocol::kMaxJoints))
-      t.Fail(table->get("model"), "model", "more markers or joints than the wire protocol carries");
+    if (const std::string problem = WireProblem(*s.model.skeleton, s.model.markers.get());
+        !problem.empty())
+      t.Fail(table->get("model"), "model", problem);
     try {
       s.cleanup.Validate();
     } catch (const std::exception& e) {
@@ -231,8 +254,8 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
       } catch (const std::exception& e) {
         t.Fail(table->get("character"), "character", e.what());
       }
-      if (s.character->num_joints() > static_cast<int>(protocol::kMaxJoints))
-        t.Fail(table->get("character"), "character", "more joints than the wire protocol carries");
+      if (const std::string problem = WireProblem(*s.character, nullptr); !problem.empty())
+        t.Fail(table->get("character"), "character", problem);
     } else if (!joint_map.empty()) {
       t.Fail(table->get("character_joint_map"), "character_joint_map", "given without a character");
     }

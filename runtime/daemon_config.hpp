@@ -49,6 +49,7 @@ struct DaemonConfig {
   int http_port = 8480;  ///< 0: any free port (logged at start-up).
   double stats_interval_s = 1.0;
   double watchdog_timeout_s = 0.5;
+  double model_suspect_mm = 20.0;  ///< Median sample-to-model distance that flags a model.
   double log_interval_s = 10.0;
   bool allow_remote = false;
   // Frame accounting.

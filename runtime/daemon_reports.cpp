@@ -10,6 +10,8 @@
 
 #include "runtime/daemon.hpp"
 
+#include <cstdio>
+
 namespace mocapd {
 
 std::string FormatPrometheusMetrics(const DaemonStats& stats) {
@@ -47,6 +49,9 @@ std::string FormatPrometheusMetrics(const DaemonStats& stats) {
   counter("mocapd_retired_frames_published_total", "Frames published by subjects a reload removed")
       .Add({})
       .Increment(static_cast<double>(stats.retired_published));
+  counter("mocapd_retired_frames_dropped_total", "Frames dropped by subjects a reload removed")
+      .Add({})
+      .Increment(static_cast<double>(stats.retired_dropped));
 
   auto& received = counter("mocapd_frames_received_total", "Marker frames received per subject");
   auto& published =
@@ -150,6 +155,9 @@ nlohmann::json SubjectJson(const SubjectStats& s) {
           {"samples_repaired", repaired},
           {"samples_unrecoverable", s.cleanup.unrecoverable},
           {"samples_out_of_volume", s.cleanup.samples_out_of_volume},
+          {"rejecting_input", s.rejecting_input},
+          {"model_suspect", s.model_suspect},
+          {"model_distance_mm", s.model_distance_mm},
           {"glitch_frames", s.cleanup.glitch_frames},
           {"capture_resyncs", s.cleanup.resyncs},
           {"mean_processing_latency_us", mean_latency_us}};
@@ -165,17 +173,28 @@ std::string FormatSubjectsJson(const DaemonStats& stats) {
 
 std::string FormatHealthJson(const DaemonStats& stats, bool data_plane_alive) {
   nlohmann::json subjects = nlohmann::json::object();
-  bool stalled = false;
+  nlohmann::json problems = nlohmann::json::array();
   for (const SubjectStats& s : stats.subjects) {
     subjects[s.name] = protocol::to_string(s.state);
-    stalled |= s.state == protocol::SubjectState::kStalled;
+    if (s.state == protocol::SubjectState::kStalled)
+      problems.push_back("subject '" + s.name + "': input stalled");
+    if (s.rejecting_input)
+      problems.push_back("subject '" + s.name + "': every frame dropped (" +
+                         to_string(s.rejecting_reason) + ")");
+    if (s.model_suspect) {
+      char line[160];
+      std::snprintf(line, sizeof(line),
+                    "subject '%s': model suspect (received markers %.0f mm from the model's)",
+                    s.name.c_str(), s.model_distance_mm);
+      problems.push_back(line);
+    }
   }
   // A data plane reading a backlog is busy, not dead; one flushing its lookahead on the
   // way out is stopping.
   const char* status = stats.stopping      ? "stopping"
                        : !data_plane_alive ? "down"
                        : stats.catching_up ? "catching up"
-                       : stalled           ? "degraded"
+                       : !problems.empty() ? "degraded"
                                            : "ok";
   const nlohmann::json health = {{"status", status},
                                  {"uptime_s", stats.uptime_s},
@@ -185,6 +204,7 @@ std::string FormatHealthJson(const DaemonStats& stats, bool data_plane_alive) {
                                  {"frames_pending", stats.pending_total()},
                                  {"accounted", stats.Balanced()},
                                  {"catching_up", stats.catching_up},
+                                 {"problems", problems},
                                  {"subjects", subjects}};
   return health.dump(2) + "\n";
 }

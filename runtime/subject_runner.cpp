@@ -69,6 +69,7 @@ SubjectRunner::SubjectRunner(const SubjectConfig& config, const DaemonConfig& da
       publish_cleaned_(daemon.publish_cleaned_markers),
       publish_globals_(daemon.publish_global_transforms),
       skeleton_(config.model.skeleton),
+      markers_(config.model.markers),
       pipeline_(config.model.skeleton, config.model.markers, config.cleanup),
       stamps_(static_cast<size_t>(config.cleanup.lookahead + 2)),
       missing_(static_cast<size_t>(config.model.markers->num_markers()), Vec3::Constant(kNaN)),
@@ -82,6 +83,13 @@ SubjectRunner::SubjectRunner(const SubjectConfig& config, const DaemonConfig& da
       status_topic_(Topic("status", config.name)) {
   const auto joints = static_cast<size_t>(skeleton_->num_joints());
   const auto markers = static_cast<size_t>(config.model.markers->num_markers());
+  // Half a second of frames, all dropped, is a subject rejecting its input; the model
+  // distance is averaged over about a second.
+  rejecting_after_ = static_cast<uint64_t>(std::max(10.0, 0.5 * config.rate_hz));
+  model_distance_weight_ = std::min(1.0, 1.0 / config.rate_hz);
+  model_suspect_m_ = daemon.model_suspect_mm * 1e-3;
+  received_.assign(stamps_.size() * markers, Vec3::Constant(kNaN));
+  distances_.reserve(markers);
   skeleton_message_.subject = name_;
   skeleton_message_.model_hash = skeleton_hash_;
   skeleton_message_.rotations.resize(joints);
@@ -132,6 +140,8 @@ uint64_t SubjectRunner::pending() const { return static_cast<uint64_t>(pushed_ -
 void SubjectRunner::CountDrop(DropReason reason) {
   ++counters_.frames_in;
   ++counters_.dropped[static_cast<size_t>(reason)];
+  ++consecutive_dropped_;
+  last_drop_ = reason;
 }
 
 void SubjectRunner::InheritCounters(const SubjectRunner& previous) {
@@ -176,6 +186,7 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
   }
   ++counters_.frames_in;
   ++counters_.frames_accepted;
+  consecutive_dropped_ = 0;
   started_ = true;
   last_receive_ns_ = receive_ns;
   last_capture_ns_ = frame.capture_time_ns;
@@ -201,12 +212,17 @@ void SubjectRunner::EndOfStream(OutputSink& sink) {
   if (retargeter_) retargeter_->Reset();
   pushed_ = published_ = 0;
   started_ = false;
+  // An ended stream is waiting for the next one, not stalled: the watchdog stays quiet.
+  state_ = protocol::SubjectState::kWaiting;
+  consecutive_dropped_ = 0;
   ++counters_.ends_of_stream;
 }
 
 void SubjectRunner::Push(std::span<const Vec3> positions, const Stamp& stamp, int64_t receive_ns,
                          OutputSink& sink) {
-  stamps_[static_cast<size_t>(pushed_) % stamps_.size()] = stamp;
+  const size_t slot = static_cast<size_t>(pushed_) % stamps_.size();
+  stamps_[slot] = stamp;
+  std::copy(positions.begin(), positions.end(), received_.begin() + slot * positions.size());
   ++pushed_;
   next_frame_number_ = stamp.frame_number + 1;
   if (pipeline_.Push(positions)) Publish(receive_ns, sink);
@@ -244,8 +260,9 @@ void SubjectRunner::Publish(int64_t trigger_receive_ns, OutputSink& sink) {
                      : 0.0f;
   s.root_translation = out.pose.translation[0];
   for (size_t j = 0; j < s.rotations.size(); ++j) s.rotations[j] = out.pose.rotation[j];
+  ForwardKinematics(*skeleton_, out.pose, &kinematics_);
+  UpdateModelDistance(out.frame);
   if (publish_globals_) {
-    ForwardKinematics(*skeleton_, out.pose, &kinematics_);
     for (size_t j = 0; j < s.rotations.size(); ++j) {
       s.global_rotations[j] = Quat(kinematics_.R_WJ[j]);
       s.global_positions[j] = kinematics_.p_WJ[j];
@@ -296,7 +313,7 @@ void SubjectRunner::Publish(int64_t trigger_receive_ns, OutputSink& sink) {
 
 bool SubjectRunner::CheckStall(int64_t now_ns, int64_t timeout_ns, OutputSink& sink) {
   if (last_receive_ns_ < 0 || state_ == protocol::SubjectState::kStalled ||
-      now_ns - last_receive_ns_ <= timeout_ns)
+      state_ == protocol::SubjectState::kWaiting || now_ns - last_receive_ns_ <= timeout_ns)
     return false;
   // The frames the lookahead holds go out now (their open gaps one-sided): a consumer
   // must not wait for a feed that may never come back to see them.
@@ -305,6 +322,28 @@ bool SubjectRunner::CheckStall(int64_t now_ns, int64_t timeout_ns, OutputSink& s
   ++counters_.stalls;
   PublishStatus(now_ns, sink);
   return true;
+}
+
+// Every received sample counts, not only those the cleanup kept: the cleanup keeps the
+// samples that fit, so a model that fits badly shows as samples thrown away rather than as
+// large residuals of the kept ones. The median stays with the majority of samples, so
+// corruption of a minority (swaps, spikes, glitches) does not move it.
+void SubjectRunner::UpdateModelDistance(int64_t frame) {
+  const size_t count = missing_.size();
+  const Vec3* received = received_.data() + static_cast<size_t>(frame) % stamps_.size() * count;
+  distances_.clear();
+  for (size_t m = 0; m < count; ++m) {
+    if (!received[m].allFinite()) continue;
+    const double d =
+        (received[m] - EvaluateMarker(markers_->marker(static_cast<int>(m)), kinematics_)).norm();
+    if (std::isfinite(d)) distances_.push_back(d);
+  }
+  if (distances_.size() < 3) return;
+  const auto middle = distances_.begin() + static_cast<std::ptrdiff_t>(distances_.size() / 2);
+  std::nth_element(distances_.begin(), middle, distances_.end());
+  model_distance_m_ += model_distance_weight_ * (*middle - model_distance_m_);
+  if (model_distance_m_ > model_suspect_m_) model_suspect_ = true;
+  if (model_distance_m_ < 0.75 * model_suspect_m_) model_suspect_ = false;
 }
 
 void SubjectRunner::PublishDescription(OutputSink& sink) {
@@ -319,6 +358,8 @@ void SubjectRunner::PublishDescription(OutputSink& sink) {
 void SubjectRunner::PublishStatus(int64_t now_ns, OutputSink& sink) {
   protocol::SubjectStatusMessage& m = status_message_;
   m.state = state_;
+  m.problems = static_cast<uint8_t>((model_suspect_ ? protocol::kProblemModelSuspect : 0) |
+                                    (rejecting() ? protocol::kProblemRejectingInput : 0));
   m.last_frame_number = counters_.last_frame_number;
   m.since_last_input_ns =
       last_receive_ns_ < 0 ? 0

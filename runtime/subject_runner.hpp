@@ -105,6 +105,17 @@ class SubjectRunner {
     return pending() - (counters_.frames_inserted - counters_.inserted_published);
   }
   protocol::SubjectState state() const { return state_; }
+  /// Every frame of the last half second (10 at least) was dropped: the reason of the last.
+  std::optional<DropReason> rejecting() const {
+    return consecutive_dropped_ >= rejecting_after_ ? std::optional<DropReason>(last_drop_)
+                                                    : std::nullopt;
+  }
+  /// How far the received samples sit from the model's markers in the solved pose (the
+  /// median over a frame's samples, averaged over about a second), metres; a model that
+  /// does not fit the actor (another subject's, the wrong scale) keeps it high and is
+  /// suspect.
+  double model_distance_m() const { return model_distance_m_; }
+  bool model_suspect() const { return model_suspect_; }
   int64_t last_receive_ns() const { return last_receive_ns_; }
   const SubjectCounters& counters() const { return counters_; }
   const CleanupCounters& cleanup_counters() const { return pipeline_.counters(); }
@@ -121,6 +132,7 @@ class SubjectRunner {
   void Push(std::span<const Vec3> positions, const Stamp& stamp, int64_t receive_ns,
             OutputSink& sink);
   void Publish(int64_t trigger_receive_ns, OutputSink& sink);
+  void UpdateModelDistance(int64_t frame);
   void Resynchronise(OutputSink& sink);
 
   std::string name_;
@@ -133,6 +145,7 @@ class SubjectRunner {
   bool publish_cleaned_ = true;
   bool publish_globals_ = false;
   std::shared_ptr<const Skeleton> skeleton_;
+  std::shared_ptr<const MarkerSet> markers_;
   CleanupPipeline pipeline_;
   std::vector<Stamp> stamps_;  ///< Ring by pipeline frame: what each pushed frame was.
   int64_t pushed_ = 0;         ///< Frames pushed since the last reset.
@@ -142,6 +155,15 @@ class SubjectRunner {
   uint64_t last_capture_ns_ = 0;
   int64_t last_receive_ns_ = -1;
   protocol::SubjectState state_ = protocol::SubjectState::kWaiting;
+  uint64_t consecutive_dropped_ = 0;
+  uint64_t rejecting_after_ = 10;
+  DropReason last_drop_ = DropReason::kMalformed;
+  std::vector<Vec3> received_;           ///< Ring like stamps_: each held frame's samples.
+  std::vector<double> distances_;        ///< Publish scratch: sample-to-model distances.
+  double model_distance_m_ = 0.0;        // running mean over about a second
+  double model_distance_weight_ = 0.01;  // its weight per frame
+  double model_suspect_m_ = 0.02;
+  bool model_suspect_ = false;
   SubjectCounters counters_;
   std::vector<Vec3> missing_;  ///< An all-missing frame.
   KinematicsWorkspace kinematics_;

@@ -172,12 +172,14 @@ def decode_cleaned_markers(data):
 def decode_subject_status(data):
     r = _check_type(data, SUBJECT_STATUS)
     subject = r.subject()
-    state, _r8, _r16, last_frame, since_ns, frames_in, frames_out, dropped = r.take("<BBHQQQQQ")
+    state, problems, _r16, last_frame, since_ns, frames_in, frames_out, dropped = r.take("<BBHQQQQQ")
     if r.offset != len(data):
         raise ValueError("size_mismatch")
     if state >= len(SUBJECT_STATES):
         raise ValueError("bad_field")
-    return {"subject": subject, "state": SUBJECT_STATES[state], "last_frame": last_frame,
+    return {"subject": subject, "state": SUBJECT_STATES[state],
+            "model_suspect": bool(problems & 1), "rejecting_input": bool(problems & 2),
+            "last_frame": last_frame,
             "since_last_input_ns": since_ns, "frames_in": frames_in, "frames_out": frames_out,
             "frames_dropped": dropped}
 

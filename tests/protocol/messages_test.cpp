@@ -250,6 +250,7 @@ TEST(MessagesTest, SubjectStatusRoundTrips) {
   m.frames_in = 1001;
   m.frames_out = 990;
   m.frames_dropped = 3;
+  m.problems = kProblemModelSuspect;
   std::vector<uint8_t> bytes;
   EncodeSubjectStatus(m, &bytes);
   SubjectStatusMessage dut;
@@ -258,6 +259,7 @@ TEST(MessagesTest, SubjectStatusRoundTrips) {
   EXPECT_EQ(dut.state, SubjectState::kStalled);
   EXPECT_EQ(dut.since_last_input_ns, 2'000'000'000u);
   EXPECT_EQ(dut.frames_out, 990u);
+  EXPECT_EQ(dut.problems, kProblemModelSuspect);
   ExpectEveryTruncationRejected<SubjectStatusMessage>(bytes, DecodeSubjectStatus);
   bytes[kHeaderBytes + 1 + 6] = 7;
   EXPECT_EQ(DecodeSubjectStatus(bytes, &dut), DecodeStatus::kBadField);

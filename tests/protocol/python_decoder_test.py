@@ -45,6 +45,7 @@ def main(directory):
     assert c["markers"][2]["position"] is None
     kind, st = mocapd_protocol.decode(read(directory, "subject_status.bin"))
     assert kind == "subject_status" and st["state"] == "stalled" and st["since_last_input_ns"] == 1500000000
+    assert st["rejecting_input"] and not st["model_suspect"]
     assert st["frames_in"] == 1235 and st["frames_out"] == 1223
     for name in ("skeleton_frame_globals.bin", "subject_description.bin", "cleaned_markers.bin", "subject_status.bin"):
         data = read(directory, name)

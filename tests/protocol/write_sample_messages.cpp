@@ -82,6 +82,7 @@ int main(int argc, char** argv) {
   status.frames_in = 1235;
   status.frames_out = 1223;
   status.frames_dropped = 0;
+  status.problems = protocol::kProblemRejectingInput;
   protocol::EncodeSubjectStatus(status, &other);
   Write(dir + "/subject_status.bin", other);
   bytes[0] = 'X';

@@ -126,6 +126,22 @@ TEST(DaemonConfigTest, NonLoopbackBindsMustBeAskedFor) {
   EXPECT_FALSE(IsLocalEndpoint("tcp://*:5"));
 }
 
+// The subject description carries names of at most 63 bytes: a longer one is refused when
+// the config loads, not met by the data plane when it describes the subject.
+TEST(DaemonConfigTest, AModelNameTooLongForTheWireIsRefusedAtLoad) {
+  const std::string dir = testing::TempDir("config_long_name");
+  const std::string long_name(64, 'M');
+  std::string model = ReadText(std::string(MOCAPD_CONFIG_DIR) + "/demo_subject.toml");
+  model.replace(model.find("\"PEL1\""), 6, "\"" + long_name + "\"");
+  std::ofstream(dir + "/long.toml") << model;
+  const std::string error =
+      ErrorOf("format_version = 1\n[[subject]]\nname = \"a\"\nmodel = \"" + dir + "/long.toml\"\n");
+  EXPECT_NE(error.find("test.toml:4: field 'subject[0].model': marker name '" + long_name +
+                       "' is longer than 63 bytes"),
+            std::string::npos)
+      << error;
+}
+
 TEST(DaemonConfigTest, ASubjectCanDriveACharacterFromABvh) {
   const std::string dir = testing::TempDir("config_character");
   const Skeleton humanoid = MakeHumanoidSkeleton(2.1);  // an ogre-sized character

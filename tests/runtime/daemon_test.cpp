@@ -612,5 +612,28 @@ TEST(DaemonTest, HttpServesHealthSubjectsAndMetrics) {
             std::string::npos);
 }
 
+// A bridge sending another marker set: every frame is dropped, and /health, which said
+// "ok" through it before, says degraded and names the subject and the reason.
+TEST(DaemonTest, HealthNamesASubjectWhoseFramesAreAllDropped) {
+  const testing::HumanoidFixture f = testing::MakeHumanoidFixture("walk", 1.0, 120.0);
+  zmq::context_t context;
+  RunningDaemon daemon(context, TestConfig("inproc://reject-in", "inproc://reject-out", 4));
+  Sender sender(context, "inproc://reject-in", f.take, MakeHumanoidSubject("actor1"),
+                zmq::socket_type::push);
+  sender.message_.model_hash ^= 1;
+  for (int t = 0; t < 100; ++t) sender.Send(t, static_cast<uint64_t>(t));
+  ASSERT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) {
+    return s.subjects[0].counters.dropped_total() == 100 && s.subjects[0].rejecting_input;
+  }));
+  std::this_thread::sleep_for(50ms);  // one more snapshot
+  const std::string health = HttpGet(daemon->http_port(), "/health").second;
+  EXPECT_NE(health.find("\"status\": \"degraded\""), std::string::npos) << health;
+  EXPECT_NE(health.find("subject 'actor1': every frame dropped (model_mismatch)"),
+            std::string::npos)
+      << health;
+  const std::string subjects = HttpGet(daemon->http_port(), "/subjects").second;
+  EXPECT_NE(subjects.find("\"rejecting_input\": true"), std::string::npos) << subjects;
+}
+
 }  // namespace
 }  // namespace mocapd

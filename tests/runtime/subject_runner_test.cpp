@@ -5,7 +5,9 @@
 
 #include <gtest/gtest.h>
 
+#include "formats/marker_layout.hpp"
 #include "formats/take_frames.hpp"
+#include "sim/humanoid.hpp"
 #include "sim/humanoid_subject.hpp"
 #include "tests/support/allocation_counter.hpp"
 #include "tests/support/test_takes.hpp"
@@ -219,6 +221,67 @@ TEST_F(SubjectRunnerTest, AStallPublishesTheFramesTheLookaheadHeld) {
   ASSERT_EQ(sink_.skeletons.size(), 60u);
   for (size_t i = 0; i < 60; ++i) EXPECT_EQ(sink_.skeletons[i].frame_number, i);
   ExpectBalanced(runner);
+}
+
+// After an end of stream the subject waits for the next one: silence is not a stall, and
+// /health must not turn degraded after a take replayed to its end.
+TEST_F(SubjectRunnerTest, AnEndedStreamWaitsInsteadOfStalling) {
+  SubjectRunner runner(subject_, daemon_);
+  for (int f = 0; f < 30; ++f)
+    ASSERT_FALSE(runner.Accept(Frame(f, f, 0), 1'000'000'000, sink_).has_value());
+  runner.EndOfStream(sink_);
+  EXPECT_EQ(sink_.skeletons.size(), 30u);
+  EXPECT_EQ(runner.state(), protocol::SubjectState::kWaiting);
+  EXPECT_FALSE(runner.CheckStall(10'000'000'000, 500'000'000, sink_));
+  EXPECT_EQ(runner.counters().stalls, 0u);
+  ASSERT_FALSE(runner.Accept(Frame(0, 0, 0), 11'000'000'000, sink_).has_value());
+  EXPECT_EQ(runner.state(), protocol::SubjectState::kTracking);
+}
+
+// A bridge sending another marker set: every frame is dropped, and the subject says so
+// (on the wire and to /health) once half a second of frames has gone, not at the first.
+TEST_F(SubjectRunnerTest, ASubjectWhoseFramesAreAllDroppedIsRejectingInput) {
+  SubjectRunner runner(subject_, daemon_);
+  protocol::MarkerFrameMessage wrong = Frame(0, 0, 0);
+  wrong.model_hash ^= 1;
+  for (int f = 0; f < 59; ++f) ASSERT_TRUE(runner.Accept(wrong, 0, sink_).has_value());
+  EXPECT_FALSE(runner.rejecting().has_value());
+  ASSERT_TRUE(runner.Accept(wrong, 0, sink_).has_value());
+  ASSERT_TRUE(runner.rejecting().has_value());
+  EXPECT_EQ(*runner.rejecting(), DropReason::kModelMismatch);
+  runner.PublishStatus(0, sink_);
+  ASSERT_EQ(sink_.statuses.size(), 1u);
+  EXPECT_EQ(sink_.statuses[0].problems, protocol::kProblemRejectingInput);
+  ASSERT_FALSE(runner.Accept(Frame(0, 0, 0), 0, sink_).has_value());
+  EXPECT_FALSE(runner.rejecting().has_value());
+}
+
+// The model's marker names match the bridge's, so every frame is accepted, but its bones
+// are 1.5 times too long: the received markers sit far from it, and it is flagged. The
+// actor's own model, fed the same frames, is not.
+TEST_F(SubjectRunnerTest, AModelAtTheWrongScaleIsFlaggedSuspect) {
+  const auto run = [&](const SubjectConfig& subject) {
+    SubjectRunner runner(subject, daemon_);
+    for (int f = 0; f < 240; ++f) EXPECT_FALSE(runner.Accept(Frame(f, f, 0), 0, sink_).has_value());
+    runner.PublishStatus(0, sink_);
+    return std::make_pair(runner.model_suspect(), runner.model_distance_m());
+  };
+  const auto [own_suspect, own_distance] = run(subject_);
+  EXPECT_FALSE(own_suspect);
+  EXPECT_LT(own_distance, 0.005);
+  EXPECT_EQ(sink_.statuses.back().problems, 0);
+
+  SubjectConfig scaled = subject_;
+  auto skeleton = std::make_shared<const Skeleton>(MakeHumanoidSkeleton(1.75 * 1.5));
+  scaled.model.markers = std::make_shared<const MarkerSet>(
+      *skeleton, PlaceMarkers(*skeleton, MatchHumanoidRoles(*skeleton), DefaultMarkerLayout(), {}));
+  scaled.model.skeleton = skeleton;
+  ASSERT_EQ(protocol::MarkerSetHash(*scaled.model.markers),
+            protocol::MarkerSetHash(*subject_.model.markers));
+  const auto [scaled_suspect, scaled_distance] = run(scaled);
+  EXPECT_TRUE(scaled_suspect) << scaled_distance;
+  EXPECT_GT(scaled_distance, 0.02);
+  EXPECT_EQ(sink_.statuses.back().problems, protocol::kProblemModelSuspect);
 }
 
 TEST_F(SubjectRunnerTest, SteadyStateAcceptAllocatesNothing) {
