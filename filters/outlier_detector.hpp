@@ -4,8 +4,8 @@
 //    that each fit the other's reference position);
 //  - solves the robust reference Y^ (Huber IRLS, temporal prior, frozen / fallen-off /
 //    stray markers excluded, unless they are all a segment has and keep its rigid
-//    distances: then they are the segment, and taken back) and writes X^ = LBS(Y^) into the window, and the naive Y
-//    (plain IK on the markers as they are) on frames where some sample is off X^;
+//    distances: then they are the segment, and taken back) and writes X^ = LBS(Y^) into the window,
+//    and the naive Y (plain IK on the markers as they are) on frames where some sample is off X^;
 //  - marks bad samples with a reason: missing, kinematic disagreement of Y and Y^ per
 //    joint mapped to markers through skin weights, residual against X^ beyond an adaptive
 //    threshold, velocity spikes against the reference, rigid-segment distance violations,
