@@ -46,7 +46,9 @@ function(mocapd_configure_target target)
     target_link_options(${target} PRIVATE -fsanitize=address,undefined)
     # The sanitizers' instrumentation makes GCC report spurious -Wmaybe-uninitialized
     # inside Eigen's expression templates; the plain build keeps the warning.
-    target_compile_options(${target} PRIVATE -Wno-maybe-uninitialized)
+    if(CMAKE_CXX_COMPILER_ID STREQUAL "GNU")
+      target_compile_options(${target} PRIVATE -Wno-maybe-uninitialized)
+    endif()
   endif()
   if(MOCAPD_BUILD_FUZZERS)
     # Coverage instrumentation for libFuzzer in everything the harnesses call.

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The README's test command: installs what is needed, builds, and runs every test --
-# once in an optimised build, once more (unit tests) under AddressSanitizer and
-# UndefinedBehaviorSanitizer.
+# once in an optimised build (GCC), once more (unit tests) under AddressSanitizer and
+# UndefinedBehaviorSanitizer (Clang).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
@@ -13,8 +13,10 @@ cmake --build build/release -j "$jobs"
 ctest --test-dir build/release --output-on-failure -j "$jobs"
 
 echo "== AddressSanitizer + UndefinedBehaviorSanitizer build"
-cmake -S . -B build/asan -G Ninja -DCMAKE_BUILD_TYPE=Debug -DCMAKE_CXX_FLAGS_DEBUG="-O1 -g" \
-  -DMOCAPD_SANITIZE=ON -DMOCAPD_BUILD_BENCHMARKS=OFF
+# Clang, because it compiles this instrumented build in well under half GCC's time (the
+# release build above stays GCC's); line tables (-g1) are all a sanitizer report needs.
+cmake -S . -B build/asan -G Ninja -DCMAKE_CXX_COMPILER=clang++ -DCMAKE_BUILD_TYPE=Debug \
+  -DCMAKE_CXX_FLAGS_DEBUG="-O1 -g1" -DMOCAPD_SANITIZE=ON -DMOCAPD_BUILD_BENCHMARKS=OFF
 cmake --build build/asan -j "$jobs"
 ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
   ctest --test-dir build/asan --output-on-failure -j "$jobs" -L unit
