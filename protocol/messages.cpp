@@ -2,6 +2,7 @@
 #include "protocol/messages.hpp"
 
 #include <cmath>
+#include <cstdio>
 #include <stdexcept>
 
 #include "protocol/byte_io.hpp"
@@ -15,12 +16,18 @@ constexpr size_t kGlobalJointBytes = 28;    // quaternion (4 x f32) + position (
 constexpr size_t kCleanedMarkerBytes = 14;  // x, y, z (f32) + status (u8) + reason (u8)
 constexpr uint16_t kFlagGlobalTransforms = 1;
 constexpr uint8_t kMaxMaskReason = 10;  // MaskReason::kTrimmed
+constexpr uint8_t kTimecodePresent = 1;
+constexpr uint8_t kTimecodeDropFrame = 2;
+
+bool KnownVersion(uint16_t version) { return version == kVersion1 || version == kVersion2; }
 
 // The payload size is patched in by FinishMessage once the payload is written, so it
 // can never disagree with what was written.
-void WriteHeader(ByteWriter& w, MessageType type) {
+void WriteHeader(ByteWriter& w, MessageType type, uint16_t version) {
+  if (!KnownVersion(version))
+    throw std::invalid_argument("protocol: cannot encode version " + std::to_string(version));
   w.WriteU32(kMagic);
-  w.WriteU16(kVersion);
+  w.WriteU16(version);
   w.WriteU16(static_cast<uint16_t>(type));
   w.WriteU32(0);  // payload size, patched
   w.WriteU32(0);  // reserved
@@ -40,15 +47,16 @@ void WriteSubject(ByteWriter& w, const std::string& subject) {
 }
 
 // Validates the header; on success the reader is positioned at the payload.
-DecodeStatus ReadHeader(ByteReader& r, MessageType expected) {
+DecodeStatus ReadHeader(ByteReader& r, MessageType expected, uint16_t* version_out) {
   uint32_t magic = 0, payload = 0, reserved = 0;
   uint16_t version = 0, type = 0;
   if (!r.ReadU32(&magic) || !r.ReadU16(&version) || !r.ReadU16(&type) || !r.ReadU32(&payload) ||
       !r.ReadU32(&reserved))
     return DecodeStatus::kTooShort;
   if (magic != kMagic) return DecodeStatus::kBadMagic;
-  if (version != kVersion) return DecodeStatus::kUnsupportedVersion;
+  if (!KnownVersion(version)) return DecodeStatus::kUnsupportedVersion;
   if (type != static_cast<uint16_t>(expected)) return DecodeStatus::kWrongType;
+  *version_out = version;
   if (r.remaining() < payload) return DecodeStatus::kTooShort;
   if (r.remaining() != payload) return DecodeStatus::kSizeMismatch;
   return DecodeStatus::kOk;
@@ -63,9 +71,56 @@ DecodeStatus ReadSubject(ByteReader& r, std::string* subject) {
 }
 
 // Every message starts with the header and the subject name.
-DecodeStatus ReadPrelude(ByteReader& r, MessageType type, std::string* subject) {
-  if (const DecodeStatus s = ReadHeader(r, type); s != DecodeStatus::kOk) return s;
+DecodeStatus ReadPrelude(ByteReader& r, MessageType type, uint16_t* version, std::string* subject) {
+  if (const DecodeStatus s = ReadHeader(r, type, version); s != DecodeStatus::kOk) return s;
   return ReadSubject(r, subject);
+}
+
+// Version 2's stream block; a field outside its range is a bad field, so a consumer can
+// trust a timecode it is handed.
+void WriteStream(ByteWriter& w, const StreamInfo& stream) {
+  w.WriteU64(stream.session_id);
+  w.WriteU32(stream.rate_numerator);
+  w.WriteU32(stream.rate_denominator);
+  const Timecode tc = stream.has_timecode ? stream.timecode : Timecode{};
+  w.WriteU8(tc.hours);
+  w.WriteU8(tc.minutes);
+  w.WriteU8(tc.seconds);
+  w.WriteU8(tc.frames);
+  w.WriteU8(tc.subframe);
+  w.WriteU8(stream.has_timecode
+                ? static_cast<uint8_t>(kTimecodePresent | (tc.drop_frame ? kTimecodeDropFrame : 0))
+                : 0);
+  w.WriteU16(tc.rate);
+}
+
+bool ValidTimecode(const Timecode& tc) {
+  // Drop-frame counting exists only for the NTSC rates (29.97 and its multiples).
+  return tc.rate > 0 && tc.hours < 24 && tc.minutes < 60 && tc.seconds < 60 &&
+         tc.frames < tc.rate && (!tc.drop_frame || tc.rate % 30 == 0);
+}
+
+DecodeStatus ReadStream(ByteReader& r, float rate_hz, StreamInfo* stream) {
+  uint8_t flags = 0;
+  Timecode& tc = stream->timecode;
+  if (!r.ReadU64(&stream->session_id) || !r.ReadU32(&stream->rate_numerator) ||
+      !r.ReadU32(&stream->rate_denominator) || !r.ReadU8(&tc.hours) || !r.ReadU8(&tc.minutes) ||
+      !r.ReadU8(&tc.seconds) || !r.ReadU8(&tc.frames) || !r.ReadU8(&tc.subframe) ||
+      !r.ReadU8(&flags) || !r.ReadU16(&tc.rate))
+    return DecodeStatus::kTooShort;
+  if ((flags & ~(kTimecodePresent | kTimecodeDropFrame)) != 0) return DecodeStatus::kBadField;
+  stream->has_timecode = (flags & kTimecodePresent) != 0;
+  tc.drop_frame = (flags & kTimecodeDropFrame) != 0;
+  if (stream->has_timecode ? !ValidTimecode(tc) : flags != 0) return DecodeStatus::kBadField;
+  if (!stream->has_timecode) tc = Timecode{};
+  if ((stream->rate_numerator == 0) != (stream->rate_denominator == 0))
+    return DecodeStatus::kBadField;
+  // The fraction is the exact rate, the float its rounding: they must agree.
+  if (stream->rate_numerator != 0 && rate_hz > 0.0f) {
+    const double exact = static_cast<double>(stream->rate_numerator) / stream->rate_denominator;
+    if (std::abs(exact - rate_hz) > 1e-4 * exact) return DecodeStatus::kBadField;
+  }
+  return DecodeStatus::kOk;
 }
 
 bool Finite(float v) { return std::isfinite(v); }
@@ -147,6 +202,15 @@ const char* to_string(SubjectState state) {
   return "?";
 }
 
+std::string FormatTimecode(const Timecode& tc) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%02u:%02u:%02u%c%02u", unsigned{tc.hours}, unsigned{tc.minutes},
+                unsigned{tc.seconds}, tc.drop_frame ? ';' : ':', unsigned{tc.frames});
+  std::string out = text;
+  if (tc.subframe != 0) out += "." + std::to_string(tc.subframe);
+  return out;
+}
+
 uint64_t NamesHash(std::span<const std::string> names) {
   uint64_t h = 1469598103934665603ull;  // FNV-1a offset basis
   for (const std::string& name : names) {
@@ -177,7 +241,7 @@ void EncodeMarkerFrame(const MarkerFrameMessage& m, std::vector<uint8_t>* out) {
     throw std::invalid_argument("protocol: marker frame with inconsistent or too many markers");
   out->clear();
   ByteWriter w(out);
-  WriteHeader(w, MessageType::kMarkerFrame);
+  WriteHeader(w, MessageType::kMarkerFrame, m.version);
   WriteSubject(w, m.subject);
   w.WriteU64(m.model_hash);
   w.WriteU64(m.frame_number);
@@ -185,6 +249,7 @@ void EncodeMarkerFrame(const MarkerFrameMessage& m, std::vector<uint8_t>* out) {
   w.WriteF32(m.rate_hz);
   w.WriteU16(static_cast<uint16_t>(m.positions.size()));
   w.WriteU16(0);
+  if (m.version >= kVersion2) WriteStream(w, m.stream);
   for (size_t i = 0; i < m.positions.size(); ++i) {
     const bool valid = m.valid[i] && m.positions[i].allFinite();
     for (int k = 0; k < 3; ++k) w.WriteF32(valid ? static_cast<float>(m.positions[i][k]) : 0.0f);
@@ -195,7 +260,7 @@ void EncodeMarkerFrame(const MarkerFrameMessage& m, std::vector<uint8_t>* out) {
 
 DecodeStatus DecodeMarkerFrame(std::span<const uint8_t> bytes, MarkerFrameMessage* m) {
   ByteReader r(bytes);
-  if (const DecodeStatus s = ReadPrelude(r, MessageType::kMarkerFrame, &m->subject);
+  if (const DecodeStatus s = ReadPrelude(r, MessageType::kMarkerFrame, &m->version, &m->subject);
       s != DecodeStatus::kOk)
     return s;
   uint16_t count = 0, reserved = 0;
@@ -205,7 +270,12 @@ DecodeStatus DecodeMarkerFrame(std::span<const uint8_t> bytes, MarkerFrameMessag
     return DecodeStatus::kTooShort;
   if (!Finite(m->rate_hz) || !(m->rate_hz > 0.0f)) return DecodeStatus::kNonFinite;
   if (count > kMaxMarkers) return DecodeStatus::kTooManyItems;
-  if (r.remaining() != kMarkerBytes * count) return DecodeStatus::kSizeMismatch;
+  const size_t stream_bytes = m->version >= kVersion2 ? kStreamBlockBytes : 0;
+  if (r.remaining() != stream_bytes + kMarkerBytes * count) return DecodeStatus::kSizeMismatch;
+  m->stream = StreamInfo{};
+  if (stream_bytes != 0)
+    if (const DecodeStatus s = ReadStream(r, m->rate_hz, &m->stream); s != DecodeStatus::kOk)
+      return s;
   m->positions.resize(count);
   m->valid.resize(count);
   for (size_t i = 0; i < count; ++i) {
@@ -232,7 +302,7 @@ void EncodeSkeletonFrame(const SkeletonFrameMessage& m, std::vector<uint8_t>* ou
         "protocol: skeleton frame with global transforms for some joints only");
   out->clear();
   ByteWriter w(out);
-  WriteHeader(w, MessageType::kSkeletonFrame);
+  WriteHeader(w, MessageType::kSkeletonFrame, m.version);
   WriteSubject(w, m.subject);
   w.WriteU64(m.model_hash);
   w.WriteU64(m.frame_number);
@@ -243,6 +313,7 @@ void EncodeSkeletonFrame(const SkeletonFrameMessage& m, std::vector<uint8_t>* ou
   w.WriteU16(globals ? kFlagGlobalTransforms : 0);
   w.WriteU16(static_cast<uint16_t>(m.rotations.size()));
   w.WriteU16(0);  // reserved
+  if (m.version >= kVersion2) WriteStream(w, m.stream);
   w.WriteF32(m.residual_m);
   WriteVec3(w, m.root_translation);
   for (const Quat& q : m.rotations) WriteQuat(w, q);
@@ -257,7 +328,7 @@ void EncodeSkeletonFrame(const SkeletonFrameMessage& m, std::vector<uint8_t>* ou
 
 DecodeStatus DecodeSkeletonFrame(std::span<const uint8_t> bytes, SkeletonFrameMessage* m) {
   ByteReader r(bytes);
-  if (const DecodeStatus s = ReadPrelude(r, MessageType::kSkeletonFrame, &m->subject);
+  if (const DecodeStatus s = ReadPrelude(r, MessageType::kSkeletonFrame, &m->version, &m->subject);
       s != DecodeStatus::kOk)
     return s;
   uint8_t state = 0;
@@ -271,8 +342,13 @@ DecodeStatus DecodeSkeletonFrame(std::span<const uint8_t> bytes, SkeletonFrameMe
   m->subject_state = static_cast<SubjectState>(state);
   if (count > kMaxJoints) return DecodeStatus::kTooManyItems;
   const bool globals = (flags & kFlagGlobalTransforms) != 0;
-  if (r.remaining() != 16 + (kJointBytes + (globals ? kGlobalJointBytes : 0)) * count)
+  const size_t stream_bytes = m->version >= kVersion2 ? kStreamBlockBytes : 0;
+  if (r.remaining() !=
+      stream_bytes + 16 + (kJointBytes + (globals ? kGlobalJointBytes : 0)) * count)
     return DecodeStatus::kSizeMismatch;
+  m->stream = StreamInfo{};
+  if (stream_bytes != 0)
+    if (const DecodeStatus s = ReadStream(r, 0.0f, &m->stream); s != DecodeStatus::kOk) return s;
   if (!r.ReadF32(&m->residual_m)) return DecodeStatus::kTooShort;
   if (!Finite(m->residual_m)) return DecodeStatus::kNonFinite;
   if (const DecodeStatus s = ReadVec3(r, &m->root_translation); s != DecodeStatus::kOk) return s;
@@ -318,7 +394,7 @@ void EncodeSubjectDescription(const SubjectDescriptionMessage& m, std::vector<ui
         "protocol: subject description with inconsistent or too many markers/joints");
   out->clear();
   ByteWriter w(out);
-  WriteHeader(w, MessageType::kSubjectDescription);
+  WriteHeader(w, MessageType::kSubjectDescription, m.version);
   WriteSubject(w, m.subject);
   w.WriteU64(m.marker_set_hash);
   w.WriteU64(m.skeleton_hash);
@@ -340,7 +416,8 @@ void EncodeSubjectDescription(const SubjectDescriptionMessage& m, std::vector<ui
 DecodeStatus DecodeSubjectDescription(std::span<const uint8_t> bytes,
                                       SubjectDescriptionMessage* m) {
   ByteReader r(bytes);
-  if (const DecodeStatus s = ReadPrelude(r, MessageType::kSubjectDescription, &m->subject);
+  if (const DecodeStatus s =
+          ReadPrelude(r, MessageType::kSubjectDescription, &m->version, &m->subject);
       s != DecodeStatus::kOk)
     return s;
   uint16_t markers = 0, joints = 0, reserved = 0;
@@ -380,7 +457,7 @@ void EncodeCleanedMarkers(const CleanedMarkersMessage& m, std::vector<uint8_t>* 
     throw std::invalid_argument("protocol: cleaned markers with inconsistent or too many markers");
   out->clear();
   ByteWriter w(out);
-  WriteHeader(w, MessageType::kCleanedMarkers);
+  WriteHeader(w, MessageType::kCleanedMarkers, m.version);
   WriteSubject(w, m.subject);
   w.WriteU64(m.model_hash);
   w.WriteU64(m.frame_number);
@@ -388,6 +465,7 @@ void EncodeCleanedMarkers(const CleanedMarkersMessage& m, std::vector<uint8_t>* 
   w.WriteU64(m.publish_time_ns);
   w.WriteU16(static_cast<uint16_t>(m.positions.size()));
   w.WriteU16(0);  // reserved
+  if (m.version >= kVersion2) WriteStream(w, m.stream);
   for (size_t i = 0; i < m.positions.size(); ++i) {
     // An unrecoverable sample has no position: zeros on the wire, NaN once decoded.
     const bool known = m.status[i] != 2 && m.positions[i].allFinite();
@@ -400,7 +478,7 @@ void EncodeCleanedMarkers(const CleanedMarkersMessage& m, std::vector<uint8_t>* 
 
 DecodeStatus DecodeCleanedMarkers(std::span<const uint8_t> bytes, CleanedMarkersMessage* m) {
   ByteReader r(bytes);
-  if (const DecodeStatus s = ReadPrelude(r, MessageType::kCleanedMarkers, &m->subject);
+  if (const DecodeStatus s = ReadPrelude(r, MessageType::kCleanedMarkers, &m->version, &m->subject);
       s != DecodeStatus::kOk)
     return s;
   uint16_t count = 0, reserved = 0;
@@ -409,7 +487,12 @@ DecodeStatus DecodeCleanedMarkers(std::span<const uint8_t> bytes, CleanedMarkers
       !r.ReadU16(&reserved))
     return DecodeStatus::kTooShort;
   if (count > kMaxMarkers) return DecodeStatus::kTooManyItems;
-  if (r.remaining() != kCleanedMarkerBytes * count) return DecodeStatus::kSizeMismatch;
+  const size_t stream_bytes = m->version >= kVersion2 ? kStreamBlockBytes : 0;
+  if (r.remaining() != stream_bytes + kCleanedMarkerBytes * count)
+    return DecodeStatus::kSizeMismatch;
+  m->stream = StreamInfo{};
+  if (stream_bytes != 0)
+    if (const DecodeStatus s = ReadStream(r, 0.0f, &m->stream); s != DecodeStatus::kOk) return s;
   m->positions.resize(count);
   m->status.resize(count);
   m->reason.resize(count);
@@ -426,7 +509,7 @@ DecodeStatus DecodeCleanedMarkers(std::span<const uint8_t> bytes, CleanedMarkers
 void EncodeSubjectStatus(const SubjectStatusMessage& m, std::vector<uint8_t>* out) {
   out->clear();
   ByteWriter w(out);
-  WriteHeader(w, MessageType::kSubjectStatus);
+  WriteHeader(w, MessageType::kSubjectStatus, m.version);
   WriteSubject(w, m.subject);
   w.WriteU8(static_cast<uint8_t>(m.state));
   w.WriteU8(m.problems);
@@ -441,7 +524,7 @@ void EncodeSubjectStatus(const SubjectStatusMessage& m, std::vector<uint8_t>* ou
 
 DecodeStatus DecodeSubjectStatus(std::span<const uint8_t> bytes, SubjectStatusMessage* m) {
   ByteReader r(bytes);
-  if (const DecodeStatus s = ReadPrelude(r, MessageType::kSubjectStatus, &m->subject);
+  if (const DecodeStatus s = ReadPrelude(r, MessageType::kSubjectStatus, &m->version, &m->subject);
       s != DecodeStatus::kOk)
     return s;
   uint8_t state = 0;
@@ -459,7 +542,7 @@ DecodeStatus DecodeSubjectStatus(std::span<const uint8_t> bytes, SubjectStatusMe
 void EncodeEndOfStream(const EndOfStreamMessage& m, std::vector<uint8_t>* out) {
   out->clear();
   ByteWriter w(out);
-  WriteHeader(w, MessageType::kEndOfStream);
+  WriteHeader(w, MessageType::kEndOfStream, m.version);
   WriteSubject(w, m.subject);
   w.WriteU64(m.last_frame_number);
   FinishMessage(out);
@@ -467,7 +550,7 @@ void EncodeEndOfStream(const EndOfStreamMessage& m, std::vector<uint8_t>* out) {
 
 DecodeStatus DecodeEndOfStream(std::span<const uint8_t> bytes, EndOfStreamMessage* m) {
   ByteReader r(bytes);
-  if (const DecodeStatus s = ReadPrelude(r, MessageType::kEndOfStream, &m->subject);
+  if (const DecodeStatus s = ReadPrelude(r, MessageType::kEndOfStream, &m->version, &m->subject);
       s != DecodeStatus::kOk)
     return s;
   if (!r.ReadU64(&m->last_frame_number)) return DecodeStatus::kTooShort;
@@ -482,7 +565,7 @@ DecodeStatus PeekType(std::span<const uint8_t> bytes, MessageType* type) {
   if (!r.ReadU32(&magic) || !r.ReadU16(&version) || !r.ReadU16(&raw))
     return DecodeStatus::kTooShort;
   if (magic != kMagic) return DecodeStatus::kBadMagic;
-  if (version != kVersion) return DecodeStatus::kUnsupportedVersion;
+  if (!KnownVersion(version)) return DecodeStatus::kUnsupportedVersion;
   if (raw < static_cast<uint16_t>(MessageType::kSubjectDescription) ||
       raw > static_cast<uint16_t>(MessageType::kEndOfStream))
     return DecodeStatus::kWrongType;

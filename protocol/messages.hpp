@@ -1,8 +1,11 @@
 // The mocapd wire format (documented byte by byte in protocol/README.md): a 16-byte
 // versioned header and little-endian payloads for marker frames in; skeleton frames,
-// cleaned markers, subject descriptions and subject status out. Encoding writes into a caller-owned
-// buffer; decoding is bounds-checked, never throws and never allocates beyond the caller's message
-// storage (sized once), and reports a status for every way a message can be malformed.
+// cleaned markers, subject descriptions and subject status out. Version 2 gives the
+// frames a stream block (capture session, exact rate, SMPTE timecode); version 1 stays
+// readable and writable for senders and consumers that predate it. Encoding writes into a
+// caller-owned buffer; decoding is bounds-checked, never throws and never allocates beyond the
+// caller's message storage (sized once), and reports a status for every way a message can be
+// malformed.
 #pragma once
 
 #include <cstdint>
@@ -16,7 +19,10 @@
 namespace mocapd::protocol {
 
 inline constexpr uint32_t kMagic = 0x4450434d;  // "MCPD" in little-endian byte order
-inline constexpr uint16_t kVersion = 1;
+inline constexpr uint16_t kVersion1 = 1;
+inline constexpr uint16_t kVersion2 = 2;
+inline constexpr uint16_t kVersion = kVersion2;  ///< The newest: what encoders write by default.
+inline constexpr size_t kStreamBlockBytes = 24;
 inline constexpr size_t kHeaderBytes = 16;
 inline constexpr size_t kMaxSubjectName = 63;
 inline constexpr size_t kMaxMarkers = 1024;
@@ -61,7 +67,36 @@ uint64_t NamesHash(std::span<const std::string> names);
 uint64_t MarkerSetHash(const MarkerSet& markers);
 uint64_t SkeletonHash(const Skeleton& skeleton);
 
+/// SMPTE timecode of a frame as the capture system stamped it.
+struct Timecode {
+  uint8_t hours = 0, minutes = 0, seconds = 0, frames = 0;
+  uint8_t subframe = 0;  ///< Capture frames within one timecode frame (240 Hz on 30 fps: 0..7).
+  bool drop_frame = false;
+  uint16_t rate = 0;  ///< Nominal timecode frames per second (24, 25, 30, 60): frames < rate.
+  bool operator==(const Timecode&) const = default;
+};
+
+/// "HH:MM:SS:FF" (";" before the frames when drop-frame, as SMPTE writes it), then
+/// ".S" with the subframe when it is not 0.
+std::string FormatTimecode(const Timecode& timecode);
+
+/// Version 2's stream block: which capture a frame belongs to and when it was taken. A v1
+/// frame decodes with everything zero / absent.
+struct StreamInfo {
+  /// Chosen by the sender, changed whenever the capture restarts (new take, system restart):
+  /// frame numbers are only comparable within one session. 0: not given.
+  uint64_t session_id = 0;
+  /// The exact capture rate as a fraction (119.88 Hz is 120000/1001); 0/0: not given.
+  uint32_t rate_numerator = 0;
+  uint32_t rate_denominator = 0;
+  bool has_timecode = false;
+  Timecode timecode;
+  bool operator==(const StreamInfo&) const = default;
+};
+
 struct MarkerFrameMessage {
+  uint16_t version = kVersion;  ///< Set by decoding; encoding writes this version.
+  StreamInfo stream;            ///< Version 2 only.
   std::string subject;
   uint64_t model_hash = 0;
   uint64_t frame_number = 0;
@@ -72,6 +107,8 @@ struct MarkerFrameMessage {
 };
 
 struct SkeletonFrameMessage {
+  uint16_t version = kVersion;
+  StreamInfo stream;  ///< The marker frame's, carried through (version 2 only).
   std::string subject;
   uint64_t model_hash = 0;
   uint64_t frame_number = 0;
@@ -90,6 +127,7 @@ struct SkeletonFrameMessage {
 /// The model a subject's frames are made for: published so a consumer can interpret
 /// skeleton frames (names, hierarchy, rest pose) and check their model hashes.
 struct SubjectDescriptionMessage {
+  uint16_t version = kVersion;  ///< Same payload in versions 1 and 2.
   std::string subject;
   uint64_t marker_set_hash = 0;
   uint64_t skeleton_hash = 0;
@@ -104,6 +142,8 @@ struct SubjectDescriptionMessage {
 
 /// Per-marker status on the wire (MarkerStatus in filters/cleanup_pipeline.hpp).
 struct CleanedMarkersMessage {
+  uint16_t version = kVersion;
+  StreamInfo stream;  ///< The marker frame's, carried through (version 2 only).
   std::string subject;
   uint64_t model_hash = 0;  ///< Marker-set hash.
   uint64_t frame_number = 0;
@@ -122,6 +162,7 @@ inline constexpr uint8_t kProblemModelSuspect = 1;    ///< Observed samples far 
 inline constexpr uint8_t kProblemRejectingInput = 2;  ///< Every recent frame dropped.
 
 struct SubjectStatusMessage {
+  uint16_t version = kVersion;  ///< Same payload in versions 1 and 2.
   std::string subject;
   SubjectState state = SubjectState::kWaiting;
   uint8_t problems = 0;            ///< kProblem* bits.
@@ -138,10 +179,12 @@ struct SubjectStatusMessage {
 struct EndOfStreamMessage {
   std::string subject;
   uint64_t last_frame_number = 0;  ///< The last frame sent (informational).
+  uint16_t version = kVersion;     ///< Same payload in versions 1 and 2.
 };
 
-/// Appends the encoded message to out (cleared first). Never fails for messages within
-/// the limits; throws std::invalid_argument otherwise (a programming error upstream).
+/// Appends the encoded message to out (cleared first), in the message's version. Never
+/// fails for messages within the limits; throws std::invalid_argument otherwise (a
+/// programming error upstream).
 void EncodeMarkerFrame(const MarkerFrameMessage& message, std::vector<uint8_t>* out);
 void EncodeSkeletonFrame(const SkeletonFrameMessage& message, std::vector<uint8_t>* out);
 void EncodeSubjectDescription(const SubjectDescriptionMessage& message, std::vector<uint8_t>* out);

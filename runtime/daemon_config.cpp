@@ -112,7 +112,8 @@ std::string SubjectFingerprint(const SubjectConfig& s, const DaemonConfig& c) {
   for (const CleanupOptionField& field : CleanupOptionFields())
     std::visit([&](auto member) { f << ' ' << s.cleanup.*member; }, field.member);
   f << ' ' << c.max_gap_frames << ' ' << c.restart_backjump_frames << ' '
-    << c.publish_cleaned_markers << ' ' << c.publish_global_transforms << '\n'
+    << c.publish_cleaned_markers << ' ' << c.publish_global_transforms << ' '
+    << c.output_protocol_version << '\n'
     << s.character_path << ' ' << s.character_map.report << ' ' << s.retarget.damping << ' '
     << s.retarget.contact_height_m << ' ' << s.retarget.contact_speed_m_s << ' '
     << s.retarget.release_frames << ' ' << s.retarget.points_per_bone;
@@ -151,6 +152,8 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
       output.Integer("send_high_water_mark", c.send_high_water_mark, 1, 10'000'000);
   c.publish_cleaned_markers = output.Bool("cleaned_markers", c.publish_cleaned_markers);
   c.publish_global_transforms = output.Bool("global_transforms", c.publish_global_transforms);
+  c.output_protocol_version = output.Integer("protocol_version", c.output_protocol_version,
+                                             protocol::kVersion1, protocol::kVersion2);
   output.RejectUnknown();
 
   TomlTable control = top.Table("control");

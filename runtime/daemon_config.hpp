@@ -43,6 +43,9 @@ struct DaemonConfig {
   int send_high_water_mark = 1000;
   bool publish_cleaned_markers = true;
   bool publish_global_transforms = false;
+  /// Wire version of everything published: 2 carries each frame's capture session, exact
+  /// rate and timecode; 1 for consumers written before version 2.
+  int output_protocol_version = 2;
   // Control plane.
   bool http_enabled = true;
   std::string http_address = "127.0.0.1";

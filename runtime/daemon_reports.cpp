@@ -63,6 +63,10 @@ std::string FormatPrometheusMetrics(const DaemonStats& stats) {
   auto& pending = gauge("mocapd_frames_pending", "Frames held in the lookahead");
   auto& restarts = counter("mocapd_capture_restarts_total",
                            "Capture restarts or long frame-number jumps re-synchronised");
+  auto& skipped = counter("mocapd_frames_skipped_total",
+                          "Frame numbers that never arrived (forward gaps within a session)");
+  auto& sessions = counter("mocapd_capture_sessions_changed_total",
+                           "Capture restarts announced by a new session id (protocol v2)");
   auto& stalls =
       counter("mocapd_input_stalls_total", "Times the watchdog saw a subject's input stall");
   auto& state =
@@ -97,6 +101,8 @@ std::string FormatPrometheusMetrics(const DaemonStats& stats) {
     inserted.Add(subject).Increment(static_cast<double>(s.counters.frames_inserted));
     pending.Add(subject).Set(static_cast<double>(s.pending));
     restarts.Add(subject).Increment(static_cast<double>(s.counters.restarts));
+    skipped.Add(subject).Increment(static_cast<double>(s.counters.frames_skipped));
+    sessions.Add(subject).Increment(static_cast<double>(s.counters.session_changes));
     stalls.Add(subject).Increment(static_cast<double>(s.counters.stalls));
     state.Add(subject).Set(static_cast<double>(s.state));
     unrecoverable.Add(subject).Increment(static_cast<double>(s.cleanup.unrecoverable));
@@ -131,6 +137,7 @@ nlohmann::json SubjectJson(const SubjectStats& s) {
     if (s.cleanup.repaired_by[static_cast<size_t>(r)] > 0)
       repaired[to_string(static_cast<MaskReason>(r))] =
           s.cleanup.repaired_by[static_cast<size_t>(r)];
+  const protocol::StreamInfo& stream = s.counters.last_stream;
   const double mean_latency_us =
       s.counters.processing.count > 0
           ? s.counters.processing.sum_s / static_cast<double>(s.counters.processing.count) * 1e6
@@ -148,7 +155,13 @@ nlohmann::json SubjectJson(const SubjectStats& s) {
           {"frames_inserted", s.counters.frames_inserted},
           {"frames_pending", s.pending},
           {"frames_dropped", dropped},
+          {"frames_skipped", s.counters.frames_skipped},
           {"capture_restarts", s.counters.restarts},
+          {"capture_session_changes", s.counters.session_changes},
+          {"capture_session_id", stream.session_id},
+          {"last_timecode", stream.has_timecode
+                                ? nlohmann::json(protocol::FormatTimecode(stream.timecode))
+                                : nlohmann::json(nullptr)},
           {"input_stalls", s.counters.stalls},
           {"last_frame_number", s.counters.last_frame_number},
           {"seconds_since_last_input", s.since_last_input_s},

@@ -103,6 +103,9 @@ SubjectRunner::SubjectRunner(const SubjectConfig& config, const DaemonConfig& da
   cleaned_message_.status.resize(markers);
   cleaned_message_.reason.resize(markers);
   status_message_.subject = name_;
+  const auto version = static_cast<uint16_t>(daemon.output_protocol_version);
+  description_.version = skeleton_message_.version = cleaned_message_.version = version;
+  status_message_.version = character_message_.version = character_description_.version = version;
   if (config.character) {
     retargeter_ = std::make_unique<Retargeter>(config.model.skeleton, config.character,
                                                config.character_map, config.retarget);
@@ -159,15 +162,24 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
     return drop(DropReason::kModelMismatch);
   if (std::abs(frame.rate_hz - rate_hz_) > 1e-3 * rate_hz_) return drop(DropReason::kRateMismatch);
 
+  // A v2 sender says when its capture restarted: frame numbers of another session are not
+  // comparable, whatever their values.
+  if (started_ && frame.stream.session_id != stream_.session_id) {
+    ++counters_.session_changes;
+    Resynchronise(sink);
+  }
   if (started_ && frame.frame_number != next_frame_number_) {
     if (frame.frame_number > next_frame_number_) {
       const uint64_t missing = frame.frame_number - next_frame_number_;
+      counters_.frames_skipped += missing;
       if (missing > static_cast<uint64_t>(max_gap_frames_)) {
         // Too long to bridge with repaired frames: start over from this frame.
         Resynchronise(sink);
       } else {
         for (uint64_t k = 0; k < missing; ++k) {
-          Push(missing_, Stamp{next_frame_number_, 0, true}, receive_ns, sink);
+          Stamp inserted{next_frame_number_, 0, true, stream_};
+          inserted.stream.has_timecode = false;  // not known without the capture's clock
+          Push(missing_, inserted, receive_ns, sink);
           ++counters_.frames_inserted;
         }
       }
@@ -175,8 +187,10 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
       const uint64_t back = next_frame_number_ - 1 - frame.frame_number;
       // A restart of the capture numbers frames from the start again while its clock goes
       // on; a late packet has an older timestamp. A long jump back is a restart either way.
-      const bool restart = back >= static_cast<uint64_t>(restart_backjump_frames_) ||
-                           (back > 0 && frame.capture_time_ns > last_capture_ns_);
+      // A session id (v2) settles it: within one session, older is late, never a restart.
+      const bool restart = frame.stream.session_id == 0 &&
+                           (back >= static_cast<uint64_t>(restart_backjump_frames_) ||
+                            (back > 0 && frame.capture_time_ns > last_capture_ns_));
       if (!restart) {
         // ++frames_in happens in the drop, so the last frame number stays the newest.
         return drop(back == 0 ? DropReason::kDuplicate : DropReason::kOutOfOrder);
@@ -190,10 +204,13 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
   started_ = true;
   last_receive_ns_ = receive_ns;
   last_capture_ns_ = frame.capture_time_ns;
+  stream_ = frame.stream;
   counters_.last_frame_number = frame.frame_number;
+  counters_.last_stream = frame.stream;
   if (state_ == protocol::SubjectState::kWaiting || state_ == protocol::SubjectState::kStalled)
     state_ = protocol::SubjectState::kTracking;
-  Push(frame.positions, Stamp{frame.frame_number, frame.capture_time_ns, false}, receive_ns, sink);
+  Push(frame.positions, Stamp{frame.frame_number, frame.capture_time_ns, false, frame.stream},
+       receive_ns, sink);
   return std::nullopt;
 }
 
@@ -250,6 +267,7 @@ void SubjectRunner::Publish(int64_t trigger_receive_ns, OutputSink& sink) {
                       : protocol::SubjectState::kTracking;
 
   protocol::SkeletonFrameMessage& s = skeleton_message_;
+  s.stream = stamp.stream;
   s.frame_number = stamp.frame_number;
   s.capture_time_ns = stamp.capture_ns;
   s.publish_time_ns = publish_ns;
@@ -273,6 +291,7 @@ void SubjectRunner::Publish(int64_t trigger_receive_ns, OutputSink& sink) {
 
   if (publish_cleaned_) {
     protocol::CleanedMarkersMessage& c = cleaned_message_;
+    c.stream = stamp.stream;
     c.frame_number = stamp.frame_number;
     c.capture_time_ns = stamp.capture_ns;
     c.publish_time_ns = publish_ns;
@@ -287,6 +306,7 @@ void SubjectRunner::Publish(int64_t trigger_receive_ns, OutputSink& sink) {
   if (retargeter_) {
     const Pose& character = retargeter_->Retarget(out.pose);
     protocol::SkeletonFrameMessage& c = character_message_;
+    c.stream = stamp.stream;
     c.frame_number = stamp.frame_number;
     c.capture_time_ns = stamp.capture_ns;
     c.publish_time_ns = publish_ns;

@@ -63,11 +63,16 @@ struct SubjectCounters {
   uint64_t frames_inserted = 0;     ///< All-missing frames pushed for missing frame numbers...
   uint64_t inserted_published = 0;  ///< ...and how many of those were published.
   std::array<uint64_t, kDropReasonCount> dropped{};
-  uint64_t restarts = 0;        ///< Capture restarts and long jumps re-synchronised.
-  uint64_t stalls = 0;          ///< Times the watchdog saw the input stall.
+  uint64_t restarts = 0;  ///< Capture restarts and long jumps re-synchronised.
+  /// Frame numbers that never arrived: forward gaps within a capture session, bridged with
+  /// inserted frames or (too long) re-synchronised. Lost before the daemon or by the sender.
+  uint64_t frames_skipped = 0;
+  uint64_t session_changes = 0;  ///< Restarts a v2 sender announced with a new session id.
+  uint64_t stalls = 0;           ///< Times the watchdog saw the input stall.
   uint64_t ends_of_stream = 0;  ///< End-of-stream messages (not frames: outside the frame balance).
   LatencyHistogram processing;  ///< Receive of the frame that completed a publication -> its send.
   uint64_t last_frame_number = 0;
+  protocol::StreamInfo last_stream;  ///< The last accepted frame's session, rate and timecode.
   uint64_t dropped_total() const;
 };
 
@@ -128,6 +133,7 @@ class SubjectRunner {
     uint64_t frame_number = 0;
     uint64_t capture_ns = 0;
     bool inserted = false;
+    protocol::StreamInfo stream;  ///< Carried to the outputs (an inserted frame: no timecode).
   };
   void Push(std::span<const Vec3> positions, const Stamp& stamp, int64_t receive_ns,
             OutputSink& sink);
@@ -153,6 +159,7 @@ class SubjectRunner {
   bool started_ = false;
   uint64_t next_frame_number_ = 0;
   uint64_t last_capture_ns_ = 0;
+  protocol::StreamInfo stream_;  ///< The current stream's, from its last accepted frame.
   int64_t last_receive_ns_ = -1;
   protocol::SubjectState state_ = protocol::SubjectState::kWaiting;
   uint64_t consecutive_dropped_ = 0;

@@ -337,6 +337,16 @@ int main(int argc, char** argv) {
   replay_cmd->add_option("--loop", replay.options.loops, "Play the take this many times")
       ->check(CLI::Range(1, 100000))
       ->capture_default_str();
+  replay_cmd
+      ->add_option("--protocol", replay.options.protocol_version,
+                   "Wire version of the marker frames: 2 adds a capture session, the exact "
+                   "rate and timecode (checked in the daemon's echo); 1 for older daemons")
+      ->check(CLI::Range(1, 2))
+      ->capture_default_str();
+  replay_cmd
+      ->add_option("--timecode", replay.options.timecode_fps,
+                   "Stamp frames with non-drop SMPTE timecode at this many fps (protocol 2)")
+      ->check(CLI::Range(0, 1000));
   replay_cmd->add_option("--report", replay.report, "Write the report as JSON");
   replay_cmd->add_option("--plot", replay.plot, "Write a processing-latency histogram (SVG)");
   replay_cmd

@@ -3,7 +3,10 @@
 #include "sim/replay.hpp"
 
 #include <chrono>
+#include <cmath>
+#include <random>
 #include <stdexcept>
+#include <utility>
 
 #include "formats/take_frames.hpp"
 #include "protocol/messages.hpp"
@@ -25,6 +28,41 @@ constexpr double kActorSpacingM = 2.5;
 
 std::string SubjectName(const ReplayOptions& o, int k) {
   return o.subject_prefix + std::to_string(k + 1);
+}
+
+// The exact rate as a fraction: whole rates over 1, the NTSC ones (119.88 = 120000/1001)
+// over 1001, anything else to a thousandth of a hertz.
+std::pair<uint32_t, uint32_t> RateFraction(double hz) {
+  if (std::abs(hz - std::round(hz)) < 1e-6 * hz) return {static_cast<uint32_t>(std::lround(hz)), 1};
+  const double ntsc = hz * 1.001;
+  if (std::abs(ntsc - std::round(ntsc)) < 1e-6 * hz)
+    return {static_cast<uint32_t>(std::lround(ntsc) * 1000), 1001};
+  return {static_cast<uint32_t>(std::lround(hz * 1000)), 1000};
+}
+
+// Non-drop timecode of capture frame f of a take starting at 01:00:00:00 (the usual
+// start of a recorded take); the subframe counts capture frames within a timecode frame.
+protocol::Timecode TimecodeOf(uint64_t f, double rate_hz, int fps) {
+  const auto tc_frame =
+      static_cast<uint64_t>(std::floor(static_cast<double>(f) * fps / rate_hz + 1e-9));
+  const auto first =
+      static_cast<uint64_t>(std::ceil(static_cast<double>(tc_frame) * rate_hz / fps - 1e-9));
+  const uint64_t seconds = tc_frame / static_cast<uint64_t>(fps);
+  protocol::Timecode tc;
+  tc.rate = static_cast<uint16_t>(fps);
+  tc.frames = static_cast<uint8_t>(tc_frame % static_cast<uint64_t>(fps));
+  tc.seconds = static_cast<uint8_t>(seconds % 60);
+  tc.minutes = static_cast<uint8_t>(seconds / 60 % 60);
+  tc.hours = static_cast<uint8_t>((1 + seconds / 3600) % 24);
+  tc.subframe = static_cast<uint8_t>(std::min<uint64_t>(255, f - first));
+  return tc;
+}
+
+// A session id per replay run: random, so that two runs never look like one capture.
+uint64_t NewSessionBase() {
+  std::random_device device;
+  const uint64_t id = (static_cast<uint64_t>(device()) << 32) ^ device();
+  return id == 0 ? 1 : id;
 }
 
 }  // namespace
@@ -62,6 +100,30 @@ ReplayReport RunReplay(const ReplaySource& source, const ReplayOptions& o) {
   protocol::MarkerFrameMessage message;
   message.model_hash = marker_hash;
   message.rate_hz = static_cast<float>(source.rate_hz);
+  message.version = static_cast<uint16_t>(o.protocol_version);
+  if (o.protocol_version != protocol::kVersion1 && o.protocol_version != protocol::kVersion2)
+    throw std::invalid_argument("replay: protocol version must be 1 or 2");
+  if (o.timecode_fps < 0 || o.timecode_fps > 1000)
+    throw std::invalid_argument("replay: timecode rate must be 0 (none) .. 1000 fps");
+  if (o.timecode_fps > 0 && o.protocol_version < protocol::kVersion2)
+    throw std::invalid_argument("replay: timecode needs protocol version 2");
+  // Each pass over the take is a capture of its own when it ends with an end of stream.
+  const uint64_t session_base = NewSessionBase();
+  const std::pair<uint32_t, uint32_t> rate_fraction = RateFraction(source.rate_hz);
+  const auto stream_of = [&](uint64_t frame_number) {
+    protocol::StreamInfo s;
+    if (o.protocol_version < protocol::kVersion2) return s;
+    const uint64_t pass = o.end_of_stream ? frame_number / static_cast<uint64_t>(n) : 0;
+    s.session_id = session_base + pass;
+    s.rate_numerator = rate_fraction.first;
+    s.rate_denominator = rate_fraction.second;
+    if (o.timecode_fps > 0) {
+      s.has_timecode = true;
+      const uint64_t f = o.end_of_stream ? frame_number % static_cast<uint64_t>(n) : frame_number;
+      s.timecode = TimecodeOf(f, source.rate_hz, o.timecode_fps);
+    }
+    return s;
+  };
   size_t seq = 0, subject = 0;
   bool ending = false;
   const int64_t period_ns = static_cast<int64_t>(1e9 / rate);
@@ -83,6 +145,7 @@ ReplayReport RunReplay(const ReplaySource& source, const ReplayOptions& o) {
         if (message.valid[m]) message.positions[m] += log.offset;
       message.subject = log.name;
       message.frame_number = seq;
+      message.stream = stream_of(seq);
       message.capture_time_ns = WallNs();
       next->end_of_stream = false;
       next->frame_number = seq;
@@ -104,6 +167,8 @@ ReplayReport RunReplay(const ReplaySource& source, const ReplayOptions& o) {
   setup.check_hash = true;
   setup.skeleton = source.skeleton.get();
   setup.frame_period_s = 1.0 / rate;
+  if (o.protocol_version >= protocol::kVersion2)
+    setup.sent_stream = [&](size_t, uint64_t frame_number) { return stream_of(frame_number); };
   setup.truth = [&](size_t k, uint64_t frame_number, Pose* scratch) -> const Pose* {
     if (source.truth.empty()) return nullptr;
     *scratch = source.truth[frame_number % static_cast<uint64_t>(n)];

@@ -33,6 +33,11 @@ struct ReplayOptions {
   double connect_timeout_s = 10.0;
   double drain_timeout_s = 5.0;
   bool end_of_stream = true;  ///< Send end-of-stream at the end so the daemon flushes.
+  /// Wire version of the marker frames: 2 gives them a capture session (a new one per pass
+  /// over the take when ends of stream are sent), the exact rate and, with timecode_fps,
+  /// an SMPTE timecode; the replay then checks that the daemon echoes them.
+  int protocol_version = 2;
+  int timecode_fps = 0;  ///< Non-drop timecode at this many frames per second (0: none).
   /// Called about every second with a one-line live status (nullptr: silent).
   std::function<void(const std::string&)> on_status;
   /// Set from elsewhere (a signal handler) to stop sending early.

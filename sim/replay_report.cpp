@@ -44,6 +44,8 @@ nlohmann::json ReplayReport::ToJson() const {
                       {"frames_lost", frames_lost},
                       {"frames_duplicated", frames_duplicated},
                       {"frames_late", frames_late},
+                      {"stream_checked", stream_checked},
+                      {"stream_mismatched", stream_mismatched},
                       {"send_seconds", send_seconds},
                       {"throughput_fps", throughput_fps},
                       {"end_to_end_latency", SummaryJson(end_to_end)},
@@ -80,6 +82,10 @@ std::string ReplayReport::FormatTable() const {
   row("frames lost / duplicated / late", std::to_string(frames_lost) + " / " +
                                              std::to_string(frames_duplicated) + " / " +
                                              std::to_string(frames_late));
+  if (stream_checked > 0)
+    row("session/timecode echoed", std::to_string(stream_checked - stream_mismatched) + " of " +
+                                       std::to_string(stream_checked) +
+                                       (stream_mismatched > 0 ? "  (MISMATCHED)" : ""));
   row("throughput (skeletons/s)", num(throughput_fps, 1));
   std::snprintf(line, sizeof(line), "  %-34s %8s %8s %8s %8s %8s\n", "latency (ms)", "p50", "p90",
                 "p99", "p99.9", "max");

@@ -25,7 +25,11 @@ struct ReplayReport {
   uint64_t frames_received = 0;
   uint64_t frames_lost = 0;  ///< Sent, never received.
   uint64_t frames_duplicated = 0;
-  uint64_t frames_late = 0;     ///< Processing latency over one frame period.
+  uint64_t frames_late = 0;  ///< Processing latency over one frame period.
+  /// Skeletons whose session id and timecode (protocol v2) were compared with the sent
+  /// frame's, and of those, how many differed.
+  uint64_t stream_checked = 0;
+  uint64_t stream_mismatched = 0;
   double send_seconds = 0.0;    ///< Wall time spent sending.
   double throughput_fps = 0.0;  ///< Skeleton frames received per second while sending.
   LatencySummary end_to_end;

@@ -125,6 +125,8 @@ class SkeletonReceiver {
   }
   uint64_t received() const { return received_.load(); }
   uint64_t duplicated() const { return duplicated_.load(); }
+  uint64_t stream_checked() const { return stream_checked_.load(); }
+  uint64_t stream_mismatched() const { return stream_mismatched_.load(); }
   /// Valid after Stop().
   const std::optional<PoseErrorAccumulator>& accuracy() const { return accuracy_; }
 
@@ -162,6 +164,11 @@ class SkeletonReceiver {
         }
         slot->second = now;
         ++received_;
+        if (setup_.sent_stream && message.version >= protocol::kVersion2) {
+          ++stream_checked_;
+          if (!(message.stream == setup_.sent_stream(k, message.frame_number)))
+            ++stream_mismatched_;
+        }
         const Pose* expected =
             setup_.truth ? setup_.truth(k, message.frame_number, &scratch) : nullptr;
         if (expected == nullptr ||
@@ -182,7 +189,7 @@ class SkeletonReceiver {
   const ScheduleSetup& setup_;
   std::optional<PoseErrorAccumulator> accuracy_;
   std::atomic<bool> running_{true};
-  std::atomic<uint64_t> received_{0}, duplicated_{0};
+  std::atomic<uint64_t> received_{0}, duplicated_{0}, stream_checked_{0}, stream_mismatched_{0};
   std::thread thread_;
 };
 
@@ -285,6 +292,8 @@ ReplayReport RunSchedule(std::vector<SubjectLog>& logs, const FrameProducer& pro
 
   report.frames_received = receiver->received();
   report.frames_duplicated = receiver->duplicated();
+  report.stream_checked = receiver->stream_checked();
+  report.stream_mismatched = receiver->stream_mismatched();
   report.frames_lost = sent - std::min<uint64_t>(sent, report.frames_received);
   MeasureLatencies(logs, setup.frame_period_s, &report);
   report.throughput_fps = report.send_seconds > 0

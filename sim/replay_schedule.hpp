@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "filters/skeleton.hpp"
+#include "protocol/messages.hpp"
 #include "sim/replay.hpp"
 
 namespace mocapd::replay {
@@ -52,6 +53,9 @@ struct ScheduleSetup {
   TruthLookup truth;                    ///< May be empty.
   const Skeleton* skeleton = nullptr;   ///< The truth's skeleton (nullptr: no accuracy).
   double frame_period_s = 1.0 / 120.0;  ///< A frame later than this is "late".
+  /// The stream block a subject's frame was sent with, which a v2 daemon must echo (empty:
+  /// not checked).
+  std::function<protocol::StreamInfo(size_t subject, uint64_t frame_number)> sent_stream;
 };
 
 /// Runs the schedule: handshake with the daemon (it subscribed to every subject's topic

@@ -81,7 +81,11 @@ def main():
                 if not args.quiet and now - last_print >= 1.0:
                     root = message["root_translation"]
                     latency_ms = (message["publish_time_ns"] - message["capture_time_ns"]) / 1e6
-                    print(f"{message['subject']} frame {message['frame']:6d} {message['subject_state']:9s} "
+                    stream = message.get("stream")
+                    timecode = ""
+                    if stream and stream["timecode"]:
+                        timecode = " tc " + mocapd_protocol.format_timecode(stream["timecode"])
+                    print(f"{message['subject']} frame {message['frame']:6d}{timecode} {message['subject_state']:9s} "
                           f"root ({root[0]:+.3f}, {root[1]:+.3f}, {root[2]:+.3f}) m  residual {message['residual_m'] * 1e3:.2f} mm  "
                           f"capture->publish {latency_ms:.1f} ms")
                     last_print = now

@@ -1,6 +1,7 @@
-"""Reference decoder for the mocapd wire protocol, version 1 (see protocol/README.md): every
-message type the daemon sends or receives; plus encoders for what a capture bridge sends
-(marker frames, end of stream).
+"""Reference decoder for the mocapd wire protocol, versions 1 and 2 (see protocol/README.md):
+every message type the daemon sends or receives; plus encoders for what a capture bridge
+sends (marker frames, end of stream). Version 2 frames carry a stream block (capture
+session, exact rate, SMPTE timecode), decoded as the "stream" field (None in version 1).
 
 Standard library only. Every decode function raises ValueError naming the problem
 (the same status names as the C++ decoder) for a malformed message.
@@ -9,8 +10,10 @@ import math
 import struct
 
 MAGIC = 0x4450434D
-VERSION = 1
+VERSION = 2  # what the encoders write unless told otherwise
+VERSIONS = (1, 2)
 HEADER = struct.Struct("<IHHII")
+STREAM_BLOCK = struct.Struct("<QIIBBBBBBH")  # session, rate num/den, hh mm ss ff sub flags, tc fps
 SUBJECT_DESCRIPTION = 1
 MARKER_FRAME = 2
 SKELETON_FRAME = 3
@@ -50,23 +53,57 @@ class Reader:
 
 
 def decode_header(data):
-    """Returns (type, payload_size) after checking magic, version and size."""
+    """Returns (type, payload_size, version) after checking magic, version and size."""
     if len(data) < HEADER.size:
         raise ValueError("too_short")
     magic, version, msg_type, payload, _reserved = HEADER.unpack_from(data, 0)
     if magic != MAGIC:
         raise ValueError("bad_magic")
-    if version != VERSION:
+    if version not in VERSIONS:
         raise ValueError("unsupported_version")
     if len(data) - HEADER.size < payload:
         raise ValueError("too_short")
     if len(data) - HEADER.size != payload:
         raise ValueError("size_mismatch")
-    return msg_type, payload
+    return msg_type, payload, version
+
+
+def _stream_bytes(version):
+    return STREAM_BLOCK.size if version >= 2 else 0
+
+
+def _read_stream(r, version, rate_hz=None):
+    """Version 2's stream block as a dict (None in version 1); bad_field when out of range."""
+    if version < 2:
+        return None
+    session, num, den, hh, mm, ss, ff, sub, flags, tc_rate = r.take(STREAM_BLOCK.format)
+    if flags & ~3:
+        raise ValueError("bad_field")
+    timecode = None
+    if flags & 1:
+        drop = bool(flags & 2)
+        if not (tc_rate > 0 and hh < 24 and mm < 60 and ss < 60 and ff < tc_rate) or (drop and tc_rate % 30):
+            raise ValueError("bad_field")
+        timecode = {"hours": hh, "minutes": mm, "seconds": ss, "frames": ff, "subframe": sub,
+                    "drop_frame": drop, "rate": tc_rate}
+    elif flags:
+        raise ValueError("bad_field")
+    if (num == 0) != (den == 0):
+        raise ValueError("bad_field")
+    if num and rate_hz is not None and abs(num / den - rate_hz) > 1e-4 * (num / den):
+        raise ValueError("bad_field")
+    return {"session_id": session, "rate": (num, den) if num else None, "timecode": timecode}
+
+
+def format_timecode(tc):
+    """HH:MM:SS:FF (';' before the frames when drop-frame), '.S' with a subframe."""
+    text = "%02d:%02d:%02d%s%02d" % (tc["hours"], tc["minutes"], tc["seconds"], ";" if tc["drop_frame"] else ":",
+                                     tc["frames"])
+    return text + (".%d" % tc["subframe"] if tc["subframe"] else "")
 
 
 def decode_marker_frame(data):
-    msg_type, _ = decode_header(data)
+    msg_type, _, version = decode_header(data)
     if msg_type != MARKER_FRAME:
         raise ValueError("wrong_type")
     r = Reader(data, HEADER.size)
@@ -76,8 +113,9 @@ def decode_marker_frame(data):
         raise ValueError("non_finite")
     if count > MAX_MARKERS:
         raise ValueError("too_many_items")
-    if len(data) - r.offset != 13 * count:
+    if len(data) - r.offset != _stream_bytes(version) + 13 * count:
         raise ValueError("size_mismatch")
+    stream = _read_stream(r, version, rate)
     markers = []
     for _ in range(count):
         x, y, z, flags = r.take("<fffB")
@@ -86,7 +124,7 @@ def decode_marker_frame(data):
             raise ValueError("non_finite")
         markers.append((x, y, z) if valid else None)
     return {"subject": subject, "model_hash": model_hash, "frame": frame, "capture_time_ns": capture_ns,
-            "rate_hz": rate, "markers": markers}
+            "rate_hz": rate, "markers": markers, "version": version, "stream": stream}
 
 
 def _finite(values):
@@ -96,14 +134,14 @@ def _finite(values):
 
 
 def _check_type(data, expected):
-    msg_type, _ = decode_header(data)
+    msg_type, _, version = decode_header(data)
     if msg_type != expected:
         raise ValueError("wrong_type")
-    return Reader(data, HEADER.size)
+    return Reader(data, HEADER.size), version
 
 
 def decode_skeleton_frame(data):
-    r = _check_type(data, SKELETON_FRAME)
+    r, version = _check_type(data, SKELETON_FRAME)
     subject = r.subject()
     model_hash, frame, capture_ns, publish_ns, status, state, flags, count, _reserved = r.take("<QQQQBBHHH")
     if state >= len(SUBJECT_STATES) or flags & ~1:
@@ -111,8 +149,9 @@ def decode_skeleton_frame(data):
     if count > MAX_JOINTS:
         raise ValueError("too_many_items")
     globals_present = bool(flags & 1)
-    if len(data) - r.offset != 16 + (16 + (28 if globals_present else 0)) * count:
+    if len(data) - r.offset != _stream_bytes(version) + 16 + (16 + (28 if globals_present else 0)) * count:
         raise ValueError("size_mismatch")
+    stream = _read_stream(r, version)
     (residual,) = _finite(r.take("<f"))
     root = _finite(r.take("<fff"))
     rotations = [_finite(r.take("<ffff")) for _ in range(count)]
@@ -120,11 +159,11 @@ def decode_skeleton_frame(data):
     return {"subject": subject, "model_hash": model_hash, "frame": frame, "capture_time_ns": capture_ns,
             "publish_time_ns": publish_ns, "status": status, "subject_state": SUBJECT_STATES[state],
             "residual_m": residual, "root_translation": root, "rotations": rotations,
-            "global_transforms": global_transforms}
+            "global_transforms": global_transforms, "version": version, "stream": stream}
 
 
 def decode_subject_description(data):
-    r = _check_type(data, SUBJECT_DESCRIPTION)
+    r, version = _check_type(data, SUBJECT_DESCRIPTION)
     subject = r.subject()
     marker_hash, skeleton_hash, rate, lookahead, markers, joints, _reserved = r.take("<QQfHHHH")
     if not math.isfinite(rate) or rate <= 0:
@@ -150,13 +189,14 @@ def decode_subject_description(data):
 
 
 def decode_cleaned_markers(data):
-    r = _check_type(data, CLEANED_MARKERS)
+    r, version = _check_type(data, CLEANED_MARKERS)
     subject = r.subject()
     model_hash, frame, capture_ns, publish_ns, count, _reserved = r.take("<QQQQHH")
     if count > MAX_MARKERS:
         raise ValueError("too_many_items")
-    if len(data) - r.offset != 14 * count:
+    if len(data) - r.offset != _stream_bytes(version) + 14 * count:
         raise ValueError("size_mismatch")
+    stream = _read_stream(r, version)
     markers = []
     for _ in range(count):
         position = _finite(r.take("<fff"))
@@ -166,11 +206,11 @@ def decode_cleaned_markers(data):
         markers.append({"position": None if status == 2 else position, "status": MARKER_STATUS[status],
                         "reason": MASK_REASONS[reason]})
     return {"subject": subject, "model_hash": model_hash, "frame": frame, "capture_time_ns": capture_ns,
-            "publish_time_ns": publish_ns, "markers": markers}
+            "publish_time_ns": publish_ns, "markers": markers, "version": version, "stream": stream}
 
 
 def decode_subject_status(data):
-    r = _check_type(data, SUBJECT_STATUS)
+    r, version = _check_type(data, SUBJECT_STATUS)
     subject = r.subject()
     state, problems, _r16, last_frame, since_ns, frames_in, frames_out, dropped = r.take("<BBHQQQQQ")
     if r.offset != len(data):
@@ -185,7 +225,7 @@ def decode_subject_status(data):
 
 
 def decode_end_of_stream(data):
-    r = _check_type(data, END_OF_STREAM)
+    r, version = _check_type(data, END_OF_STREAM)
     subject = r.subject()
     (last_frame,) = r.take("<Q")
     if r.offset != len(data):
@@ -205,7 +245,7 @@ DECODERS = {
 
 def decode(data):
     """Decodes any message by its header's type; returns (kind, fields)."""
-    msg_type, _ = decode_header(data)
+    msg_type, _, _ = decode_header(data)
     if msg_type not in DECODERS:
         raise ValueError("wrong_type")
     kind, decoder = DECODERS[msg_type]
@@ -222,8 +262,10 @@ def names_hash(names):
     return h
 
 
-def _message(msg_type, payload):
-    return HEADER.pack(MAGIC, VERSION, msg_type, len(payload), 0) + payload
+def _message(msg_type, payload, version=VERSION):
+    if version not in VERSIONS:
+        raise ValueError("unsupported_version")
+    return HEADER.pack(MAGIC, version, msg_type, len(payload), 0) + payload
 
 
 def _name(name):
@@ -233,15 +275,31 @@ def _name(name):
     return struct.pack("<B", len(raw)) + raw
 
 
-def encode_marker_frame(subject, model_hash, frame, capture_time_ns, rate_hz, markers):
-    """markers: a list, in the subject's marker order, of (x, y, z) in metres or None (missing)."""
+def encode_stream(session_id=0, rate=None, timecode=None):
+    """Version 2's stream block. rate: (numerator, denominator) or None; timecode: a dict
+    as decoded (hours, minutes, seconds, frames, subframe, drop_frame, rate) or None."""
+    num, den = rate if rate else (0, 0)
+    if timecode is None:
+        return STREAM_BLOCK.pack(session_id, num, den, 0, 0, 0, 0, 0, 0, 0)
+    flags = 1 | (2 if timecode.get("drop_frame") else 0)
+    return STREAM_BLOCK.pack(session_id, num, den, timecode["hours"], timecode["minutes"], timecode["seconds"],
+                             timecode["frames"], timecode.get("subframe", 0), flags, timecode["rate"])
+
+
+def encode_marker_frame(subject, model_hash, frame, capture_time_ns, rate_hz, markers, version=VERSION,
+                        session_id=0, rate=None, timecode=None):
+    """markers: a list, in the subject's marker order, of (x, y, z) in metres or None (missing).
+    Version 2 (the default) adds the stream block: session_id, rate (numerator, denominator),
+    timecode (see encode_stream)."""
     if len(markers) > MAX_MARKERS:
         raise ValueError("too_many_items")
     body = [_name(subject), struct.pack("<QQQfHH", model_hash, frame, capture_time_ns, rate_hz, len(markers), 0)]
+    if version >= 2:
+        body.append(encode_stream(session_id, rate, timecode))
     for m in markers:
         body.append(struct.pack("<fffB", 0.0, 0.0, 0.0, 0) if m is None else struct.pack("<fffB", m[0], m[1], m[2], 1))
-    return _message(MARKER_FRAME, b"".join(body))
+    return _message(MARKER_FRAME, b"".join(body), version)
 
 
-def encode_end_of_stream(subject, last_frame):
-    return _message(END_OF_STREAM, _name(subject) + struct.pack("<Q", last_frame))
+def encode_end_of_stream(subject, last_frame, version=VERSION):
+    return _message(END_OF_STREAM, _name(subject) + struct.pack("<Q", last_frame), version)

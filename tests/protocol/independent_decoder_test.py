@@ -8,23 +8,43 @@ the document. This file was written by reading only protocol/README.md (plus the
 files and the top-level README for how to start the daemon); it does not import or
 mirror the project's code. If the document is wrong or incomplete, this test fails.
 
-What it checks:
+What it checks (wire versions 1 and 2):
   a. the README's model-hash examples; the marker-set and skeleton hashes of
-     config/demo_subject.toml against the subject description and GET /subjects;
-  b. the real daemon (PULL input, PUB output, global transforms on) fed with marker
-     frames encoded here: a synthetic body moving at 120 Hz, then an end of stream, then
-     a second short stream with a one-frame gap, then another end of stream;
-  c. every published message decodes, has the size of the README's formula and fields in
-     their documented ranges; frame numbers are the ones sent, consecutive, once each;
-     capture timestamps are echoed (0 for the inserted frame); the lookahead K is
-     honoured; the end of stream flushes every frame at once;
+     config/demo_subject.toml against the subject description and GET /subjects; our own
+     codec: v1 and v2 round trips and sizes (B = 24 in v2), every cut too_short, versions
+     other than 1 and 2 unsupported, each stream-block rule (bad_field) and its valid edge
+     cases;
+  b. the real daemon (PULL input, PUB output, global transforms on, [output]
+     protocol_version left at its default) fed with marker frames encoded here: a
+     synthetic body moving at 120 Hz in version 2 (capture session S1, rate 120/1, 30 fps
+     non-drop timecode with subframes 0..3; a 2-frame gap; then session S2 with the frame
+     numbers continuing: a restart), an end of stream, then a second stream in version 1
+     with a one-frame gap and a jump of more than max_gap_frames, another end of stream;
+  c. every published message is version 2, decodes, has the size of the README's formula
+     (with B) and fields in their documented ranges; frame numbers are the ones sent,
+     consecutive, once each; capture timestamps are echoed (0 for inserted frames); each
+     skeleton frame and cleaned-markers message carries its marker frame's stream block
+     (inserted frames: the stream's session and rate, no timecode; version 1 input:
+     session 0, no rate, no timecode); the lookahead K is honoured; a session change, a
+     jump and an end of stream flush every frame held;
   d. forward kinematics from the description and the local block equals the global block;
   e. the /metrics balance equation, /health "ok" and "accounted" after the end of
-     stream, the subject status message's counters;
+     stream, the subject status message's counters; mocapd_frames_skipped_total (gaps and
+     the jump), mocapd_capture_restarts_total and mocapd_capture_sessions_changed_total
+     (the session change; frames of other sessions that are dropped earlier, a late frame
+     and the post-end-of-stream version 1 stream do not count); /subjects' frames_skipped,
+     capture_session_id, last_timecode and capture_session_changes;
   f. negative cases: wrong hash or marker count (model_mismatch), wrong rate
-     (rate_mismatch), truncated, 35+n+13M-sized, bad magic/version, 3-part and bad end of
-     stream (malformed), NaN (non_finite), unknown subject, not a marker frame, oversized,
-     duplicate, out of order.
+     (rate_mismatch), truncated, 35+n+B+13M-sized, bad magic, version 3, a header version
+     that disagrees with the payload, each broken stream-block rule (timecode fields,
+     flags, rate fraction vs the f32 rate, numerator without denominator and the
+     reverse), 3-part and bad end of stream (malformed), NaN (non_finite), unknown
+     subject, not a marker frame, oversized, duplicate, out of order (3 back; and 125 back
+     with a later capture timestamp, which is late within a session, not a restart);
+  g. a second daemon with [output] protocol_version = 1 (global transforms off), fed
+     version 2 frames with a drop-frame timecode: everything it publishes is version 1
+     with the version 1 sizes (no stream block); its /subjects shows the session and
+     "HH:MM:SS;FF.S".
 
 Standard library and pyzmq only.
 
@@ -56,13 +76,81 @@ from daemon_harness import free_ports  # noqa: E402
 # ---------------------------------------------------------------------------------------
 
 MAGIC = 0x4450434D  # bytes 4D 43 50 44, "MCPD"
-VERSION = 1
+VERSIONS = (1, 2)
+VERSION = 2  # what we send by default, and what the daemon publishes by default
 SUBJECT_DESCRIPTION, MARKER_FRAME, SKELETON_FRAME, CLEANED_MARKERS, SUBJECT_STATUS, END_OF_STREAM = 1, 2, 3, 4, 5, 6
 TYPE_NAMES = {1: "subject description", 2: "marker frame", 3: "skeleton frame", 4: "cleaned markers",
               5: "subject status", 6: "end of stream"}
 MAX_MARKERS = 1024
 MAX_JOINTS = 512
 HEADER = struct.Struct("<IHHII")  # magic, version, type, payload size P, reserved
+
+# The version 2 stream block (README, "Versions and the stream block"): 24 bytes.
+STREAM_FMT = "QIIBBBBBBH"
+STREAM_SIZE = struct.calcsize("<" + STREAM_FMT)
+assert STREAM_SIZE == 24
+
+
+def print_log_tail(log, title, chars):
+    """On a failure: the end of the daemon's log, to see why."""
+    log.flush()
+    log.seek(0)
+    print(f"---- {title} log (tail) ----\n" + log.read()[-chars:] + "\n----", file=sys.stderr)
+
+
+def stop_all(collector, sender, daemon, log):
+    """Whatever started, stopped, whether the checks passed or not."""
+    if collector is not None:
+        collector.stop()
+    if sender is not None:
+        sender.sock.close(linger=0)
+    if daemon is not None and daemon.poll() is None:
+        daemon.kill()
+        daemon.wait(timeout=10)
+    log.close()
+
+
+class Stream(tuple):
+    """session id, rate numerator, rate denominator, timecode hours, minutes, seconds,
+    frames, subframe, timecode flags (bit 0 present, bit 1 drop-frame), timecode rate."""
+    FIELDS = ("session", "num", "den", "hours", "minutes", "seconds", "frames", "subframe", "tc_flags", "tc_rate")
+
+    def __new__(cls, session=0, num=0, den=0, hours=0, minutes=0, seconds=0, frames=0, subframe=0, tc_flags=0,
+                tc_rate=0):
+        return super().__new__(cls, (session, num, den, hours, minutes, seconds, frames, subframe, tc_flags, tc_rate))
+
+    def __getattr__(self, name):
+        try:
+            return self[Stream.FIELDS.index(name)]
+        except ValueError:
+            raise AttributeError(name)
+
+    def replace(self, **kw):
+        return Stream(*(kw.get(f, v) for f, v in zip(Stream.FIELDS, self)))
+
+    def __repr__(self):
+        return "Stream(" + ", ".join(f"{f}={v}" for f, v in zip(Stream.FIELDS, self)) + ")"
+
+
+NO_STREAM = Stream()  # what a version 1 frame reads as: session 0, no rate fraction, no timecode
+
+
+def block_size(version):
+    """B: 24 in version 2, 0 in version 1."""
+    return STREAM_SIZE if version == 2 else 0
+
+
+def timecode(session, num, den, index, subframe, fps=30):
+    """A non-drop timecode at `index` timecode frames since midnight, present (flags bit 0)."""
+    frames = index % fps
+    secs = index // fps
+    return Stream(session, num, den, (secs // 3600) % 24, (secs // 60) % 60, secs % 60, frames, subframe, 1, fps)
+
+
+def timecode_text(s):
+    """/subjects' last_timecode: "HH:MM:SS:FF", ";" before the frames when drop-frame, ".S" with a subframe."""
+    return (f"{s.hours:02d}:{s.minutes:02d}:{s.seconds:02d}{';' if s.tc_flags & 2 else ':'}{s.frames:02d}"
+            + (f".{s.subframe}" if s.subframe else ""))
 
 
 class DecodeError(Exception):
@@ -86,13 +174,14 @@ def skeleton_hash_strings(joint_names, parents):
     return [f"{name}/{parent}" for name, parent in zip(joint_names, parents)]
 
 
-# Payload sizes, the README's formulas (n = the subject name's length in bytes).
-def marker_frame_size(n, m):
-    return 33 + n + 13 * m
+# Payload sizes, the README's formulas (n = the subject name's length in bytes, B the
+# stream block's size: 24 in version 2, 0 in version 1).
+def marker_frame_size(n, m, version=VERSION):
+    return 33 + n + block_size(version) + 13 * m
 
 
-def skeleton_frame_size(n, j, global_block):
-    return 1 + n + 56 + (44 if global_block else 16) * j
+def skeleton_frame_size(n, j, global_block, version=VERSION):
+    return 1 + n + 56 + block_size(version) + (44 if global_block else 16) * j
 
 
 def description_size(n, marker_names, joint_names):
@@ -100,8 +189,8 @@ def description_size(n, marker_names, joint_names):
             + sum(31 + len(x.encode()) for x in joint_names))
 
 
-def cleaned_size(n, m):
-    return 1 + n + 36 + 14 * m
+def cleaned_size(n, m, version=VERSION):
+    return 1 + n + 36 + block_size(version) + 14 * m
 
 
 def status_size(n):
@@ -124,19 +213,27 @@ def enc_string(s):
     return bytes([len(b)]) + b
 
 
-def encode_marker_frame(subject, hash_, frame, capture_ns, rate, markers, junk=False):
+def enc_stream(version, stream):
+    """The stream block in version 2 (NO_STREAM when none is given), nothing in version 1."""
+    if version == 1:
+        assert stream is None, "version 1 has no stream block"
+        return b""
+    return struct.pack("<" + STREAM_FMT, *(NO_STREAM if stream is None else stream))
+
+
+def encode_marker_frame(subject, hash_, frame, capture_ns, rate, markers, junk=False, version=VERSION, stream=None):
     """markers: list of (x, y, z) or None (an invalid marker: zeros, flags 0). With junk,
     every reserved field and reserved flag bit is set (readers must ignore them)."""
     out = [enc_string(subject), struct.pack("<QQQfHH", hash_, frame, capture_ns, rate, len(markers),
-                                            0xBEEF if junk else 0)]
+                                            0xBEEF if junk else 0), enc_stream(version, stream)]
     valid, invalid = (0xFF, 0xFE) if junk else (1, 0)
     for p in markers:
         out.append(struct.pack("<fffB", 0.0, 0.0, 0.0, invalid) if p is None else struct.pack("<fffB", *p, valid))
-    return message(MARKER_FRAME, b"".join(out), reserved=0xDEADBEEF if junk else 0)
+    return message(MARKER_FRAME, b"".join(out), version=version, reserved=0xDEADBEEF if junk else 0)
 
 
-def encode_end_of_stream(subject, last_frame):
-    return message(END_OF_STREAM, enc_string(subject) + struct.pack("<Q", last_frame))
+def encode_end_of_stream(subject, last_frame, version=VERSION):
+    return message(END_OF_STREAM, enc_string(subject) + struct.pack("<Q", last_frame), version=version)
 
 
 def encode_description(subject, marker_hash, skel_hash, rate, k, marker_names, joints):
@@ -148,21 +245,24 @@ def encode_description(subject, marker_hash, skel_hash, rate, k, marker_names, j
     return message(SUBJECT_DESCRIPTION, b"".join(out))
 
 
-def encode_skeleton_frame(subject, hash_, frame, capture_ns, publish_ns, solve, state, rms, root, local, global_=None):
+def encode_skeleton_frame(subject, hash_, frame, capture_ns, publish_ns, solve, state, rms, root, local, global_=None,
+                          version=VERSION, stream=None):
     flags = 1 if global_ is not None else 0
-    out = [enc_string(subject), struct.pack("<QQQQBBHHHf3f", hash_, frame, capture_ns, publish_ns, solve, state, flags,
-                                            len(local), 0, rms, *root)]
+    out = [enc_string(subject),
+           struct.pack("<QQQQBBHHH", hash_, frame, capture_ns, publish_ns, solve, state, flags, len(local), 0),
+           enc_stream(version, stream), struct.pack("<f3f", rms, *root)]
     out += [struct.pack("<4f", *q) for q in local]
     if global_ is not None:
         out += [struct.pack("<4f3f", *q, *p) for q, p in global_]
-    return message(SKELETON_FRAME, b"".join(out))
+    return message(SKELETON_FRAME, b"".join(out), version=version)
 
 
-def encode_cleaned(subject, hash_, frame, capture_ns, publish_ns, markers):
+def encode_cleaned(subject, hash_, frame, capture_ns, publish_ns, markers, version=VERSION, stream=None):
     """markers: list of ((x, y, z), status, reason)."""
-    out = [enc_string(subject), struct.pack("<QQQQHH", hash_, frame, capture_ns, publish_ns, len(markers), 0)]
+    out = [enc_string(subject), struct.pack("<QQQQHH", hash_, frame, capture_ns, publish_ns, len(markers), 0),
+           enc_stream(version, stream)]
     out += [struct.pack("<3fBB", *p, st, r) for p, st, r in markers]
-    return message(CLEANED_MARKERS, b"".join(out))
+    return message(CLEANED_MARKERS, b"".join(out), version=version)
 
 
 def encode_status(subject, state, problems, last, since_ns, f_in, f_out, dropped):
@@ -211,12 +311,13 @@ def finite(*xs):
 
 
 def decode_header(msg):
+    """(message type, version, payload)."""
     if len(msg) < 16:
         raise DecodeError("too_short", f"{len(msg)} bytes, a header is 16")
     magic, version, msg_type, size, _reserved = HEADER.unpack_from(msg)
     if magic != MAGIC:
         raise DecodeError("bad_magic", f"magic 0x{magic:08X}")
-    if version != VERSION:
+    if version not in VERSIONS:
         raise DecodeError("unsupported_version", f"version {version}")
     if msg_type not in TYPE_NAMES:
         raise DecodeError("wrong_type", f"type {msg_type}")
@@ -224,7 +325,7 @@ def decode_header(msg):
         raise DecodeError("too_short", f"{len(msg)} bytes, header says 16 + {size}")
     if len(msg) > 16 + size:
         raise DecodeError("size_mismatch", f"{len(msg)} bytes, header says 16 + {size}")
-    return msg_type, msg[16:]
+    return msg_type, version, msg[16:]
 
 
 def expect_size(payload, expected, what):
@@ -234,7 +335,36 @@ def expect_size(payload, expected, what):
         raise DecodeError("size_mismatch", f"{what}: payload {len(payload)} bytes, README formula gives {expected}")
 
 
-def decode_marker_frame(p):
+def check_stream(s, marker_rate=None):
+    """The stream block's decoder rules, all bad_field. marker_rate: the marker frame's f32 rate."""
+    if s.tc_flags & ~0b11:
+        raise DecodeError("bad_field", f"timecode flags 0x{s.tc_flags:02x}: a bit other than 0 and 1")
+    if s.tc_flags & 2 and not s.tc_flags & 1:
+        raise DecodeError("bad_field", "drop-frame (bit 1) without a timecode (bit 0)")
+    if s.tc_flags & 1:
+        if s.tc_rate == 0:
+            raise DecodeError("bad_field", "timecode rate 0")
+        if s.hours > 23 or s.minutes > 59 or s.seconds > 59 or s.frames >= s.tc_rate:
+            raise DecodeError("bad_field", f"timecode {s.hours}:{s.minutes}:{s.seconds}:{s.frames} at {s.tc_rate} fps")
+        if s.tc_flags & 2 and s.tc_rate % 30 != 0:
+            raise DecodeError("bad_field", f"drop-frame at {s.tc_rate} fps")
+    if (s.num == 0) != (s.den == 0):
+        raise DecodeError("bad_field", f"rate fraction {s.num}/{s.den}: exactly one of them is 0")
+    if marker_rate is not None and s.num:
+        fraction = s.num / s.den
+        if abs(marker_rate - fraction) > 1e-4 * fraction:
+            raise DecodeError("bad_field", f"rate fraction {s.num}/{s.den} vs the f32 rate {marker_rate}")
+
+
+def take_stream(r, version, marker_rate=None):
+    if version == 1:
+        return None
+    s = Stream(*r.take(STREAM_FMT))
+    check_stream(s, marker_rate)
+    return s
+
+
+def decode_marker_frame(p, version=VERSION):
     r = Reader(p)
     subject = r.string("bad_subject_name")
     hash_, frame, capture_ns, rate, m, _res = r.take("QQQfHH")
@@ -242,7 +372,8 @@ def decode_marker_frame(p):
         raise DecodeError("non_finite", f"rate {rate}")
     if m > MAX_MARKERS:
         raise DecodeError("too_many_items", f"M = {m}")
-    expect_size(p, marker_frame_size(len(subject.encode()), m), "marker frame")
+    expect_size(p, marker_frame_size(len(subject.encode()), m, version), "marker frame")
+    stream = take_stream(r, version, marker_rate=rate)
     markers = []
     for _ in range(m):
         x, y, z, flags = r.take("fffB")
@@ -250,14 +381,14 @@ def decode_marker_frame(p):
         if valid and not finite(x, y, z):
             raise DecodeError("non_finite", "valid marker with a non-finite coordinate")
         markers.append((x, y, z) if valid else None)
-    return dict(subject=subject, hash=hash_, frame=frame, capture_ns=capture_ns, rate=rate, markers=markers)
+    return dict(version=version, subject=subject, hash=hash_, frame=frame, capture_ns=capture_ns, rate=rate,
+                stream=stream, markers=markers)
 
 
-def decode_skeleton_frame(p):
+def decode_skeleton_frame(p, version=VERSION):
     r = Reader(p)
     subject = r.string("bad_subject_name")
-    hash_, frame, capture_ns, publish_ns, solve, state, flags, j, _res, rms = r.take("QQQQBBHHHf")
-    root = r.take("3f")
+    hash_, frame, capture_ns, publish_ns, solve, state, flags, j, _res = r.take("QQQQBBHHH")
     if state > 4:
         raise DecodeError("bad_field", f"subject state {state}")
     if flags & ~1:
@@ -265,7 +396,10 @@ def decode_skeleton_frame(p):
     if j > MAX_JOINTS:
         raise DecodeError("too_many_items", f"J = {j}")
     has_global = bool(flags & 1)
-    expect_size(p, skeleton_frame_size(len(subject.encode()), j, has_global), "skeleton frame")
+    expect_size(p, skeleton_frame_size(len(subject.encode()), j, has_global, version), "skeleton frame")
+    stream = take_stream(r, version)
+    rms = r.take("f")
+    root = r.take("3f")
     local = [r.take("4f") for _ in range(j)]
     global_ = [(r.take("4f"), r.take("3f")) for _ in range(j)] if has_global else None
     floats = [rms, *root, *(c for q in local for c in q)]
@@ -273,11 +407,12 @@ def decode_skeleton_frame(p):
         floats += [c for q, pos in global_ for c in (*q, *pos)]
     if not finite(*floats):
         raise DecodeError("non_finite", "a non-finite float in a skeleton frame")
-    return dict(subject=subject, hash=hash_, frame=frame, capture_ns=capture_ns, publish_ns=publish_ns, solve=solve,
-                state=state, flags=flags, rms=rms, root=root, local=local, global_=global_)
+    return dict(version=version, subject=subject, hash=hash_, frame=frame, capture_ns=capture_ns,
+                publish_ns=publish_ns, solve=solve, state=state, flags=flags, stream=stream, rms=rms, root=root,
+                local=local, global_=global_)
 
 
-def decode_description(p):
+def decode_description(p, version=VERSION):
     r = Reader(p)
     subject = r.string("bad_subject_name")
     marker_hash, skel_hash, rate, k, m, j, _res = r.take("QQfHHHH")
@@ -300,17 +435,18 @@ def decode_description(p):
             raise DecodeError("bad_field", f"joint {index} ({name}) has parent {parent}")
         joints.append(dict(name=name, parent=parent, offset=offset, rotation=rotation))
     expect_size(p, description_size(len(subject.encode()), markers, [x["name"] for x in joints]), "subject description")
-    return dict(subject=subject, marker_hash=marker_hash, skeleton_hash=skel_hash, rate=rate, k=k, markers=markers,
-                joints=joints)
+    return dict(version=version, subject=subject, marker_hash=marker_hash, skeleton_hash=skel_hash, rate=rate, k=k,
+                markers=markers, joints=joints)
 
 
-def decode_cleaned(p):
+def decode_cleaned(p, version=VERSION):
     r = Reader(p)
     subject = r.string("bad_subject_name")
     hash_, frame, capture_ns, publish_ns, m, _res = r.take("QQQQHH")
     if m > MAX_MARKERS:
         raise DecodeError("too_many_items", f"M = {m}")
-    expect_size(p, cleaned_size(len(subject.encode()), m), "cleaned markers")
+    expect_size(p, cleaned_size(len(subject.encode()), m, version), "cleaned markers")
+    stream = take_stream(r, version)
     markers = []
     for _ in range(m):
         x, y, z, status, reason = r.take("3fBB")
@@ -319,25 +455,26 @@ def decode_cleaned(p):
         if status > 2 or reason > 10:
             raise DecodeError("bad_field", f"status {status}, reason {reason}")
         markers.append(((x, y, z), status, reason))
-    return dict(subject=subject, hash=hash_, frame=frame, capture_ns=capture_ns, publish_ns=publish_ns, markers=markers)
+    return dict(version=version, subject=subject, hash=hash_, frame=frame, capture_ns=capture_ns,
+                publish_ns=publish_ns, stream=stream, markers=markers)
 
 
-def decode_status(p):
+def decode_status(p, version=VERSION):
     r = Reader(p)
     subject = r.string("bad_subject_name")
     expect_size(p, status_size(len(subject.encode())), "subject status")
     state, problems, _res, last, since_ns, f_in, f_out, dropped = r.take("BBHQQQQQ")
     if state > 4:
         raise DecodeError("bad_field", f"state {state}")
-    return dict(subject=subject, state=state, problems=problems, last=last, since_ns=since_ns, frames_in=f_in,
-                frames_out=f_out, dropped=dropped)
+    return dict(version=version, subject=subject, state=state, problems=problems, last=last, since_ns=since_ns,
+                frames_in=f_in, frames_out=f_out, dropped=dropped)
 
 
-def decode_end_of_stream(p):
+def decode_end_of_stream(p, version=VERSION):
     r = Reader(p)
     subject = r.string("bad_subject_name")
     expect_size(p, end_of_stream_size(len(subject.encode())), "end of stream")
-    return dict(subject=subject, last=r.take("Q"))
+    return dict(version=version, subject=subject, last=r.take("Q"))
 
 
 DECODERS = {SUBJECT_DESCRIPTION: decode_description, MARKER_FRAME: decode_marker_frame,
@@ -346,8 +483,8 @@ DECODERS = {SUBJECT_DESCRIPTION: decode_description, MARKER_FRAME: decode_marker
 
 
 def decode(msg):
-    msg_type, payload = decode_header(msg)
-    return msg_type, DECODERS[msg_type](payload)
+    msg_type, version, payload = decode_header(msg)
+    return msg_type, DECODERS[msg_type](payload, version)
 
 
 # --- skeleton pose (README "Skeleton pose") ----------------------------------------------
@@ -571,40 +708,118 @@ def check_readme_examples():
     check(model_hash([]) == 0x14650FB0739D0383, "model_hash([])")
 
 
+def expect_status(msg, status, what):
+    try:
+        decode(msg)
+    except DecodeError as e:
+        check(e.status == status, f"{what}: {e.status}, expected {status}")
+        return
+    raise Failure(f"{what} decoded, expected {status}")
+
+
+# Stream blocks that break one decoder rule each (README, "Versions and the stream block":
+# all bad_field), for a marker frame at 120 Hz (f32 120.0). A daemon drops them as malformed.
+GOOD_TC = timecode(7, 120, 1, 36_000 * 30 + 5, 2)  # 10:00:00:05.2 at 30 fps
+BAD_STREAMS = [
+    ("timecode hours 24", GOOD_TC.replace(hours=24)),
+    ("timecode minutes 60", GOOD_TC.replace(minutes=60)),
+    ("timecode seconds 60", GOOD_TC.replace(seconds=60)),
+    ("timecode frames 30 at 30 fps", GOOD_TC.replace(frames=30)),
+    ("timecode rate 0 with a timecode", GOOD_TC.replace(tc_rate=0, frames=0)),
+    ("timecode flags bit 2", GOOD_TC.replace(tc_flags=0b101)),
+    ("timecode flags bit 7", GOOD_TC.replace(tc_flags=0x81)),
+    ("timecode flags bit 2 without a timecode", NO_STREAM.replace(tc_flags=0b100)),
+    ("drop-frame without a timecode (flags 2)", GOOD_TC.replace(tc_flags=0b10)),
+    ("drop-frame at 25 fps", GOOD_TC.replace(tc_flags=0b11, tc_rate=25)),
+    ("drop-frame at 24 fps", GOOD_TC.replace(tc_flags=0b11, tc_rate=24)),
+    ("rate fraction 119/1 with an f32 rate of 120", GOOD_TC.replace(num=119, den=1)),
+    ("rate fraction 120.013 Hz (0.0108 % off 120)", GOOD_TC.replace(num=120013, den=1000)),
+    ("rate numerator without a denominator (120/0)", GOOD_TC.replace(num=120, den=0)),
+    ("rate denominator without a numerator (0/1)", GOOD_TC.replace(num=0, den=1)),
+]
+# ... and stream blocks that are valid (and must be carried through unchanged).
+GOOD_STREAMS = [
+    ("no rate, no timecode", NO_STREAM),
+    ("a u64 session id above 2^63", GOOD_TC.replace(session=0xFEDC_BA98_7654_3210)),
+    ("rate fraction 120000/1000", GOOD_TC.replace(num=120000, den=1000)),
+    ("rate fraction 120.011 Hz (0.0092 % off 120)", GOOD_TC.replace(num=120011, den=1000)),
+    ("timecode 23:59:59:29", GOOD_TC.replace(hours=23, minutes=59, seconds=59, frames=29)),
+    ("drop-frame at 30 fps", GOOD_TC.replace(tc_flags=0b11)),
+    ("drop-frame at 60 fps, frame 59", GOOD_TC.replace(tc_flags=0b11, tc_rate=60, frames=59)),
+    ("timecode bytes set without a timecode (not checked)",
+     Stream(7, 120, 1, 99, 99, 99, 99, 99, 0, 0)),
+]
+
+
 def check_codec_round_trips(model):
-    """Our encoders against our decoders, sizes against the formulas."""
+    """Our encoders against our decoders, sizes against the formulas, the stream block's rules."""
     n = len(SUBJECT)
-    msg = encode_marker_frame(SUBJECT, 7, 8, 9, RATE, [(1.0, 2.0, 3.0), None])
-    check(len(msg) == 16 + marker_frame_size(n, 2), "marker frame size")
-    t, d = decode(msg)
-    check(t == MARKER_FRAME and d["markers"] == [(1.0, 2.0, 3.0), None] and d["frame"] == 8, "marker frame round trip")
+    stream = timecode(0xFEDC_BA98_7654_3210, 120, 1, 12345, 3)
+    for version, st in ((1, None), (2, stream), (2, None)):
+        msg = encode_marker_frame(SUBJECT, 7, 8, 9, RATE, [(1.0, 2.0, 3.0), None], version=version, stream=st)
+        check(len(msg) == 16 + marker_frame_size(n, 2, version), "marker frame size")
+        check(len(msg) - 16 == (33 if version == 1 else 57) + n + 13 * 2, "marker frame size: 33/57 + n + 13 M")
+        t, d = decode(msg)
+        check(t == MARKER_FRAME and d["markers"] == [(1.0, 2.0, 3.0), None] and d["frame"] == 8,
+              "marker frame round trip")
+        check(d["version"] == version and d["stream"] == (None if version == 1 else st or NO_STREAM),
+              f"marker frame v{version} stream round trip: {d['stream']}")
     joints = [(name, parent, off, (1.0, 0.0, 0.0, 0.0))
               for name, parent, off in zip(model.joint_names, model.parents, model.offsets)]
-    msg = encode_description(SUBJECT, 1, 2, RATE, K, model.marker_names, joints)
-    check(len(msg) == 16 + description_size(n, model.marker_names, model.joint_names), "description size")
-    check(decode(msg)[1]["markers"] == model.marker_names, "description round trip")
+    for version in VERSIONS:
+        msg = message(SUBJECT_DESCRIPTION, encode_description(SUBJECT, 1, 2, RATE, K, model.marker_names, joints)[16:],
+                      version=version)
+        check(len(msg) == 16 + description_size(n, model.marker_names, model.joint_names), "description size")
+        check(decode(msg)[1]["markers"] == model.marker_names, "description round trip")
     local = [(1.0, 0.0, 0.0, 0.0)] * 3
-    for g in (None, [((1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0))] * 3):
-        msg = encode_skeleton_frame(SUBJECT, 1, 2, 3, 4, 0, 0, 0.0, (0.0, 1.0, 0.0), local, g)
-        check(len(msg) == 16 + skeleton_frame_size(n, 3, g is not None), "skeleton frame size")
-        check(decode(msg)[1]["root"] == (0.0, 1.0, 0.0), "skeleton frame round trip")
-    msg = encode_cleaned(SUBJECT, 1, 2, 3, 4, [((1.0, 2.0, 3.0), 1, 4)])
-    check(len(msg) == 16 + cleaned_size(n, 1) and decode(msg)[1]["markers"][0][2] == 4, "cleaned round trip")
+    for version, st in ((1, None), (2, stream)):
+        for g in (None, [((1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0))] * 3):
+            msg = encode_skeleton_frame(SUBJECT, 1, 2, 3, 4, 0, 0, 0.5, (0.0, 1.0, 0.0), local, g, version=version,
+                                        stream=st)
+            check(len(msg) == 16 + skeleton_frame_size(n, 3, g is not None, version), "skeleton frame size")
+            d = decode(msg)[1]
+            check(d["root"] == (0.0, 1.0, 0.0) and d["rms"] == 0.5 and d["stream"] == st, "skeleton frame round trip")
+        msg = encode_cleaned(SUBJECT, 1, 2, 3, 4, [((1.0, 2.0, 3.0), 1, 4)], version=version, stream=st)
+        d = decode(msg)[1]
+        check(len(msg) == 16 + cleaned_size(n, 1, version) and d["markers"][0][2] == 4 and d["stream"] == st,
+              "cleaned round trip")
     msg = encode_status(SUBJECT, 4, 3, 5, 6, 7, 8, 9)
     check(len(msg) == 16 + status_size(n) and decode(msg)[1]["dropped"] == 9, "status round trip")
-    msg = encode_end_of_stream(SUBJECT, 77)
-    check(len(msg) == 16 + end_of_stream_size(n) and decode(msg)[1]["last"] == 77, "end of stream round trip")
+    for version in VERSIONS:
+        msg = encode_end_of_stream(SUBJECT, 77, version=version)
+        check(len(msg) == 16 + end_of_stream_size(n) and decode(msg)[1]["last"] == 77, "end of stream round trip")
+        for cut in range(len(msg)):
+            expect_status(msg[:cut], "too_short", f"a {cut}-byte cut of an end of stream")
+    # Every cut of a version 2 marker frame is too short; the header's version decides B.
+    msg = encode_marker_frame(SUBJECT, 7, 8, 9, RATE, [(1.0, 2.0, 3.0)], stream=stream)
     for cut in range(len(msg)):
-        try:
-            decode(msg[:cut])
-            raise Failure(f"a {cut}-byte cut of an end of stream decoded")
-        except DecodeError as e:
-            check(e.status == "too_short", f"cut at {cut}: {e.status}")
+        expect_status(msg[:cut], "too_short", f"a {cut}-byte cut of a v2 marker frame")
+    v1 = encode_marker_frame(SUBJECT, 7, 8, 9, RATE, [(1.0, 2.0, 3.0)], version=1)
+    expect_status(v1[:4] + struct.pack("<H", 2) + v1[6:], "too_short", "a v1 payload under a v2 header")
+    expect_status(msg[:4] + struct.pack("<H", 1) + msg[6:], "size_mismatch", "a v2 payload under a v1 header")
+    for version in (0, 3, 0xFFFF):
+        expect_status(msg[:4] + struct.pack("<H", version) + msg[6:], "unsupported_version", f"version {version}")
+    for what, st in BAD_STREAMS:
+        expect_status(encode_marker_frame(SUBJECT, 7, 8, 9, RATE, [(1.0, 2.0, 3.0)], stream=st), "bad_field", what)
+    for what, st in GOOD_STREAMS:
+        check(decode(encode_marker_frame(SUBJECT, 7, 8, 9, RATE, [(1.0, 2.0, 3.0)], stream=st))[1]["stream"] == st,
+              f"valid stream block ({what}) does not round trip")
+    # The rate fraction is checked against the rate only in marker frames; the other block
+    # rules hold in skeleton frames and cleaned markers too.
+    st = GOOD_TC.replace(num=119, den=1)
+    check(decode(encode_cleaned(SUBJECT, 1, 2, 3, 4, [], stream=st))[1]["stream"] == st, "cleaned: 119/1 is valid")
+    for what, st in BAD_STREAMS:
+        if "rate fraction 1" not in what:
+            expect_status(encode_cleaned(SUBJECT, 1, 2, 3, 4, [], stream=st), "bad_field", f"cleaned markers, {what}")
+            expect_status(encode_skeleton_frame(SUBJECT, 1, 2, 3, 4, 0, 0, 0.0, (0.0, 0.0, 0.0), local, stream=st),
+                          "bad_field", f"skeleton frame, {what}")
 
 
-def write_config(work, config_dir, input_port, output_port, http_port):
+def write_config(work, config_dir, input_port, output_port, http_port, protocol_version=None, global_transforms=True):
+    """protocol_version None: leave [output] protocol_version out (the default, 2)."""
     path = os.path.join(work, "mocapd.toml")
     model = os.path.abspath(os.path.join(config_dir, "demo_subject.toml"))
+    version_line = "" if protocol_version is None else f"protocol_version = {protocol_version}\n"
     with open(path, "w") as f:
         f.write(f"""format_version = 1
 [input]
@@ -612,9 +827,9 @@ endpoint = "tcp://127.0.0.1:{input_port}"
 pattern = "pull"
 [output]
 endpoint = "tcp://127.0.0.1:{output_port}"
-global_transforms = true
+global_transforms = {"true" if global_transforms else "false"}
 send_high_water_mark = 100000
-[control]
+{version_line}[control]
 http_port = {http_port}
 stats_interval_s = 0.2
 watchdog_timeout_s = {WATCHDOG_S}
@@ -645,49 +860,152 @@ class Sender:
         self.count += 1
 
 
+def start_daemon(mocapd, config, log, http_port):
+    daemon = subprocess.Popen([mocapd, "run", "--config", config], stdout=log, stderr=subprocess.STDOUT)
+    for _ in range(200):
+        check(daemon.poll() is None, "the daemon exited at start-up")
+        try:
+            if http_get(http_port, "/health")[0] == 200:
+                return daemon
+        except OSError:
+            time.sleep(0.05)
+    daemon.kill()
+    raise Failure("the daemon's /health never answered")
+
+
+def wait_for_description(collector):
+    """The subject description arrives on every stats tick: wait for it (this also means
+    our subscription is live)."""
+    deadline = time.monotonic() + 5
+    while time.monotonic() < deadline:
+        for _, topic, msg in collector.snapshot():
+            if topic == f"subject/{SUBJECT}/":
+                return decode(msg)[1]
+        time.sleep(0.05)
+    raise Failure("no subject description within 5 s")
+
+
+def subject_entry(http_port):
+    code, body = http_get(http_port, "/subjects")
+    check(code == 200, f"GET /subjects: HTTP {code}")
+    entry = next((e for e in json.loads(body) if e.get("name") == SUBJECT), None)
+    check(entry is not None, f"GET /subjects has no {SUBJECT}: {body[:300]}")
+    return entry
+
+
+def check_stream_fields(entry, want, where):
+    """/subjects' stream fields (README, "Frame numbering": skipped frames, session, timecode)."""
+    for key in ("frames_skipped", "capture_session_id", "last_timecode", "capture_session_changes"):
+        check(key in entry, f"GET /subjects lacks '{key}' ({where})")
+    for key, value in want.items():
+        check(entry.get(key) == value, f"/subjects {key} {entry.get(key)!r}, expected {value!r} ({where})")
+
+
+def run_v1_output_daemon(mocapd, config_dir, work, ctx, model):
+    """A second daemon with [output] protocol_version = 1, fed version 2 frames (with a
+    session, a rate fraction and a drop-frame timecode): everything it publishes is version
+    1, with the version 1 sizes (no stream block); /subjects still shows the input's stream."""
+    work = os.path.join(work, "v1_output")
+    os.makedirs(work, exist_ok=True)
+    input_port, output_port, http_port = free_ports(3)
+    config = write_config(work, config_dir, input_port, output_port, http_port, protocol_version=1,
+                          global_transforms=False)
+    log = open(os.path.join(work, "mocapd.log"), "w+")
+    daemon = collector = sender = None
+    n, M, J = len(SUBJECT.encode()), len(model.marker_names), len(model.joint_names)
+    try:
+        daemon = start_daemon(mocapd, config, log, http_port)
+        collector = Collector(ctx, f"tcp://127.0.0.1:{output_port}")
+        collector.start()
+        sender = Sender(ctx, f"tcp://127.0.0.1:{input_port}")
+        wait_for_description(collector)
+        session = 0xABCDEF
+        numbers = list(range(500, 524))
+        sent = {}
+        t_start = time.monotonic()
+        for i, number in enumerate(numbers):
+            # 29.97 drop-frame timecode from 01:02:03;04, subframes 0..3.
+            st = Stream(session, 120, 1, 1, 2, 3, 4 + i // 4, i % 4, 0b11, 30)
+            t_ns = 9_000_000_000 + i * PERIOD_NS
+            sent[number] = t_ns
+            markers = model.markers_at(i / RATE)[1]
+            sender.send(encode_marker_frame(SUBJECT, model.marker_hash, number, t_ns, RATE, markers, stream=st))
+            delay = t_start + (i + 1) / RATE - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+        time.sleep(0.15)
+        check_stream_fields(subject_entry(http_port), {"capture_session_id": session, "last_timecode": "01:02:03;09.3",
+                                                       "frames_skipped": 0, "capture_session_changes": 0},
+                            "protocol_version = 1 daemon, before its end of stream")
+        sender.send(encode_end_of_stream(SUBJECT, numbers[-1], version=1))
+        t_eos = time.monotonic()
+        while time.monotonic() < t_eos + 1.0:
+            if any(tp == f"status/{SUBJECT}/" and t > t_eos + 0.05 for t, tp, _ in collector.snapshot()):
+                break
+            time.sleep(0.02)
+        time.sleep(0.05)
+        items = collector.snapshot()
+        counts = {}
+        frames = []
+        for _, topic, msg in items:
+            msg_type, version, payload = decode_header(msg)
+            check(version == 1, f"protocol_version = 1 daemon: version {version} {TYPE_NAMES[msg_type]} on {topic}")
+            d = decode(msg)[1]
+            counts[msg_type] = counts.get(msg_type, 0) + 1
+            want = {SKELETON_FRAME: lambda: skeleton_frame_size(n, J, False, version=1),
+                    CLEANED_MARKERS: lambda: cleaned_size(n, M, version=1),
+                    SUBJECT_STATUS: lambda: status_size(n),
+                    SUBJECT_DESCRIPTION: lambda: description_size(n, model.marker_names, model.joint_names)}[msg_type]()
+            check(len(payload) == want, f"protocol_version = 1 daemon: {TYPE_NAMES[msg_type]} payload {len(payload)} "
+                                        f"bytes, the version 1 formula gives {want}")
+            if msg_type in (SKELETON_FRAME, CLEANED_MARKERS):
+                check(d["stream"] is None, "a version 1 message with a stream block")
+                check(d["capture_ns"] == sent.get(d["frame"]), f"v1 output: frame {d['frame']} capture timestamp")
+                if msg_type == SKELETON_FRAME:
+                    check(d["flags"] == 0 and d["global_"] is None, "global block with global_transforms = false")
+                    frames.append(d["frame"])
+        check(frames == numbers, f"protocol_version = 1 daemon published frames {frames}, expected {numbers}")
+        check(all(counts.get(t) for t in (1, 3, 4, 5)), f"protocol_version = 1 daemon: message counts {counts}")
+        daemon.send_signal(signal.SIGTERM)
+        code = daemon.wait(timeout=10)
+        check(code == 0, f"the protocol_version = 1 daemon exited with {code} after SIGTERM")
+        return (f"[output] protocol_version = 1 daemon, fed version 2 frames: {len(items)} messages all version 1 with "
+                f"the version 1 sizes (B = 0; " + ", ".join(f"{counts[t]} {TYPE_NAMES[t]}" for t in (1, 3, 4, 5))
+                + "); /subjects showed the session and the drop-frame timecode 01:02:03;09.3")
+    except BaseException:
+        print_log_tail(log, "mocapd (protocol_version = 1)", 3000)
+        raise
+    finally:
+        stop_all(collector, sender, daemon, log)
+
+
 def run(mocapd, config_dir, work):
     summary = []
     check_readme_examples()
     summary.append("README hash examples reproduce")
     model = Model(os.path.join(config_dir, "demo_subject.toml"))
     check_codec_round_trips(model)
+    summary.append(f"own codec: v1/v2 round trips and sizes, every cut too_short, versions 0/3/65535 unsupported, "
+                   f"{len(BAD_STREAMS)} bad stream blocks bad_field, {len(GOOD_STREAMS)} edge-case blocks valid")
     M, J = len(model.marker_names), len(model.joint_names)
     n = len(SUBJECT.encode())
 
     os.makedirs(work, exist_ok=True)
     input_port, output_port, http_port = free_ports(3)
+    # [output] protocol_version is left out: the default (2) is what is checked.
     config = write_config(work, config_dir, input_port, output_port, http_port)
     log_path = os.path.join(work, "mocapd.log")
     log = open(log_path, "w+")
-    daemon = subprocess.Popen([mocapd, "run", "--config", config], stdout=log, stderr=subprocess.STDOUT)
+    daemon = None
     ctx = zmq.Context()
     collector = None
     sender = None
     try:
-        for _ in range(200):
-            check(daemon.poll() is None, "the daemon exited at start-up")
-            try:
-                if http_get(http_port, "/health")[0] == 200:
-                    break
-            except OSError:
-                time.sleep(0.05)
-        else:
-            raise Failure("the daemon's /health never answered")
-
+        daemon = start_daemon(mocapd, config, log, http_port)
         collector = Collector(ctx, f"tcp://127.0.0.1:{output_port}")
         collector.start()
         sender = Sender(ctx, f"tcp://127.0.0.1:{input_port}")
-
-        # The subject description arrives on every stats tick: wait for it (this also
-        # means our subscription is live).
-        deadline = time.monotonic() + 5
-        description = None
-        while description is None and time.monotonic() < deadline:
-            for _, topic, msg in collector.snapshot():
-                if topic == f"subject/{SUBJECT}/":
-                    description = decode(msg)[1]
-            time.sleep(0.05)
-        check(description is not None, "no subject description within 5 s")
+        description = wait_for_description(collector)
 
         # --- a. hashes ---------------------------------------------------------------
         check(description["marker_hash"] == model.marker_hash,
@@ -704,6 +1022,7 @@ def run(mocapd, config_dir, work):
               f"/subjects marker_set_hash {entry.get('marker_set_hash')} != {model.marker_hash}")
         check(entry.get("skeleton_hash") == model.skeleton_hash,
               f"/subjects skeleton_hash {entry.get('skeleton_hash')} != {model.skeleton_hash}")
+        check_stream_fields(entry, {"frames_skipped": 0, "capture_session_changes": 0}, "before any frame")
         summary.append(f"hashes: marker set {model.marker_hash:#018x}, skeleton {model.skeleton_hash:#018x} "
                        "(description and /subjects agree)")
 
@@ -721,29 +1040,52 @@ def run(mocapd, config_dir, work):
               f"description rate {description['rate']} / K {description['k']}")
 
         # --- b. the feed -------------------------------------------------------------
-        sent = {}        # frame number -> (capture ns, markers sent, send time)
-        truth_root = {}  # frame number -> the performance's root position
-        invalid = {}     # frame number -> marker indices we sent invalid or out of volume
+        sent = {}         # frame number -> (capture ns, markers sent, send time)
+        sent_stream = {}  # frame number -> the stream block sent (NO_STREAM for a version 1 frame)
+        truth_root = {}   # frame number -> the performance's root position
+        invalid = {}      # frame number -> marker indices we sent invalid or out of volume
         eos_times = []
         F0, N1 = 1_000_000, 300
         T0 = 5_000_000_000_000
+        # Phase 1 is version 2: session S1, then S2 from frame F0 + SESSION_CHANGE on with
+        # the frame numbers continuing (a capture restart); 120/1 Hz; 30 fps non-drop
+        # timecode from 09:59:58:20 (it crosses the hour), subframes 0..3.
+        S1, S2 = 0xF00D_CAFE_0000_0001, 0xF00D_CAFE_0000_0002  # above 2^63: all 64 bits count
+        FOREIGN = 0x0BAD_5E55_1011  # the session of frames dropped before the session step
+        SESSION_CHANGE = 240
+        GAP1 = {F0 + 200, F0 + 201}  # never sent: inserted, counted as skipped
+        TC0 = (9 * 3600 + 59 * 60 + 58) * 30 + 20
         # |rate - 120| <= 0.12 on the wire's f32: the f32 values just inside are accepted,
         # the one nearest 120.12 (120.12000275, just outside) is not.
         inside_rates = {F0 + 55: 120.1199951171875, F0 + 56: 119.8800048828125}
         outside_rate = 120.12000274658203
         check(f32_round(outside_rate) == outside_rate and all(f32_round(r) == r for r in inside_rates.values()),
               "rate boundary values are f32")
+        # The valid edge cases of the stream block ride on frames F0 + 57 ...; F0 + 55's rate
+        # fraction must agree with its f32 rate within 0.01 %, F0 + 56 gives none.
+        special_streams = {F0 + 55: lambda st: st.replace(num=120120, den=1000),
+                           F0 + 56: lambda st: st.replace(num=0, den=0)}
+        for k, (_, good_st) in enumerate(GOOD_STREAMS):
+            special_streams[F0 + 57 + k] = lambda st, g=good_st: g.replace(session=st.session)
+        check(F0 + 57 + len(GOOD_STREAMS) <= F0 + 95, "the stream edge cases reach the duplicate/late negatives")
+
+        def stream_of(i):
+            st = timecode(S1 if i < SESSION_CHANGE else S2, 120, 1, TC0 + i // 4, i % 4)
+            return special_streams.get(F0 + i, lambda x: x)(st)
 
         def frame_markers(i):
             root, markers = model.markers_at(i / RATE)
             return root, list(markers)
 
-        def send_good(number, i, t_ns, parts=2, markers=None, rate=RATE, junk=False, topic=f"markers/{SUBJECT}/"):
+        def send_good(number, i, t_ns, parts=2, markers=None, rate=RATE, junk=False, topic=f"markers/{SUBJECT}/",
+                      version=VERSION, stream=None):
             root, ms = frame_markers(i)
             if markers is not None:
                 ms = markers
-            msg = encode_marker_frame(SUBJECT, model.marker_hash, number, t_ns, rate, ms, junk=junk)
+            msg = encode_marker_frame(SUBJECT, model.marker_hash, number, t_ns, rate, ms, junk=junk, version=version,
+                                      stream=stream)
             sent[number] = (t_ns, ms, time.monotonic())  # stamped before the send: the daemon cannot beat it
+            sent_stream[number] = NO_STREAM if version == 1 else stream
             sender.send(msg, parts=parts, topic=topic)
             truth_root[number] = root
 
@@ -757,31 +1099,35 @@ def run(mocapd, config_dir, work):
             nxt = F0 + i + 1
             t_ns = T0 + (i + 1) * PERIOD_NS
             _, ms = frame_markers(i + 1)
-            good = encode_marker_frame(SUBJECT, model.marker_hash, nxt, t_ns, RATE, ms)
+            st = stream_of(i + 1)
+            foreign = st.replace(session=FOREIGN)  # dropped before the session step: no restart
+            good = encode_marker_frame(SUBJECT, model.marker_hash, nxt, t_ns, RATE, ms, stream=st)
             if i == 40:  # wrong hash
-                sender.send(encode_marker_frame(SUBJECT, model.marker_hash ^ 1, nxt, t_ns, RATE, ms))
+                sender.send(encode_marker_frame(SUBJECT, model.marker_hash ^ 1, nxt, t_ns, RATE, ms, stream=foreign))
                 expected_drops["model_mismatch"] += 1
             elif i == 45:  # right hash, one marker short
-                sender.send(encode_marker_frame(SUBJECT, model.marker_hash, nxt, t_ns, RATE, ms[:-1]))
+                sender.send(encode_marker_frame(SUBJECT, model.marker_hash, nxt, t_ns, RATE, ms[:-1], stream=foreign))
                 expected_drops["model_mismatch"] += 1
-            elif i == 50:  # rate just over 0.1 % off
-                sender.send(encode_marker_frame(SUBJECT, model.marker_hash, nxt, t_ns, outside_rate, ms))
+            elif i == 50:  # rate just over 0.1 % off (its fraction agrees with it: not malformed)
+                sender.send(encode_marker_frame(SUBJECT, model.marker_hash, nxt, t_ns, outside_rate, ms,
+                                                stream=foreign.replace(num=120120, den=1000)))
                 expected_drops["rate_mismatch"] += 1
             elif i == 60:  # truncated: the header's P is no longer met
                 sender.send(good[:-5])
                 expected_drops["malformed"] += 1
-            elif i == 65:  # the old, wrong size formula 35 + n + 13 M: two bytes too many
+            elif i == 65:  # the old, wrong size formula 35 + n + B + 13 M: two bytes too many
                 payload = good[16:] + b"\x00\x00"
-                check(len(payload) == 35 + n + 13 * M, "old-formula payload size")
+                check(len(payload) == 35 + n + 24 + 13 * M, "old-formula payload size")
                 sender.send(message(MARKER_FRAME, payload))
                 expected_drops["malformed"] += 1
             elif i == 70:  # a valid marker with NaN
                 bad = list(ms)
                 bad[3] = (float("nan"), 0.0, 0.0)
-                sender.send(encode_marker_frame(SUBJECT, model.marker_hash, nxt, t_ns, RATE, bad))
+                sender.send(encode_marker_frame(SUBJECT, model.marker_hash, nxt, t_ns, RATE, bad, stream=foreign))
                 expected_drops["non_finite"] += 1
             elif i == 75:  # a subject this daemon does not have
-                sender.send(encode_marker_frame("nobody", model.marker_hash, nxt, t_ns, RATE, ms), topic="markers/nobody/")
+                sender.send(encode_marker_frame("nobody", model.marker_hash, nxt, t_ns, RATE, ms, stream=foreign),
+                            topic="markers/nobody/")
                 expected_drops["unknown_subject"] += 1
             elif i == 80:  # not a marker frame (type 5)
                 sender.send(encode_status(SUBJECT, 0, 0, 1, 2, 3, 4, 5))
@@ -792,13 +1138,15 @@ def run(mocapd, config_dir, work):
             elif i == 90:  # over max_message_bytes (65536)
                 sender.send(good + bytes(70000))
                 expected_drops["oversized"] += 1
-            elif i == 95:  # the newest frame again
+            elif i == 95:  # the newest frame again (same session)
                 t_dup, ms_dup, _ = sent[F0 + i]
-                sender.send(encode_marker_frame(SUBJECT, model.marker_hash, F0 + i, t_dup, RATE, ms_dup))
+                sender.send(encode_marker_frame(SUBJECT, model.marker_hash, F0 + i, t_dup, RATE, ms_dup,
+                                                stream=sent_stream[F0 + i]))
                 expected_drops["duplicate"] += 1
             elif i == 100:  # three behind, with its own (earlier) capture timestamp
                 t_old, ms_old, _ = sent[F0 + i - 3]
-                sender.send(encode_marker_frame(SUBJECT, model.marker_hash, F0 + i - 3, t_old, RATE, ms_old))
+                sender.send(encode_marker_frame(SUBJECT, model.marker_hash, F0 + i - 3, t_old, RATE, ms_old,
+                                                stream=sent_stream[F0 + i - 3]))
                 expected_drops["out_of_order"] += 1
             elif i == 105:  # bad magic
                 sender.send(struct.pack("<I", 0x12345678) + good[4:])
@@ -809,33 +1157,75 @@ def run(mocapd, config_dir, work):
             elif i == 115:  # an end of stream one byte too long
                 sender.send(message(END_OF_STREAM, enc_string(SUBJECT) + struct.pack("<Q", F0 + i) + b"\x00"))
                 expected_drops["malformed"] += 1
-            elif i == 120:  # version 2
-                sender.send(good[:4] + struct.pack("<H", 2) + good[6:])
+            elif i == 120:  # version 3
+                sender.send(good[:4] + struct.pack("<H", 3) + good[6:])
                 expected_drops["malformed"] += 1
+            elif i == 122:  # the header's version disagrees with the payload's layout, both ways
+                v1 = encode_marker_frame(SUBJECT, model.marker_hash, nxt, t_ns, RATE, ms, version=1)
+                sender.send(v1[:4] + struct.pack("<H", 2) + v1[6:])
+                sender.send(good[:4] + struct.pack("<H", 1) + good[6:])
+                expected_drops["malformed"] += 2
+            elif i == 125:  # every stream-block rule broken once (bad_field: malformed)
+                for _, bad_st in BAD_STREAMS:
+                    sender.send(encode_marker_frame(SUBJECT, model.marker_hash, nxt, t_ns, RATE, ms,
+                                                    stream=bad_st.replace(session=st.session)))
+                    expected_drops["malformed"] += 1
+            elif i == 130:  # late within the session: far back (b = 125 >= 120) with a LATER
+                # capture timestamp. In version 1 that is a restart; with a session id it is late.
+                old = F0 + 5
+                sender.send(encode_marker_frame(SUBJECT, model.marker_hash, old, t_ns + PERIOD_NS, RATE, sent[old][1],
+                                                stream=sent_stream[old]))
+                check(i - 5 >= 120 and t_ns + PERIOD_NS > sent[F0 + i][0], "the late frame's setup")
+                expected_drops["out_of_order"] += 1
 
-        # Phase 1: N1 frames in real time.
+        # Phase 1: N1 frames in real time, version 2.
         t_start = time.monotonic()
         for i in range(N1):
             number = F0 + i
-            _, ms = frame_markers(i)
-            if 150 <= i < 154:  # one marker missing for 4 frames
-                ms[20] = None
-                invalid.setdefault(number, []).append(20)
-            if i == 170:  # a valid sample far outside the capture volume
-                ms[30] = (1000.0, ms[30][1], ms[30][2])
-                invalid.setdefault(number, []).append(30)
-            rate = inside_rates.get(number, RATE)  # within ±0.1 %
-            # Variations that must not matter: one-part messages (PULL), reserved fields and
-            # flag bits set, a topic naming another subject (routing is by the payload).
-            send_good(number, i, T0 + i * PERIOD_NS, parts=1 if i % 10 == 3 else 2, markers=ms, rate=rate,
-                      junk=i % 10 == 5, topic="markers/someone_else/" if i % 10 == 7 else f"markers/{SUBJECT}/")
-            negatives(i)
+            if number not in GAP1:
+                _, ms = frame_markers(i)
+                if 150 <= i < 154:  # one marker missing for 4 frames
+                    ms[20] = None
+                    invalid.setdefault(number, []).append(20)
+                if i == 170:  # a valid sample far outside the capture volume
+                    ms[30] = (1000.0, ms[30][1], ms[30][2])
+                    invalid.setdefault(number, []).append(30)
+                rate = inside_rates.get(number, RATE)  # within ±0.1 %
+                # Variations that must not matter: one-part messages (PULL), reserved fields and
+                # flag bits set, a topic naming another subject (routing is by the payload).
+                send_good(number, i, T0 + i * PERIOD_NS, parts=1 if i % 10 == 3 else 2, markers=ms, rate=rate,
+                          junk=i % 10 == 5, topic="markers/someone_else/" if i % 10 == 7 else f"markers/{SUBJECT}/",
+                          stream=stream_of(i))
+                negatives(i)
             delay = t_start + (i + 1) / RATE - time.monotonic()
             if delay > 0:
                 time.sleep(delay)
+        phase1 = list(range(F0, F0 + N1))
+
+        # Before the end of stream: the session, last timecode and skipped frames so far.
+        time.sleep(0.1)
+        want1 = {"capture_session_id": S2, "last_timecode": timecode_text(stream_of(N1 - 1)),
+                 "frames_skipped": len(GAP1), "capture_session_changes": 1}
+        check_stream_fields(subject_entry(http_port), want1, "end of the version 2 stream")
+        m = metrics(http_port)
+        for name in ("mocapd_frames_skipped_total", "mocapd_capture_sessions_changed_total",
+                     "mocapd_capture_restarts_total"):
+            check(name in m, f"/metrics lacks {name}")
+        check(metric_sum(m, "mocapd_frames_skipped_total", subject=SUBJECT) == len(GAP1),
+              f"frames_skipped {metric_sum(m, 'mocapd_frames_skipped_total', subject=SUBJECT)} after a "
+              f"{len(GAP1)}-frame gap")
+        check(metric_sum(m, "mocapd_capture_sessions_changed_total", subject=SUBJECT) == 1,
+              f"capture_sessions_changed {metric_sum(m, 'mocapd_capture_sessions_changed_total', subject=SUBJECT)} "
+              "after one session change (frames of other sessions dropped before the session step do not count)")
+        check(metric_sum(m, "mocapd_capture_restarts_total", subject=SUBJECT) == 1,
+              f"capture_restarts {metric_sum(m, 'mocapd_capture_restarts_total', subject=SUBJECT)} after one session "
+              "change (a late frame within a session is no restart)")
+        summary.append(f"version 2 stream: session change at frame {F0 + SESSION_CHANGE} (numbers continuing) = 1 "
+                       f"restart + 1 session change; late frame 125 back with a later timestamp = out_of_order; "
+                       f"{len(GAP1)}-frame gap = {len(GAP1)} skipped; /subjects: {want1}")
+
         eos_times.append(time.monotonic())
         sender.send(encode_end_of_stream(SUBJECT, F0 + N1 - 1))
-        phase1 = list(range(F0, F0 + N1))
 
         # The flush must come from the end of stream, well before the watchdog would fire.
         deadline = eos_times[0] + WATCHDOG_S * 0.75
@@ -847,8 +1237,13 @@ def run(mocapd, config_dir, work):
         else:
             raise Failure(f"the last frame was not published within {WATCHDOG_S * 0.75:.1f} s of the end of stream")
 
+        # Meanwhile, a second daemon publishing version 1.
+        summary.append(run_v1_output_daemon(mocapd, config_dir, work, ctx, model))
+
         # After the end of stream, past the watchdog timeout: "ok", not degraded.
-        time.sleep(WATCHDOG_S + 0.3)
+        delay = eos_times[0] + WATCHDOG_S + 0.3 - time.monotonic()
+        if delay > 0:
+            time.sleep(delay)
         code, body = http_get(http_port, "/health")
         health1 = json.loads(body)
         check(code == 200 and health1.get("status") == "ok",
@@ -856,20 +1251,34 @@ def run(mocapd, config_dir, work):
         check(health1.get("accounted") is True, f"/health accounted after the end of stream: {body}")
         summary.append(f"/health after end of stream (+{WATCHDOG_S + 0.3:.1f} s): ok, accounted")
 
-        # Phase 2: a fresh stream (any number accepted) with one missing frame number.
+        # Phase 2: a fresh stream in version 1 (any number accepted) with one missing frame
+        # number, then a jump of more than max_gap_frames (240).
         T1 = 77_000_000_000
-        phase2 = list(range(10, 50))
-        inserted = {30}
+        JUMP_FROM, JUMP_TO = 49, 350
+        phase2 = list(range(10, JUMP_FROM + 1)) + list(range(JUMP_TO, JUMP_TO + 20))
+        inserted_v1 = {30}
         t_start = time.monotonic()
         for i, number in enumerate(phase2):
-            if number not in inserted:
-                send_good(number, N1 + i, T1 + i * PERIOD_NS)
+            if number not in inserted_v1:
+                send_good(number, N1 + i, T1 + i * PERIOD_NS, version=1)
             delay = t_start + (i + 1) / RATE - time.monotonic()
             if delay > 0:
                 time.sleep(delay)
+        skipped = len(GAP1) + len(inserted_v1) + (JUMP_TO - JUMP_FROM - 1)
+        time.sleep(0.1)
+        entry2 = subject_entry(http_port)
+        check_stream_fields(entry2, {"capture_session_id": 0, "frames_skipped": skipped}, "end of the version 1 stream")
         eos_times.append(time.monotonic())
-        sender.send(encode_end_of_stream(SUBJECT, phase2[-1]))
+        sender.send(encode_end_of_stream(SUBJECT, phase2[-1], version=1))
         time.sleep(WATCHDOG_S + 0.3)
+        inserted = GAP1 | inserted_v1
+        # Streams, each ended by a flush: (frame numbers, when the flush was caused).
+        segments = [(phase1[:SESSION_CHANGE], sent[F0 + SESSION_CHANGE][2]), (phase1[SESSION_CHANGE:], eos_times[0]),
+                    ([f for f in phase2 if f <= JUMP_FROM], sent[JUMP_TO][2]),
+                    ([f for f in phase2 if f >= JUMP_TO], eos_times[1])]
+        segment_of = {f: seg for seg in segments for f in seg[0]}
+        # What an inserted frame carries: the session and rate of its stream, no timecode.
+        inserted_stream = {f: Stream(S1, 120, 1) for f in GAP1} | {f: NO_STREAM for f in inserted_v1}
 
         # --- c. every published message ------------------------------------------------
         items = collector.snapshot()
@@ -888,11 +1297,15 @@ def run(mocapd, config_dir, work):
             check(msg_type in kinds, f"unexpected {TYPE_NAMES[msg_type]} on {topic}")
             check(topic == f"{kinds[msg_type]}/{SUBJECT}/", f"{TYPE_NAMES[msg_type]} on topic {topic}")
             check(d["subject"] == SUBJECT, f"subject {d['subject']!r} on {topic}")
+            # The default [output] protocol_version is 2: every message, whatever the input's.
+            check(d["version"] == 2, f"a version {d['version']} {TYPE_NAMES[msg_type]} from a default daemon")
             if msg_type == SUBJECT_DESCRIPTION:
                 check(d == description, "the subject description changed between ticks")
             elif msg_type == SKELETON_FRAME:
+                check(len(msg) - 16 == 1 + n + 56 + 24 + 44 * J, "skeleton frame size: 1 + n + 56 + B + 44 J, B = 24")
                 skeletons.append((when, d))
             elif msg_type == CLEANED_MARKERS:
+                check(len(msg) - 16 == 1 + n + 36 + 24 + 14 * M, "cleaned markers size: 1 + n + 36 + B + 14 M, B = 24")
                 cleaned.append((when, d))
             else:
                 statuses.append((when, d))
@@ -912,6 +1325,27 @@ def run(mocapd, config_dir, work):
             check(s["state"] == want, f"frame {s['frame']}: subject state {s['state']}, expected {want} "
                                       f"(solve status {s['solve']})")
 
+        # The stream block: each skeleton frame and cleaned-markers message carries its
+        # marker frame's, unchanged; an inserted frame its stream's session and rate, no timecode.
+        junk_tc_frames = {F0 + 57 + k for k, (what, _) in enumerate(GOOD_STREAMS) if "not checked" in what}
+        junk_tc_seen = set()
+        for _, d in skeletons + cleaned:
+            f = d["frame"]
+            want_st = inserted_stream[f] if f in inserted else sent_stream[f]
+            if f in junk_tc_frames and d["stream"] != want_st:
+                # README: "unchanged" and, for the six timecode bytes without bit 0, "write
+                # zeros": a writer that zeroes them satisfies the second.
+                check(d["stream"] == want_st.replace(hours=0, minutes=0, seconds=0, frames=0, subframe=0, tc_rate=0),
+                      f"frame {f}: stream block {d['stream']}, sent {want_st}")
+                junk_tc_seen.add("zeroed")
+            else:
+                check(d["stream"] == want_st, f"frame {f}: stream block {d['stream']}, expected {want_st}")
+                if f in junk_tc_frames:
+                    junk_tc_seen.add("echoed")
+        summary.append("stream blocks: every skeleton/cleaned message carries its marker frame's (inserted: session "
+                       "and rate, no timecode; version 1 input: session 0, no rate, no timecode); timecode bytes sent "
+                       f"without a timecode were {'/'.join(sorted(junk_tc_seen))}")
+
         numbers = [d["frame"] for _, d in skeletons]
         check(numbers == phase1 + phase2,
               f"published frame numbers: {len(numbers)} frames, expected {len(phase1) + len(phase2)}; "
@@ -923,7 +1357,7 @@ def run(mocapd, config_dir, work):
         for when, s in skeletons:
             f = s["frame"]
             check(s["hash"] == model.skeleton_hash, f"frame {f}: skeleton hash {s['hash']}")
-            want_ts = 0 if (phase_of[f] == 1 and f in inserted) else sent[f][0]
+            want_ts = 0 if f in inserted else sent[f][0]
             check(s["capture_ns"] == want_ts, f"frame {f}: capture timestamp {s['capture_ns']}, sent {want_ts}")
             check(abs(s["publish_ns"] - now_ns) < 60e9, f"frame {f}: publish timestamp {s['publish_ns']} is not now")
             check(s["solve"] <= 3, f"frame {f}: final solve status {s['solve']}")
@@ -933,10 +1367,11 @@ def run(mocapd, config_dir, work):
             check(s["rms"] >= 0, f"frame {f}: negative RMS")
             worst_rms = max(worst_rms, s["rms"])
             # K frames of lookahead: frame f leaves only once frame f + K (or the next one
-            # sent, when f + K was inserted) has been sent, or on the end of stream.
-            phase = phase1 if phase_of[f] == 0 else phase2
-            release = next((sent[g][2] for g in phase if g >= f + K and g in sent), eos_times[phase_of[f]])
-            check(when >= release, f"frame {f} was published before frame {f + K} or the end of stream was sent")
+            # sent, when f + K was inserted) of its stream has been sent, or on the flush
+            # that ends its stream (session change, jump, end of stream).
+            seg, flush_time = segment_of[f]
+            release = next((sent[g][2] for g in seg if g >= f + K and g in sent), flush_time)
+            check(when >= release, f"frame {f} was published before frame {f + K} or its stream's flush")
             if f in truth_root and phase_of[f] == 0 and f >= F0 + 30:
                 root_err.append(math.dist(s["root"], truth_root[f]))
         check(sorted(numbers) == sorted(set(numbers)), "a frame was published twice")
@@ -947,7 +1382,7 @@ def run(mocapd, config_dir, work):
             f = c["frame"]
             check(c["hash"] == model.marker_hash, f"cleaned {f}: hash {c['hash']}")
             check(len(c["markers"]) == M, f"cleaned {f}: {len(c['markers'])} markers")
-            ms_sent = sent[f][1] if f in sent and not (phase_of[f] == 1 and f in inserted) else None
+            ms_sent = sent[f][1] if f in sent and f not in inserted else None
             for idx, (pos, st, reason) in enumerate(c["markers"]):
                 if st == 0:
                     observed += 1
@@ -967,7 +1402,7 @@ def run(mocapd, config_dir, work):
                 pos, st, reason = c["markers"][idx]
                 check(st != 0, f"cleaned {f} marker {idx}: sent missing/out of volume, published as observed")
                 check(st == 2 or reason == 1, f"cleaned {f} marker {idx}: a missing sample repaired with reason {reason}")
-            if phase_of[f] == 1 and f in inserted:
+            if f in inserted:
                 check(all(st != 0 for _, st, _ in c["markers"]), f"inserted frame {f} has observed markers")
 
         # --- d. forward kinematics against the global block ---------------------------
@@ -1024,6 +1459,23 @@ def run(mocapd, config_dir, work):
         check(published == good_sent, f"frames_published {published}, expected the {good_sent} received frames "
                                       "(inserted frames excluded)")
         check(metric_sum(m, "mocapd_frames_inserted_total", subject=SUBJECT) == len(inserted), "frames_inserted")
+        # Skipped: the two gaps and the whole of the jump. Restarts: the session change S1 -> S2
+        # and the jump. The version 1 stream's first frame (session 0 after S2's last frame)
+        # follows an end of stream, which already made it "a fresh start": it is neither a
+        # restart nor a session change. (The README's "Session" step compares with "the last
+        # accepted frame" and does not say whether an end of stream forgets its session; this
+        # is the daemon's reading, the one that keeps restarts for unannounced restarts.)
+        got = {name: metric_sum(m, f"mocapd_{name}_total", subject=SUBJECT)
+               for name in ("frames_skipped", "capture_restarts", "capture_sessions_changed")}
+        want = {"frames_skipped": skipped, "capture_restarts": 2, "capture_sessions_changed": 1}
+        check(got == want, f"/metrics at the end: {got}, expected {want}")
+        _, body = http_get(http_port, "/subjects")
+        entry = next((e for e in json.loads(body) if e.get("name") == SUBJECT), {})
+        check_stream_fields(entry, {"frames_skipped": skipped, "capture_session_changes": 1}, "at the end")
+        summary.append(f"version 1 stream: gap of 1 + jump of {JUMP_TO - JUMP_FROM - 1} numbers: frames_skipped "
+                       f"{int(got['frames_skipped'])} in all; restarts {int(got['capture_restarts'])}, session changes "
+                       f"{int(got['capture_sessions_changed'])}; /subjects last_timecode for version 1 input: "
+                       f"{entry2.get('last_timecode')!r}")
         check(pending == 0 and control == 2, f"pending {pending}, control messages {control} (2 end of stream)")
         for reason, want in expected_drops.items():
             got = metric_sum(m, "mocapd_frames_dropped_total", reason=reason)
@@ -1059,10 +1511,11 @@ def run(mocapd, config_dir, work):
               f"/subjects flags: rejecting_input {entry.get('rejecting_input')}, model_suspect {entry.get('model_suspect')}, "
               f"model_distance_mm {entry.get('model_distance_mm')}")
 
-        summary.insert(1, f"decoded {len(items)} messages: " + ", ".join(
+        summary.insert(2, f"decoded {len(items)} messages: " + ", ".join(
             f"{counts.get(t, 0)} {TYPE_NAMES[t]}" for t in (1, 3, 4, 5)) + "; every size = the README formula")
-        summary.insert(2, f"frames {phase1[0]}..{phase1[-1]} and {phase2[0]}..{phase2[-1]} published once each, in "
-                          f"order, timestamps echoed (inserted frame {min(inserted)}: 0); cleaned samples: {observed} "
+        summary.insert(3, f"frames {phase1[0]}..{phase1[-1]}, {phase2[0]}..{JUMP_FROM} and {JUMP_TO}..{phase2[-1]} "
+                          f"published once each, in order, timestamps echoed (inserted frames {sorted(inserted)}: 0), "
+                          f"every message version 2 (the default); cleaned samples: {observed} "
                           f"observed (bit-exact), {repaired} repaired, {unrecoverable} unrecoverable")
 
         # Shutdown: exit 0 means every frame accounted for; one last status message.
@@ -1076,21 +1529,11 @@ def run(mocapd, config_dir, work):
         summary.append(f"SIGTERM: exit 0, {len(final)} status message(s) at shutdown")
         return summary
     except BaseException:
-        log.flush()
-        log.seek(0)
-        tail = log.read()[-4000:]
-        print("---- mocapd log (tail) ----\n" + tail + "\n---------------------------", file=sys.stderr)
+        print_log_tail(log, "mocapd", 4000)
         raise
     finally:
-        if collector is not None:
-            collector.stop()
-        if sender is not None:
-            sender.sock.close(linger=0)
-        if daemon.poll() is None:
-            daemon.kill()
-            daemon.wait(timeout=10)
+        stop_all(collector, sender, daemon, log)
         ctx.term()
-        log.close()
 
 
 def main(argv):

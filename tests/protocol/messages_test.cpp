@@ -104,7 +104,7 @@ TEST(MessagesTest, HeaderIsLittleEndianWithMagicVersionTypeAndSize) {
   std::vector<uint8_t> bytes;
   EncodeMarkerFrame(SampleMarkers(), &bytes);
   EXPECT_EQ(std::string(bytes.begin(), bytes.begin() + 4), "MCPD");
-  EXPECT_EQ(bytes[4], 1);  // version
+  EXPECT_EQ(bytes[4], 2);  // version
   EXPECT_EQ(bytes[6], 2);  // marker frame
   const uint32_t payload =
       bytes[8] | (bytes[9] << 8) | (bytes[10] << 16) | (static_cast<uint32_t>(bytes[11]) << 24);
@@ -283,7 +283,9 @@ TEST(MessagesTest, EveryTruncationAndExtensionIsRejected) {
 
 TEST(MessagesTest, MalformedFieldsGetTheirOwnStatus) {
   std::vector<uint8_t> good;
-  EncodeMarkerFrame(SampleMarkers(), &good);
+  MarkerFrameMessage v1 = SampleMarkers();  // version 1: the markers follow the count
+  v1.version = kVersion1;
+  EncodeMarkerFrame(v1, &good);
   MarkerFrameMessage dut;
   auto with = [&](size_t offset, uint8_t value) {
     std::vector<uint8_t> b = good;
@@ -309,6 +311,125 @@ TEST(MessagesTest, MalformedFieldsGetTheirOwnStatus) {
   const float zero = 0.0f;
   std::memcpy(&zero_rate[count_offset - 4], &zero, 4);
   EXPECT_EQ(DecodeMarkerFrame(zero_rate, &dut), DecodeStatus::kNonFinite);
+}
+
+StreamInfo SampleStream() {
+  StreamInfo s;
+  s.session_id = 0xfeedfacecafebeefull;
+  s.rate_numerator = 120000;
+  s.rate_denominator = 1001;  // 119.88 Hz
+  s.has_timecode = true;
+  s.timecode = {10, 59, 58, 29, 3, true, 30};
+  return s;
+}
+
+// A marker frame at 119.88 Hz with the sample stream block.
+MarkerFrameMessage SampleMarkersWithStream() {
+  MarkerFrameMessage m = SampleMarkers();
+  m.rate_hz = 119.88f;
+  m.stream = SampleStream();
+  return m;
+}
+
+TEST(MessagesTest, VersionTwoFramesCarryTheStreamBlockThrough) {
+  MarkerFrameMessage m = SampleMarkersWithStream();
+  std::vector<uint8_t> bytes;
+  EncodeMarkerFrame(m, &bytes);
+  MarkerFrameMessage v1_form = m;
+  v1_form.version = kVersion1;
+  std::vector<uint8_t> v1_bytes;
+  EncodeMarkerFrame(v1_form, &v1_bytes);
+  EXPECT_EQ(bytes.size(), v1_bytes.size() + kStreamBlockBytes);
+  MarkerFrameMessage dut;
+  ASSERT_EQ(DecodeMarkerFrame(bytes, &dut), DecodeStatus::kOk);
+  EXPECT_EQ(dut.version, kVersion2);
+  EXPECT_EQ(dut.stream, SampleStream());
+  EXPECT_EQ(dut.positions[2], m.positions[2]);
+
+  SkeletonFrameMessage skeleton = SampleSkeleton();
+  skeleton.stream = SampleStream();
+  EncodeSkeletonFrame(skeleton, &bytes);
+  SkeletonFrameMessage skeleton_dut;
+  ASSERT_EQ(DecodeSkeletonFrame(bytes, &skeleton_dut), DecodeStatus::kOk);
+  EXPECT_EQ(skeleton_dut.stream, SampleStream());
+  EXPECT_EQ(skeleton_dut.rotations[1].coeffs(), skeleton.rotations[1].coeffs());
+  ExpectEveryTruncationRejected<SkeletonFrameMessage>(bytes, DecodeSkeletonFrame);
+
+  CleanedMarkersMessage cleaned = SampleCleaned();
+  cleaned.stream = SampleStream();
+  EncodeCleanedMarkers(cleaned, &bytes);
+  CleanedMarkersMessage cleaned_dut;
+  ASSERT_EQ(DecodeCleanedMarkers(bytes, &cleaned_dut), DecodeStatus::kOk);
+  EXPECT_EQ(cleaned_dut.stream, SampleStream());
+  EXPECT_EQ(cleaned_dut.status, cleaned.status);
+  ExpectEveryTruncationRejected<CleanedMarkersMessage>(bytes, DecodeCleanedMarkers);
+}
+
+TEST(MessagesTest, VersionOneMessagesStillDecodeWithNoStream) {
+  MarkerFrameMessage m = SampleMarkers();
+  m.version = kVersion1;
+  m.stream = SampleStream();  // not on the wire in version 1
+  std::vector<uint8_t> bytes;
+  EncodeMarkerFrame(m, &bytes);
+  EXPECT_EQ(bytes[4], 1);
+  MarkerFrameMessage dut;
+  dut.stream = SampleStream();  // left over from an earlier frame: must be cleared
+  ASSERT_EQ(DecodeMarkerFrame(bytes, &dut), DecodeStatus::kOk);
+  EXPECT_EQ(dut.version, kVersion1);
+  EXPECT_EQ(dut.stream, StreamInfo{});
+  EXPECT_EQ(dut.frame_number, 42u);
+  SubjectStatusMessage status;
+  status.subject = "actor1";
+  status.version = kVersion1;
+  EncodeSubjectStatus(status, &bytes);
+  SubjectStatusMessage status_dut;
+  ASSERT_EQ(DecodeSubjectStatus(bytes, &status_dut), DecodeStatus::kOk);
+  EXPECT_EQ(status_dut.version, kVersion1);
+  bytes[4] = 3;  // a version from the future
+  EXPECT_EQ(DecodeSubjectStatus(bytes, &status_dut), DecodeStatus::kUnsupportedVersion);
+  MessageType type;
+  EXPECT_EQ(PeekType(bytes, &type), DecodeStatus::kUnsupportedVersion);
+  m.version = 3;
+  EXPECT_THROW(EncodeMarkerFrame(m, &bytes), std::invalid_argument);
+}
+
+TEST(MessagesTest, StreamBlockFieldsOutOfRangeAreBadFields) {
+  std::vector<uint8_t> good;
+  EncodeMarkerFrame(SampleMarkersWithStream(), &good);
+  // After subject "actor1", hash, frame, time, rate, count and reserved.
+  const size_t stream = kHeaderBytes + 1 + 6 + 8 + 8 + 8 + 4 + 2 + 2;
+  const size_t timecode = stream + 16;
+  MarkerFrameMessage dut;
+  auto with = [&](size_t offset, uint8_t value) {
+    std::vector<uint8_t> b = good;
+    b[offset] = value;
+    return DecodeMarkerFrame(b, &dut);
+  };
+  ASSERT_EQ(with(timecode, 10), DecodeStatus::kOk);              // the unchanged hour
+  EXPECT_EQ(with(timecode + 0, 24), DecodeStatus::kBadField);    // hours
+  EXPECT_EQ(with(timecode + 1, 60), DecodeStatus::kBadField);    // minutes
+  EXPECT_EQ(with(timecode + 2, 60), DecodeStatus::kBadField);    // seconds
+  EXPECT_EQ(with(timecode + 3, 30), DecodeStatus::kBadField);    // frames at 30 fps
+  EXPECT_EQ(with(timecode + 5, 0x07), DecodeStatus::kBadField);  // an undefined flag bit
+  EXPECT_EQ(with(timecode + 6, 25), DecodeStatus::kBadField);    // drop-frame at 25 fps
+  EXPECT_EQ(with(timecode + 6, 0), DecodeStatus::kBadField);     // timecode rate 0
+  EXPECT_EQ(with(timecode + 5, 0x00), DecodeStatus::kOk);        // no timecode: fields ignored
+  EXPECT_FALSE(dut.stream.has_timecode);
+  // A rate fraction with no denominator, or one the float rate disagrees with.
+  std::vector<uint8_t> b = good;
+  std::memset(&b[stream + 12], 0, 4);
+  EXPECT_EQ(DecodeMarkerFrame(b, &dut), DecodeStatus::kBadField);
+  b = good;
+  b[stream + 12] = 1;  // 120000 / 1 (low byte of 1001 is 0xe9)
+  b[stream + 13] = 0;
+  EXPECT_EQ(DecodeMarkerFrame(b, &dut), DecodeStatus::kBadField);
+  std::memset(&b[stream + 8], 0, 8);  // 0/0: not given
+  EXPECT_EQ(DecodeMarkerFrame(b, &dut), DecodeStatus::kOk);
+}
+
+TEST(MessagesTest, TimecodeFormatsAsSmpteWritesIt) {
+  EXPECT_EQ(FormatTimecode({1, 2, 3, 4, 0, false, 30}), "01:02:03:04");
+  EXPECT_EQ(FormatTimecode({10, 59, 58, 29, 3, true, 30}), "10:59:58;29.3");
 }
 
 TEST(MessagesTest, EncoderRefusesMessagesOutsideTheLimits) {

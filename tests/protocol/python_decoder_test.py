@@ -25,12 +25,18 @@ def main(directory):
     assert kind == "marker_frame"
     assert m["subject"] == "actor1" and m["frame"] == 1234 and m["capture_time_ns"] == 987654321
     assert m["rate_hz"] == 120.0
+    assert m["version"] == 2 and m["stream"]["session_id"] == 0x0123456789ABCDEF and m["stream"]["rate"] == (120, 1)
+    assert mocapd_protocol.format_timecode(m["stream"]["timecode"]) == "01:02:03:04.2"
+    kind, v1 = mocapd_protocol.decode(read(directory, "marker_frame_v1.bin"))
+    assert v1["version"] == 1 and v1["stream"] is None and v1["markers"] == m["markers"]
     assert m["markers"][0] == (0.5, 1.25, -0.75) and m["markers"][1] is None and m["markers"][2] == (-1.5, 0.0, 2.0)
     kind, s = mocapd_protocol.decode(read(directory, "skeleton_frame.bin"))
     assert kind == "skeleton_frame"
     assert s["publish_time_ns"] == 987754321 and s["root_translation"] == (0.25, 0.875, -3.5)
     assert s["rotations"][1] == (0.5, 0.5, 0.5, 0.5)
     assert s["subject_state"] == "repairing" and s["global_transforms"] is None
+    assert s["stream"]["rate"] == (120000, 1001) and s["stream"]["session_id"] == 42
+    assert mocapd_protocol.format_timecode(s["stream"]["timecode"]) == "23:59:59;29.3"
     kind, g = mocapd_protocol.decode(read(directory, "skeleton_frame_globals.bin"))
     assert g["global_transforms"][1] == ((0.5, -0.5, 0.5, -0.5), (0.5, 1.0, -3.0))
     kind, d = mocapd_protocol.decode(read(directory, "subject_description.bin"))
@@ -61,9 +67,20 @@ def main(directory):
     expect_error(b"", "too_short")
     # The encoders write what the C++ encoder writes, byte for byte.
     assert mocapd_protocol.names_hash(["LASI", "RASI", "LKNE"]) == m["model_hash"]
-    encoded = mocapd_protocol.encode_marker_frame("actor1", m["model_hash"], 1234, 987654321, 120.0,
-                                                  [(0.5, 1.25, -0.75), None, (-1.5, 0.0, 2.0)])
+    points = [(0.5, 1.25, -0.75), None, (-1.5, 0.0, 2.0)]
+    encoded = mocapd_protocol.encode_marker_frame("actor1", m["model_hash"], 1234, 987654321, 120.0, points,
+                                                  session_id=m["stream"]["session_id"], rate=(120, 1),
+                                                  timecode=m["stream"]["timecode"])
     assert encoded == read(directory, "marker_frame.bin")
+    encoded = mocapd_protocol.encode_marker_frame("actor1", m["model_hash"], 1234, 987654321, 120.0, points,
+                                                  version=1)
+    assert encoded == read(directory, "marker_frame_v1.bin")
+    # Out-of-range stream fields are refused: 30 frames at 30 fps, drop-frame at 25 fps.
+    for bad in ({"hours": 1, "minutes": 0, "seconds": 0, "frames": 30, "rate": 30},
+                {"hours": 1, "minutes": 0, "seconds": 0, "frames": 0, "rate": 25, "drop_frame": True}):
+        expect_error(mocapd_protocol.encode_marker_frame("actor1", 1, 1, 1, 120.0, points, timecode=bad),
+                     "bad_field")
+    expect_error(mocapd_protocol.encode_marker_frame("actor1", 1, 1, 1, 120.0, points, rate=(119, 1)), "bad_field")
     eos = mocapd_protocol.decode(mocapd_protocol.encode_end_of_stream("actor1", 77))
     assert eos == ("end_of_stream", {"subject": "actor1", "last_frame": 77})
     print("1 passed, 0 failed")

@@ -29,7 +29,16 @@ int main(int argc, char** argv) {
   markers.rate_hz = 120.0f;
   markers.positions = {Vec3(0.5, 1.25, -0.75), Vec3::Constant(kNaN), Vec3(-1.5, 0.0, 2.0)};
   markers.valid = {1, 0, 1};
+  markers.stream.session_id = 0x0123456789abcdefull;
+  markers.stream.rate_numerator = 120;
+  markers.stream.rate_denominator = 1;
+  markers.stream.has_timecode = true;
+  markers.stream.timecode = {1, 2, 3, 4, 2, false, 30};
   std::vector<uint8_t> bytes;
+  markers.version = protocol::kVersion1;
+  protocol::EncodeMarkerFrame(markers, &bytes);
+  Write(dir + "/marker_frame_v1.bin", bytes);
+  markers.version = protocol::kVersion2;
   protocol::EncodeMarkerFrame(markers, &bytes);
   Write(dir + "/marker_frame.bin", bytes);
   std::vector<uint8_t> truncated(bytes.begin(), bytes.end() - 5);
@@ -44,6 +53,11 @@ int main(int argc, char** argv) {
   skeleton.root_translation = Vec3(0.25, 0.875, -3.5);
   skeleton.rotations = {Quat::Identity(), Quat(0.5, 0.5, 0.5, 0.5)};
   skeleton.subject_state = protocol::SubjectState::kRepairing;
+  skeleton.stream.session_id = 42;
+  skeleton.stream.rate_numerator = 120000;
+  skeleton.stream.rate_denominator = 1001;
+  skeleton.stream.has_timecode = true;
+  skeleton.stream.timecode = {23, 59, 59, 29, 3, true, 30};
   protocol::EncodeSkeletonFrame(skeleton, &bytes);
   Write(dir + "/skeleton_frame.bin", bytes);
   skeleton.global_rotations = {Quat::Identity(), Quat(0.5, -0.5, 0.5, -0.5)};

@@ -55,6 +55,7 @@ TEST(DaemonConfigTest, ShippedDefaultParsesWithDocumentedValues) {
   EXPECT_EQ(SubjectFingerprint(minimal.subjects[0], minimal), SubjectFingerprint(c.subjects[0], c));
   EXPECT_EQ(minimal.watchdog_timeout_s, c.watchdog_timeout_s);
   EXPECT_EQ(minimal.max_gap_frames, c.max_gap_frames);
+  EXPECT_EQ(c.output_protocol_version, 2);
 }
 
 TEST(DaemonConfigTest, DemoSubjectFileIsTheBuiltInHumanoid) {
@@ -78,6 +79,8 @@ TEST(DaemonConfigTest, ErrorsNameFileLineAndField) {
   EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[output]\nendpoint = \"udp://x\"\n"),
             "test.toml:5: field 'output.endpoint': expected tcp://HOST:PORT, ipc://PATH or "
             "inproc://NAME, got 'udp://x'");
+  EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[output]\nprotocol_version = 3\n"),
+            "test.toml:6: field 'output.protocol_version': must be in [1, 2], got 3");
   EXPECT_NE(ErrorOf("format_version = 1\n").find("field 'subject': no [[subject]] tables"),
             std::string::npos);
   EXPECT_NE(ErrorOf("[[subject]]\nname = \"a\"\nmodel = \"demo_subject.toml\"\n")

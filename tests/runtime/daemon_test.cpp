@@ -317,7 +317,7 @@ TEST(DaemonTest, MalformedMessagesAreCountedByReasonAndTheStreamGoesOn) {
   };
   variant([](auto& b) { b.resize(b.size() - 3); });              // truncated
   variant([](auto& b) { b[0] = 'X'; });                          // bad magic
-  variant([](auto& b) { b[4] = 2; });                            // version
+  variant([](auto& b) { b[4] = 3; });                            // version
   variant([](auto& b) { b.clear(); });                           // empty
   variant([](auto& b) { b.resize(8000, 0); });                   // oversized
   variant([](auto& b) { b[17] = 'X'; });                         // unknown subject "Xctor1"

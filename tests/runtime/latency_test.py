@@ -73,7 +73,7 @@ def main(mocapd, mocap_sim, config_dir, work, seconds="30"):
     probe.start()
     try:
         replay = subprocess.run([mocap_sim, "replay", "--humanoid", "mixed", "--seconds", seconds, "--corrupt", "medium",
-                                 "--seed", "7", "--to", daemon.input, "--from", daemon.output, "--report", report_path,
+                                 "--seed", "7", "--timecode", "30", "--to", daemon.input, "--from", daemon.output, "--report", report_path,
                                  "--plot", os.path.join(work, "latency.svg")], capture_output=True, text=True, timeout=600)
         print(replay.stdout, replay.stderr)
         assert replay.returncode == 0, f"replay exited {replay.returncode}"
@@ -91,6 +91,8 @@ def main(mocapd, mocap_sim, config_dir, work, seconds="30"):
         r = json.load(f)
     assert r["frames_sent"] == frames, r
     assert r["frames_received"] == frames and r["frames_lost"] == 0 and r["frames_duplicated"] == 0, r
+    # Protocol v2: every skeleton carried its marker frame's session id and timecode back.
+    assert r["stream_checked"] == frames and r["stream_mismatched"] == 0, r
     p = r["processing_latency"]
     print(f"LATENCY: {frames} frames, processing p50 {p['p50_ms']:.3f} ms, p99 {p['p99_ms']:.3f} ms, "
           f"p99.9 {p['p99.9_ms']:.3f} ms, max {p['max_ms']:.3f} ms; end-to-end p99 {r['end_to_end_latency']['p99_ms']:.3f} ms; "

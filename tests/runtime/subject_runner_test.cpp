@@ -186,6 +186,129 @@ TEST_F(SubjectRunnerTest, ALongJumpAheadResynchronisesInsteadOfInsertingFrames) 
   ExpectBalanced(runner);
 }
 
+// Protocol v2: the sender's session id, not a guess from frame numbers and clocks, says
+// when the capture restarted; frames that never arrived are counted.
+protocol::StreamInfo Session(uint64_t id, uint8_t seconds = 0, uint8_t frames = 0) {
+  protocol::StreamInfo s;
+  s.session_id = id;
+  s.rate_numerator = 120;
+  s.rate_denominator = 1;
+  s.has_timecode = true;
+  s.timecode.hours = 1;
+  s.timecode.seconds = seconds;
+  s.timecode.frames = frames;
+  s.timecode.rate = 30;
+  return s;
+}
+
+TEST_F(SubjectRunnerTest, ANewSessionRestartsTheSubjectEvenWhenItsFrameNumbersGoOn) {
+  SubjectRunner runner(subject_, daemon_);
+  for (int f = 0; f < 30; ++f) {
+    protocol::MarkerFrameMessage m = Frame(f, static_cast<uint64_t>(f), 1000 + f);
+    m.stream = Session(7);
+    ASSERT_FALSE(runner.Accept(m, 0, sink_).has_value());
+  }
+  // The capture restarted and its new session numbers frames from where the old one was:
+  // the numbers alone would have joined the two takes as one.
+  for (int f = 30; f < 60; ++f) {
+    protocol::MarkerFrameMessage m = Frame(f, static_cast<uint64_t>(f), 1000 + f);
+    m.stream = Session(8);
+    ASSERT_FALSE(runner.Accept(m, 0, sink_).has_value());
+  }
+  runner.Flush(sink_);
+  EXPECT_EQ(runner.counters().session_changes, 1u);
+  EXPECT_EQ(runner.counters().restarts, 1u);
+  EXPECT_EQ(runner.counters().frames_skipped, 0u);
+  ASSERT_EQ(sink_.skeletons.size(), 60u);
+  EXPECT_EQ(sink_.skeletons[29].stream.session_id, 7u);
+  EXPECT_EQ(sink_.skeletons[30].stream.session_id, 8u);
+  EXPECT_EQ(runner.counters().last_stream.session_id, 8u);
+  ExpectBalanced(runner);
+}
+
+TEST_F(SubjectRunnerTest, WithinASessionALateFrameIsOutOfOrderNeverARestart) {
+  SubjectRunner runner(subject_, daemon_);
+  for (int f = 0; f < 200; ++f) {
+    protocol::MarkerFrameMessage m = Frame(f % 200, static_cast<uint64_t>(f), 1000 + f);
+    m.stream = Session(7);
+    ASSERT_FALSE(runner.Accept(m, 0, sink_).has_value());
+  }
+  // Far back and stamped later: without a session (v1) this reads as a restart.
+  protocol::MarkerFrameMessage late = Frame(10, 10, 5000);
+  late.stream = Session(7);
+  EXPECT_EQ(runner.Accept(late, 0, sink_), DropReason::kOutOfOrder);
+  protocol::MarkerFrameMessage v1 = Frame(10, 10, 5000);
+  EXPECT_FALSE(runner.Accept(v1, 0, sink_).has_value());  // session 0: a new capture
+  EXPECT_EQ(runner.counters().restarts, 1u);
+  ExpectBalanced(runner);
+}
+
+TEST_F(SubjectRunnerTest, FrameNumbersThatNeverArrivedAreCountedAsSkipped) {
+  daemon_.max_gap_frames = 10;
+  SubjectRunner runner(subject_, daemon_);
+  auto send = [&](int f) {
+    protocol::MarkerFrameMessage m = Frame(f, static_cast<uint64_t>(f), 1000 + f);
+    m.stream = Session(7);
+    return runner.Accept(m, 0, sink_);
+  };
+  for (int f = 0; f < 20; ++f) ASSERT_FALSE(send(f).has_value());
+  for (int f = 25; f < 40; ++f) ASSERT_FALSE(send(f).has_value());    // 5 lost: bridged
+  for (int f = 100; f < 120; ++f) ASSERT_FALSE(send(f).has_value());  // 60 lost: too long
+  runner.Flush(sink_);
+  EXPECT_EQ(runner.counters().frames_skipped, 65u);
+  EXPECT_EQ(runner.counters().frames_inserted, 5u);
+  EXPECT_EQ(runner.counters().restarts, 1u);
+  ExpectBalanced(runner);
+}
+
+TEST_F(SubjectRunnerTest, OutputsCarryTheSessionAndTimecodeOfTheirFrame) {
+  SubjectRunner runner(subject_, daemon_);
+  for (int f = 0; f < 40; ++f) {
+    if (f == 20) continue;  // one lost: inserted, with the session but no timecode
+    protocol::MarkerFrameMessage m = Frame(f, static_cast<uint64_t>(f), 1000 + f);
+    m.stream = Session(99, static_cast<uint8_t>(f / 4 / 30), static_cast<uint8_t>(f / 4 % 30));
+    m.stream.timecode.subframe = static_cast<uint8_t>(f % 4);
+    ASSERT_FALSE(runner.Accept(m, 0, sink_).has_value());
+  }
+  runner.Flush(sink_);
+  ASSERT_EQ(sink_.skeletons.size(), 40u);
+  ASSERT_EQ(sink_.cleaned.size(), 40u);
+  for (int f = 0; f < 40; ++f) {
+    const auto& skeleton = sink_.skeletons[static_cast<size_t>(f)];
+    const auto& cleaned = sink_.cleaned[static_cast<size_t>(f)];
+    EXPECT_EQ(skeleton.version, protocol::kVersion2);
+    EXPECT_EQ(skeleton.stream.session_id, 99u);
+    EXPECT_EQ(cleaned.stream, skeleton.stream);
+    if (f == 20) {
+      EXPECT_FALSE(skeleton.stream.has_timecode);
+      continue;
+    }
+    ASSERT_TRUE(skeleton.stream.has_timecode);
+    EXPECT_EQ(skeleton.stream.timecode.frames, f / 4 % 30);
+    EXPECT_EQ(skeleton.stream.timecode.subframe, f % 4);
+    EXPECT_EQ(skeleton.stream.rate_numerator, 120u);
+  }
+}
+
+TEST_F(SubjectRunnerTest, ProtocolVersionOneOutputForOlderConsumers) {
+  daemon_.output_protocol_version = 1;
+  SubjectRunner runner(subject_, daemon_);
+  for (int f = 0; f < 10; ++f) {
+    protocol::MarkerFrameMessage m = Frame(f, static_cast<uint64_t>(f), 1000 + f);
+    m.stream = Session(5);
+    ASSERT_FALSE(runner.Accept(m, 0, sink_).has_value());
+  }
+  runner.Flush(sink_);
+  runner.PublishStatus(0, sink_);
+  ASSERT_EQ(sink_.skeletons.size(), 10u);
+  for (const auto& skeleton : sink_.skeletons) {
+    EXPECT_EQ(skeleton.version, protocol::kVersion1);
+    EXPECT_EQ(skeleton.stream, protocol::StreamInfo{});  // v1 has no stream block
+  }
+  EXPECT_EQ(sink_.cleaned.front().version, protocol::kVersion1);
+  EXPECT_EQ(sink_.statuses.back().version, protocol::kVersion1);
+}
+
 TEST_F(SubjectRunnerTest, WatchdogMarksAStalledSubjectOnceAndPublishesIt) {
   SubjectRunner runner(subject_, daemon_);
   EXPECT_FALSE(runner.CheckStall(10'000'000'000, 500'000'000,
