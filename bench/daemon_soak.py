@@ -102,6 +102,12 @@ def run(args, subjects, seconds, work):
           f"({'balanced' if result['balanced'] else 'UNBALANCED'}), exit {code}; processing p50 {p['p50_ms']:.3f} p99 {p['p99_ms']:.3f} "
           f"p99.9 {p['p99.9_ms']:.3f} max {p['max_ms']:.3f} ms; CPU {result['daemon_cpu_percent_mean'] or 0:.0f} %; "
           f"RSS {result['daemon_rss_mb_first_quarter'] or 0:.1f} -> {result['daemon_rss_mb_last_quarter'] or 0:.1f} MB", flush=True)
+    a = r.get("accuracy")
+    if a:
+        w = a.get("worst_frame", {})
+        print(f"  joint error: mean {a['mean_joint_position_error_cm']:.3f} cm / {a['mean_joint_rotation_error_deg']:.2f} deg, "
+              f"frame p99.9 {a.get('p999_frame_position_error_cm', 0):.2f} cm, worst frame {a['max_joint_position_error_cm']:.2f} cm "
+              f"({w.get('subject', '?')} frame {w.get('frame_number', '?')}, {w.get('joint', '?')})", flush=True)
     return result
 
 

@@ -75,4 +75,26 @@ double PoseErrorAccumulator::worst_joint_position_quantile_m(double q, int* wors
   return WorstQuantile(position_, joints_, q, worst_joint);
 }
 
+double PoseErrorAccumulator::frame_position_error_quantile_m(double q) const {
+  std::vector<double> frame_errors(static_cast<size_t>(frames_), 0.0);
+  for (const auto& joint : position_)
+    for (size_t f = 0; f < joint.size(); ++f) frame_errors[f] = std::max(frame_errors[f], joint[f]);
+  return Quantile(std::move(frame_errors), q);
+}
+
+int PoseErrorAccumulator::worst_frame(int* worst_joint) const {
+  int frame = -1;
+  double worst = -1.0;
+  for (size_t i = 0; i < position_.size(); ++i) {
+    for (size_t f = 0; f < position_[i].size(); ++f) {
+      if (position_[i][f] > worst) {
+        worst = position_[i][f];
+        frame = static_cast<int>(f);
+        if (worst_joint != nullptr) *worst_joint = joints_[i];
+      }
+    }
+  }
+  return frame;
+}
+
 }  // namespace mocapd

@@ -25,6 +25,12 @@ class PoseErrorAccumulator {
   /// The largest, over joints, of each joint's q-quantile rotation error (q in [0, 1]).
   double worst_joint_rotation_quantile_rad(double q, int* worst_joint = nullptr) const;
   double worst_joint_position_quantile_m(double q, int* worst_joint = nullptr) const;
+  /// A frame's position error is its worst joint's (what a viewer sees): the q-quantile
+  /// of that over the frames added.
+  double frame_position_error_quantile_m(double q) const;
+  /// The frame (in the order added) with the largest position error, and its joint; -1
+  /// when no frame was added.
+  int worst_frame(int* worst_joint = nullptr) const;
 
  private:
   std::vector<int> joints_;

@@ -53,6 +53,11 @@ nlohmann::json ReplayReport::ToJson() const {
   if (has_truth)
     j["accuracy"] = {{"mean_joint_position_error_cm", mean_position_error_cm},
                      {"max_joint_position_error_cm", max_position_error_cm},
+                     {"p999_frame_position_error_cm", p999_frame_error_cm},
+                     {"worst_frame",
+                      {{"subject", worst_frame_subject},
+                       {"frame_number", worst_frame_number},
+                       {"joint", worst_frame_joint}}},
                      {"mean_joint_rotation_error_deg", mean_rotation_error_deg}};
   return j;
 }
@@ -99,7 +104,10 @@ std::string ReplayReport::FormatTable() const {
   }
   if (has_truth) {
     row("joint position error mean (cm)", num(mean_position_error_cm, 3));
-    row("joint position error max (cm)", num(max_position_error_cm, 3));
+    row("frame position error p99.9 (cm)", num(p999_frame_error_cm, 3));
+    row("worst frame (cm)", num(max_position_error_cm, 3) + "  (" + worst_frame_subject +
+                                " frame " + std::to_string(worst_frame_number) + ", " +
+                                worst_frame_joint + ")");
     row("joint rotation error mean (deg)", num(mean_rotation_error_deg, 3));
   }
   return s.str();

@@ -38,7 +38,11 @@ struct ReplayReport {
   bool has_truth = false;
   double mean_position_error_cm = 0.0;
   double mean_rotation_error_deg = 0.0;
-  double max_position_error_cm = 0.0;
+  double max_position_error_cm = 0.0;  ///< The worst frame's (a frame's error: its worst joint's).
+  double p999_frame_error_cm = 0.0;    ///< 99.9th percentile over frames.
+  std::string worst_frame_subject;     ///< Where the worst frame was.
+  uint64_t worst_frame_number = 0;
+  std::string worst_frame_joint;
   nlohmann::json ToJson() const;
   std::string FormatTable() const;
 };

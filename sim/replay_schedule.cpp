@@ -129,6 +129,8 @@ class SkeletonReceiver {
   uint64_t stream_mismatched() const { return stream_mismatched_.load(); }
   /// Valid after Stop().
   const std::optional<PoseErrorAccumulator>& accuracy() const { return accuracy_; }
+  /// Valid after Stop(): which subject and frame number each scored frame was.
+  const std::vector<std::pair<size_t, uint64_t>>& scored() const { return scored_; }
 
  private:
   void Run() {
@@ -180,6 +182,7 @@ class SkeletonReceiver {
         ForwardKinematics(*skeleton, solved, &*solved_fk);
         ForwardKinematics(*skeleton, *expected, &*truth_fk);
         accuracy_->Add(*truth_fk, *solved_fk);
+        scored_.push_back({k, message.frame_number});
       }
     }
   }
@@ -188,6 +191,7 @@ class SkeletonReceiver {
   std::vector<SubjectLog>& logs_;
   const ScheduleSetup& setup_;
   std::optional<PoseErrorAccumulator> accuracy_;
+  std::vector<std::pair<size_t, uint64_t>> scored_;
   std::atomic<bool> running_{true};
   std::atomic<uint64_t> received_{0}, duplicated_{0}, stream_checked_{0}, stream_mismatched_{0};
   std::thread thread_;
@@ -305,6 +309,15 @@ ReplayReport RunSchedule(std::vector<SubjectLog>& logs, const FrameProducer& pro
     report.mean_position_error_cm = accuracy->mean_position_error_m() * 100.0;
     report.max_position_error_cm = accuracy->max_position_error_m() * 100.0;
     report.mean_rotation_error_deg = accuracy->mean_rotation_error_rad() * 180.0 / M_PI;
+    report.p999_frame_error_cm = accuracy->frame_position_error_quantile_m(0.999) * 100.0;
+    int joint = -1;
+    const int worst = accuracy->worst_frame(&joint);
+    if (worst >= 0 && setup.skeleton != nullptr) {
+      const auto& [subject, frame_number] = receiver->scored()[static_cast<size_t>(worst)];
+      report.worst_frame_subject = logs[subject].name;
+      report.worst_frame_number = frame_number;
+      report.worst_frame_joint = setup.skeleton->joint(joint).name;
+    }
   }
   return report;
 }

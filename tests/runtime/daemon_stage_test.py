@@ -1,7 +1,9 @@
 """`mocapd run` as a stage uses it: SIGTERM while a capture keeps streaming at 120 Hz
 finishes within 1 s with every frame it read accounted for, and /health answers
 "stopping" meanwhile; a second SIGTERM exits at once; during a burst (a replay as fast
-as possible) /health keeps answering within 100 ms and never says "down".
+as possible) /health keeps answering within 100 ms and never says "down", and a reload
+(SIGHUP) sent in the middle of it is applied within 0.5 s (a sanity bound; the figure is
+printed), and the resident memory the burst took is given back once it has been read.
 
 usage: daemon_stage_test.py MOCAPD MOCAP_SIM CONFIG_DIR WORK_DIR
 """
@@ -14,7 +16,27 @@ import threading
 import time
 import urllib.request
 
-from daemon_harness import Daemon
+from daemon_harness import Daemon, metrics
+
+PAGE = os.sysconf("SC_PAGE_SIZE")
+
+
+def rss_mb(pid):
+    with open(f"/proc/{pid}/statm") as f:
+        return int(f.read().split()[1]) * PAGE / 1e6
+
+
+def reload_latency(d, timeout_s=5.0):
+    """Seconds from SIGHUP until /metrics counts the reload as applied."""
+    key = ("mocapd_reloads_total", ())
+    before = metrics(d.http_port).get(key, 0)
+    t0 = time.monotonic()
+    d.process.send_signal(signal.SIGHUP)
+    while time.monotonic() - t0 < timeout_s:
+        if metrics(d.http_port).get(key, 0) > before:
+            return time.monotonic() - t0
+        time.sleep(0.002)
+    return float("inf")
 
 
 def health(port, timeout=1.0):
@@ -91,19 +113,32 @@ def health_answers_during_a_burst(mocapd, mocap_sim, config_dir, work):
             samples.append(health(d.http_port, timeout=2.0))
             time.sleep(0.01)
 
+    rss = [rss_mb(d.process.pid)]
     prober = threading.Thread(target=probe)
     prober.start()
+    reload_s = None
     try:
         feed = replay(mocap_sim, d, "--seconds", "60", "--subjects", "4", "--rate", "max")
+        while feed.poll() is None:
+            rss.append(rss_mb(d.process.pid))
+            if reload_s is None and len(rss) > 10:  # about 0.5 s into the burst
+                reload_s = reload_latency(d)
+            time.sleep(0.05)
         out, _ = feed.communicate(timeout=120)
-        time.sleep(0.3)
+        time.sleep(1.0)
+        rss_after = rss_mb(d.process.pid)
     finally:
         done.set()
         prober.join()
     try:
         worst = max(t for t, _ in samples)
         statuses = sorted(set(s for _, s in samples))
-        print(f"burst: {len(samples)} /health requests, slowest {worst * 1e3:.1f} ms, statuses {statuses}")
+        print(f"burst: {len(samples)} /health requests, slowest {worst * 1e3:.1f} ms, statuses {statuses}; "
+              f"SIGHUP to reload applied {reload_s * 1e3:.1f} ms; resident memory {rss[0]:.1f} MB before, "
+              f"{max(rss):.1f} MB at the peak, {rss_after:.1f} MB 1 s after")
+        assert reload_s is not None and reload_s <= 0.5, f"the reload took {reload_s} s during the burst"
+        # The backlog's memory is handed back once it has been read (most of what it grew by).
+        assert rss_after <= rss[0] + 0.5 * (max(rss) - rss[0]) + 2.0, (rss[0], max(rss), rss_after)
         assert feed.returncode == 0, out
         assert all(not s.startswith("no answer") and s != "down" for _, s in samples), statuses
         assert worst <= 0.1, f"/health took {worst * 1e3:.1f} ms during the burst (at most 100 ms)"

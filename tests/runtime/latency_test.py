@@ -107,6 +107,11 @@ def main(mocapd, mocap_sim, config_dir, work, seconds="30"):
     assert daemon_p99_s <= 0.010, f"the daemon's own p99 latency is over 10 ms (bucket bound {daemon_p99_s * 1e3:g} ms)"
     assert p["p99_ms"] < 500.0, f"p99 processing latency {p['p99_ms']} ms is over the 0.5 s sanity bound"
     assert r["accuracy"]["mean_joint_position_error_cm"] < 1.0, r["accuracy"]
+    # The worst frame is reported where it was, and the p99.9 lies between the mean and it.
+    worst = r["accuracy"]["worst_frame"]
+    assert worst["subject"] == "actor1" and 0 <= worst["frame_number"] < frames and worst["joint"], worst
+    assert (r["accuracy"]["mean_joint_position_error_cm"] <= r["accuracy"]["p999_frame_position_error_cm"]
+            <= r["accuracy"]["max_joint_position_error_cm"]), r["accuracy"]
     # Sanity bounds, not the accuracy targets (those are the cleanup benchmark's): the
     # humanoid's twist-prone end joints put the clean-marker rotation error near 2-3 deg.
     assert r["accuracy"]["mean_joint_rotation_error_deg"] < 10.0, r["accuracy"]
