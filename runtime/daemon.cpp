@@ -467,6 +467,16 @@ void LogStartup(const DaemonConfig& c, int http_port) {
                c.input_pattern == InputPattern::kSub && !c.subscribe_all ? "subjects' topics"
                                                                          : "all messages",
                c.output_endpoint);
+  if (c.shard_count > 1) {
+    std::string others;
+    for (const std::string& name : c.other_shards_subjects) others += " " + name;
+    spdlog::info("shard {}/{}: solving {} of {} configured subjects; the other shards'{}",
+                 c.shard_index, c.shard_count, c.subjects.size(),
+                 c.subjects.size() + c.other_shards_subjects.size(), others);
+    if (c.subjects.empty())
+      spdlog::warn("shard {}/{} has no subjects: this daemon solves nothing", c.shard_index,
+                   c.shard_count);
+  }
   for (const SubjectConfig& s : c.subjects) {
     const double budget_ms = 1e3 / s.rate_hz;
     spdlog::info(

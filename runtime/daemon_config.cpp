@@ -1,7 +1,9 @@
 // Reading and validating the daemon's TOML configuration.
 #include "runtime/daemon_config.hpp"
 
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -144,6 +146,22 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
       input.Integer("receive_high_water_mark", c.receive_high_water_mark, 1, 10'000'000);
   c.max_message_bytes = static_cast<size_t>(
       input.Integer("max_message_bytes", static_cast<int>(c.max_message_bytes), 64, 64 << 20));
+  if (input.Has("shard")) {
+    const std::string shard = input.String("shard", "0/1");
+    int index = -1, count = 0;
+    char tail = 0;
+    if (std::sscanf(shard.c_str(), "%d/%d%c", &index, &count, &tail) != 2 || count < 1 ||
+        count > 1024 || index < 0 || index >= count)
+      input.Fail(root["input"]["shard"].node(), "shard",
+                 "expected I/N with 0 <= I < N <= 1024, got '" + shard + "'");
+    // Each daemon must see only its own subjects' frames: PULL deals messages out to its
+    // peers in turn, and subscribing to everything would count the others' as unknown.
+    if (count > 1 && (c.input_pattern != InputPattern::kSub || c.subscribe_all))
+      input.Fail(root["input"]["shard"].node(), "shard",
+                 "needs pattern = \"sub\" and subscribe = \"subjects\"");
+    c.shard_index = index;
+    c.shard_count = count;
+  }
   input.RejectUnknown();
 
   TomlTable output = top.Table("output");
@@ -215,7 +233,8 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
     if (s.name.empty() || s.name.size() > protocol::kMaxSubjectName ||
         s.name.find_first_of("/ \t\n") != std::string::npos)
       t.Fail(table->get("name"), "name", "must be 1..63 characters without '/' or spaces");
-    if (c.FindSubject(s.name) != nullptr)
+    if (c.FindSubject(s.name) != nullptr ||
+        std::count(c.other_shards_subjects.begin(), c.other_shards_subjects.end(), s.name) > 0)
       t.Fail(table->get("name"), "name", "subject '" + s.name + "' is listed twice");
     s.model_path = t.String("model", "", true);
     if (!s.model_path.empty() && std::filesystem::path(s.model_path).is_relative())
@@ -262,10 +281,19 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
     } else if (!joint_map.empty()) {
       t.Fail(table->get("character_joint_map"), "character_joint_map", "given without a character");
     }
-    c.subjects.push_back(std::move(s));
+    // Every subject is validated, whichever daemon solves it: the shards share one list.
+    if (SubjectShard(s.name, c.shard_count) == c.shard_index)
+      c.subjects.push_back(std::move(s));
+    else
+      c.other_shards_subjects.push_back(s.name);
   }
   top.RejectUnknown();
   return c;
+}
+
+int SubjectShard(const std::string& name, int shard_count) {
+  const std::string names[] = {name};
+  return static_cast<int>(protocol::NamesHash(names) % static_cast<uint64_t>(shard_count));
 }
 
 DaemonConfig LoadDaemonConfig(const std::string& path) {

@@ -38,6 +38,12 @@ struct DaemonConfig {
   bool subscribe_all = false;  ///< SUB: every topic, not just the configured subjects'.
   int receive_high_water_mark = 10000;
   size_t max_message_bytes = 65536;
+  /// Scale-out: this daemon solves only the configured subjects whose shard (a hash of the
+  /// name, SubjectShard) is shard_index of shard_count; several daemons with the same
+  /// subject list and shards 0/n .. n-1/n on one capture feed solve each subject once.
+  int shard_index = 0;
+  int shard_count = 1;
+  std::vector<std::string> other_shards_subjects;  ///< Configured, left to other shards.
   // Output.
   std::string output_endpoint = "tcp://127.0.0.1:5556";
   int send_high_water_mark = 1000;
@@ -62,6 +68,11 @@ struct DaemonConfig {
 
   const SubjectConfig* FindSubject(const std::string& name) const;
 };
+
+/// The shard a subject belongs to among shard_count: the 64-bit FNV-1a hash of its name
+/// (the wire's model-hash recipe over the one name) modulo shard_count, so every daemon
+/// and every operator's script computes the same split.
+int SubjectShard(const std::string& name, int shard_count);
 
 /// Parses and validates a config; subject model paths are resolved against base_dir
 /// and loaded. Throws std::runtime_error "SOURCE:LINE: field 'a.b': problem".

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <fstream>
+#include <map>
 #include <sstream>
 
 #include "formats/bvh.hpp"
@@ -88,6 +89,40 @@ TEST(DaemonConfigTest, ErrorsNameFileLineAndField) {
             std::string::npos);
   EXPECT_NE(ErrorOf("format_version = 1\n[[subject]\n").find("test.toml:2:"),
             std::string::npos);  // TOML syntax
+}
+
+TEST(DaemonConfigTest, ShardsSplitTheSubjectListSoEachIsSolvedOnce) {
+  std::string subjects;
+  for (int k = 1; k <= 16; ++k)
+    subjects +=
+        "[[subject]]\nname = \"actor" + std::to_string(k) + "\"\nmodel = \"demo_subject.toml\"\n";
+  std::map<std::string, int> owner;
+  for (int i = 0; i < 3; ++i) {
+    const std::string text =
+        "format_version = 1\n[input]\nshard = \"" + std::to_string(i) + "/3\"\n" + subjects;
+    const DaemonConfig c = ParseDaemonConfig(text, "shard.toml", MOCAPD_CONFIG_DIR);
+    EXPECT_EQ(c.subjects.size() + c.other_shards_subjects.size(), 16u);
+    for (const SubjectConfig& s : c.subjects) {
+      EXPECT_EQ(SubjectShard(s.name, 3), i);
+      EXPECT_TRUE(owner.emplace(s.name, i).second) << s.name << " solved by two shards";
+    }
+  }
+  EXPECT_EQ(owner.size(), 16u);  // every subject has a shard, and only one
+  // The split is the wire's hash of the name: anyone can compute it.
+  EXPECT_EQ(SubjectShard("actor1", 2), 1);
+  EXPECT_EQ(SubjectShard("actor2", 2), 0);
+  EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[input]\nshard = \"2/2\"\n"),
+            "test.toml:6: field 'input.shard': expected I/N with 0 <= I < N <= 1024, got '2/2'");
+  EXPECT_NE(ErrorOf(std::string(kMinimal) + "[input]\nshard = \"1/2x\"\n").find("expected I/N"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf(std::string(kMinimal) + "[input]\npattern = \"pull\"\nshard = \"0/2\"\n")
+                .find("needs pattern = \"sub\""),
+            std::string::npos);
+  // A subject listed twice is found even when the first lies in another shard.
+  EXPECT_NE(ErrorOf("format_version = 1\n[input]\nshard = \"0/2\"\n" + subjects +
+                    "[[subject]]\nname = \"actor1\"\nmodel = \"demo_subject.toml\"\n")
+                .find("listed twice"),
+            std::string::npos);
 }
 
 TEST(DaemonConfigTest, SubjectsAreValidatedOneByOne) {

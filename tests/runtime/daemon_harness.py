@@ -47,18 +47,21 @@ def wait_for_metric(port, name, labels, at_least, timeout_s=5.0):
 
 
 class Daemon:
-    """`mocapd run` on fresh loopback ports with the demo subject; logs to WORK/mocapd.log."""
+    """`mocapd run` on fresh loopback ports with the demo subject; logs to WORK/mocapd.log.
+    input: the capture feed to connect to (default: a fresh port); shard: "I/N" or None."""
 
-    def __init__(self, mocapd, config_dir, work, lookahead=12, subjects=("actor1",), rate_hz=120.0):
+    def __init__(self, mocapd, config_dir, work, lookahead=12, subjects=("actor1",), rate_hz=120.0, input=None,
+                 shard=None):
         os.makedirs(work, exist_ok=True)
         self.lookahead = lookahead
         self.input_port, self.output_port, self.http_port = free_ports(3)
-        self.input = f"tcp://127.0.0.1:{self.input_port}"
+        self.input = input or f"tcp://127.0.0.1:{self.input_port}"
         self.output = f"tcp://127.0.0.1:{self.output_port}"
         self.config = os.path.join(work, "mocapd.toml")
         model = os.path.abspath(os.path.join(config_dir, "demo_subject.toml"))
         with open(self.config, "w") as f:
-            f.write(f"format_version = 1\n[input]\nendpoint = \"{self.input}\"\n[output]\nendpoint = \"{self.output}\"\n"
+            shard_line = f"shard = \"{shard}\"\n" if shard else ""
+            f.write(f"format_version = 1\n[input]\nendpoint = \"{self.input}\"\n{shard_line}[output]\nendpoint = \"{self.output}\"\n"
                     f"[control]\nhttp_port = {self.http_port}\nstats_interval_s = 0.2\n[pipeline]\nlookahead = {lookahead}\n")
             for name in subjects:
                 f.write(f"[[subject]]\nname = \"{name}\"\nmodel = \"{model}\"\nrate_hz = {rate_hz}\n")
