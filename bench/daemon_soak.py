@@ -20,7 +20,7 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 sys.path.insert(0, os.path.join(ROOT, "tests", "runtime"))
-from daemon_harness import Daemon, http_get  # noqa: E402
+from daemon_harness import Daemon, add_run_arguments, http_get  # noqa: E402
 
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
 PAGE = os.sysconf("SC_PAGE_SIZE")
@@ -113,11 +113,7 @@ def run(args, subjects, seconds, work):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--mocapd", default=os.path.join(ROOT, "build", "release", "runtime", "mocapd"))
-    parser.add_argument("--mocap-sim", dest="mocap_sim", default=os.path.join(ROOT, "build", "release", "sim", "mocap-sim"))
-    parser.add_argument("--subjects", type=int, default=4)
-    parser.add_argument("--rate", type=float, default=240.0)
-    parser.add_argument("--seconds", type=float, default=600.0)
+    add_run_arguments(parser, ROOT, seconds=600.0)
     parser.add_argument("--lookahead", type=int, default=12)
     parser.add_argument("--sample-s", dest="sample_s", type=float, default=5.0)
     parser.add_argument("--load", action="store_true", help="run each N of --load-subjects and report the largest within bounds")

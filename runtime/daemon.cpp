@@ -345,6 +345,15 @@ struct Daemon::ControlPlane {
   std::optional<boost::asio::signal_set> signals;
   std::optional<boost::asio::steady_timer> tick;
   std::unique_ptr<HttpServer> http;
+  // Each endpoint's last answer, rendered at most once per kRenderPeriodNs however often
+  // it is asked for: a scraper hammering /metrics costs a copy, not a render and a turn
+  // at the data plane's statistics lock.
+  static constexpr int64_t kRenderPeriodNs = 20'000'000;
+  struct Rendered {
+    int64_t at_ns = -1;
+    HttpResponse response;
+  };
+  std::map<std::string, Rendered> rendered;
   DaemonConfig config;  // the control plane's copy (what was last applied)
   DaemonStats last_logged;
   std::array<int64_t, kDropReasonCount> last_drop_log_ns{};
@@ -428,9 +437,12 @@ void Daemon::ApplyReload(DaemonConfig config) {
   if (config.input_endpoint != old.input_endpoint ||
       config.output_endpoint != old.output_endpoint || config.input_pattern != old.input_pattern ||
       config.subscribe_all != old.subscribe_all || config.http_port != old.http_port ||
-      config.http_address != old.http_address || config.http_enabled != old.http_enabled)
+      config.http_address != old.http_address || config.http_enabled != old.http_enabled ||
+      config.http_token != old.http_token ||
+      config.http_max_connections != old.http_max_connections)
     spdlog::warn(
-        "reload: endpoint changes take effect only after a restart; the sockets stay as they are");
+        "reload: endpoint and HTTP access changes take effect only after a restart; the sockets "
+        "and the HTTP endpoint stay as they are");
   auto pending = std::make_unique<DataPlane::PendingReload>();
   for (const SubjectConfig& s : config.subjects)
     pending->runners.push_back(std::make_unique<SubjectRunner>(s, config));
@@ -501,22 +513,39 @@ void Daemon::Run(bool handle_signals) {
   try {
     data_->Open();
     if (cp.config.http_enabled) {
+      auto render = [this](const std::string& target) {
+        DaemonStats stats = Stats();
+        if (control_->http) {
+          stats.http_unauthorized = control_->http->counters().unauthorized;
+          stats.http_over_connections = control_->http->counters().over_connections;
+        }
+        const bool alive = (stats.running || stats.stopping) &&
+                           SteadyNs() - stats.data_plane_heartbeat_ns < 1'000'000'000;
+        if (target == "/metrics")
+          return HttpResponse{200, "text/plain; version=0.0.4; charset=utf-8",
+                              FormatPrometheusMetrics(stats)};
+        if (target == "/subjects")
+          return HttpResponse{200, "application/json", FormatSubjectsJson(stats)};
+        return HttpResponse{alive ? 200 : 503, "application/json", FormatHealthJson(stats, alive)};
+      };
+      HttpServerOptions options;
+      options.bearer_token = cp.config.http_token;
+      options.max_connections = cp.config.http_max_connections;
       cp.http = std::make_unique<HttpServer>(
-          cp.io, cp.config.http_address, cp.config.http_port, [this](const std::string& target) {
-            const DaemonStats stats = Stats();
-            const bool alive = (stats.running || stats.stopping) &&
-                               SteadyNs() - stats.data_plane_heartbeat_ns < 1'000'000'000;
-            if (target == "/metrics")
-              return HttpResponse{200, "text/plain; version=0.0.4; charset=utf-8",
-                                  FormatPrometheusMetrics(stats)};
-            if (target == "/subjects")
-              return HttpResponse{200, "application/json", FormatSubjectsJson(stats)};
-            if (target == "/health")
-              return HttpResponse{alive ? 200 : 503, "application/json",
-                                  FormatHealthJson(stats, alive)};
-            return HttpResponse{404, "text/plain; charset=utf-8",
-                                "not found; try /health, /subjects or /metrics\n"};
-          });
+          cp.io, cp.config.http_address, cp.config.http_port,
+          [this, render](const std::string& target) {
+            if (target != "/metrics" && target != "/subjects" && target != "/health")
+              return HttpResponse{404, "text/plain; charset=utf-8",
+                                  "not found; try /health, /subjects or /metrics\n"};
+            ControlPlane::Rendered& r = control_->rendered[target];
+            const int64_t now = SteadyNs();
+            if (r.at_ns < 0 || now - r.at_ns >= ControlPlane::kRenderPeriodNs) {
+              r.response = render(target);
+              r.at_ns = now;
+            }
+            return r.response;
+          },
+          options);
       http_port_.store(cp.http->port());
     }
   } catch (...) {

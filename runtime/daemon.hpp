@@ -60,6 +60,8 @@ struct DaemonStats {
   uint64_t output_send_failures = 0;
   uint64_t reloads = 0;
   uint64_t reload_failures = 0;
+  uint64_t http_unauthorized = 0;       ///< HTTP requests without the bearer token.
+  uint64_t http_over_connections = 0;   ///< HTTP connections closed: too many open.
   int64_t data_plane_heartbeat_ns = 0;  ///< Steady clock of the data plane's last loop.
   std::vector<SubjectStats> subjects;
 

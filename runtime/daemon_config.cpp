@@ -2,6 +2,7 @@
 #include "runtime/daemon_config.hpp"
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -183,6 +184,30 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
   c.log_interval_s = control.Number("log_interval_s", c.log_interval_s, 0.1, 86400);
   c.model_suspect_mm = control.Number("model_suspect_mm", c.model_suspect_mm, 1.0, 10000.0);
   c.allow_remote = control.Bool("allow_remote", c.allow_remote);
+  c.http_max_connections =
+      control.Integer("http_max_connections", c.http_max_connections, 1, 10000);
+  c.http_token_file = control.String("http_token_file", "");
+  if (!c.http_token_file.empty()) {
+    if (std::filesystem::path(c.http_token_file).is_relative())
+      c.http_token_file =
+          (std::filesystem::path(base_dir) / c.http_token_file).lexically_normal().string();
+    std::ifstream token_in(c.http_token_file, std::ios::binary);
+    std::ostringstream token;
+    token << token_in.rdbuf();
+    c.http_token = token.str();
+    while (!c.http_token.empty() && std::isspace(static_cast<unsigned char>(c.http_token.back())))
+      c.http_token.pop_back();
+    // A short or spaced token is a mistake (a path, a placeholder), not a secret.
+    const bool spaced = std::any_of(c.http_token.begin(), c.http_token.end(),
+                                    [](unsigned char ch) { return std::isspace(ch) != 0; });
+    if (!token_in)
+      control.Fail(root["control"]["http_token_file"].node(), "http_token_file",
+                   "cannot read '" + c.http_token_file + "'");
+    if (c.http_token.size() < 16 || spaced)
+      control.Fail(root["control"]["http_token_file"].node(), "http_token_file",
+                   "'" + c.http_token_file +
+                       "' must hold one token of at least 16 characters without spaces");
+  }
   control.RejectUnknown();
   // Anything reachable from other machines must be asked for: a stage network is shared.
   if (!c.allow_remote) {

@@ -56,6 +56,11 @@ struct DaemonConfig {
   bool http_enabled = true;
   std::string http_address = "127.0.0.1";
   int http_port = 8480;  ///< 0: any free port (logged at start-up).
+  /// A file holding the bearer token every HTTP request must carry ("": none); the token
+  /// itself is read at load.
+  std::string http_token_file;
+  std::string http_token;
+  int http_max_connections = 64;
   double stats_interval_s = 1.0;
   double watchdog_timeout_s = 0.5;
   double model_suspect_mm = 20.0;  ///< Median sample-to-model distance that flags a model.

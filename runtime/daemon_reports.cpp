@@ -43,6 +43,13 @@ std::string FormatPrometheusMetrics(const DaemonStats& stats) {
   counter("mocapd_reload_failures_total", "Configuration reloads refused (invalid config)")
       .Add({})
       .Increment(static_cast<double>(stats.reload_failures));
+  counter("mocapd_http_unauthorized_total", "HTTP requests refused: no or a wrong bearer token")
+      .Add({})
+      .Increment(static_cast<double>(stats.http_unauthorized));
+  counter("mocapd_http_over_connections_total",
+          "HTTP connections closed unanswered: control.http_max_connections were open")
+      .Add({})
+      .Increment(static_cast<double>(stats.http_over_connections));
   counter("mocapd_output_send_failures_total", "Messages the PUB socket could not queue")
       .Add({})
       .Increment(static_cast<double>(stats.output_send_failures));

@@ -1,10 +1,12 @@
 // The control plane's HTTP endpoint: accept, read one request, answer, close.
 #include "runtime/http_server.hpp"
 
+#include <algorithm>
 #include <boost/beast/core.hpp>
 #include <boost/beast/http.hpp>
 #include <chrono>
 #include <stdexcept>
+#include <string_view>
 
 namespace mocapd {
 namespace {
@@ -13,10 +15,23 @@ namespace beast = boost::beast;
 namespace http = beast::http;
 using tcp = boost::asio::ip::tcp;
 
+// Compares without stopping at the first difference, so the time a wrong token takes
+// says nothing about how much of it was right.
+bool SameSecret(std::string_view given, std::string_view secret) {
+  unsigned char difference = given.size() == secret.size() ? 0 : 1;
+  for (size_t i = 0; i < given.size(); ++i)
+    difference |=
+        static_cast<unsigned char>(given[i] ^ secret[i % std::max<size_t>(1, secret.size())]);
+  return difference == 0;
+}
+
 class Session : public std::enable_shared_from_this<Session> {
  public:
-  Session(tcp::socket socket, std::shared_ptr<HttpServer::Handler> handler)
-      : stream_(std::move(socket)), handler_(std::move(handler)) {}
+  Session(tcp::socket socket, std::shared_ptr<HttpServer::Shared> shared)
+      : stream_(std::move(socket)), shared_(std::move(shared)) {
+    ++shared_->open_connections;
+  }
+  ~Session() { --shared_->open_connections; }
 
   void Start() {
     stream_.expires_after(std::chrono::seconds(5));
@@ -29,11 +44,18 @@ class Session : public std::enable_shared_from_this<Session> {
   void OnRead(beast::error_code ec) {
     if (ec) return;  // client went away or timed out: nothing to answer
     HttpResponse answer;
-    if (request_.method() != http::verb::get && request_.method() != http::verb::head) {
+    const std::string& token = shared_->options.bearer_token;
+    if (!token.empty() && !Authorized(token)) {
+      ++shared_->counters.unauthorized;
+      answer = {401, "text/plain; charset=utf-8",
+                "unauthorized: send the header 'Authorization: Bearer TOKEN' "
+                "(control.http_token_file)\n"};
+      response_.set(http::field::www_authenticate, "Bearer realm=\"mocapd\"");
+    } else if (request_.method() != http::verb::get && request_.method() != http::verb::head) {
       answer = {405, "text/plain; charset=utf-8", "only GET is served here\n"};
     } else {
       try {
-        answer = (*handler_)(std::string(request_.target()));
+        answer = shared_->handler(std::string(request_.target()));
       } catch (const std::exception& e) {
         answer = {500, "text/plain; charset=utf-8",
                   std::string("internal error: ") + e.what() + "\n"};
@@ -53,18 +75,28 @@ class Session : public std::enable_shared_from_this<Session> {
     });
   }
 
+  bool Authorized(const std::string& token) const {
+    const auto header = request_.find(http::field::authorization);
+    if (header == request_.end()) return false;
+    constexpr std::string_view kScheme = "Bearer ";
+    const std::string_view value(header->value().data(), header->value().size());
+    return value.starts_with(kScheme) && SameSecret(value.substr(kScheme.size()), token);
+  }
+
   beast::tcp_stream stream_;
   beast::flat_buffer buffer_;
   http::request<http::string_body> request_;
   http::response<http::string_body> response_;
-  std::shared_ptr<HttpServer::Handler> handler_;
+  std::shared_ptr<HttpServer::Shared> shared_;
 };
 
 }  // namespace
 
 HttpServer::HttpServer(boost::asio::io_context& io, const std::string& address, int port,
-                       Handler handler)
-    : io_(io), acceptor_(io), handler_(std::make_shared<Handler>(std::move(handler))) {
+                       Handler handler, HttpServerOptions options)
+    : io_(io),
+      acceptor_(io),
+      shared_(std::make_shared<Shared>(Shared{std::move(handler), std::move(options), {}, 0})) {
   boost::system::error_code ec;
   const auto ip = boost::asio::ip::make_address(address == "localhost" ? "127.0.0.1" : address, ec);
   if (ec) throw std::runtime_error("HTTP address '" + address + "': " + ec.message());
@@ -90,7 +122,14 @@ void HttpServer::Stop() {
 void HttpServer::Accept() {
   acceptor_.async_accept(io_, [this](boost::system::error_code ec, tcp::socket socket) {
     if (ec == boost::asio::error::operation_aborted || !acceptor_.is_open()) return;
-    if (!ec) std::make_shared<Session>(std::move(socket), handler_)->Start();
+    if (!ec && shared_->open_connections >= shared_->options.max_connections) {
+      // Busy: closing now costs nothing, where reading a request would hold memory.
+      ++shared_->counters.over_connections;
+      boost::system::error_code ignored;
+      socket.close(ignored);
+    } else if (!ec) {
+      std::make_shared<Session>(std::move(socket), shared_)->Start();
+    }
     Accept();
   });
 }

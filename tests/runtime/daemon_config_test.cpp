@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <filesystem>
 #include <fstream>
 #include <map>
 #include <sstream>
@@ -123,6 +124,30 @@ TEST(DaemonConfigTest, ShardsSplitTheSubjectListSoEachIsSolvedOnce) {
                     "[[subject]]\nname = \"actor1\"\nmodel = \"demo_subject.toml\"\n")
                 .find("listed twice"),
             std::string::npos);
+}
+
+TEST(DaemonConfigTest, AnHttpTokenFileMustHoldOneLongToken) {
+  const std::string dir = std::filesystem::temp_directory_path() / "mocapd_token_test";
+  std::filesystem::create_directories(dir);
+  auto write = [&](const std::string& name, const std::string& text) {
+    std::ofstream(dir + "/" + name) << text;
+    return dir + "/" + name;
+  };
+  const std::string good = write("good.token", "0123456789abcdef-token\n");
+  const DaemonConfig c =
+      ParseDaemonConfig(std::string(kMinimal) + "[control]\nhttp_token_file = \"" + good + "\"\n",
+                        "test.toml", MOCAPD_CONFIG_DIR);
+  EXPECT_EQ(c.http_token, "0123456789abcdef-token");  // the trailing newline is not part of it
+  const std::string short_token = write("short.token", "abc\n");
+  EXPECT_NE(
+      ErrorOf(std::string(kMinimal) + "[control]\nhttp_token_file = \"" + short_token + "\"\n")
+          .find("at least 16 characters"),
+      std::string::npos);
+  EXPECT_NE(ErrorOf(std::string(kMinimal) + "[control]\nhttp_token_file = \"" + dir +
+                    "/missing.token\"\n")
+                .find("test.toml:6: field 'control.http_token_file': cannot read"),
+            std::string::npos);
+  std::filesystem::remove_all(dir);
 }
 
 TEST(DaemonConfigTest, SubjectsAreValidatedOneByOne) {

@@ -93,3 +93,12 @@ class Daemon:
         self.log.flush()
         self.log.seek(0)
         return self.log.read()
+
+
+def add_run_arguments(parser, root, seconds):
+    """The command-line options the bench scripts share: the binaries, actors, rate, length."""
+    parser.add_argument("--mocapd", default=os.path.join(root, "build", "release", "runtime", "mocapd"))
+    parser.add_argument("--mocap-sim", dest="mocap_sim", default=os.path.join(root, "build", "release", "sim", "mocap-sim"))
+    parser.add_argument("--subjects", type=int, default=4)
+    parser.add_argument("--rate", type=float, default=240.0)
+    parser.add_argument("--seconds", type=float, default=seconds)

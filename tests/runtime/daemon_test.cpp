@@ -565,7 +565,8 @@ TEST(DaemonTest, ARetargetedCharacterIsPublishedBesideTheActor) {
   EXPECT_LT(worst_deg, 10.0);  // planted feet are held, so not exactly the actor's angles
 }
 
-std::pair<int, std::string> HttpGet(int port, const std::string& target) {
+std::pair<int, std::string> HttpGet(int port, const std::string& target,
+                                    const std::string& authorization = "") {
   namespace beast = boost::beast;
   boost::asio::io_context io;
   boost::asio::ip::tcp::resolver resolver(io);
@@ -573,6 +574,7 @@ std::pair<int, std::string> HttpGet(int port, const std::string& target) {
   stream.connect(resolver.resolve("127.0.0.1", std::to_string(port)));
   beast::http::request<beast::http::empty_body> request(beast::http::verb::get, target, 11);
   request.set(beast::http::field::host, "127.0.0.1");
+  if (!authorization.empty()) request.set(beast::http::field::authorization, authorization);
   beast::http::write(stream, request);
   beast::flat_buffer buffer;
   beast::http::response<beast::http::string_body> response;
@@ -633,6 +635,45 @@ TEST(DaemonTest, HealthNamesASubjectWhoseFramesAreAllDropped) {
       << health;
   const std::string subjects = HttpGet(daemon->http_port(), "/subjects").second;
   EXPECT_NE(subjects.find("\"rejecting_input\": true"), std::string::npos) << subjects;
+}
+
+TEST(DaemonTest, HttpWithATokenAnswersOnlyRequestsThatCarryIt) {
+  DaemonConfig config = TestConfig("inproc://token-in", "inproc://token-out", 4);
+  config.http_token = "s3cret-token-0123456789";
+  zmq::context_t context;
+  RunningDaemon daemon(context, config);
+  const int port = daemon->http_port();
+  EXPECT_EQ(HttpGet(port, "/health").first, 401);
+  EXPECT_EQ(HttpGet(port, "/metrics", "Bearer wrong-token-0123456789").first, 401);
+  EXPECT_EQ(HttpGet(port, "/metrics", "Bearer s3cret-token-012345678").first, 401);  // a prefix
+  EXPECT_EQ(HttpGet(port, "/health", "Basic s3cret-token-0123456789").first, 401);
+  const auto [code, metrics] = HttpGet(port, "/metrics", "Bearer s3cret-token-0123456789");
+  EXPECT_EQ(code, 200);
+  EXPECT_NE(metrics.find("mocapd_http_unauthorized_total 4"), std::string::npos) << metrics;
+}
+
+// Connections that never send a request hold a slot until their 5 s timeout; beyond the
+// limit, new ones are closed at once and counted, and the endpoint answers again as soon
+// as a slot frees.
+TEST(DaemonTest, HttpConnectionsBeyondTheLimitAreClosedAndCounted) {
+  DaemonConfig config = TestConfig("inproc://limit-in", "inproc://limit-out", 4);
+  config.http_max_connections = 2;
+  zmq::context_t context;
+  RunningDaemon daemon(context, config);
+  const int port = daemon->http_port();
+  boost::asio::io_context io;
+  std::vector<boost::asio::ip::tcp::socket> idle;
+  for (int k = 0; k < 2; ++k) {
+    idle.emplace_back(io);
+    idle.back().connect({boost::asio::ip::make_address("127.0.0.1"), static_cast<uint16_t>(port)});
+  }
+  std::this_thread::sleep_for(100ms);          // both accepted
+  EXPECT_ANY_THROW(HttpGet(port, "/health"));  // closed without an answer
+  for (auto& socket : idle) socket.close();
+  std::this_thread::sleep_for(100ms);  // the server sees them go
+  const auto [code, metrics] = HttpGet(port, "/metrics");
+  EXPECT_EQ(code, 200);
+  EXPECT_NE(metrics.find("mocapd_http_over_connections_total 1"), std::string::npos) << metrics;
 }
 
 }  // namespace
