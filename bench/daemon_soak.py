@@ -45,7 +45,8 @@ def metric_sum(text, name):
 
 def run(args, subjects, seconds, work):
     names = [f"actor{k + 1}" for k in range(subjects)]
-    daemon = Daemon(args.mocapd, os.path.join(ROOT, "config"), work, lookahead=args.lookahead, subjects=names, rate_hz=args.rate)
+    daemon = Daemon(args.mocapd, os.path.join(ROOT, "config"), work, lookahead=args.lookahead, subjects=names, rate_hz=args.rate,
+                    workers=args.workers)
     samples = []
     stop = threading.Event()
 
@@ -115,6 +116,7 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     add_run_arguments(parser, ROOT, seconds=600.0)
     parser.add_argument("--lookahead", type=int, default=12)
+    parser.add_argument("--workers", type=int, default=None, help="data-plane threads (default: the daemon's, one per core)")
     parser.add_argument("--sample-s", dest="sample_s", type=float, default=5.0)
     parser.add_argument("--load", action="store_true", help="run each N of --load-subjects and report the largest within bounds")
     parser.add_argument("--load-subjects", dest="load_subjects", default="1,2,4,6,8,10,12")

@@ -9,7 +9,12 @@
 #include <boost/asio/signal_set.hpp>
 #include <boost/asio/steady_timer.hpp>
 
+#include <pthread.h>
+#include <sched.h>
+
+#include <algorithm>
 #include <csignal>
+#include <cstdio>
 #include <map>
 #include <optional>
 #include <zmq.hpp>
@@ -52,10 +57,8 @@ uint64_t DaemonStats::pending_total() const {
 // Data plane: one thread, owns the sockets and the runners.
 
 struct Daemon::DataPlane final : OutputSink {
-  DataPlane(DaemonConfig cfg, zmq::context_t* shared_context)
-      : owned_context(shared_context == nullptr ? std::make_unique<zmq::context_t>(1) : nullptr),
-        context(shared_context != nullptr ? *shared_context : *owned_context),
-        config(std::move(cfg)) {
+  DataPlane(DaemonConfig cfg, zmq::context_t& shared_context, int worker_index)
+      : context(shared_context), config(std::move(cfg)), index(worker_index) {
     for (const SubjectConfig& s : config.subjects)
       runners.push_back(std::make_unique<SubjectRunner>(s, config));
     frame.positions.reserve(protocol::kMaxMarkers);
@@ -258,6 +261,7 @@ struct Daemon::DataPlane final : OutputSink {
       if (rejecting) s.rejecting_reason = *rejecting;
       s.model_suspect = r.model_suspect();
       s.model_distance_mm = r.model_distance_m() * 1e3;
+      s.worker = index;
     }
   }
 
@@ -316,11 +320,11 @@ struct Daemon::DataPlane final : OutputSink {
     std::vector<std::unique_ptr<SubjectRunner>> runners;
   };
 
-  std::unique_ptr<zmq::context_t> owned_context;
   zmq::context_t& context;
   zmq::socket_t input;
   zmq::socket_t output;
   DaemonConfig config;
+  int index = 0;  // which worker
   std::vector<std::unique_ptr<SubjectRunner>> runners;
   protocol::MarkerFrameMessage frame;
   protocol::EndOfStreamMessage end_of_stream;
@@ -367,19 +371,138 @@ struct Daemon::ControlPlane {
   std::function<void(const boost::system::error_code&)> on_shutdown_poll;  // ...with this
 };
 
+// ---------------------------------------------------------------------------------------
+// With several workers, each publishes on its own inproc PUB and this thread forwards
+// everything to the one output endpoint (and consumers' subscriptions back), so no socket
+// is shared between threads and each subject's messages keep their order (one worker, one
+// pipe). Stopped after the workers have flushed: it forwards what they left, then exits.
+
+struct Daemon::OutputProxy {
+  OutputProxy(zmq::context_t& context, const DaemonConfig& config, const std::string& prefix,
+              int workers)
+      : from_workers(context, zmq::socket_type::xsub),
+        to_consumers(context, zmq::socket_type::xpub),
+        control_in(context, zmq::socket_type::pair),
+        control_out(context, zmq::socket_type::pair) {
+    from_workers.set(zmq::sockopt::rcvhwm, config.send_high_water_mark);
+    to_consumers.set(zmq::sockopt::sndhwm, config.send_high_water_mark);
+    to_consumers.set(zmq::sockopt::linger, 2000);
+    try {
+      to_consumers.bind(config.output_endpoint);
+    } catch (const zmq::error_t& e) {
+      throw std::runtime_error("output endpoint '" + config.output_endpoint + "': " + e.what());
+    }
+    for (int i = 0; i < workers; ++i) from_workers.connect(prefix + std::to_string(i));
+    control_in.bind(prefix + "control");
+    control_out.connect(prefix + "control");
+    thread = std::thread([this] { Loop(); });
+  }
+
+  void Loop() {
+    zmq::pollitem_t items[] = {{from_workers.handle(), 0, ZMQ_POLLIN, 0},
+                               {to_consumers.handle(), 0, ZMQ_POLLIN, 0},
+                               {control_in.handle(), 0, ZMQ_POLLIN, 0}};
+    zmq::message_t part;
+    auto forward = [&](zmq::socket_t& from, zmq::socket_t& to) {
+      while (from.recv(part, zmq::recv_flags::dontwait)) {
+        const bool more = part.more();
+        (void)to.send(part, more ? zmq::send_flags::sndmore : zmq::send_flags::none);
+        if (!more) break;
+      }
+    };
+    for (;;) {
+      zmq::poll(items, 3, std::chrono::milliseconds(-1));
+      if ((items[1].revents & ZMQ_POLLIN) != 0) forward(to_consumers, from_workers);
+      if ((items[0].revents & ZMQ_POLLIN) != 0) forward(from_workers, to_consumers);
+      if ((items[2].revents & ZMQ_POLLIN) != 0) {
+        // The workers have closed: what they sent is already in the pipe; pass it all on.
+        zmq::pollitem_t rest = {from_workers.handle(), 0, ZMQ_POLLIN, 0};
+        while (zmq::poll(&rest, 1, std::chrono::milliseconds(20)) > 0)
+          forward(from_workers, to_consumers);
+        return;
+      }
+    }
+  }
+
+  void Stop() {
+    if (!thread.joinable()) return;
+    (void)control_out.send(zmq::str_buffer("stop"), zmq::send_flags::none);
+    thread.join();
+  }
+
+  ~OutputProxy() { Stop(); }
+
+  zmq::socket_t from_workers, to_consumers, control_in, control_out;
+  std::thread thread;
+};
+
 Daemon::Daemon(DaemonConfig config, std::string config_path, zmq::context_t* context)
     : config_path_(std::move(config_path)),
-      data_(std::make_unique<DataPlane>(config, context)),
+      owned_context_(context == nullptr ? std::make_unique<zmq::context_t>(1) : nullptr),
+      context_(context != nullptr ? context : owned_context_.get()),
       control_(std::make_unique<ControlPlane>()) {
+  // One worker per core (at most one per subject); PULL deals messages out to whoever
+  // reads, and subscribing to everything would give every worker every message, so those
+  // inputs keep one.
+  const int cores = std::max(1u, std::thread::hardware_concurrency());
+  int workers = config.workers > 0 ? config.workers
+                                   : std::clamp(static_cast<int>(config.subjects.size()), 1, cores);
+  if (workers > 1 && (config.input_pattern != InputPattern::kSub || config.subscribe_all)) {
+    if (config.workers > 1)
+      spdlog::warn("input.workers = {}: a PULL input or subscribe = \"all\" has one worker",
+                   config.workers);
+    workers = 1;
+  }
+  char prefix[64];
+  std::snprintf(prefix, sizeof prefix, "inproc://mocapd-%p-worker-", static_cast<void*>(this));
+  worker_output_prefix_ = prefix;
+  planes_.resize(static_cast<size_t>(workers));
+  AssignWorkers(config);
+  for (int i = 0; i < workers; ++i)
+    planes_[static_cast<size_t>(i)] =
+        std::make_unique<DataPlane>(WorkerConfig(config, i), *context_, i);
   control_->config = std::move(config);
+}
+
+void Daemon::AssignWorkers(const DaemonConfig& config) {
+  std::map<std::string, int> next;
+  std::vector<int> load(planes_.size(), 0);
+  for (const SubjectConfig& s : config.subjects)
+    if (const auto kept = worker_of_.find(s.name); kept != worker_of_.end()) {
+      next[s.name] = kept->second;
+      ++load[static_cast<size_t>(kept->second)];
+    }
+  for (const SubjectConfig& s : config.subjects) {
+    if (next.count(s.name) > 0) continue;
+    const auto least = std::min_element(load.begin(), load.end()) - load.begin();
+    next[s.name] = static_cast<int>(least);
+    ++load[static_cast<size_t>(least)];
+  }
+  worker_of_ = std::move(next);
+}
+
+DaemonConfig Daemon::WorkerConfig(const DaemonConfig& config, int worker) const {
+  DaemonConfig c = config;
+  c.subjects.clear();
+  for (const SubjectConfig& s : config.subjects)
+    if (worker_of_.at(s.name) == worker) c.subjects.push_back(s);
+  if (planes_.size() > 1) c.output_endpoint = worker_output_prefix_ + std::to_string(worker);
+  return c;
+}
+
+void Daemon::StopProxy() {
+  if (proxy_) proxy_->Stop();
 }
 
 Daemon::~Daemon() {
   Stop();
-  if (data_->thread.joinable()) {
-    data_->stop.store(true);
-    data_->thread.join();
+  for (auto& plane : planes_) {
+    if (plane && plane->thread.joinable()) {
+      plane->stop.store(true);
+      plane->thread.join();
+    }
   }
+  proxy_.reset();
 }
 
 void Daemon::Stop() {
@@ -388,18 +511,22 @@ void Daemon::Stop() {
     if (cp.stopping) return;
     cp.stopping = true;
     spdlog::info("shutting down: reading what has arrived, flushing the lookahead");
-    data_->stop.store(true, std::memory_order_release);
+    for (auto& plane : planes_) plane->stop.store(true, std::memory_order_release);
     // The control plane keeps serving (/health says "stopping") and a second signal is
     // still heard while the data plane flushes; it is joined once it has finished.
     cp.shutdown.emplace(cp.io);
     cp.on_shutdown_poll = [this](const boost::system::error_code&) {
       ControlPlane& c = *control_;
-      if (!data_->finished.load(std::memory_order_acquire)) {
-        c.shutdown->expires_after(std::chrono::milliseconds(5));
-        c.shutdown->async_wait(c.on_shutdown_poll);
-        return;
+      for (auto& plane : planes_) {
+        if (!plane->finished.load(std::memory_order_acquire)) {
+          c.shutdown->expires_after(std::chrono::milliseconds(5));
+          c.shutdown->async_wait(c.on_shutdown_poll);
+          return;
+        }
       }
-      if (data_->thread.joinable()) data_->thread.join();
+      for (auto& plane : planes_)
+        if (plane->thread.joinable()) plane->thread.join();
+      StopProxy();
       if (c.http) c.http->Stop();
       if (c.tick) c.tick->cancel();
       if (c.signals) c.signals->cancel();
@@ -443,23 +570,63 @@ void Daemon::ApplyReload(DaemonConfig config) {
     spdlog::warn(
         "reload: endpoint and HTTP access changes take effect only after a restart; the sockets "
         "and the HTTP endpoint stay as they are");
-  auto pending = std::make_unique<DataPlane::PendingReload>();
-  for (const SubjectConfig& s : config.subjects)
-    pending->runners.push_back(std::make_unique<SubjectRunner>(s, config));
-  pending->config = config;
+  AssignWorkers(config);
+  for (size_t i = 0; i < planes_.size(); ++i) {
+    auto pending = std::make_unique<DataPlane::PendingReload>();
+    pending->config = WorkerConfig(config, static_cast<int>(i));
+    for (const SubjectConfig& s : pending->config.subjects)
+      pending->runners.push_back(std::make_unique<SubjectRunner>(s, pending->config));
+    DataPlane& plane = *planes_[i];
+    std::lock_guard lock(plane.mailbox_mutex);
+    plane.pending_reload = std::move(pending);
+    plane.has_pending_reload.store(true, std::memory_order_release);
+  }
   std::string names;
   for (const SubjectConfig& s : config.subjects) names += (names.empty() ? "" : ", ") + s.name;
   spdlog::info("reload: applying {} ({} subjects: {})", config.source, config.subjects.size(),
                names);
   control_->config = std::move(config);
-  std::lock_guard lock(data_->mailbox_mutex);
-  data_->pending_reload = std::move(pending);
-  data_->has_pending_reload.store(true, std::memory_order_release);
 }
 
 DaemonStats Daemon::Stats() const {
-  std::lock_guard lock(data_->stats_mutex);
-  DaemonStats stats = data_->shared_stats;
+  DaemonStats stats;
+  for (size_t i = 0; i < planes_.size(); ++i) {
+    std::lock_guard lock(planes_[i]->stats_mutex);
+    const DaemonStats& w = planes_[i]->shared_stats;
+    if (i == 0) {
+      stats = w;
+      continue;
+    }
+    // The daemon runs while every worker does, and is alive while the slowest reports.
+    stats.running = stats.running && w.running;
+    stats.stopping = stats.stopping || w.stopping;
+    stats.catching_up = stats.catching_up || w.catching_up;
+    stats.full_batches += w.full_batches;
+    stats.uptime_s = std::max(stats.uptime_s, w.uptime_s);
+    stats.messages_in += w.messages_in;
+    stats.control_messages += w.control_messages;
+    for (size_t r = 0; r < stats.unattributed_dropped.size(); ++r)
+      stats.unattributed_dropped[r] += w.unattributed_dropped[r];
+    stats.retired_published += w.retired_published;
+    stats.retired_dropped += w.retired_dropped;
+    stats.output_send_failures += w.output_send_failures;
+    stats.reloads = std::max(stats.reloads, w.reloads);  // every worker applies each reload
+    stats.data_plane_heartbeat_ns =
+        std::min(stats.data_plane_heartbeat_ns, w.data_plane_heartbeat_ns);
+    stats.subjects.insert(stats.subjects.end(), w.subjects.begin(), w.subjects.end());
+  }
+  if (planes_.size() > 1) {
+    // In the config's order, whichever worker solves each.
+    const std::vector<SubjectConfig>& order = control_->config.subjects;
+    auto rank = [&](const SubjectStats& s) {
+      for (size_t k = 0; k < order.size(); ++k)
+        if (order[k].name == s.name) return k;
+      return order.size();
+    };
+    std::stable_sort(
+        stats.subjects.begin(), stats.subjects.end(),
+        [&](const SubjectStats& a, const SubjectStats& b) { return rank(a) < rank(b); });
+  }
   stats.reload_failures = reload_failures_.load();
   return stats;
 }
@@ -511,7 +678,10 @@ void LogStartup(const DaemonConfig& c, int http_port) {
 void Daemon::Run(bool handle_signals) {
   ControlPlane& cp = *control_;
   try {
-    data_->Open();
+    for (auto& plane : planes_) plane->Open();
+    if (planes_.size() > 1)
+      proxy_ = std::make_unique<OutputProxy>(*context_, cp.config, worker_output_prefix_,
+                                             static_cast<int>(planes_.size()));
     if (cp.config.http_enabled) {
       auto render = [this](const std::string& target) {
         DaemonStats stats = Stats();
@@ -557,8 +727,30 @@ void Daemon::Run(bool handle_signals) {
     throw;
   }
   LogStartup(cp.config, http_port_.load());
-  data_->Snapshot(true);
-  data_->thread = std::thread([this] { data_->Loop(); });
+  if (planes_.size() > 1) {
+    std::string split;
+    for (const auto& plane : planes_) {
+      split += fmt::format(" [{}:", plane->index);
+      for (const SubjectConfig& s : plane->config.subjects) split += " " + s.name;
+      split += "]";
+    }
+    spdlog::info("data plane: {} workers{}{}", planes_.size(),
+                 cp.config.pin_workers ? ", pinned" : "", split);
+  }
+  const unsigned cores = std::max(1u, std::thread::hardware_concurrency());
+  for (auto& plane : planes_) {
+    plane->Snapshot(true);
+    DataPlane* p = plane.get();
+    p->thread = std::thread([p] { p->Loop(); });
+    if (cp.config.pin_workers) {
+      cpu_set_t set;
+      CPU_ZERO(&set);
+      CPU_SET(static_cast<unsigned>(p->index) % cores, &set);
+      if (pthread_setaffinity_np(p->thread.native_handle(), sizeof set, &set) != 0)
+        spdlog::warn("worker {}: could not pin it to core {}", p->index,
+                     static_cast<unsigned>(p->index) % cores);
+    }
+  }
 
   // Handlers re-arm themselves through these, which live until Run returns.
   std::function<void(const boost::system::error_code&, int)> on_signal;
@@ -688,10 +880,13 @@ void Daemon::Run(bool handle_signals) {
   }
   run_cv_.notify_all();
   cp.io.run();
-  if (data_->thread.joinable()) {
-    data_->stop.store(true);
-    data_->thread.join();
+  for (auto& plane : planes_) {
+    if (plane->thread.joinable()) {
+      plane->stop.store(true);
+      plane->thread.join();
+    }
   }
+  StopProxy();
   const DaemonStats final_stats = Stats();
   spdlog::info("mocapd stopped: {} messages in, {} frames published, {} dropped, {} pending ({})",
                final_stats.messages_in, final_stats.published_total(), final_stats.dropped_total(),

@@ -9,6 +9,7 @@
 #include <chrono>
 #include <condition_variable>
 #include <cstdint>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -41,6 +42,7 @@ struct SubjectStats {
   DropReason rejecting_reason = DropReason::kMalformed;  ///< ...the last one for this.
   bool model_suspect = false;      ///< Received samples persistently far from the model.
   double model_distance_mm = 0.0;  ///< Median sample-to-model distance, over about a second.
+  int worker = 0;                  ///< The data-plane thread that solves it.
 };
 
 struct DaemonStats {
@@ -110,9 +112,21 @@ class Daemon {
  private:
   void ApplyReload(DaemonConfig config);
 
+  /// Which worker solves each subject: kept across reloads (a subject never moves), new
+  /// subjects go to the least loaded. Control plane only.
+  void AssignWorkers(const DaemonConfig& config);
+  DaemonConfig WorkerConfig(const DaemonConfig& config, int worker) const;
+  void StopProxy();
+
   std::string config_path_;
   std::atomic<uint64_t> reload_failures_{0};
-  std::unique_ptr<DataPlane> data_;
+  std::unique_ptr<zmq::context_t> owned_context_;
+  zmq::context_t* context_ = nullptr;
+  std::vector<std::unique_ptr<DataPlane>> planes_;
+  std::map<std::string, int> worker_of_;
+  std::string worker_output_prefix_;  ///< inproc endpoints the workers publish on (> 1 worker)
+  struct OutputProxy;
+  std::unique_ptr<OutputProxy> proxy_;
   std::unique_ptr<ControlPlane> control_;
   std::atomic<int> http_port_{0};
   std::mutex run_mutex_;

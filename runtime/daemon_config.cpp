@@ -147,6 +147,8 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
       input.Integer("receive_high_water_mark", c.receive_high_water_mark, 1, 10'000'000);
   c.max_message_bytes = static_cast<size_t>(
       input.Integer("max_message_bytes", static_cast<int>(c.max_message_bytes), 64, 64 << 20));
+  c.workers = input.Integer("workers", c.workers, 0, 64);
+  c.pin_workers = input.Bool("pin_workers", c.pin_workers);
   if (input.Has("shard")) {
     const std::string shard = input.String("shard", "0/1");
     int index = -1, count = 0;

@@ -41,6 +41,10 @@ struct DaemonConfig {
   /// Scale-out: this daemon solves only the configured subjects whose shard (a hash of the
   /// name, SubjectShard) is shard_index of shard_count; several daemons with the same
   /// subject list and shards 0/n .. n-1/n on one capture feed solve each subject once.
+  /// Data-plane threads, each solving its own subjects (0: one per core, at most one per
+  /// subject; a PULL input or subscribe = "all" has one).
+  int workers = 0;
+  bool pin_workers = false;  ///< Pin worker i to core i (mod the cores).
   int shard_index = 0;
   int shard_count = 1;
   std::vector<std::string> other_shards_subjects;  ///< Configured, left to other shards.

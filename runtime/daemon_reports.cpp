@@ -150,6 +150,7 @@ nlohmann::json SubjectJson(const SubjectStats& s) {
           ? s.counters.processing.sum_s / static_cast<double>(s.counters.processing.count) * 1e6
           : 0.0;
   return {{"name", s.name},
+          {"worker", s.worker},
           {"state", protocol::to_string(s.state)},
           {"markers", s.markers},
           {"joints", s.joints},

@@ -48,10 +48,11 @@ def wait_for_metric(port, name, labels, at_least, timeout_s=5.0):
 
 class Daemon:
     """`mocapd run` on fresh loopback ports with the demo subject; logs to WORK/mocapd.log.
-    input: the capture feed to connect to (default: a fresh port); shard: "I/N" or None."""
+    input: the capture feed to connect to (default: a fresh port); shard: "I/N" or None;
+    workers: [input] workers (None: the default, one per core)."""
 
     def __init__(self, mocapd, config_dir, work, lookahead=12, subjects=("actor1",), rate_hz=120.0, input=None,
-                 shard=None):
+                 shard=None, workers=None):
         os.makedirs(work, exist_ok=True)
         self.lookahead = lookahead
         self.input_port, self.output_port, self.http_port = free_ports(3)
@@ -61,6 +62,8 @@ class Daemon:
         model = os.path.abspath(os.path.join(config_dir, "demo_subject.toml"))
         with open(self.config, "w") as f:
             shard_line = f"shard = \"{shard}\"\n" if shard else ""
+            if workers is not None:
+                shard_line += f"workers = {workers}\n"
             f.write(f"format_version = 1\n[input]\nendpoint = \"{self.input}\"\n{shard_line}[output]\nendpoint = \"{self.output}\"\n"
                     f"[control]\nhttp_port = {self.http_port}\nstats_interval_s = 0.2\n[pipeline]\nlookahead = {lookahead}\n")
             for name in subjects:

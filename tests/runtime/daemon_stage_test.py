@@ -121,7 +121,7 @@ def health_answers_during_a_burst(mocapd, mocap_sim, config_dir, work):
         feed = replay(mocap_sim, d, "--seconds", "60", "--subjects", "4", "--rate", "max")
         while feed.poll() is None:
             rss.append(rss_mb(d.process.pid))
-            if reload_s is None and len(rss) > 10:  # about 0.5 s into the burst
+            if reload_s is None and len(rss) > 2:  # about 0.1 s into the burst
                 reload_s = reload_latency(d)
             time.sleep(0.05)
         out, _ = feed.communicate(timeout=120)

@@ -15,6 +15,7 @@
 #include <filesystem>
 #include <functional>
 #include <map>
+#include <set>
 #include <thread>
 #include <zmq.hpp>
 
@@ -500,6 +501,63 @@ TEST(DaemonTest, ASubscribingDaemonTakesOnlyItsSubjectsTopics) {
   EXPECT_EQ(s.unattributed_dropped[static_cast<size_t>(DropReason::kUnknownSubject)], 0u);
   EXPECT_EQ(s.messages_in, s.subjects[0].counters.frames_in);
   EXPECT_TRUE(s.Balanced());
+}
+
+// Two data-plane threads: each subject is solved by one of them, its frames published in
+// order through the one output endpoint, and the accounting adds up over both.
+TEST(DaemonTest, WorkersSolveTheirOwnSubjectsEachInOrder) {
+  const testing::HumanoidFixture f = testing::MakeHumanoidFixture("walk", 1.0, 120.0);
+  zmq::context_t context;
+  DaemonConfig config = TestConfig("inproc://workers-capture", "inproc://workers-out", 4);
+  config.input_pattern = InputPattern::kSub;
+  config.workers = 2;
+  const std::vector<std::string> names = {"actor1", "actor2", "actor3", "actor4"};
+  config.subjects.resize(names.size(), config.subjects[0]);
+  for (size_t k = 0; k < names.size(); ++k) config.subjects[k].name = names[k];
+  const SubjectModel model = MakeHumanoidSubject("actor1");
+  Sender capture(context, "inproc://workers-capture", f.take, model, zmq::socket_type::pub);
+  RunningDaemon daemon(context, config);
+  Subscriber out(context, "inproc://workers-out");
+  ASSERT_TRUE(out.WaitConnected());
+  // Until every worker's subscriptions reached the capture publisher.
+  std::map<std::string, uint64_t> next;
+  ASSERT_TRUE(WaitForStats(*daemon, [&](const DaemonStats& s) {
+    bool all = s.subjects.size() == names.size();
+    for (const std::string& name : names) {
+      capture.message_.subject = name;
+      capture.Send(0, next[name]++, "markers/" + name + "/");
+    }
+    for (const SubjectStats& subject : s.subjects) all = all && subject.counters.frames_in > 0;
+    return all;
+  }));
+  for (int t = 1; t < 100; ++t)
+    for (const std::string& name : names) {
+      capture.message_.subject = name;
+      capture.Send(t, next[name]++, "markers/" + name + "/");
+    }
+  daemon.Stop();
+  const DaemonStats s = daemon->Stats();
+  EXPECT_TRUE(s.Balanced());
+  std::set<int> workers;
+  for (size_t k = 0; k < names.size(); ++k) {
+    EXPECT_EQ(s.subjects[k].name, names[k]);  // in the config's order
+    workers.insert(s.subjects[k].worker);
+    EXPECT_EQ(s.subjects[k].pending, 0u);
+    EXPECT_EQ(s.subjects[k].counters.frames_published, s.subjects[k].counters.frames_in);
+  }
+  EXPECT_EQ(workers, (std::set<int>{0, 1}));
+  ASSERT_TRUE(out.WaitFor([&] {
+    size_t total = 0;
+    for (const auto& [name, frames] : out.skeletons) total += frames.size();
+    return total == s.published_total();
+  }));
+  std::lock_guard lock(out.mutex);
+  for (const std::string& name : names) {
+    const auto& frames = out.skeletons[name];
+    ASSERT_FALSE(frames.empty()) << name;
+    for (size_t i = 1; i < frames.size(); ++i)
+      EXPECT_EQ(frames[i].frame_number, frames[i - 1].frame_number + 1) << name;
+  }
 }
 
 TEST(DaemonTest, ASubscriberThatNeverReadsDoesNotSlowTheDataPlane) {
