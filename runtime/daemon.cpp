@@ -53,8 +53,28 @@ uint64_t DaemonStats::pending_total() const {
   return n;
 }
 
+namespace {
+
+// Between the workers and the forwarding thread (in process): large, so a burst waits in
+// the pipe rather than being dropped where no counter sees it.
+constexpr int kInternalHighWaterMark = 1'000'000;
+
+// zmq::poll, except that a signal arriving on this thread is not an error (cppzmq throws
+// on EINTR, and an exception leaving a thread ends the process). False: nothing ready.
+bool PollRetryingOnSignals(zmq::pollitem_t* items, size_t count,
+                           std::chrono::milliseconds timeout) {
+  try {
+    return zmq::poll(items, count, timeout) > 0;
+  } catch (const zmq::error_t& e) {
+    if (e.num() == EINTR) return false;
+    throw;
+  }
+}
+
+}  // namespace
+
 // ---------------------------------------------------------------------------------------
-// Data plane: one thread, owns the sockets and the runners.
+// Data plane: workers, each a thread owning its input and output sockets and its runners.
 
 struct Daemon::DataPlane final : OutputSink {
   DataPlane(DaemonConfig cfg, zmq::context_t& shared_context, int worker_index)
@@ -90,7 +110,8 @@ struct Daemon::DataPlane final : OutputSink {
     }
     try {
       output = zmq::socket_t(context, zmq::socket_type::pub);
-      output.set(zmq::sockopt::sndhwm, config.send_high_water_mark);
+      output.set(zmq::sockopt::sndhwm,
+                 forwarded ? kInternalHighWaterMark : config.send_high_water_mark);
       // Give subscribers a moment to receive the last frames at shutdown, never forever.
       output.set(zmq::sockopt::linger, 2000);
       output.bind(config.output_endpoint);
@@ -220,7 +241,8 @@ struct Daemon::DataPlane final : OutputSink {
     config = std::move(reload->config);
     if (resubscribe)
       for (const auto& r : runners) input.set(zmq::sockopt::subscribe, Topic("markers", r->name()));
-    ++stats.reloads;
+    // A reload posted while an older one waited replaced it: the count is the newest's.
+    stats.reloads = reload->sequence;
     for (const auto& r : runners) r->PublishDescription(*this);
   }
 
@@ -262,6 +284,7 @@ struct Daemon::DataPlane final : OutputSink {
       s.model_suspect = r.model_suspect();
       s.model_distance_mm = r.model_distance_m() * 1e3;
       s.worker = index;
+      s.config_rank = r.rank();
     }
   }
 
@@ -274,7 +297,7 @@ struct Daemon::DataPlane final : OutputSink {
     while (!stop.load(std::memory_order_acquire)) {
       if (has_pending_reload.load(std::memory_order_acquire)) ApplyPendingReload();
       // A short poll so the watchdog, the stats tick and a stop request are seen promptly.
-      zmq::poll(items, 1, std::chrono::milliseconds(2));
+      PollRetryingOnSignals(items, 1, std::chrono::milliseconds(2));
       // A backlog is read batch by batch without waiting on the poll.
       if ((items[0].revents & ZMQ_POLLIN) != 0 || stats.catching_up) DrainInput();
       const int64_t now = SteadyNs();
@@ -298,7 +321,7 @@ struct Daemon::DataPlane final : OutputSink {
     Snapshot(true);
     const int64_t read_until = SteadyNs() + kShutdownReadNs;
     for (int quiet = 0; quiet < 2 && SteadyNs() < read_until;) {
-      zmq::poll(items, 1, std::chrono::milliseconds(5));
+      PollRetryingOnSignals(items, 1, std::chrono::milliseconds(5));
       quiet = (items[0].revents & ZMQ_POLLIN) != 0 && DrainInput() > 0 ? 0 : quiet + 1;
       Snapshot(false);
     }
@@ -318,13 +341,15 @@ struct Daemon::DataPlane final : OutputSink {
   struct PendingReload {
     DaemonConfig config;
     std::vector<std::unique_ptr<SubjectRunner>> runners;
+    uint64_t sequence = 0;  // the control plane's count of reloads, this one included
   };
 
   zmq::context_t& context;
   zmq::socket_t input;
   zmq::socket_t output;
   DaemonConfig config;
-  int index = 0;  // which worker
+  int index = 0;           // which worker
+  bool forwarded = false;  // publishes to the forwarding thread, not to consumers
   std::vector<std::unique_ptr<SubjectRunner>> runners;
   protocol::MarkerFrameMessage frame;
   protocol::EndOfStreamMessage end_of_stream;
@@ -384,7 +409,8 @@ struct Daemon::OutputProxy {
         to_consumers(context, zmq::socket_type::xpub),
         control_in(context, zmq::socket_type::pair),
         control_out(context, zmq::socket_type::pair) {
-    from_workers.set(zmq::sockopt::rcvhwm, config.send_high_water_mark);
+    // Inside the daemon nothing may be lost: the high-water mark is the consumers' (XPUB).
+    from_workers.set(zmq::sockopt::rcvhwm, kInternalHighWaterMark);
     to_consumers.set(zmq::sockopt::sndhwm, config.send_high_water_mark);
     to_consumers.set(zmq::sockopt::linger, 2000);
     try {
@@ -392,9 +418,13 @@ struct Daemon::OutputProxy {
     } catch (const zmq::error_t& e) {
       throw std::runtime_error("output endpoint '" + config.output_endpoint + "': " + e.what());
     }
-    for (int i = 0; i < workers; ++i) from_workers.connect(prefix + std::to_string(i));
-    control_in.bind(prefix + "control");
-    control_out.connect(prefix + "control");
+    try {
+      for (int i = 0; i < workers; ++i) from_workers.connect(prefix + std::to_string(i));
+      control_in.bind(prefix + "control");
+      control_out.connect(prefix + "control");
+    } catch (const zmq::error_t& e) {
+      throw std::runtime_error("output forwarding '" + prefix + "': " + e.what());
+    }
     thread = std::thread([this] { Loop(); });
   }
 
@@ -403,21 +433,22 @@ struct Daemon::OutputProxy {
                                {to_consumers.handle(), 0, ZMQ_POLLIN, 0},
                                {control_in.handle(), 0, ZMQ_POLLIN, 0}};
     zmq::message_t part;
+    // Up to a batch of messages per wake-up: one per poll would let a burst fill the pipe.
     auto forward = [&](zmq::socket_t& from, zmq::socket_t& to) {
-      while (from.recv(part, zmq::recv_flags::dontwait)) {
+      for (int messages = 0; messages < 1024 && from.recv(part, zmq::recv_flags::dontwait);) {
         const bool more = part.more();
         (void)to.send(part, more ? zmq::send_flags::sndmore : zmq::send_flags::none);
-        if (!more) break;
+        messages += more ? 0 : 1;
       }
     };
     for (;;) {
-      zmq::poll(items, 3, std::chrono::milliseconds(-1));
+      if (!PollRetryingOnSignals(items, 3, std::chrono::milliseconds(-1))) continue;
       if ((items[1].revents & ZMQ_POLLIN) != 0) forward(to_consumers, from_workers);
       if ((items[0].revents & ZMQ_POLLIN) != 0) forward(from_workers, to_consumers);
       if ((items[2].revents & ZMQ_POLLIN) != 0) {
         // The workers have closed: what they sent is already in the pipe; pass it all on.
         zmq::pollitem_t rest = {from_workers.handle(), 0, ZMQ_POLLIN, 0};
-        while (zmq::poll(&rest, 1, std::chrono::milliseconds(20)) > 0)
+        while (PollRetryingOnSignals(&rest, 1, std::chrono::milliseconds(20)))
           forward(from_workers, to_consumers);
         return;
       }
@@ -428,6 +459,11 @@ struct Daemon::OutputProxy {
     if (!thread.joinable()) return;
     (void)control_out.send(zmq::str_buffer("stop"), zmq::send_flags::none);
     thread.join();
+    // Unbinds the output endpoint now, as one worker's PUB would at the end of its loop.
+    from_workers.close();
+    to_consumers.close();
+    control_in.close();
+    control_out.close();
   }
 
   ~OutputProxy() { Stop(); }
@@ -453,39 +489,43 @@ Daemon::Daemon(DaemonConfig config, std::string config_path, zmq::context_t* con
                    config.workers);
     workers = 1;
   }
-  char prefix[64];
-  std::snprintf(prefix, sizeof prefix, "inproc://mocapd-%p-worker-", static_cast<void*>(this));
-  worker_output_prefix_ = prefix;
+  // Unique in the process for good: libzmq frees an inproc name only some time after its
+  // socket closed, so a daemon built where an old one was must not reuse its names.
+  static std::atomic<uint64_t> daemons_made{0};
+  worker_output_prefix_ = "inproc://mocapd-" + std::to_string(++daemons_made) + "-worker-";
   planes_.resize(static_cast<size_t>(workers));
   AssignWorkers(config);
-  for (int i = 0; i < workers; ++i)
+  for (int i = 0; i < workers; ++i) {
     planes_[static_cast<size_t>(i)] =
         std::make_unique<DataPlane>(WorkerConfig(config, i), *context_, i);
+    planes_[static_cast<size_t>(i)]->forwarded = workers > 1;
+  }
   control_->config = std::move(config);
 }
 
 void Daemon::AssignWorkers(const DaemonConfig& config) {
-  std::map<std::string, int> next;
+  // A subject once seen keeps its worker for good, even while a reload has removed it: one
+  // that comes back while its old worker still runs it must not start on another as well.
   std::vector<int> load(planes_.size(), 0);
   for (const SubjectConfig& s : config.subjects)
-    if (const auto kept = worker_of_.find(s.name); kept != worker_of_.end()) {
-      next[s.name] = kept->second;
+    if (const auto kept = worker_of_.find(s.name); kept != worker_of_.end())
       ++load[static_cast<size_t>(kept->second)];
-    }
   for (const SubjectConfig& s : config.subjects) {
-    if (next.count(s.name) > 0) continue;
+    if (worker_of_.count(s.name) > 0) continue;
     const auto least = std::min_element(load.begin(), load.end()) - load.begin();
-    next[s.name] = static_cast<int>(least);
+    worker_of_[s.name] = static_cast<int>(least);
     ++load[static_cast<size_t>(least)];
   }
-  worker_of_ = std::move(next);
 }
 
 DaemonConfig Daemon::WorkerConfig(const DaemonConfig& config, int worker) const {
   DaemonConfig c = config;
   c.subjects.clear();
-  for (const SubjectConfig& s : config.subjects)
-    if (worker_of_.at(s.name) == worker) c.subjects.push_back(s);
+  for (size_t k = 0; k < config.subjects.size(); ++k) {
+    if (worker_of_.at(config.subjects[k].name) != worker) continue;
+    c.subjects.push_back(config.subjects[k]);
+    c.subjects.back().rank = static_cast<int>(k);
+  }
   if (planes_.size() > 1) c.output_endpoint = worker_output_prefix_ + std::to_string(worker);
   return c;
 }
@@ -566,19 +606,28 @@ void Daemon::ApplyReload(DaemonConfig config) {
       config.subscribe_all != old.subscribe_all || config.http_port != old.http_port ||
       config.http_address != old.http_address || config.http_enabled != old.http_enabled ||
       config.http_token != old.http_token ||
-      config.http_max_connections != old.http_max_connections)
+      config.http_max_connections != old.http_max_connections || config.workers != old.workers ||
+      config.pin_workers != old.pin_workers)
     spdlog::warn(
-        "reload: endpoint and HTTP access changes take effect only after a restart; the sockets "
-        "and the HTTP endpoint stay as they are");
+        "reload: endpoint, worker and HTTP access changes take effect only after a restart; the "
+        "sockets, the workers and the HTTP endpoint stay as they are");
   AssignWorkers(config);
+  // Every worker's part is built before any is posted: a reload applies everywhere or
+  // nowhere.
+  std::vector<std::unique_ptr<DataPlane::PendingReload>> parts;
   for (size_t i = 0; i < planes_.size(); ++i) {
     auto pending = std::make_unique<DataPlane::PendingReload>();
     pending->config = WorkerConfig(config, static_cast<int>(i));
+    pending->sequence = reloads_posted_ + 1;
     for (const SubjectConfig& s : pending->config.subjects)
       pending->runners.push_back(std::make_unique<SubjectRunner>(s, pending->config));
+    parts.push_back(std::move(pending));
+  }
+  ++reloads_posted_;
+  for (size_t i = 0; i < planes_.size(); ++i) {
     DataPlane& plane = *planes_[i];
     std::lock_guard lock(plane.mailbox_mutex);
-    plane.pending_reload = std::move(pending);
+    plane.pending_reload = std::move(parts[i]);
     plane.has_pending_reload.store(true, std::memory_order_release);
   }
   std::string names;
@@ -610,23 +659,17 @@ DaemonStats Daemon::Stats() const {
     stats.retired_published += w.retired_published;
     stats.retired_dropped += w.retired_dropped;
     stats.output_send_failures += w.output_send_failures;
-    stats.reloads = std::max(stats.reloads, w.reloads);  // every worker applies each reload
+    stats.reloads = std::min(stats.reloads, w.reloads);  // applied once every worker has it
     stats.data_plane_heartbeat_ns =
         std::min(stats.data_plane_heartbeat_ns, w.data_plane_heartbeat_ns);
     stats.subjects.insert(stats.subjects.end(), w.subjects.begin(), w.subjects.end());
   }
-  if (planes_.size() > 1) {
-    // In the config's order, whichever worker solves each.
-    const std::vector<SubjectConfig>& order = control_->config.subjects;
-    auto rank = [&](const SubjectStats& s) {
-      for (size_t k = 0; k < order.size(); ++k)
-        if (order[k].name == s.name) return k;
-      return order.size();
-    };
+  // In the config's order, whichever worker solves each (from the snapshots alone: this
+  // runs on any thread, and the control plane's config is its own).
+  if (planes_.size() > 1)
     std::stable_sort(
         stats.subjects.begin(), stats.subjects.end(),
-        [&](const SubjectStats& a, const SubjectStats& b) { return rank(a) < rank(b); });
-  }
+        [](const SubjectStats& a, const SubjectStats& b) { return a.config_rank < b.config_rank; });
   stats.reload_failures = reload_failures_.load();
   return stats;
 }
@@ -786,7 +829,8 @@ void Daemon::Run(bool handle_signals) {
         ControlPlane& c = *control_;
         const DaemonStats now = Stats();
         const int64_t t = SteadyNs();
-        const bool alive = now.running && t - now.data_plane_heartbeat_ns < 1'000'000'000;
+        const bool alive =
+            (now.running || now.stopping) && t - now.data_plane_heartbeat_ns < 1'000'000'000;
         if (alive != c.data_plane_alive) {
           if (!alive)
             spdlog::error("watchdog: the data plane has not reported for over 1 s");

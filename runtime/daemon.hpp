@@ -1,8 +1,9 @@
-// The mocapd daemon (`mocapd run`): a data-plane thread that owns the ZeroMQ sockets
-// and the per-subject pipelines, and a Boost.Asio control plane (signals, stats and
+// The mocapd daemon (`mocapd run`): data-plane workers, each a thread owning its ZeroMQ
+// sockets and its subjects' pipelines (with several, a forwarding thread joins their
+// outputs on the one endpoint), and a Boost.Asio control plane (signals, stats and
 // watchdog timers, config reload, the HTTP /health, /subjects and /metrics endpoint).
-// The two meet only in a mailbox (reloads, stop) and a statistics snapshot that the data
-// plane refreshes with try_lock, so nothing the control plane does can stall a frame.
+// They meet only in mailboxes (reloads, stop) and statistics snapshots that each worker
+// refreshes with try_lock, so nothing the control plane does can stall a frame.
 #pragma once
 
 #include <atomic>
@@ -43,6 +44,7 @@ struct SubjectStats {
   bool model_suspect = false;      ///< Received samples persistently far from the model.
   double model_distance_mm = 0.0;  ///< Median sample-to-model distance, over about a second.
   int worker = 0;                  ///< The data-plane thread that solves it.
+  int config_rank = 0;             ///< Its place in the config's subject list.
 };
 
 struct DaemonStats {
@@ -60,7 +62,7 @@ struct DaemonStats {
   uint64_t retired_published = 0;
   uint64_t retired_dropped = 0;
   uint64_t output_send_failures = 0;
-  uint64_t reloads = 0;
+  uint64_t reloads = 0;  ///< Reloads every worker has applied.
   uint64_t reload_failures = 0;
   uint64_t http_unauthorized = 0;       ///< HTTP requests without the bearer token.
   uint64_t http_over_connections = 0;   ///< HTTP connections closed: too many open.
@@ -124,6 +126,7 @@ class Daemon {
   zmq::context_t* context_ = nullptr;
   std::vector<std::unique_ptr<DataPlane>> planes_;
   std::map<std::string, int> worker_of_;
+  uint64_t reloads_posted_ = 0;       ///< Control plane only.
   std::string worker_output_prefix_;  ///< inproc endpoints the workers publish on (> 1 worker)
   struct OutputProxy;
   std::unique_ptr<OutputProxy> proxy_;

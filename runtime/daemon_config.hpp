@@ -19,6 +19,7 @@ enum class InputPattern { kSub, kPull };
 
 struct SubjectConfig {
   std::string name;        ///< Topic name; frames must carry it.
+  int rank = 0;            ///< Its place in the daemon's subject list (set per worker).
   std::string model_path;  ///< Resolved against the config file's directory.
   double rate_hz = 120.0;
   CleanupOptions cleanup;  ///< Pipeline options (rate, lookahead, window, thresholds).
@@ -38,13 +39,13 @@ struct DaemonConfig {
   bool subscribe_all = false;  ///< SUB: every topic, not just the configured subjects'.
   int receive_high_water_mark = 10000;
   size_t max_message_bytes = 65536;
+  /// Data-plane threads, each solving its own subjects (0: one per core, at most one per
+  /// subject; a PULL input or subscribe = "all" has one). Fixed at start-up.
+  int workers = 0;
+  bool pin_workers = false;  ///< Pin worker i to core i (mod the cores).
   /// Scale-out: this daemon solves only the configured subjects whose shard (a hash of the
   /// name, SubjectShard) is shard_index of shard_count; several daemons with the same
   /// subject list and shards 0/n .. n-1/n on one capture feed solve each subject once.
-  /// Data-plane threads, each solving its own subjects (0: one per core, at most one per
-  /// subject; a PULL input or subscribe = "all" has one).
-  int workers = 0;
-  bool pin_workers = false;  ///< Pin worker i to core i (mod the cores).
   int shard_index = 0;
   int shard_count = 1;
   std::vector<std::string> other_shards_subjects;  ///< Configured, left to other shards.

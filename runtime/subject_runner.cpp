@@ -60,6 +60,7 @@ uint64_t SubjectCounters::dropped_total() const {
 
 SubjectRunner::SubjectRunner(const SubjectConfig& config, const DaemonConfig& daemon)
     : name_(config.name),
+      rank_(config.rank),
       fingerprint_(SubjectFingerprint(config, daemon)),
       marker_hash_(protocol::MarkerSetHash(*config.model.markers)),
       skeleton_hash_(protocol::SkeletonHash(*config.model.skeleton)),

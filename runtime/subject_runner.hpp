@@ -82,6 +82,7 @@ class SubjectRunner {
   SubjectRunner(const SubjectConfig& config, const DaemonConfig& daemon);
 
   const std::string& name() const { return name_; }
+  int rank() const { return rank_; }
   const std::string& fingerprint() const { return fingerprint_; }
 
   /// Takes one decoded marker frame of this subject, received at receive_ns (steady
@@ -142,6 +143,7 @@ class SubjectRunner {
   void Resynchronise(OutputSink& sink);
 
   std::string name_;
+  int rank_ = 0;
   std::string fingerprint_;
   uint64_t marker_hash_ = 0;
   uint64_t skeleton_hash_ = 0;

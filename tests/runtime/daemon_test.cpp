@@ -503,17 +503,25 @@ TEST(DaemonTest, ASubscribingDaemonTakesOnlyItsSubjectsTopics) {
   EXPECT_TRUE(s.Balanced());
 }
 
+// A subscribing daemon with two data-plane workers and these subjects.
+DaemonConfig TwoWorkerConfig(const std::string& capture, const std::string& output, int lookahead,
+                             const std::vector<std::string>& names) {
+  DaemonConfig config = TestConfig(capture, output, lookahead);
+  config.input_pattern = InputPattern::kSub;
+  config.workers = 2;
+  config.subjects.resize(names.size(), config.subjects[0]);
+  for (size_t k = 0; k < names.size(); ++k) config.subjects[k].name = names[k];
+  return config;
+}
+
 // Two data-plane threads: each subject is solved by one of them, its frames published in
 // order through the one output endpoint, and the accounting adds up over both.
 TEST(DaemonTest, WorkersSolveTheirOwnSubjectsEachInOrder) {
   const testing::HumanoidFixture f = testing::MakeHumanoidFixture("walk", 1.0, 120.0);
   zmq::context_t context;
-  DaemonConfig config = TestConfig("inproc://workers-capture", "inproc://workers-out", 4);
-  config.input_pattern = InputPattern::kSub;
-  config.workers = 2;
   const std::vector<std::string> names = {"actor1", "actor2", "actor3", "actor4"};
-  config.subjects.resize(names.size(), config.subjects[0]);
-  for (size_t k = 0; k < names.size(); ++k) config.subjects[k].name = names[k];
+  const DaemonConfig config =
+      TwoWorkerConfig("inproc://workers-capture", "inproc://workers-out", 4, names);
   const SubjectModel model = MakeHumanoidSubject("actor1");
   Sender capture(context, "inproc://workers-capture", f.take, model, zmq::socket_type::pub);
   RunningDaemon daemon(context, config);
@@ -538,6 +546,7 @@ TEST(DaemonTest, WorkersSolveTheirOwnSubjectsEachInOrder) {
   daemon.Stop();
   const DaemonStats s = daemon->Stats();
   EXPECT_TRUE(s.Balanced());
+  ASSERT_EQ(s.subjects.size(), names.size());
   std::set<int> workers;
   for (size_t k = 0; k < names.size(); ++k) {
     EXPECT_EQ(s.subjects[k].name, names[k]);  // in the config's order
@@ -558,6 +567,58 @@ TEST(DaemonTest, WorkersSolveTheirOwnSubjectsEachInOrder) {
     for (size_t i = 1; i < frames.size(); ++i)
       EXPECT_EQ(frames[i].frame_number, frames[i - 1].frame_number + 1) << name;
   }
+}
+
+// A reload with two workers: subjects keep their worker (and their pending frames), a new
+// one goes to the less loaded, a removed one is flushed; every frame is accounted for.
+TEST(DaemonTest, AReloadKeepsEachSubjectOnItsWorker) {
+  const testing::HumanoidFixture f = testing::MakeHumanoidFixture("walk", 2.0, 120.0);
+  zmq::context_t context;
+  const DaemonConfig first = TwoWorkerConfig("inproc://wreload-capture", "inproc://wreload-out", 12,
+                                             {"actor1", "actor2", "actor3"});
+  const SubjectModel model = MakeHumanoidSubject("actor1");
+  Sender capture(context, "inproc://wreload-capture", f.take, model, zmq::socket_type::pub);
+  RunningDaemon daemon(context, first);
+  auto send = [&](const std::string& name, uint64_t n) {
+    capture.message_.subject = name;
+    capture.Send(static_cast<int>(n % 200), n, "markers/" + name + "/");
+  };
+  // actor1 alone until every worker's subscriptions are in; its earlier frames are lost
+  // at the publisher, before the daemon.
+  uint64_t n1 = 0;
+  ASSERT_TRUE(WaitForStats(*daemon, [&](const DaemonStats& s) {
+    send("actor1", n1++);
+    send("actor2", 0);
+    send("actor3", 0);
+    return s.subjects.size() == 3 && s.subjects[0].counters.frames_in > 0 &&
+           s.subjects[1].counters.frames_in > 0 && s.subjects[2].counters.frames_in > 0;
+  }));
+  const DaemonStats before = daemon->Stats();
+  std::map<std::string, int> worker;
+  for (const SubjectStats& subject : before.subjects) worker[subject.name] = subject.worker;
+  for (int k = 0; k < 30; ++k) send("actor1", n1++);
+  // actor3 goes, actor4 comes; actor1 and actor2 are unchanged.
+  DaemonConfig second = first;
+  second.subjects[2].name = "actor4";
+  daemon->Reload(second);
+  ASSERT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) { return s.reloads == 1; }));
+  const DaemonStats after = daemon->Stats();
+  ASSERT_EQ(after.subjects.size(), 3u);
+  EXPECT_EQ(after.subjects[0].name, "actor1");
+  EXPECT_EQ(after.subjects[0].worker, worker["actor1"]);
+  EXPECT_EQ(after.subjects[1].worker, worker["actor2"]);
+  EXPECT_EQ(after.subjects[2].name, "actor4");
+  uint64_t n4 = 0;
+  ASSERT_TRUE(WaitForStats(*daemon, [&](const DaemonStats& s) {
+    send("actor4", n4++);
+    return s.subjects.size() == 3 && s.subjects[2].counters.frames_in > 0;
+  }));
+  for (int k = 0; k < 30; ++k) send("actor1", n1++);
+  daemon.Stop();
+  const DaemonStats s = daemon->Stats();
+  EXPECT_TRUE(s.Balanced());
+  EXPECT_GT(s.retired_published, 0u);  // actor3's frames, flushed when it went
+  EXPECT_EQ(s.subjects[0].counters.frames_published, s.subjects[0].counters.frames_in);
 }
 
 TEST(DaemonTest, ASubscriberThatNeverReadsDoesNotSlowTheDataPlane) {
