@@ -275,6 +275,32 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
   // The reference moving away from a still marker only convicts it if the segment's
   // motion is seen: another marker on the same joint fits its reference. (A planted
   // foot's markers stay still while a reference with no foot data drifts.)
+  // A marker rigidly on its joint keeps its distance to the joint's origin, wherever the
+  // segment turns; the origin is where the parent segment ends, so when the parent's own
+  // samples fit their reference, a still marker whose distance to it has changed cannot be
+  // on the segment any more: it is frozen, whatever the rest of its segment does (which
+  // may be frozen with it, so no neighbour fits).
+  const KinematicsWorkspace& pose = robust_.kinematics();
+  auto parent_fits = [&](size_t m) {
+    const int joint = markers_.primary_joint(static_cast<int>(m));
+    const int parent = skeleton_.joint(joint).parent.value;
+    if (parent < 0) return false;
+    for (int other : markers_of_joint_[static_cast<size_t>(parent)]) {
+      const auto o = static_cast<size_t>(other);
+      if (s.valid[o] && !tracks_[o].frozen && s.mask[o] == MaskReason::kNone &&
+          residual[o].norm() <= threshold(o))
+        return true;
+    }
+    return false;
+  };
+  auto off_its_joint = [&](size_t m) {
+    const MarkerDefinition& d = markers_.marker(static_cast<int>(m));
+    if (d.num_attachments != 1) return false;
+    const Vec3& origin = pose.p_WJ[static_cast<size_t>(d.attachments[0].joint)];
+    return std::abs((s.raw[m] - origin).norm() - d.attachments[0].offset.norm()) >
+               options_.frozen_reference_motion_m &&
+           parent_fits(m);
+  };
   auto has_fitting_neighbour = [&](size_t m) {
     for (int other :
          markers_of_joint_[static_cast<size_t>(markers_.primary_joint(static_cast<int>(m)))]) {
@@ -320,9 +346,10 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
       track.still_reference = s.reference[m];
       track.frozen = false;
     } else if (t - track.still_since + 1 >= rules_.frozen_frames &&
-               (s.reference[m] - track.still_reference).norm() >
-                   options_.frozen_reference_motion_m &&
-               has_fitting_neighbour(m)) {
+               (((s.reference[m] - track.still_reference).norm() >
+                     options_.frozen_reference_motion_m &&
+                 has_fitting_neighbour(m)) ||
+                off_its_joint(m))) {
       track.frozen = true;
     }
     if (track.frozen) {

@@ -111,9 +111,31 @@ TEST_F(OutlierDetectorTest, FrozenMarkerUnderCaptureJitterIsDetected) {
   EXPECT_GT(FramesFoundFrozen(0.002), 40);
 }
 
-TEST_F(OutlierDetectorTest, StillMarkerIsNotFrozenWhenNoOtherMarkerShowsItsSegmentMoving) {
-  // The foot's other markers are occluded: the reference's foot is a guess, so a marker
-  // that stays put (a planted foot) may not be blamed for the guess moving away.
+TEST_F(OutlierDetectorTest, APlantedFootIsNotFrozenWhenItsOtherMarkersAreOccluded) {
+  // The foot's other markers are occluded, so the reference's foot is a guess; a marker
+  // that stays put because the foot is planted may not be blamed for the guess moving.
+  const int m = Marker("RFOT2");
+  int planted = -1;  // the first 0.5 s in which the truth's foot stays within 5 mm
+  for (int f = 100; f + 60 < static_cast<int>(frames_.size()) && planted < 0; ++f) {
+    bool still = true;
+    for (int g = f; g < f + 60 && still; ++g) still = (Truth(g, m) - Truth(f, m)).norm() < 0.005;
+    if (still) planted = f;
+  }
+  ASSERT_GE(planted, 0) << "the walk has no planted foot to test";
+  for (int f = planted; f < planted + 60; ++f) {
+    Sample(f, Marker("RFOT1")) = Vec3::Constant(kNaN);
+    Sample(f, Marker("RFOT3")) = Vec3::Constant(kNaN);
+  }
+  CleanupOptions options = Blind();
+  options.frozen_s = 0.05;
+  const auto out = Run(options);
+  for (int f = planted; f < planted + 60; ++f)
+    EXPECT_NE(out[static_cast<size_t>(f)].reason[static_cast<size_t>(m)], MaskReason::kFrozen) << f;
+}
+
+TEST_F(OutlierDetectorTest, AStuckMarkerIsFrozenWhenItsParentShowsTheSegmentMoved) {
+  // The same occlusion, but the sample sticks while the foot walks on (12 cm in 0.5 s):
+  // no marker of the foot fits, yet the shin's do, and the ankle they place has left it.
   const int m = Marker("RFOT2");
   for (int f = 700; f < 760; ++f) {
     Sample(f, m) = Truth(699, m);
@@ -123,8 +145,31 @@ TEST_F(OutlierDetectorTest, StillMarkerIsNotFrozenWhenNoOtherMarkerShowsItsSegme
   CleanupOptions options = Blind();
   options.frozen_s = 0.05;
   const auto out = Run(options);
+  int frozen = 0;
   for (int f = 700; f < 760; ++f)
-    EXPECT_NE(out[static_cast<size_t>(f)].reason[static_cast<size_t>(m)], MaskReason::kFrozen) << f;
+    frozen += out[static_cast<size_t>(f)].reason[static_cast<size_t>(m)] == MaskReason::kFrozen;
+  EXPECT_GT(frozen, 30);
+}
+
+TEST_F(OutlierDetectorTest, AFootFrozenTogetherUnderAMovingShinIsFrozenNotItsToes) {
+  // Three of the foot's markers stick where they were while the leg walks on: no marker of
+  // the foot fits, so only the shin, whose markers do, shows that the foot moved away
+  // from them. The toe markers are clean and must stay in.
+  const int frozen[] = {Marker("RFOT1"), Marker("RFOT2"), Marker("RFOT3")};
+  for (int f = 300; f < 420; ++f)
+    for (int m : frozen) Sample(f, m) = Truth(299, m);
+  const auto out = Run(CleanupOptions{});
+  int found_frozen = 0, toes_kept = 0;
+  for (int f = 300; f < 420; ++f) {
+    for (int m : frozen)
+      found_frozen +=
+          out[static_cast<size_t>(f)].reason[static_cast<size_t>(m)] == MaskReason::kFrozen;
+    for (const char* toe : {"RTOE1", "RTOE2"})
+      toes_kept += out[static_cast<size_t>(f)].status[static_cast<size_t>(Marker(toe))] ==
+                   MarkerStatus::kObserved;
+  }
+  EXPECT_GT(found_frozen, 3 * 120 / 2);
+  EXPECT_GT(toes_kept, 2 * 120 * 9 / 10);
 }
 
 TEST_F(OutlierDetectorTest, FallenOffMarkerIsClassifiedAndExcluded) {
