@@ -123,6 +123,16 @@ DecodeStatus ReadStream(ByteReader& r, float rate_hz, StreamInfo* stream) {
   return DecodeStatus::kOk;
 }
 
+// What follows the fixed fields of a frame: the stream block in version 2, then
+// item_bytes of per-item arrays, exactly. rate_hz: the frame's own rate (0 if it has none).
+DecodeStatus ReadStreamAndSize(ByteReader& r, uint16_t version, size_t item_bytes, float rate_hz,
+                               StreamInfo* stream) {
+  const size_t stream_bytes = version >= kVersion2 ? kStreamBlockBytes : 0;
+  if (r.remaining() != stream_bytes + item_bytes) return DecodeStatus::kSizeMismatch;
+  *stream = StreamInfo{};
+  return stream_bytes != 0 ? ReadStream(r, rate_hz, stream) : DecodeStatus::kOk;
+}
+
 bool Finite(float v) { return std::isfinite(v); }
 
 void WriteQuat(ByteWriter& w, const Quat& q) {
@@ -270,12 +280,10 @@ DecodeStatus DecodeMarkerFrame(std::span<const uint8_t> bytes, MarkerFrameMessag
     return DecodeStatus::kTooShort;
   if (!Finite(m->rate_hz) || !(m->rate_hz > 0.0f)) return DecodeStatus::kNonFinite;
   if (count > kMaxMarkers) return DecodeStatus::kTooManyItems;
-  const size_t stream_bytes = m->version >= kVersion2 ? kStreamBlockBytes : 0;
-  if (r.remaining() != stream_bytes + kMarkerBytes * count) return DecodeStatus::kSizeMismatch;
-  m->stream = StreamInfo{};
-  if (stream_bytes != 0)
-    if (const DecodeStatus s = ReadStream(r, m->rate_hz, &m->stream); s != DecodeStatus::kOk)
-      return s;
+  if (const DecodeStatus s =
+          ReadStreamAndSize(r, m->version, kMarkerBytes * count, m->rate_hz, &m->stream);
+      s != DecodeStatus::kOk)
+    return s;
   m->positions.resize(count);
   m->valid.resize(count);
   for (size_t i = 0; i < count; ++i) {
@@ -342,13 +350,10 @@ DecodeStatus DecodeSkeletonFrame(std::span<const uint8_t> bytes, SkeletonFrameMe
   m->subject_state = static_cast<SubjectState>(state);
   if (count > kMaxJoints) return DecodeStatus::kTooManyItems;
   const bool globals = (flags & kFlagGlobalTransforms) != 0;
-  const size_t stream_bytes = m->version >= kVersion2 ? kStreamBlockBytes : 0;
-  if (r.remaining() !=
-      stream_bytes + 16 + (kJointBytes + (globals ? kGlobalJointBytes : 0)) * count)
-    return DecodeStatus::kSizeMismatch;
-  m->stream = StreamInfo{};
-  if (stream_bytes != 0)
-    if (const DecodeStatus s = ReadStream(r, 0.0f, &m->stream); s != DecodeStatus::kOk) return s;
+  const size_t item_bytes = 16 + (kJointBytes + (globals ? kGlobalJointBytes : 0)) * count;
+  if (const DecodeStatus s = ReadStreamAndSize(r, m->version, item_bytes, 0.0f, &m->stream);
+      s != DecodeStatus::kOk)
+    return s;
   if (!r.ReadF32(&m->residual_m)) return DecodeStatus::kTooShort;
   if (!Finite(m->residual_m)) return DecodeStatus::kNonFinite;
   if (const DecodeStatus s = ReadVec3(r, &m->root_translation); s != DecodeStatus::kOk) return s;
@@ -487,12 +492,10 @@ DecodeStatus DecodeCleanedMarkers(std::span<const uint8_t> bytes, CleanedMarkers
       !r.ReadU16(&reserved))
     return DecodeStatus::kTooShort;
   if (count > kMaxMarkers) return DecodeStatus::kTooManyItems;
-  const size_t stream_bytes = m->version >= kVersion2 ? kStreamBlockBytes : 0;
-  if (r.remaining() != stream_bytes + kCleanedMarkerBytes * count)
-    return DecodeStatus::kSizeMismatch;
-  m->stream = StreamInfo{};
-  if (stream_bytes != 0)
-    if (const DecodeStatus s = ReadStream(r, 0.0f, &m->stream); s != DecodeStatus::kOk) return s;
+  if (const DecodeStatus s =
+          ReadStreamAndSize(r, m->version, kCleanedMarkerBytes * count, 0.0f, &m->stream);
+      s != DecodeStatus::kOk)
+    return s;
   m->positions.resize(count);
   m->status.resize(count);
   m->reason.resize(count);

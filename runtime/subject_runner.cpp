@@ -165,7 +165,7 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
 
   // A v2 sender says when its capture restarted: frame numbers of another session are not
   // comparable, whatever their values.
-  if (started_ && frame.stream.session_id != stream_.session_id) {
+  if (started_ && frame.stream.session_id != counters_.last_stream.session_id) {
     ++counters_.session_changes;
     Resynchronise(sink);
   }
@@ -178,7 +178,7 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
         Resynchronise(sink);
       } else {
         for (uint64_t k = 0; k < missing; ++k) {
-          Stamp inserted{next_frame_number_, 0, true, stream_};
+          Stamp inserted{next_frame_number_, 0, true, counters_.last_stream};
           inserted.stream.has_timecode = false;  // not known without the capture's clock
           Push(missing_, inserted, receive_ns, sink);
           ++counters_.frames_inserted;
@@ -205,7 +205,6 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
   started_ = true;
   last_receive_ns_ = receive_ns;
   last_capture_ns_ = frame.capture_time_ns;
-  stream_ = frame.stream;
   counters_.last_frame_number = frame.frame_number;
   counters_.last_stream = frame.stream;
   if (state_ == protocol::SubjectState::kWaiting || state_ == protocol::SubjectState::kStalled)

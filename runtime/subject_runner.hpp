@@ -161,7 +161,6 @@ class SubjectRunner {
   bool started_ = false;
   uint64_t next_frame_number_ = 0;
   uint64_t last_capture_ns_ = 0;
-  protocol::StreamInfo stream_;  ///< The current stream's, from its last accepted frame.
   int64_t last_receive_ns_ = -1;
   protocol::SubjectState state_ = protocol::SubjectState::kWaiting;
   uint64_t consecutive_dropped_ = 0;
