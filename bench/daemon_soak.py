@@ -6,6 +6,10 @@ Samples the daemon's CPU and resident memory every few seconds from /proc, reads
 
     bench/daemon_soak.py --subjects 4 --rate 240 --seconds 600        # the 10-minute soak
     bench/daemon_soak.py --load --rate 240 --seconds 60               # N = 1..12: latency, CPU, memory
+    bench/daemon_soak.py --subjects 8 --rate 240 --seconds 3600 --sample-s 60 --interval-s 60 \
+        --report bench/results_soak_8x240_3600s.json --plot bench/results_soak_8x240_3600s.svg
+                                                                       # the 1-hour soak, per minute
+    bench/daemon_soak.py --subjects 4 --seconds 60 --curve             # with CURVE on every socket
 
 Prints a table per run and writes JSON with --report.
 """
@@ -46,7 +50,7 @@ def metric_sum(text, name):
 def run(args, subjects, seconds, work):
     names = [f"actor{k + 1}" for k in range(subjects)]
     daemon = Daemon(args.mocapd, os.path.join(ROOT, "config"), work, lookahead=args.lookahead, subjects=names, rate_hz=args.rate,
-                    workers=args.workers)
+                    workers=args.workers, curve=args.curve)
     samples = []
     stop = threading.Event()
 
@@ -63,7 +67,8 @@ def run(args, subjects, seconds, work):
     try:
         replay = subprocess.run([args.mocap_sim, "replay", "--humanoid", "mixed", "--seconds", str(take_seconds), "--synth-rate", str(args.rate),
                                  "--loop", str(loops), "--subjects", str(subjects), "--corrupt", "medium", "--to", daemon.input,
-                                 "--from", daemon.output, "--report", report_path, "--plot", os.path.join(work, "latency.svg")],
+                                 "--from", daemon.output, "--report", report_path, "--plot", os.path.join(work, "latency.svg"),
+                                 "--latency-interval", str(args.interval_s), *daemon.replay_curve_args],
                                 capture_output=True, text=True)
         stop.set()
         thread.join()
@@ -96,6 +101,13 @@ def run(args, subjects, seconds, work):
         "daemon_rss_mb_first_quarter": sum(rss_mb[:quarter]) / quarter if rss_mb else None,
         "daemon_rss_mb_last_quarter": sum(rss_mb[-quarter:]) / quarter if rss_mb else None,
         "daemon_rss_mb_max": max(rss_mb) if rss_mb else None,
+        "curve": args.curve,
+        # Per interval of the replay's sending time: processing latency (the replay's
+        # measure) and the daemon's resident memory sampled within it.
+        "per_interval": [
+            {"from_s": i["from_s"], "processing_latency": {k: v for k, v in i.items() if k != "from_s"},
+             "daemon_rss_mb_max": max([m / 1e6 for t, _, m in samples if i["from_s"] <= t < i["from_s"] + args.interval_s] or [0])}
+            for i in r.get("processing_latency_per_interval", [])],
     }
     p = r["processing_latency"]
     print(f"N={subjects} @ {args.rate:.0f} Hz, {seconds:.0f} s: sent {r['frames_sent']}, received {r['frames_received']}, lost {r['frames_lost']}; "
@@ -109,7 +121,57 @@ def run(args, subjects, seconds, work):
         print(f"  joint error: mean {a['mean_joint_position_error_cm']:.3f} cm / {a['mean_joint_rotation_error_deg']:.2f} deg, "
               f"frame p99.9 {a.get('p999_frame_position_error_cm', 0):.2f} cm, worst frame {a['max_joint_position_error_cm']:.2f} cm "
               f"({w.get('subject', '?')} frame {w.get('frame_number', '?')}, {w.get('joint', '?')})", flush=True)
+    if result["per_interval"]:
+        worst = max(result["per_interval"], key=lambda i: i["processing_latency"]["p99_ms"])
+        rss = [i["daemon_rss_mb_max"] for i in result["per_interval"] if i["daemon_rss_mb_max"] > 0]
+        print(f"  per {args.interval_s:.0f} s: worst p99 {worst['processing_latency']['p99_ms']:.3f} ms (from {worst['from_s']:.0f} s), "
+              f"RSS {min(rss) if rss else 0:.1f}..{max(rss) if rss else 0:.1f} MB", flush=True)
     return result
+
+
+def plot_intervals(result, path, interval_s):
+    """An SVG of processing p50/p99/p99.9 and RSS per interval: a long soak at a glance."""
+    rows = result["per_interval"]
+    if not rows:
+        return
+    w, h, left, right, top, bottom = 900, 420, 70, 70, 40, 50
+    pw, ph = w - left - right, h - top - bottom
+    t_max = rows[-1]["from_s"] + interval_s
+    lat_max = max(2.0, max(r["processing_latency"]["p99.9_ms"] for r in rows) * 1.1)
+    rss = [r["daemon_rss_mb_max"] for r in rows]
+    rss_max = max(rss) * 1.3 if max(rss) > 0 else 1.0
+    x = lambda t: left + pw * t / t_max
+    y_lat = lambda v: top + ph * (1 - min(v, lat_max) / lat_max)
+    y_rss = lambda v: top + ph * (1 - v / rss_max)
+    out = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" font-family="sans-serif" font-size="12">',
+           f'<rect width="{w}" height="{h}" fill="white"/>',
+           f'<text x="{w / 2}" y="20" text-anchor="middle" font-size="14">mocapd soak: {result["subjects"]} actors at {result["rate_hz"]:.0f} Hz, '
+           f'{result["seconds"] / 60:.0f} min, {result["frames_sent"]} frames, {result["frames_lost"]} lost</text>',
+           f'<rect x="{left}" y="{top}" width="{pw}" height="{ph}" fill="none" stroke="#888"/>']
+    for v in [0.5 * k for k in range(int(lat_max / 0.5) + 1)]:
+        out.append(f'<line x1="{left}" x2="{left + pw}" y1="{y_lat(v):.1f}" y2="{y_lat(v):.1f}" stroke="#eee"/>'
+                   f'<text x="{left - 6}" y="{y_lat(v) + 4:.1f}" text-anchor="end">{v:.1f}</text>')
+    if lat_max >= 2.0:
+        out.append(f'<line x1="{left}" x2="{left + pw}" y1="{y_lat(2.0):.1f}" y2="{y_lat(2.0):.1f}" stroke="#c00" stroke-dasharray="6,4"/>'
+                   f'<text x="{left + pw - 4}" y="{y_lat(2.0) - 4:.1f}" text-anchor="end" fill="#c00">2 ms bound</text>')
+    for k in range(0, int(t_max / 60) + 1, max(1, int(t_max / 60 / 12))):
+        out.append(f'<text x="{x(k * 60):.1f}" y="{top + ph + 16}" text-anchor="middle">{k}</text>')
+    out.append(f'<text x="{left + pw / 2}" y="{h - 12}" text-anchor="middle">minutes</text>'
+               f'<text x="16" y="{top + ph / 2}" transform="rotate(-90 16 {top + ph / 2})" text-anchor="middle">processing latency (ms)</text>'
+               f'<text x="{w - 14}" y="{top + ph / 2}" transform="rotate(90 {w - 14} {top + ph / 2})" text-anchor="middle">daemon RSS (MB)</text>')
+    for v in [rss_max * k / 4 for k in range(5)]:
+        out.append(f'<text x="{left + pw + 6}" y="{y_rss(v) + 4:.1f}">{v:.0f}</text>')
+    for key, colour in (("p50_ms", "#2a7"), ("p99_ms", "#27c"), ("p99.9_ms", "#c72")):
+        pts = " ".join(f"{x(r['from_s'] + interval_s / 2):.1f},{y_lat(r['processing_latency'][key]):.1f}" for r in rows)
+        out.append(f'<polyline points="{pts}" fill="none" stroke="{colour}" stroke-width="1.5"/>')
+    pts = " ".join(f"{x(r['from_s'] + interval_s / 2):.1f},{y_rss(r['daemon_rss_mb_max']):.1f}" for r in rows if r["daemon_rss_mb_max"] > 0)
+    out.append(f'<polyline points="{pts}" fill="none" stroke="#888" stroke-width="1.5" stroke-dasharray="3,3"/>')
+    for k, (label, colour) in enumerate((("p50", "#2a7"), ("p99", "#27c"), ("p99.9", "#c72"), ("RSS", "#888"))):
+        out.append(f'<line x1="{left + 10 + k * 80}" x2="{left + 30 + k * 80}" y1="{top + 12}" y2="{top + 12}" stroke="{colour}" stroke-width="2"/>'
+                   f'<text x="{left + 34 + k * 80}" y="{top + 16}">{label}</text>')
+    out.append("</svg>\n")
+    with open(path, "w") as f:
+        f.write("\n".join(out))
 
 
 def main():
@@ -122,6 +184,10 @@ def main():
     parser.add_argument("--load-subjects", dest="load_subjects", default="1,2,4,6,8,10,12")
     parser.add_argument("--work", default=os.path.join(ROOT, "build", "soak"))
     parser.add_argument("--report", default="")
+    parser.add_argument("--curve", action="store_true", help="CURVE on every socket (fresh keys from mocapd keygen)")
+    parser.add_argument("--interval-s", dest="interval_s", type=float, default=60.0,
+                        help="latency percentiles and RSS per this many seconds")
+    parser.add_argument("--plot", default="", help="write the per-interval latency and RSS as SVG")
     args = parser.parse_args()
     results = []
     if args.load:
@@ -134,6 +200,8 @@ def main():
             print(f"largest N with p99 processing < {name} and no loss at {args.rate:.0f} Hz: {max(passing) if passing else 0}")
     else:
         results.append(run(args, args.subjects, args.seconds, args.work))
+    if args.plot:
+        plot_intervals(results[-1], args.plot, args.interval_s)
     if args.report:
         with open(args.report, "w") as f:
             json.dump(results, f, indent=2)

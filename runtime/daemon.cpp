@@ -94,6 +94,12 @@ struct Daemon::DataPlane final : OutputSink {
                                          : zmq::socket_type::pull);
       input.set(zmq::sockopt::rcvhwm, config.receive_high_water_mark);
       input.set(zmq::sockopt::linger, 0);
+      if (config.curve) {
+        if (config.input_pattern == InputPattern::kSub)
+          curve::MakeClient(input, config.curve_keys, config.curve_input_server_key);
+        else
+          curve::MakeServer(input, config.curve_keys, CurveSocketName(CurveSocket::kInput));
+      }
       if (config.input_pattern == InputPattern::kSub) {
         if (config.subscribe_all) {
           input.set(zmq::sockopt::subscribe, "");
@@ -114,6 +120,8 @@ struct Daemon::DataPlane final : OutputSink {
                  forwarded ? kInternalHighWaterMark : config.send_high_water_mark);
       // Give subscribers a moment to receive the last frames at shutdown, never forever.
       output.set(zmq::sockopt::linger, 2000);
+      if (config.curve && !forwarded)
+        curve::MakeServer(output, config.curve_keys, CurveSocketName(CurveSocket::kOutput));
       output.bind(config.output_endpoint);
     } catch (const zmq::error_t& e) {
       throw std::runtime_error("output endpoint '" + config.output_endpoint + "': " + e.what());
@@ -413,6 +421,8 @@ struct Daemon::OutputProxy {
     from_workers.set(zmq::sockopt::rcvhwm, kInternalHighWaterMark);
     to_consumers.set(zmq::sockopt::sndhwm, config.send_high_water_mark);
     to_consumers.set(zmq::sockopt::linger, 2000);
+    if (config.curve)
+      curve::MakeServer(to_consumers, config.curve_keys, CurveSocketName(CurveSocket::kOutput));
     try {
       to_consumers.bind(config.output_endpoint);
     } catch (const zmq::error_t& e) {
@@ -493,6 +503,9 @@ Daemon::Daemon(DaemonConfig config, std::string config_path, zmq::context_t* con
   // socket closed, so a daemon built where an old one was must not reuse its names.
   static std::atomic<uint64_t> daemons_made{0};
   worker_output_prefix_ = "inproc://mocapd-" + std::to_string(++daemons_made) + "-worker-";
+  if (config.curve)
+    authenticator_ = std::make_unique<CurveAuthenticator>(*context_, config.curve_authorized_keys,
+                                                          config.log_interval_s);
   planes_.resize(static_cast<size_t>(workers));
   AssignWorkers(config);
   for (int i = 0; i < workers; ++i) {
@@ -543,6 +556,7 @@ Daemon::~Daemon() {
     }
   }
   proxy_.reset();
+  if (authenticator_) authenticator_->Stop();
 }
 
 void Daemon::Stop() {
@@ -567,6 +581,7 @@ void Daemon::Stop() {
       for (auto& plane : planes_)
         if (plane->thread.joinable()) plane->thread.join();
       StopProxy();
+      if (authenticator_) authenticator_->Stop();
       if (c.http) c.http->Stop();
       if (c.tick) c.tick->cancel();
       if (c.signals) c.signals->cancel();
@@ -607,10 +622,16 @@ void Daemon::ApplyReload(DaemonConfig config) {
       config.http_address != old.http_address || config.http_enabled != old.http_enabled ||
       config.http_token != old.http_token ||
       config.http_max_connections != old.http_max_connections || config.workers != old.workers ||
-      config.pin_workers != old.pin_workers)
+      config.pin_workers != old.pin_workers || config.curve != old.curve ||
+      config.curve_keys.secret_key != old.curve_keys.secret_key ||
+      config.curve_input_server_key != old.curve_input_server_key)
     spdlog::warn(
-        "reload: endpoint, worker and HTTP access changes take effect only after a restart; the "
-        "sockets, the workers and the HTTP endpoint stay as they are");
+        "reload: endpoint, worker, CURVE key and HTTP access changes take effect only after a "
+        "restart; the sockets, the workers and the HTTP endpoint stay as they are");
+  if (authenticator_ && config.curve) {
+    authenticator_->SetAuthorizedKeys(config.curve_authorized_keys);
+    spdlog::info("reload: {} authorized CURVE client keys", config.curve_authorized_keys.size());
+  }
   AssignWorkers(config);
   // Every worker's part is built before any is posted: a reload applies everywhere or
   // nowhere.
@@ -671,6 +692,8 @@ DaemonStats Daemon::Stats() const {
         stats.subjects.begin(), stats.subjects.end(),
         [](const SubjectStats& a, const SubjectStats& b) { return a.config_rank < b.config_rank; });
   stats.reload_failures = reload_failures_.load();
+  stats.curve = authenticator_ != nullptr;
+  if (authenticator_) stats.curve_counts = authenticator_->Counts();
   return stats;
 }
 
@@ -689,6 +712,18 @@ void LogStartup(const DaemonConfig& c, int http_port) {
                c.input_pattern == InputPattern::kSub && !c.subscribe_all ? "subjects' topics"
                                                                          : "all messages",
                c.output_endpoint);
+  if (c.curve) {
+    spdlog::info("security: CURVE on, this daemon's key {}, {} authorized client keys{}",
+                 curve::ShortKey(c.curve_keys.public_key), c.curve_authorized_keys.size(),
+                 c.input_pattern == InputPattern::kSub
+                     ? ", capture publisher's key " + curve::ShortKey(c.curve_input_server_key)
+                     : std::string());
+    if (c.curve_authorized_keys.empty())
+      spdlog::warn("security.authorized_keys ({}) holds no *.key: every client will be refused",
+                   c.curve_authorized_keys_dir);
+  } else {
+    spdlog::info("security: CURVE off (open to local processes; endpoints are loopback only)");
+  }
   if (c.shard_count > 1) {
     std::string others;
     for (const std::string& name : c.other_shards_subjects) others += " " + name;
@@ -725,6 +760,13 @@ void Daemon::Run(bool handle_signals) {
     if (planes_.size() > 1)
       proxy_ = std::make_unique<OutputProxy>(*context_, cp.config, worker_output_prefix_,
                                              static_cast<int>(planes_.size()));
+    if (authenticator_) {
+      for (auto& plane : planes_)
+        authenticator_->Monitor(plane->input.handle(), CurveSocket::kInput);
+      authenticator_->Monitor(proxy_ ? proxy_->to_consumers.handle() : planes_[0]->output.handle(),
+                              CurveSocket::kOutput);
+      authenticator_->Start();
+    }
     if (cp.config.http_enabled) {
       auto render = [this](const std::string& target) {
         DaemonStats stats = Stats();

@@ -17,6 +17,7 @@
 #include <thread>
 #include <vector>
 
+#include "runtime/curve_authenticator.hpp"
 #include "runtime/daemon_config.hpp"
 #include "runtime/subject_runner.hpp"
 
@@ -66,6 +67,8 @@ struct DaemonStats {
   uint64_t reload_failures = 0;
   uint64_t http_unauthorized = 0;       ///< HTTP requests without the bearer token.
   uint64_t http_over_connections = 0;   ///< HTTP connections closed: too many open.
+  bool curve = false;                   ///< CURVE on the input and output sockets.
+  CurveCounts curve_counts;             ///< Its handshakes: admitted, refused, failed.
   int64_t data_plane_heartbeat_ns = 0;  ///< Steady clock of the data plane's last loop.
   std::vector<SubjectStats> subjects;
 
@@ -131,6 +134,9 @@ class Daemon {
   struct OutputProxy;
   std::unique_ptr<OutputProxy> proxy_;
   std::unique_ptr<ControlPlane> control_;
+  /// The ZAP handler when security.curve is on: bound before any socket, so no client is
+  /// ever admitted unchecked.
+  std::unique_ptr<CurveAuthenticator> authenticator_;
   std::atomic<int> http_port_{0};
   std::mutex run_mutex_;
   std::condition_variable run_cv_;

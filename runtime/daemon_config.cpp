@@ -211,18 +211,82 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
                        "' must hold one token of at least 16 characters without spaces");
   }
   control.RejectUnknown();
-  // Anything reachable from other machines must be asked for: a stage network is shared.
-  if (!c.allow_remote) {
+
+  TomlTable security = top.Table("security");
+  c.curve = security.Bool("curve", c.curve);
+  const auto resolve = [&](const std::string& path) {
+    return path.empty() || std::filesystem::path(path).is_absolute()
+               ? path
+               : (std::filesystem::path(base_dir) / path).lexically_normal().string();
+  };
+  c.curve_key_file = resolve(security.String("key_file", ""));
+  c.curve_authorized_keys_dir = resolve(security.String("authorized_keys", ""));
+  c.curve_input_server_key_file = resolve(security.String("input_server_key_file", ""));
+  security.RejectUnknown();
+  if (c.curve) {
+    const auto node = [&](const char* key) { return root["security"][key].node(); };
+    if (!curve::Available())
+      security.Fail(node("curve"), "curve", "this libzmq was built without CURVE");
+    if (c.curve_key_file.empty())
+      security.Fail(nullptr, "key_file",
+                    "missing: curve = true needs this daemon's key pair (mocapd keygen)");
+    try {
+      c.curve_keys = curve::ReadCertificate(c.curve_key_file, true);
+    } catch (const std::exception& e) {
+      security.Fail(node("key_file"), "key_file", e.what());
+    }
+    if (c.curve_authorized_keys_dir.empty())
+      security.Fail(nullptr, "authorized_keys",
+                    "missing: curve = true needs the directory of clients' public keys");
+    try {
+      c.curve_authorized_keys = curve::ReadAuthorizedKeys(c.curve_authorized_keys_dir);
+    } catch (const std::exception& e) {
+      security.Fail(node("authorized_keys"), "authorized_keys", e.what());
+    }
+    if (c.input_pattern == InputPattern::kSub) {
+      if (c.curve_input_server_key_file.empty())
+        security.Fail(nullptr, "input_server_key_file",
+                      "missing: a SUB input with curve = true needs the capture publisher's "
+                      "public key");
+      try {
+        c.curve_input_server_key =
+            curve::ReadCertificate(c.curve_input_server_key_file, false).public_key;
+      } catch (const std::exception& e) {
+        security.Fail(node("input_server_key_file"), "input_server_key_file", e.what());
+      }
+    }
+  } else if (!c.curve_key_file.empty() || !c.curve_authorized_keys_dir.empty() ||
+             !c.curve_input_server_key_file.empty()) {
+    security.Fail(root["security"].node(), "curve",
+                  "keys are given but curve = false; set curve = true to use them");
+  }
+
+  // Anything reachable from other machines must be asked for (a stage network is
+  // shared), and then authenticated: CURVE on the sockets, a token on HTTP.
+  {
     TomlTable in = top.Table("input"), out = top.Table("output"), ctl = top.Table("control");
-    if (c.input_pattern == InputPattern::kPull && !IsLocalEndpoint(c.input_endpoint))
-      in.Fail(root["input"]["endpoint"].node(), "endpoint",
-              "binds a non-loopback address; set control.allow_remote = true to allow it");
-    if (!IsLocalEndpoint(c.output_endpoint))
-      out.Fail(root["output"]["endpoint"].node(), "endpoint",
-               "binds a non-loopback address; set control.allow_remote = true to allow it");
-    if (c.http_enabled && !IsLoopbackHost(c.http_address))
+    const char* const ask =
+        "binds a non-loopback address; set control.allow_remote = true to allow it";
+    const char* const secure =
+        "is reachable from other machines: set security.curve = true (mocapd keygen) to allow it";
+    if (!c.allow_remote) {
+      if (c.input_pattern == InputPattern::kPull && !IsLocalEndpoint(c.input_endpoint))
+        in.Fail(root["input"]["endpoint"].node(), "endpoint", ask);
+      if (!IsLocalEndpoint(c.output_endpoint))
+        out.Fail(root["output"]["endpoint"].node(), "endpoint", ask);
+      if (c.http_enabled && !IsLoopbackHost(c.http_address))
+        ctl.Fail(root["control"]["http_address"].node(), "http_address",
+                 "is not loopback; set control.allow_remote = true to allow it");
+    }
+    // A SUB input reaching out to another machine is as exposed as a bound one: a forged
+    // publisher there would feed the stage.
+    if (!IsLocalEndpoint(c.input_endpoint) && !c.curve)
+      in.Fail(root["input"]["endpoint"].node(), "endpoint", secure);
+    if (!IsLocalEndpoint(c.output_endpoint) && !c.curve)
+      out.Fail(root["output"]["endpoint"].node(), "endpoint", secure);
+    if (c.http_enabled && !IsLoopbackHost(c.http_address) && c.http_token.empty())
       ctl.Fail(root["control"]["http_address"].node(), "http_address",
-               "is not loopback; set control.allow_remote = true to allow it");
+               "is reachable from other machines: set control.http_token_file to allow it");
   }
 
   TomlTable frames = top.Table("frames");

@@ -12,6 +12,7 @@
 #include "filters/cleanup_pipeline.hpp"
 #include "filters/retarget.hpp"
 #include "formats/subject_file.hpp"
+#include "protocol/curve.hpp"
 
 namespace mocapd {
 
@@ -71,6 +72,18 @@ struct DaemonConfig {
   double model_suspect_mm = 20.0;  ///< Median sample-to-model distance that flags a model.
   double log_interval_s = 10.0;
   bool allow_remote = false;
+  // Security: ZeroMQ CURVE on the input and output sockets. Fixed at start-up, except the
+  // allow-list, which a reload re-reads.
+  bool curve = false;
+  std::string curve_key_file;  ///< This daemon's key pair (a .key_secret certificate).
+  curve::KeyPair curve_keys;
+  /// Directory of the clients' public certificates (*.key) that may connect to the
+  /// daemon's CURVE servers: consumers of the output, pushers into a PULL input.
+  std::string curve_authorized_keys_dir;
+  std::vector<curve::AuthorizedKey> curve_authorized_keys;
+  /// SUB input: the capture publisher's public certificate (the daemon is its client).
+  std::string curve_input_server_key_file;
+  std::string curve_input_server_key;
   // Frame accounting.
   int max_gap_frames = 240;
   int restart_backjump_frames = 120;

@@ -50,6 +50,20 @@ std::string FormatPrometheusMetrics(const DaemonStats& stats) {
           "HTTP connections closed unanswered: control.http_max_connections were open")
       .Add({})
       .Increment(static_cast<double>(stats.http_over_connections));
+  if (stats.curve) {
+    auto& accepted = counter("mocapd_curve_clients_accepted_total",
+                             "CURVE clients admitted: key in security.authorized_keys");
+    auto& refused = counter("mocapd_curve_clients_refused_total",
+                            "CURVE clients refused: key not in security.authorized_keys");
+    auto& failed = counter("mocapd_curve_handshake_failures_total",
+                           "Handshakes failed otherwise: a peer without CURVE or other keys");
+    for (int i = 0; i < kCurveSocketCount; ++i) {
+      const prometheus::Labels socket = {{"socket", CurveSocketName(static_cast<CurveSocket>(i))}};
+      accepted.Add(socket).Increment(static_cast<double>(stats.curve_counts.accepted[i]));
+      refused.Add(socket).Increment(static_cast<double>(stats.curve_counts.refused[i]));
+      failed.Add(socket).Increment(static_cast<double>(stats.curve_counts.handshake_failures[i]));
+    }
+  }
   counter("mocapd_output_send_failures_total", "Messages the PUB socket could not queue")
       .Add({})
       .Increment(static_cast<double>(stats.output_send_failures));

@@ -3,12 +3,14 @@
 //   calibrate  build a subject model from labelled markers alone (or a BVH and its C3D)
 //   process    clean a recorded C3D through the streaming pipeline; write BVH (+ C3D)
 //   run        the daemon: marker frames in over ZeroMQ, cleaned skeletons out
+//   keygen     a CURVE key pair for the daemon, a capture bridge or a consumer
 #include <CLI/CLI.hpp>
 #include <exception>
 #include <iostream>
 
 #include <spdlog/spdlog.h>
 
+#include "protocol/curve.hpp"
 #include "runtime/calibrate_command.hpp"
 #include "runtime/daemon.hpp"
 #include "runtime/process_command.hpp"
@@ -109,12 +111,28 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error"}))
       ->capture_default_str();
 
+  std::string keygen_out;
+  CLI::App* keygen_cmd = app.add_subcommand(
+      "keygen",
+      "Write a CURVE key pair: OUT.key (public: give it to the peers) and OUT.key_secret "
+      "(secret, mode 0600), ZeroMQ certificates as czmq and pyzmq's zmq.auth read them");
+  keygen_cmd->add_option("--out", keygen_out, "Path without extension, e.g. keys/mocapd")
+      ->required();
+
   CLI11_PARSE(app, argc, argv);
   try {
     if (*demo_cmd) return mocapd::RunDemoCommand(demo, std::cout);
     if (*cal_cmd) {
       cal.calibration.max_rms_m = max_rms_mm * 1e-3;
       mocapd::RunCalibrateCommand(cal, std::cout);
+      return 0;
+    }
+    if (*keygen_cmd) {
+      const mocapd::curve::KeyPair keys = mocapd::curve::GenerateKeyPair();
+      mocapd::curve::WriteCertificates(keygen_out, keys);
+      std::cout << "public key " << keys.public_key << "\n  " << keygen_out
+                << ".key         give it to the peers that must trust this one\n  " << keygen_out
+                << ".key_secret  keep it here (mode 0600)\n";
       return 0;
     }
     if (*run_cmd) {

@@ -358,6 +358,19 @@ int main(int argc, char** argv) {
                    "Seconds to wait for the last skeletons")
       ->capture_default_str();
 
+  replay_cmd
+      ->add_option("--latency-interval", replay.options.latency_interval_s,
+                   "Also report processing latency per this many seconds (a soak's drift)")
+      ->check(CLI::NonNegativeNumber);
+  replay_cmd
+      ->add_option("--curve-key", replay.options.curve_key_file,
+                   "CURVE: this replay's key pair (FILE.key_secret from mocapd keygen)")
+      ->check(CLI::ExistingFile);
+  replay_cmd
+      ->add_option("--curve-server-key", replay.options.curve_server_key_file,
+                   "CURVE: the daemon's public key (FILE.key); needs --curve-key")
+      ->check(CLI::ExistingFile);
+
   mocapd::RecordOptions record;
   std::string record_subjects;
   CLI::App* record_cmd = app.add_subcommand(
@@ -370,6 +383,14 @@ int main(int argc, char** argv) {
   record_cmd
       ->add_option("--seconds", record.seconds, "Stop after this long (default: until Ctrl-C)")
       ->check(CLI::NonNegativeNumber);
+  record_cmd
+      ->add_option("--curve-key", record.curve_key_file,
+                   "CURVE: this recorder's key pair (FILE.key_secret from mocapd keygen)")
+      ->check(CLI::ExistingFile);
+  record_cmd
+      ->add_option("--curve-server-key", record.curve_server_key_file,
+                   "CURVE: the publisher's public key (FILE.key); needs --curve-key")
+      ->check(CLI::ExistingFile);
 
   CLI11_PARSE(app, argc, argv);
   try {

@@ -15,6 +15,7 @@
 #include <zmq.hpp>
 
 #include "protocol/byte_io.hpp"
+#include "protocol/curve.hpp"
 
 namespace mocapd {
 namespace {
@@ -89,6 +90,8 @@ uint64_t RecordStream(const RecordOptions& o,
   zmq::context_t context;
   zmq::socket_t in(context, zmq::socket_type::sub);
   in.set(zmq::sockopt::rcvhwm, 0);
+  if (const auto keys = curve::ReadClientKeys(o.curve_key_file, o.curve_server_key_file, "record"))
+    curve::MakeClient(in, keys->own, keys->server_public_key);
   if (o.subjects.empty()) {
     in.set(zmq::sockopt::subscribe, "markers/");
   } else {

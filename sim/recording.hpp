@@ -62,6 +62,9 @@ struct RecordOptions {
   std::string out;
   std::vector<std::string> subjects;  ///< Topics markers/<name>/; empty: every markers/ topic.
   double seconds = 0.0;               ///< Stop after this long (0: until stop is set).
+  /// CURVE (both or neither): the recorder's key pair and the publisher's public key.
+  std::string curve_key_file;
+  std::string curve_server_key_file;
   const std::atomic<bool>* stop = nullptr;
 };
 

@@ -38,6 +38,13 @@ struct ReplayOptions {
   /// an SMPTE timecode; the replay then checks that the daemon echoes them.
   int protocol_version = 2;
   int timecode_fps = 0;  ///< Non-drop timecode at this many frames per second (0: none).
+  /// Also summarise processing latency per this many seconds of sending (0: not).
+  double latency_interval_s = 0.0;
+  /// CURVE (both or neither): the replay's own key pair (a .key_secret certificate; its
+  /// PUB serves with it) and the daemon's public certificate (its SUB on the daemon's
+  /// output and a PUSH into a PULL input connect as clients of that key).
+  std::string curve_key_file;
+  std::string curve_server_key_file;
   /// Called about every second with a one-line live status (nullptr: silent).
   std::function<void(const std::string&)> on_status;
   /// Set from elsewhere (a signal handler) to stop sending early.

@@ -50,6 +50,16 @@ nlohmann::json ReplayReport::ToJson() const {
                       {"throughput_fps", throughput_fps},
                       {"end_to_end_latency", SummaryJson(end_to_end)},
                       {"processing_latency", SummaryJson(processing)}};
+  if (!processing_per_interval.empty()) {
+    j["interval_s"] = interval_s;
+    nlohmann::json intervals = nlohmann::json::array();
+    for (const Interval& i : processing_per_interval) {
+      nlohmann::json entry = SummaryJson(i.processing);
+      entry["from_s"] = i.from_s;
+      intervals.push_back(std::move(entry));
+    }
+    j["processing_latency_per_interval"] = std::move(intervals);
+  }
   if (has_truth)
     j["accuracy"] = {{"mean_joint_position_error_cm", mean_position_error_cm},
                      {"max_joint_position_error_cm", max_position_error_cm},
@@ -101,6 +111,16 @@ std::string ReplayReport::FormatTable() const {
     std::snprintf(line, sizeof(line), "  %-34s %8.3f %8.3f %8.3f %8.3f %8.3f\n", name, l.p50_ms,
                   l.p90_ms, l.p99_ms, l.p999_ms, l.max_ms);
     s << line;
+  }
+  if (!processing_per_interval.empty()) {
+    const auto worst =
+        std::max_element(processing_per_interval.begin(), processing_per_interval.end(),
+                         [](const Interval& a, const Interval& b) {
+                           return a.processing.p99_ms < b.processing.p99_ms;
+                         });
+    row("worst interval's processing p99",
+        num(worst->processing.p99_ms, 3) + " ms  (" + num(worst->from_s, 0) + " s + " +
+            num(interval_s, 0) + " s, of " + std::to_string(processing_per_interval.size()) + ")");
   }
   if (has_truth) {
     row("joint position error mean (cm)", num(mean_position_error_cm, 3));

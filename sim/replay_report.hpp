@@ -35,6 +35,14 @@ struct ReplayReport {
   LatencySummary end_to_end;
   LatencySummary processing;
   std::vector<double> processing_ms;  ///< Every frame's, for the histogram.
+  /// Processing latency per interval of sending time (ReplayOptions::latency_interval_s),
+  /// so a long soak shows whether it drifts: [from_s, from_s + interval_s).
+  struct Interval {
+    double from_s = 0.0;
+    LatencySummary processing;
+  };
+  double interval_s = 0.0;
+  std::vector<Interval> processing_per_interval;
   bool has_truth = false;
   double mean_position_error_cm = 0.0;
   double mean_rotation_error_deg = 0.0;

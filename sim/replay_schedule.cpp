@@ -12,6 +12,7 @@
 #include <zmq.hpp>
 
 #include "filters/pose_error.hpp"
+#include "protocol/curve.hpp"
 #include "protocol/messages.hpp"
 
 namespace mocapd::replay {
@@ -28,9 +29,14 @@ struct Sockets {
 };
 
 void OpenSockets(const ReplayOptions& o, Sockets* s) {
+  const std::optional<curve::ClientKeys> keys =
+      curve::ReadClientKeys(o.curve_key_file, o.curve_server_key_file, "replay");
   s->out = zmq::socket_t(s->context, o.push ? zmq::socket_type::push : zmq::socket_type::xpub);
   s->out.set(zmq::sockopt::sndhwm, 0);  // never drop a frame on our side
   s->out.set(zmq::sockopt::linger, 2000);
+  // A PUB feed serves its key to every subscriber (a simulator has no allow-list).
+  if (keys && o.push) curve::MakeClient(s->out, keys->own, keys->server_public_key);
+  if (keys && !o.push) curve::MakeServer(s->out, keys->own, "");
   try {
     if (o.push)
       s->out.connect(o.to);
@@ -45,6 +51,7 @@ void OpenSockets(const ReplayOptions& o, Sockets* s) {
   s->in->set(zmq::sockopt::rcvhwm, 0);
   s->in->set(zmq::sockopt::subscribe, "skeleton/");
   s->in->set(zmq::sockopt::subscribe, "subject/");
+  if (keys) curve::MakeClient(*s->in, keys->own, keys->server_public_key);
   s->in->connect(o.from);
 }
 
@@ -230,8 +237,9 @@ uint64_t SendAll(zmq::socket_t& out, std::vector<SubjectLog>& logs, const FrameP
 
 // End-to-end latency (sent -> skeleton) and processing latency (the message that let the
 // frame out -> skeleton) from the logs, into the report.
-void MeasureLatencies(const std::vector<SubjectLog>& logs, double frame_period_s,
-                      ReplayReport* report) {
+void MeasureLatencies(const std::vector<SubjectLog>& logs, double frame_period_s, int64_t start_ns,
+                      double interval_s, ReplayReport* report) {
+  std::vector<std::vector<double>> per_interval;
   std::vector<double> e2e;
   e2e.reserve(report->frames_sent);
   report->processing_ms.reserve(report->frames_sent);
@@ -258,11 +266,21 @@ void MeasureLatencies(const std::vector<SubjectLog>& logs, double frame_period_s
       if (trigger_ns == 0) continue;
       const double ms = static_cast<double>(got - trigger_ns) * 1e-6;
       report->processing_ms.push_back(ms);
+      if (interval_s > 0) {
+        const auto slot = static_cast<size_t>(
+            std::max<double>(0.0, static_cast<double>(trigger_ns - start_ns) * 1e-9 / interval_s));
+        if (slot >= per_interval.size()) per_interval.resize(slot + 1);
+        per_interval[slot].push_back(ms);
+      }
       if (ms * 1e-3 > frame_period_s) ++report->frames_late;
     }
   }
   report->end_to_end = SummariseLatencies(e2e);
   report->processing = SummariseLatencies(report->processing_ms);
+  report->interval_s = interval_s;
+  for (size_t k = 0; k < per_interval.size(); ++k)
+    report->processing_per_interval.push_back(
+        {static_cast<double>(k) * interval_s, SummariseLatencies(std::move(per_interval[k]))});
 }
 
 }  // namespace
@@ -299,7 +317,7 @@ ReplayReport RunSchedule(std::vector<SubjectLog>& logs, const FrameProducer& pro
   report.stream_checked = receiver->stream_checked();
   report.stream_mismatched = receiver->stream_mismatched();
   report.frames_lost = sent - std::min<uint64_t>(sent, report.frames_received);
-  MeasureLatencies(logs, setup.frame_period_s, &report);
+  MeasureLatencies(logs, setup.frame_period_s, start, o.latency_interval_s, &report);
   report.throughput_fps = report.send_seconds > 0
                               ? static_cast<double>(report.frames_received) / report.send_seconds
                               : 0.0;

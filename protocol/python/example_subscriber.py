@@ -3,6 +3,9 @@
 descriptions and status), decodes them with mocapd_protocol, and prints what it sees.
 
     python3 protocol/python/example_subscriber.py --endpoint tcp://127.0.0.1:5556 --subject actor1
+    # a daemon with security.curve = true: this consumer's key pair (its .key in the
+    # daemon's authorized_keys directory) and the daemon's public key
+    python3 protocol/python/example_subscriber.py --curve-key me.key_secret --curve-server-key mocapd.key
 
 Needs only the standard library and Debian's python3-zmq. A game-engine or MotionBuilder
 bridge would start from here: the subject description gives joint names, parents and
@@ -15,6 +18,7 @@ import sys
 import time
 
 import zmq
+import zmq.auth
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import mocapd_protocol  # noqa: E402
@@ -27,7 +31,11 @@ def main():
     parser.add_argument("--frames", type=int, default=0, help="exit after this many skeleton frames (0: run until Ctrl-C)")
     parser.add_argument("--timeout", type=float, default=0.0, help="give up after this many seconds (0: never)")
     parser.add_argument("--quiet", action="store_true", help="print only the summary")
+    parser.add_argument("--curve-key", default="", help="CURVE: this consumer's key pair (NAME.key_secret from mocapd keygen)")
+    parser.add_argument("--curve-server-key", default="", help="CURVE: the daemon's public key (NAME.key)")
     args = parser.parse_args()
+    if bool(args.curve_key) != bool(args.curve_server_key):
+        parser.error("CURVE needs both --curve-key and --curve-server-key")
 
     context = zmq.Context()
     socket = context.socket(zmq.SUB)
@@ -35,6 +43,13 @@ def main():
     suffix = args.subject + "/" if args.subject else ""
     for kind in ("skeleton/", "subject/", "status/", "character/"):
         socket.setsockopt(zmq.SUBSCRIBE, (kind + suffix).encode())
+    if args.curve_key:
+        # mocapd keygen writes ZeroMQ certificates, which pyzmq reads as they are.
+        public, secret = zmq.auth.load_certificate(args.curve_key)
+        server_public, _ = zmq.auth.load_certificate(args.curve_server_key)
+        if not secret:
+            parser.error(f"{args.curve_key}: no secret-key (give the .key_secret file)")
+        socket.curve_publickey, socket.curve_secretkey, socket.curve_serverkey = public, secret, server_public
     socket.connect(args.endpoint)
 
     joints = {}  # subject -> joint names, from its description

@@ -178,15 +178,83 @@ TEST(DaemonConfigTest, NonLoopbackBindsMustBeAskedFor) {
       ErrorOf(std::string(kMinimal) + "[input]\npattern = \"pull\"\nendpoint = \"tcp://*:5555\"\n")
           .find("input.endpoint"),
       std::string::npos);
-  // Connecting a SUB to a remote capture publisher is fine: it binds nothing.
-  EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[input]\nendpoint = \"tcp://10.0.0.5:5555\"\n"), "");
-  EXPECT_EQ(
-      ErrorOf(std::string(kMinimal) +
-              "[output]\nendpoint = \"tcp://0.0.0.0:5556\"\n[control]\nallow_remote = true\n"),
-      "");
   EXPECT_TRUE(IsLocalEndpoint("ipc:///tmp/x"));
   EXPECT_TRUE(IsLocalEndpoint("tcp://[::1]:5"));
   EXPECT_FALSE(IsLocalEndpoint("tcp://*:5"));
+}
+
+// Keys for a CURVE config in dir: the daemon's pair, a capture publisher's public key and
+// one authorized client. Returns the [security] table that names them.
+std::string WriteCurveKeys(const std::string& dir) {
+  std::filesystem::create_directories(dir + "/authorized");
+  curve::WriteCertificates(dir + "/mocapd", curve::GenerateKeyPair());
+  curve::WriteCertificates(dir + "/capture", curve::GenerateKeyPair());
+  curve::WriteCertificates(dir + "/authorized/viewer", curve::GenerateKeyPair());
+  return "[security]\ncurve = true\nkey_file = \"" + dir + "/mocapd.key_secret\"\n" +
+         "authorized_keys = \"" + dir + "/authorized\"\ninput_server_key_file = \"" + dir +
+         "/capture.key\"\n";
+}
+
+TEST(DaemonConfigTest, RemoteEndpointsNeedCurveAndRemoteHttpNeedsAToken) {
+  const std::string dir = testing::TempDir("config_remote_curve");
+  const std::string security = WriteCurveKeys(dir);
+  const std::string remote_output =
+      "[output]\nendpoint = \"tcp://0.0.0.0:5556\"\n[control]\nallow_remote = true\n";
+  EXPECT_EQ(ErrorOf(std::string(kMinimal) + remote_output),
+            "test.toml:6: field 'output.endpoint': is reachable from other machines: set "
+            "security.curve = true (mocapd keygen) to allow it");
+  EXPECT_EQ(ErrorOf(std::string(kMinimal) + remote_output + security), "");
+  // A SUB reaching out to a remote publisher could be fed by a forged one just the same.
+  EXPECT_NE(ErrorOf(std::string(kMinimal) + "[input]\nendpoint = \"tcp://10.0.0.5:5555\"\n")
+                .find("field 'input.endpoint': is reachable from other machines"),
+            std::string::npos);
+  EXPECT_EQ(
+      ErrorOf(std::string(kMinimal) + "[input]\nendpoint = \"tcp://10.0.0.5:5555\"\n" + security),
+      "");
+  EXPECT_NE(ErrorOf(std::string(kMinimal) +
+                    "[control]\nallow_remote = true\nhttp_address = \"0.0.0.0\"\n")
+                .find("set control.http_token_file to allow it"),
+            std::string::npos);
+}
+
+TEST(DaemonConfigTest, CurveKeysAreReadAndEveryMistakeNamesItsField) {
+  const std::string dir = testing::TempDir("config_curve");
+  const std::string security = WriteCurveKeys(dir);
+  const DaemonConfig c =
+      ParseDaemonConfig(std::string(kMinimal) + security, "test.toml", MOCAPD_CONFIG_DIR);
+  EXPECT_TRUE(c.curve);
+  EXPECT_EQ(c.curve_keys.public_key, curve::ReadCertificate(dir + "/mocapd.key", false).public_key);
+  EXPECT_EQ(c.curve_keys.secret_key.size(), curve::kZ85KeyLength);
+  ASSERT_EQ(c.curve_authorized_keys.size(), 1u);  // the .key_secret beside it is not a client
+  EXPECT_EQ(c.curve_input_server_key,
+            curve::ReadCertificate(dir + "/capture.key", false).public_key);
+
+  const std::string base = std::string(kMinimal) + "[security]\ncurve = true\n";
+  EXPECT_NE(ErrorOf(base).find("field 'security.key_file': missing"), std::string::npos);
+  EXPECT_NE(ErrorOf(base + "key_file = \"" + dir + "/mocapd.key\"\n")
+                .find("no secret-key (give the .key_secret file"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf(base + "key_file = \"" + dir + "/mocapd.key_secret\"\n")
+                .find("field 'security.authorized_keys': missing"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf(base + "key_file = \"" + dir + "/mocapd.key_secret\"\nauthorized_keys = \"" +
+                    dir + "/nowhere\"\n")
+                .find("cannot list the authorized keys"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf(base + "key_file = \"" + dir + "/mocapd.key_secret\"\nauthorized_keys = \"" +
+                    dir + "/authorized\"\n")
+                .find("field 'security.input_server_key_file': missing"),
+            std::string::npos);
+  EXPECT_NE(
+      ErrorOf(std::string(kMinimal) + "[security]\nkey_file = \"" + dir + "/mocapd.key_secret\"\n")
+          .find("keys are given but curve = false"),
+      std::string::npos);
+  EXPECT_NE(ErrorOf(std::string(kMinimal) + "[security]\ncurves = true\n").find("unknown field"),
+            std::string::npos);
+  // A secret key others can read is refused, as ssh refuses one.
+  std::filesystem::permissions(dir + "/mocapd.key_secret", std::filesystem::perms::group_read,
+                               std::filesystem::perm_options::add);
+  EXPECT_NE(ErrorOf(std::string(kMinimal) + security).find("chmod 600"), std::string::npos);
 }
 
 // The subject description carries names of at most 63 bytes: a longer one is refused when

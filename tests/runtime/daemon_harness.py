@@ -1,6 +1,7 @@
 """Shared by the Python tests that run `mocapd run` as a process: free ports, a config
 on them, start-up and shutdown."""
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -52,8 +53,21 @@ class Daemon:
     workers: [input] workers (None: the default, one per core)."""
 
     def __init__(self, mocapd, config_dir, work, lookahead=12, subjects=("actor1",), rate_hz=120.0, input=None,
-                 shard=None, workers=None):
+                 shard=None, workers=None, curve=False):
         os.makedirs(work, exist_ok=True)
+        security = ""
+        # curve: fresh keys (`mocapd keygen`) for the daemon and for the replay, which is both
+        # its capture publisher and an authorized consumer; replay_curve_args passes them on.
+        self.replay_curve_args = []
+        if curve:
+            keys = os.path.join(work, "keys")
+            shutil.rmtree(keys, ignore_errors=True)
+            os.makedirs(os.path.join(keys, "authorized"))
+            for name in ("mocapd", "authorized/replay"):
+                subprocess.run([mocapd, "keygen", "--out", os.path.join(keys, name)], check=True, capture_output=True)
+            security = (f"[security]\ncurve = true\nkey_file = \"{keys}/mocapd.key_secret\"\n"
+                        f"authorized_keys = \"{keys}/authorized\"\ninput_server_key_file = \"{keys}/authorized/replay.key\"\n")
+            self.replay_curve_args = ["--curve-key", f"{keys}/authorized/replay.key_secret", "--curve-server-key", f"{keys}/mocapd.key"]
         self.lookahead = lookahead
         self.input_port, self.output_port, self.http_port = free_ports(3)
         self.input = input or f"tcp://127.0.0.1:{self.input_port}"
@@ -65,7 +79,7 @@ class Daemon:
             if workers is not None:
                 shard_line += f"workers = {workers}\n"
             f.write(f"format_version = 1\n[input]\nendpoint = \"{self.input}\"\n{shard_line}[output]\nendpoint = \"{self.output}\"\n"
-                    f"[control]\nhttp_port = {self.http_port}\nstats_interval_s = 0.2\n[pipeline]\nlookahead = {lookahead}\n")
+                    f"[control]\nhttp_port = {self.http_port}\nstats_interval_s = 0.2\n{security}[pipeline]\nlookahead = {lookahead}\n")
             for name in subjects:
                 f.write(f"[[subject]]\nname = \"{name}\"\nmodel = \"{model}\"\nrate_hz = {rate_hz}\n")
         self.log = open(os.path.join(work, "mocapd.log"), "w+")

@@ -22,6 +22,7 @@
 #include "filters/pose_error.hpp"
 #include "formats/retarget_map.hpp"
 #include "formats/take_frames.hpp"
+#include "protocol/curve.hpp"
 #include "sim/corruption.hpp"
 #include "sim/humanoid_subject.hpp"
 #include "tests/support/test_takes.hpp"
@@ -83,10 +84,12 @@ class RunningDaemon {
 // Everything the daemon publishes, decoded by kind, received on its own thread.
 class Subscriber {
  public:
-  Subscriber(zmq::context_t& context, const std::string& endpoint, bool read = true)
+  Subscriber(zmq::context_t& context, const std::string& endpoint, bool read = true,
+             const curve::ClientKeys* keys = nullptr)
       : socket_(context, zmq::socket_type::sub) {
     socket_.set(zmq::sockopt::rcvhwm, 0);
     socket_.set(zmq::sockopt::subscribe, "");
+    if (keys) curve::MakeClient(socket_, keys->own, keys->server_public_key);
     socket_.connect(endpoint);
     if (read) thread_ = std::thread([this] { Loop(); });
   }
@@ -171,9 +174,13 @@ class Subscriber {
 class Sender {
  public:
   Sender(zmq::context_t& context, const std::string& endpoint, const C3dTake& take,
-         const SubjectModel& model, zmq::socket_type type)
+         const SubjectModel& model, zmq::socket_type type, const curve::ClientKeys* keys = nullptr)
       : socket_(context, type), take_(take), map_(*model.markers, take) {
     socket_.set(zmq::sockopt::linger, 5000);
+    // A CURVE PUB serves with its own key pair; a PUSH is the daemon's client.
+    if (keys && type == zmq::socket_type::pub) curve::MakeServer(socket_, keys->own, "");
+    if (keys && type != zmq::socket_type::pub)
+      curve::MakeClient(socket_, keys->own, keys->server_public_key);
     if (type == zmq::socket_type::pub) {
       socket_.bind(endpoint);
     } else {
@@ -793,6 +800,120 @@ TEST(DaemonTest, HttpConnectionsBeyondTheLimitAreClosedAndCounted) {
   const auto [code, metrics] = HttpGet(port, "/metrics");
   EXPECT_EQ(code, 200);
   EXPECT_NE(metrics.find("mocapd_http_over_connections_total 1"), std::string::npos) << metrics;
+}
+
+// CURVE keys for a test: the daemon's pair, an authorized client's and a stranger's.
+struct CurveTestKeys {
+  curve::KeyPair daemon = curve::GenerateKeyPair();
+  curve::ClientKeys trusted, stranger;
+  std::string dir;
+  explicit CurveTestKeys(const std::string& name) : dir(testing::TempDir(name)) {
+    std::filesystem::create_directories(dir + "/authorized");
+    trusted = {curve::GenerateKeyPair(), daemon.public_key};
+    stranger = {curve::GenerateKeyPair(), daemon.public_key};
+    curve::WriteCertificates(dir + "/authorized/trusted", trusted.own);
+  }
+  DaemonConfig Apply(DaemonConfig c) const {
+    c.curve = true;
+    c.curve_keys = daemon;
+    c.curve_authorized_keys = curve::ReadAuthorizedKeys(dir + "/authorized");
+    return c;
+  }
+};
+
+// With CURVE on, a PULL input and the output admit only the authorized key: a pusher with
+// another key or with no CURVE at all gets no frame in, a subscriber with either gets
+// nothing out, and each refusal is counted by socket, while the trusted peers' frames
+// all go through and the accounting still balances.
+TEST(DaemonTest, CurveAdmitsOnlyAuthorizedKeysAndCountsEveryoneElse) {
+  const testing::HumanoidFixture f = testing::MakeHumanoidFixture("walk", 1.0, 120.0);
+  const CurveTestKeys keys("daemon_curve");
+  const std::string in = "tcp://127.0.0.1:47331", out = "tcp://127.0.0.1:47332";
+  zmq::context_t context;
+  RunningDaemon daemon(context, keys.Apply(TestConfig(in, out, 4)));
+  const auto refused = [](const DaemonStats& s, CurveSocket which) {
+    return s.curve_counts.refused[static_cast<int>(which)];
+  };
+  const auto failed = [](const DaemonStats& s, CurveSocket which) {
+    return s.curve_counts.handshake_failures[static_cast<int>(which)];
+  };
+  Subscriber trusted_sub(context, out, true, &keys.trusted);
+  Subscriber stranger_sub(context, out, true, &keys.stranger);
+  Subscriber plain_sub(context, out, true, nullptr);
+  ASSERT_TRUE(trusted_sub.WaitConnected());
+  ASSERT_TRUE(WaitForStats(*daemon, [&](const DaemonStats& s) {
+    return refused(s, CurveSocket::kOutput) >= 1 && failed(s, CurveSocket::kOutput) >= 1;
+  }));
+  const SubjectModel model = MakeHumanoidSubject("actor1");
+  {
+    Sender forged(context, in, f.take, model, zmq::socket_type::push, &keys.stranger);
+    Sender plain(context, in, f.take, model, zmq::socket_type::push, nullptr);
+    forged.socket().set(zmq::sockopt::linger, 0);
+    plain.socket().set(zmq::sockopt::linger, 0);
+    // Queued for a handshake that fails: never delivered, whatever they send.
+    for (int t = 0; t < 20; ++t) forged.Send(t, 5000 + static_cast<uint64_t>(t));
+    for (int t = 0; t < 20; ++t) plain.Send(t, 6000 + static_cast<uint64_t>(t));
+    ASSERT_TRUE(WaitForStats(*daemon, [&](const DaemonStats& s) {
+      return refused(s, CurveSocket::kInput) >= 1 && failed(s, CurveSocket::kInput) >= 1;
+    }));
+  }
+  EXPECT_EQ(daemon->Stats().messages_in, 0u);
+  Sender trusted(context, in, f.take, model, zmq::socket_type::push, &keys.trusted);
+  const int frames = f.take.num_frames;
+  for (int t = 0; t < frames; ++t) trusted.Send(t, static_cast<uint64_t>(t));
+  ASSERT_TRUE(WaitForStats(*daemon, [&](const DaemonStats& s) {
+    return s.messages_in == static_cast<uint64_t>(frames);
+  }));
+  daemon.Stop();
+  const DaemonStats s = daemon->Stats();
+  EXPECT_TRUE(s.Balanced());
+  EXPECT_EQ(s.published_total(), static_cast<uint64_t>(frames));
+  EXPECT_GE(s.curve_counts.accepted[static_cast<int>(CurveSocket::kInput)], 1u);
+  EXPECT_GE(s.curve_counts.accepted[static_cast<int>(CurveSocket::kOutput)], 1u);
+  ASSERT_TRUE(trusted_sub.WaitFor([&] { return trusted_sub.skeletons["actor1"].size() == 120; }));
+  for (Subscriber* shut_out : {&stranger_sub, &plain_sub}) {
+    std::lock_guard lock(shut_out->mutex);
+    EXPECT_EQ(shut_out->statuses, 0);
+    EXPECT_TRUE(shut_out->skeletons.empty());
+  }
+  EXPECT_NE(FormatPrometheusMetrics(s).find("mocapd_curve_clients_refused_total{socket=\"input\"}"),
+            std::string::npos);
+}
+
+// A subscribing daemon is the capture publisher's CURVE client: a publisher without the
+// configured key (a forged feed on the same address) never gets a frame in, and the failed
+// handshakes are counted; the real publisher's frames then flow.
+TEST(DaemonTest, ACurveSubInputTakesFramesOnlyFromThePublisherWhoseKeyItHolds) {
+  const testing::HumanoidFixture f = testing::MakeHumanoidFixture("walk", 1.0, 120.0);
+  const CurveTestKeys keys("daemon_curve_sub");
+  const curve::ClientKeys capture{curve::GenerateKeyPair(), ""};
+  const std::string in = "tcp://127.0.0.1:47341", out = "tcp://127.0.0.1:47342";
+  DaemonConfig config = keys.Apply(TestConfig(in, out, 0));
+  config.input_pattern = InputPattern::kSub;
+  config.curve_input_server_key = capture.own.public_key;
+  // The publishers live in their own context, as in their own process: a CURVE server in
+  // the daemon's context would be judged by the daemon's allow-list.
+  zmq::context_t context, capture_context;
+  const SubjectModel model = MakeHumanoidSubject("actor1");
+  RunningDaemon daemon(context, config);
+  {
+    Sender forged(capture_context, in, f.take, model, zmq::socket_type::pub, &keys.stranger);
+    forged.socket().set(zmq::sockopt::linger, 0);
+    ASSERT_TRUE(WaitForStats(*daemon, [&](const DaemonStats& s) {
+      forged.Send(0, 0, "markers/actor1/");
+      return s.curve_counts.handshake_failures[static_cast<int>(CurveSocket::kInput)] >= 1;
+    }));
+    for (int t = 0; t < 20; ++t) forged.Send(t, static_cast<uint64_t>(t), "markers/actor1/");
+  }
+  EXPECT_EQ(daemon->Stats().messages_in, 0u);
+  Sender real(capture_context, in, f.take, model, zmq::socket_type::pub, &capture);
+  uint64_t t = 0;
+  ASSERT_TRUE(WaitForStats(*daemon, [&](const DaemonStats& s) {
+    real.Send(0, t++, "markers/actor1/");
+    return s.messages_in > 0;
+  }));
+  daemon.Stop();
+  EXPECT_TRUE(daemon->Stats().Balanced());
 }
 
 }  // namespace
