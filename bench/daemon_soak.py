@@ -15,6 +15,7 @@ Prints a table per run and writes JSON with --report.
 """
 import argparse
 import json
+import math
 import os
 import subprocess
 import sys
@@ -25,6 +26,14 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 sys.path.insert(0, os.path.join(ROOT, "tests", "runtime"))
 from daemon_harness import Daemon, add_run_arguments, http_get  # noqa: E402
+
+try:  # only for --viewers / --stalled-viewers (Debian: chromium, python3-websocket)
+    import socket
+
+    import websocket
+    from browser import Browser
+except ImportError:
+    websocket = Browser = None
 
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
 PAGE = os.sysconf("SC_PAGE_SIZE")
@@ -59,6 +68,31 @@ def run(args, subjects, seconds, work):
         while not stop.wait(args.sample_s):
             samples.append((time.monotonic() - start, *proc_sample(daemon.process.pid)))
 
+    # Browsers on the live view, and stalled viewers: WebSockets that never read.
+    browsers, stalled = [], []
+    for _ in range(args.viewers):
+        browsers.append(Browser())
+        browsers[-1].open(f"http://127.0.0.1:{daemon.http_port}/")
+    for _ in range(args.stalled_viewers):
+        stalled.append(websocket.create_connection(f"ws://127.0.0.1:{daemon.http_port}/live",
+                                                   sockopt=((socket.SOL_SOCKET, socket.SO_RCVBUF, 4096),)))
+    # Readers: pages without a renderer, taking every message as it comes. What the live
+    # view costs the daemon itself, without browsers' software WebGL sharing the cores.
+    readers, reader_counts = [], []
+
+    def read_all(ws, k):
+        try:
+            while True:
+                ws.recv()
+                reader_counts[k] += 1
+        except Exception:  # closed at the end of the run
+            pass
+
+    for k in range(args.readers):
+        ws = websocket.create_connection(f"ws://127.0.0.1:{daemon.http_port}/live")
+        reader_counts.append(0)
+        readers.append((ws, threading.Thread(target=read_all, args=(ws, k), daemon=True)))
+        readers[-1][1].start()
     thread = threading.Thread(target=sampler)
     thread.start()
     take_seconds = min(seconds, 60.0)
@@ -76,8 +110,16 @@ def run(args, subjects, seconds, work):
             raise RuntimeError(replay.stdout + replay.stderr)
         time.sleep(0.2)  # the daemon's statistics snapshot is refreshed every 20 ms
         metrics = http_get(daemon.http_port, "/metrics")[1]
+        views = [b.evaluate("({frames: mocapdView.framesReceived, fps: mocapdView.renderFps, first_ms: mocapdView.firstFrameMs})")
+                 for b in browsers]
     finally:
         stop.set()
+        for b in browsers:
+            b.close()
+        for w in stalled:
+            w.close()
+        for ws, _ in readers:
+            ws.close()
         code = daemon.stop()
     with open(report_path) as f:
         r = json.load(f)
@@ -102,6 +144,11 @@ def run(args, subjects, seconds, work):
         "daemon_rss_mb_last_quarter": sum(rss_mb[-quarter:]) / quarter if rss_mb else None,
         "daemon_rss_mb_max": max(rss_mb) if rss_mb else None,
         "curve": args.curve,
+        "live_view": {"browsers": args.viewers, "stalled_viewers": args.stalled_viewers, "pages": views,
+                      "readers": args.readers, "reader_messages": reader_counts,
+                      "messages_sent": metric_sum(metrics, "mocapd_live_messages_sent_total"),
+                      "messages_skipped": metric_sum(metrics, "mocapd_live_messages_skipped_total"),
+                      "closed_slow": metric_sum(metrics, "mocapd_live_viewers_closed_slow_total")},
         # Per interval of the replay's sending time: processing latency (the replay's
         # measure) and the daemon's resident memory sampled within it.
         "per_interval": [
@@ -121,6 +168,12 @@ def run(args, subjects, seconds, work):
         print(f"  joint error: mean {a['mean_joint_position_error_cm']:.3f} cm / {a['mean_joint_rotation_error_deg']:.2f} deg, "
               f"frame p99.9 {a.get('p999_frame_position_error_cm', 0):.2f} cm, worst frame {a['max_joint_position_error_cm']:.2f} cm "
               f"({w.get('subject', '?')} frame {w.get('frame_number', '?')}, {w.get('joint', '?')})", flush=True)
+    if args.viewers or args.stalled_viewers or args.readers:
+        lv = result["live_view"]
+        rates = ", ".join("%.1f fps" % p["fps"] for p in views if p)
+        print(f"  live view: {args.viewers} browsers ({rates}), {args.readers} readers ({lv['reader_messages']} messages), "
+              f"{args.stalled_viewers} stalled; {lv['messages_sent']:.0f} messages sent, {lv['messages_skipped']:.0f} skipped, "
+              f"{lv['closed_slow']:.0f} stalled viewers closed", flush=True)
     if result["per_interval"]:
         worst = max(result["per_interval"], key=lambda i: i["processing_latency"]["p99_ms"])
         rss = [i["daemon_rss_mb_max"] for i in result["per_interval"] if i["daemon_rss_mb_max"] > 0]
@@ -137,27 +190,31 @@ def plot_intervals(result, path, interval_s):
     w, h, left, right, top, bottom = 900, 420, 70, 70, 40, 50
     pw, ph = w - left - right, h - top - bottom
     t_max = rows[-1]["from_s"] + interval_s
-    lat_max = max(2.0, max(r["processing_latency"]["p99.9_ms"] for r in rows) * 1.1)
+    # A log axis: the median (tenths of a ms) and a rare stall (hundreds) both stay readable.
+    lat_min = 0.1
+    worst = max(r["processing_latency"]["p99.9_ms"] for r in rows)
+    lat_max = 10 ** math.ceil(math.log10(max(2.0, worst * 1.1)))
     rss = [r["daemon_rss_mb_max"] for r in rows]
     rss_max = max(rss) * 1.3 if max(rss) > 0 else 1.0
     x = lambda t: left + pw * t / t_max
-    y_lat = lambda v: top + ph * (1 - min(v, lat_max) / lat_max)
+    y_lat = lambda v: top + ph * (1 - math.log10(min(max(v, lat_min), lat_max) / lat_min) / math.log10(lat_max / lat_min))
     y_rss = lambda v: top + ph * (1 - v / rss_max)
     out = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" font-family="sans-serif" font-size="12">',
            f'<rect width="{w}" height="{h}" fill="white"/>',
            f'<text x="{w / 2}" y="20" text-anchor="middle" font-size="14">mocapd soak: {result["subjects"]} actors at {result["rate_hz"]:.0f} Hz, '
            f'{result["seconds"] / 60:.0f} min, {result["frames_sent"]} frames, {result["frames_lost"]} lost</text>',
            f'<rect x="{left}" y="{top}" width="{pw}" height="{ph}" fill="none" stroke="#888"/>']
-    for v in [0.5 * k for k in range(int(lat_max / 0.5) + 1)]:
+    ticks = [m * 10 ** e for e in range(-1, int(math.log10(lat_max)) + 1) for m in (1, 2, 5)]
+    for v in [t for t in ticks if lat_min <= t <= lat_max]:
         out.append(f'<line x1="{left}" x2="{left + pw}" y1="{y_lat(v):.1f}" y2="{y_lat(v):.1f}" stroke="#eee"/>'
-                   f'<text x="{left - 6}" y="{y_lat(v) + 4:.1f}" text-anchor="end">{v:.1f}</text>')
+                   f'<text x="{left - 6}" y="{y_lat(v) + 4:.1f}" text-anchor="end">{v:g}</text>')
     if lat_max >= 2.0:
         out.append(f'<line x1="{left}" x2="{left + pw}" y1="{y_lat(2.0):.1f}" y2="{y_lat(2.0):.1f}" stroke="#c00" stroke-dasharray="6,4"/>'
                    f'<text x="{left + pw - 4}" y="{y_lat(2.0) - 4:.1f}" text-anchor="end" fill="#c00">2 ms bound</text>')
     for k in range(0, int(t_max / 60) + 1, max(1, int(t_max / 60 / 12))):
         out.append(f'<text x="{x(k * 60):.1f}" y="{top + ph + 16}" text-anchor="middle">{k}</text>')
     out.append(f'<text x="{left + pw / 2}" y="{h - 12}" text-anchor="middle">minutes</text>'
-               f'<text x="16" y="{top + ph / 2}" transform="rotate(-90 16 {top + ph / 2})" text-anchor="middle">processing latency (ms)</text>'
+               f'<text x="16" y="{top + ph / 2}" transform="rotate(-90 16 {top + ph / 2})" text-anchor="middle">processing latency (ms, log scale)</text>'
                f'<text x="{w - 14}" y="{top + ph / 2}" transform="rotate(90 {w - 14} {top + ph / 2})" text-anchor="middle">daemon RSS (MB)</text>')
     for v in [rss_max * k / 4 for k in range(5)]:
         out.append(f'<text x="{left + pw + 6}" y="{y_rss(v) + 4:.1f}">{v:.0f}</text>')
@@ -188,6 +245,11 @@ def main():
     parser.add_argument("--interval-s", dest="interval_s", type=float, default=60.0,
                         help="latency percentiles and RSS per this many seconds")
     parser.add_argument("--plot", default="", help="write the per-interval latency and RSS as SVG")
+    parser.add_argument("--viewers", type=int, default=0, help="headless Chromium pages on the live view during the run")
+    parser.add_argument("--readers", type=int, default=0,
+                        help="WebSocket clients on the live view that read every message and render nothing")
+    parser.add_argument("--stalled-viewers", dest="stalled_viewers", type=int, default=0,
+                        help="live-view WebSockets that never read")
     args = parser.parse_args()
     results = []
     if args.load:

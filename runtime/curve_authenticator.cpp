@@ -118,17 +118,26 @@ struct CurveAuthenticator::Impl {
     if (!zmq::recv_multipart(w.events, std::back_inserter(event), zmq::recv_flags::dontwait))
       return;
     if (event.empty() || event[0].size() < 6) return;
+    // First frame: the event (u16) and its value (u32: a protocol error code, an errno or,
+    // for a refusal, the ZAP status); second: the endpoint.
     uint16_t id = 0;
+    uint32_t value = 0;
     std::memcpy(&id, event[0].data(), sizeof id);
-    if (id == ZMQ_EVENT_HANDSHAKE_FAILED_NO_DETAIL || id == ZMQ_EVENT_HANDSHAKE_FAILED_PROTOCOL) {
-      handshake_failures[static_cast<int>(w.which)].fetch_add(1, std::memory_order_relaxed);
-      const int64_t now = SteadyNowNs();
-      if (last_failure_log_ns < 0 || now - last_failure_log_ns >= log_interval_ns) {
+    std::memcpy(&value, static_cast<const uint8_t*>(event[0].data()) + sizeof id, sizeof value);
+    handshake_failures[static_cast<size_t>(w.which)].fetch_add(1, std::memory_order_relaxed);
+    const int64_t now = SteadyNowNs();
+    if (last_failure_log_ns < 0 || now - last_failure_log_ns >= log_interval_ns) {
+      const std::string peer = event.size() > 1 ? event[1].to_string() : "?";
+      if (id == ZMQ_EVENT_HANDSHAKE_FAILED_AUTH)
         spdlog::warn(
-            "CURVE: a handshake on the {} failed ({}): a peer without CURVE or with other keys",
-            CurveSocketName(w.which), event.size() > 1 ? event[1].to_string() : "?");
-        last_failure_log_ns = now;
-      }
+            "CURVE: {} refused this daemon (ZAP status {}): is its key in that peer's allow-list?",
+            peer, value);
+      else
+        spdlog::warn(
+            "CURVE: a handshake on the {} ({}) failed (code {:#x}): a peer without CURVE or with "
+            "other keys",
+            CurveSocketName(w.which), peer, value);
+      last_failure_log_ns = now;
     }
   }
 
@@ -164,12 +173,12 @@ CurveAuthenticator::CurveAuthenticator(zmq::context_t& context,
 
 CurveAuthenticator::~CurveAuthenticator() { Stop(); }
 
-void CurveAuthenticator::Monitor(void* socket_handle, CurveSocket which) {
+void CurveAuthenticator::Monitor(void* socket_handle, CurveSocket which, bool client) {
   static std::atomic<uint64_t> monitors{0};
   const std::string endpoint = "inproc://mocapd-curve-monitor-" + std::to_string(++monitors);
-  if (zmq_socket_monitor(
-          socket_handle, endpoint.c_str(),
-          ZMQ_EVENT_HANDSHAKE_FAILED_NO_DETAIL | ZMQ_EVENT_HANDSHAKE_FAILED_PROTOCOL) != 0)
+  int events = ZMQ_EVENT_HANDSHAKE_FAILED_NO_DETAIL | ZMQ_EVENT_HANDSHAKE_FAILED_PROTOCOL;
+  if (client) events |= ZMQ_EVENT_HANDSHAKE_FAILED_AUTH;
+  if (zmq_socket_monitor(socket_handle, endpoint.c_str(), events) != 0)
     throw std::runtime_error("CURVE authenticator: cannot monitor the " +
                              std::string(CurveSocketName(which)) + ": " +
                              zmq_strerror(zmq_errno()));

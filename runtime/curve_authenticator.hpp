@@ -45,9 +45,11 @@ class CurveAuthenticator {
   CurveAuthenticator(const CurveAuthenticator&) = delete;
   CurveAuthenticator& operator=(const CurveAuthenticator&) = delete;
 
-  /// Watches a socket's handshakes (before Start; the socket must be a daemon socket that
-  /// outlives this authenticator's thread, i.e. Stop() is called before it closes).
-  void Monitor(void* socket_handle, CurveSocket which);
+  /// Watches a socket's handshakes. Call on the thread that owns the socket, before it
+  /// binds or connects and before Start. client: the daemon is this socket's CURVE
+  /// client, so a server that refuses it is a failure to count here (refusals of the
+  /// daemon's own clients are counted by ZAP).
+  void Monitor(void* socket_handle, CurveSocket which, bool client);
   /// Starts answering (requests that arrived before are answered then).
   void Start();
   void Stop();

@@ -73,14 +73,28 @@ bool PollRetryingOnSignals(zmq::pollitem_t* items, size_t count,
 
 }  // namespace
 
+// A subject's runner, with its live-view slot when the view is on.
+static std::unique_ptr<SubjectRunner> MakeRunner(const SubjectConfig& subject,
+                                                 const DaemonConfig& config, LiveViewBoard* board) {
+  auto runner = std::make_unique<SubjectRunner>(subject, config);
+  if (board)
+    runner->AttachLiveView(board->Register(subject.name, *subject.model.skeleton,
+                                           *subject.model.markers, subject.character.get()));
+  return runner;
+}
+
 // ---------------------------------------------------------------------------------------
 // Data plane: workers, each a thread owning its input and output sockets and its runners.
 
 struct Daemon::DataPlane final : OutputSink {
-  DataPlane(DaemonConfig cfg, zmq::context_t& shared_context, int worker_index)
-      : context(shared_context), config(std::move(cfg)), index(worker_index) {
+  DataPlane(DaemonConfig cfg, zmq::context_t& shared_context, int worker_index,
+            std::shared_ptr<LiveViewBoard> board)
+      : context(shared_context),
+        config(std::move(cfg)),
+        index(worker_index),
+        view_board(std::move(board)) {
     for (const SubjectConfig& s : config.subjects)
-      runners.push_back(std::make_unique<SubjectRunner>(s, config));
+      runners.push_back(MakeRunner(s, config, view_board.get()));
     frame.positions.reserve(protocol::kMaxMarkers);
     frame.valid.reserve(protocol::kMaxMarkers);
     frame.subject.reserve(protocol::kMaxSubjectName);
@@ -95,10 +109,13 @@ struct Daemon::DataPlane final : OutputSink {
       input.set(zmq::sockopt::rcvhwm, config.receive_high_water_mark);
       input.set(zmq::sockopt::linger, 0);
       if (config.curve) {
-        if (config.input_pattern == InputPattern::kSub)
+        const bool client = config.input_pattern == InputPattern::kSub;
+        if (client)
           curve::MakeClient(input, config.curve_keys, config.curve_input_server_key);
         else
           curve::MakeServer(input, config.curve_keys, CurveSocketName(CurveSocket::kInput));
+        // Watched from before the first handshake (Open runs before the worker starts).
+        if (authenticator) authenticator->Monitor(input.handle(), CurveSocket::kInput, client);
       }
       if (config.input_pattern == InputPattern::kSub) {
         if (config.subscribe_all) {
@@ -120,8 +137,10 @@ struct Daemon::DataPlane final : OutputSink {
                  forwarded ? kInternalHighWaterMark : config.send_high_water_mark);
       // Give subscribers a moment to receive the last frames at shutdown, never forever.
       output.set(zmq::sockopt::linger, 2000);
-      if (config.curve && !forwarded)
+      if (config.curve && !forwarded) {
         curve::MakeServer(output, config.curve_keys, CurveSocketName(CurveSocket::kOutput));
+        if (authenticator) authenticator->Monitor(output.handle(), CurveSocket::kOutput, false);
+      }
       output.bind(config.output_endpoint);
     } catch (const zmq::error_t& e) {
       throw std::runtime_error("output endpoint '" + config.output_endpoint + "': " + e.what());
@@ -358,6 +377,8 @@ struct Daemon::DataPlane final : OutputSink {
   DaemonConfig config;
   int index = 0;           // which worker
   bool forwarded = false;  // publishes to the forwarding thread, not to consumers
+  CurveAuthenticator* authenticator = nullptr;  // counts this worker's failed handshakes
+  std::shared_ptr<LiveViewBoard> view_board;    // null: no live view
   std::vector<std::unique_ptr<SubjectRunner>> runners;
   protocol::MarkerFrameMessage frame;
   protocol::EndOfStreamMessage end_of_stream;
@@ -382,6 +403,7 @@ struct Daemon::ControlPlane {
   std::optional<boost::asio::signal_set> signals;
   std::optional<boost::asio::steady_timer> tick;
   std::unique_ptr<HttpServer> http;
+  std::unique_ptr<LiveViewHub> live;  // the browser view's WebSockets (with the HTTP endpoint)
   // Each endpoint's last answer, rendered at most once per kRenderPeriodNs however often
   // it is asked for: a scraper hammering /metrics costs a copy, not a render and a turn
   // at the data plane's statistics lock.
@@ -412,7 +434,7 @@ struct Daemon::ControlPlane {
 
 struct Daemon::OutputProxy {
   OutputProxy(zmq::context_t& context, const DaemonConfig& config, const std::string& prefix,
-              int workers)
+              int workers, CurveAuthenticator* authenticator)
       : from_workers(context, zmq::socket_type::xsub),
         to_consumers(context, zmq::socket_type::xpub),
         control_in(context, zmq::socket_type::pair),
@@ -421,8 +443,10 @@ struct Daemon::OutputProxy {
     from_workers.set(zmq::sockopt::rcvhwm, kInternalHighWaterMark);
     to_consumers.set(zmq::sockopt::sndhwm, config.send_high_water_mark);
     to_consumers.set(zmq::sockopt::linger, 2000);
-    if (config.curve)
+    if (config.curve) {
       curve::MakeServer(to_consumers, config.curve_keys, CurveSocketName(CurveSocket::kOutput));
+      if (authenticator) authenticator->Monitor(to_consumers.handle(), CurveSocket::kOutput, false);
+    }
     try {
       to_consumers.bind(config.output_endpoint);
     } catch (const zmq::error_t& e) {
@@ -506,12 +530,15 @@ Daemon::Daemon(DaemonConfig config, std::string config_path, zmq::context_t* con
   if (config.curve)
     authenticator_ = std::make_unique<CurveAuthenticator>(*context_, config.curve_authorized_keys,
                                                           config.log_interval_s);
+  if (config.http_enabled && config.live_view)
+    view_board_ = std::make_shared<LiveViewBoard>(config.live_view_rate_hz);
   planes_.resize(static_cast<size_t>(workers));
   AssignWorkers(config);
   for (int i = 0; i < workers; ++i) {
     planes_[static_cast<size_t>(i)] =
-        std::make_unique<DataPlane>(WorkerConfig(config, i), *context_, i);
+        std::make_unique<DataPlane>(WorkerConfig(config, i), *context_, i, view_board_);
     planes_[static_cast<size_t>(i)]->forwarded = workers > 1;
+    planes_[static_cast<size_t>(i)]->authenticator = authenticator_.get();
   }
   control_->config = std::move(config);
 }
@@ -583,6 +610,7 @@ void Daemon::Stop() {
       StopProxy();
       if (authenticator_) authenticator_->Stop();
       if (c.http) c.http->Stop();
+      if (c.live) c.live->Stop();
       if (c.tick) c.tick->cancel();
       if (c.signals) c.signals->cancel();
       c.io.stop();
@@ -622,16 +650,14 @@ void Daemon::ApplyReload(DaemonConfig config) {
       config.http_address != old.http_address || config.http_enabled != old.http_enabled ||
       config.http_token != old.http_token ||
       config.http_max_connections != old.http_max_connections || config.workers != old.workers ||
+      config.live_view != old.live_view || config.live_view_rate_hz != old.live_view_rate_hz ||
+      config.live_view_max_viewers != old.live_view_max_viewers ||
       config.pin_workers != old.pin_workers || config.curve != old.curve ||
       config.curve_keys.secret_key != old.curve_keys.secret_key ||
       config.curve_input_server_key != old.curve_input_server_key)
     spdlog::warn(
         "reload: endpoint, worker, CURVE key and HTTP access changes take effect only after a "
         "restart; the sockets, the workers and the HTTP endpoint stay as they are");
-  if (authenticator_ && config.curve) {
-    authenticator_->SetAuthorizedKeys(config.curve_authorized_keys);
-    spdlog::info("reload: {} authorized CURVE client keys", config.curve_authorized_keys.size());
-  }
   AssignWorkers(config);
   // Every worker's part is built before any is posted: a reload applies everywhere or
   // nowhere.
@@ -640,9 +666,20 @@ void Daemon::ApplyReload(DaemonConfig config) {
     auto pending = std::make_unique<DataPlane::PendingReload>();
     pending->config = WorkerConfig(config, static_cast<int>(i));
     pending->sequence = reloads_posted_ + 1;
-    for (const SubjectConfig& s : pending->config.subjects)
-      pending->runners.push_back(std::make_unique<SubjectRunner>(s, pending->config));
+    for (const SubjectConfig& s : pending->config.subjects) {
+      // A subject the reload leaves as it was keeps its running pipeline (the worker
+      // drops this new runner), and with it its live-view slot.
+      const SubjectConfig* before = old.FindSubject(s.name);
+      const bool unchanged = before != nullptr && SubjectFingerprint(*before, old) ==
+                                                      SubjectFingerprint(s, pending->config);
+      pending->runners.push_back(
+          MakeRunner(s, pending->config, unchanged ? nullptr : view_board_.get()));
+    }
     parts.push_back(std::move(pending));
+  }
+  if (authenticator_ && config.curve) {
+    authenticator_->SetAuthorizedKeys(config.curve_authorized_keys);
+    spdlog::info("reload: {} authorized CURVE client keys", config.curve_authorized_keys.size());
   }
   ++reloads_posted_;
   for (size_t i = 0; i < planes_.size(); ++i) {
@@ -758,21 +795,21 @@ void Daemon::Run(bool handle_signals) {
   try {
     for (auto& plane : planes_) plane->Open();
     if (planes_.size() > 1)
-      proxy_ = std::make_unique<OutputProxy>(*context_, cp.config, worker_output_prefix_,
-                                             static_cast<int>(planes_.size()));
-    if (authenticator_) {
-      for (auto& plane : planes_)
-        authenticator_->Monitor(plane->input.handle(), CurveSocket::kInput);
-      authenticator_->Monitor(proxy_ ? proxy_->to_consumers.handle() : planes_[0]->output.handle(),
-                              CurveSocket::kOutput);
-      authenticator_->Start();
-    }
+      proxy_ =
+          std::make_unique<OutputProxy>(*context_, cp.config, worker_output_prefix_,
+                                        static_cast<int>(planes_.size()), authenticator_.get());
+    if (authenticator_) authenticator_->Start();
     if (cp.config.http_enabled) {
       auto render = [this](const std::string& target) {
         DaemonStats stats = Stats();
         if (control_->http) {
           stats.http_unauthorized = control_->http->counters().unauthorized;
           stats.http_over_connections = control_->http->counters().over_connections;
+        }
+        if (control_->live) {
+          stats.live_view = true;
+          stats.live_viewers = control_->live->viewers();
+          stats.live_counters = control_->live->counters();
         }
         const bool alive = (stats.running || stats.stopping) &&
                            SteadyNs() - stats.data_plane_heartbeat_ns < 1'000'000'000;
@@ -786,12 +823,32 @@ void Daemon::Run(bool handle_signals) {
       HttpServerOptions options;
       options.bearer_token = cp.config.http_token;
       options.max_connections = cp.config.http_max_connections;
+      if (view_board_) {
+        cp.live = std::make_unique<LiveViewHub>(cp.io, view_board_, cp.config.live_view_max_viewers,
+                                                cp.config.live_view_close_stalled_s);
+        options.upgrade = [this](const std::string& path, boost::asio::ip::tcp::socket& socket,
+                                 HttpRequest request) -> std::optional<HttpResponse> {
+          if (path != "/live")
+            return HttpResponse{
+                404, "text/plain; charset=utf-8",
+                "no WebSocket at " + path.substr(0, 64) + "; the live view's is /live\n"};
+          if (!control_->live || control_->stopping)
+            return HttpResponse{503, "text/plain; charset=utf-8", "the daemon is stopping\n"};
+          return control_->live->Accept(socket, std::move(request));
+        };
+      }
       cp.http = std::make_unique<HttpServer>(
           cp.io, cp.config.http_address, cp.config.http_port,
           [this, render](const std::string& target) {
-            if (target != "/metrics" && target != "/subjects" && target != "/health")
+            if (target != "/metrics" && target != "/subjects" && target != "/health") {
+              if (control_->live)
+                if (auto file = LiveViewFile(target))
+                  return HttpResponse{file->status, file->content_type, std::move(file->body)};
               return HttpResponse{404, "text/plain; charset=utf-8",
-                                  "not found; try /health, /subjects or /metrics\n"};
+                                  control_->live
+                                      ? "not found; try /, /health, /subjects or /metrics\n"
+                                      : "not found; try /health, /subjects or /metrics\n"};
+            }
             ControlPlane::Rendered& r = control_->rendered[target];
             const int64_t now = SteadyNs();
             if (r.at_ns < 0 || now - r.at_ns >= ControlPlane::kRenderPeriodNs) {
@@ -951,6 +1008,7 @@ void Daemon::Run(bool handle_signals) {
                        now.pending_total());
           c.last_log_ns = t;
         }
+        if (c.live && c.live->viewers() > 0) c.live->OnStats(now);
         c.last_logged = now;
         c.tick->expires_after(std::chrono::milliseconds(
             static_cast<int64_t>(std::min(c.config.stats_interval_s, 0.25) * 1e3)));

@@ -19,6 +19,7 @@
 
 #include "runtime/curve_authenticator.hpp"
 #include "runtime/daemon_config.hpp"
+#include "runtime/live_view.hpp"
 #include "runtime/subject_runner.hpp"
 
 namespace zmq {
@@ -65,8 +66,11 @@ struct DaemonStats {
   uint64_t output_send_failures = 0;
   uint64_t reloads = 0;  ///< Reloads every worker has applied.
   uint64_t reload_failures = 0;
-  uint64_t http_unauthorized = 0;       ///< HTTP requests without the bearer token.
-  uint64_t http_over_connections = 0;   ///< HTTP connections closed: too many open.
+  uint64_t http_unauthorized = 0;      ///< HTTP requests without the bearer token.
+  uint64_t http_over_connections = 0;  ///< HTTP connections closed: too many open.
+  bool live_view = false;              ///< The browser view is served.
+  int live_viewers = 0;                ///< Pages open on it now.
+  LiveViewCounters live_counters;
   bool curve = false;                   ///< CURVE on the input and output sockets.
   CurveCounts curve_counts;             ///< Its handshakes: admitted, refused, failed.
   int64_t data_plane_heartbeat_ns = 0;  ///< Steady clock of the data plane's last loop.
@@ -127,6 +131,9 @@ class Daemon {
   std::atomic<uint64_t> reload_failures_{0};
   std::unique_ptr<zmq::context_t> owned_context_;
   zmq::context_t* context_ = nullptr;
+  /// The ZAP handler when security.curve is on: bound before any socket and destroyed
+  /// after them all (declared before them), so no client is ever admitted unchecked.
+  std::unique_ptr<CurveAuthenticator> authenticator_;
   std::vector<std::unique_ptr<DataPlane>> planes_;
   std::map<std::string, int> worker_of_;
   uint64_t reloads_posted_ = 0;       ///< Control plane only.
@@ -134,9 +141,8 @@ class Daemon {
   struct OutputProxy;
   std::unique_ptr<OutputProxy> proxy_;
   std::unique_ptr<ControlPlane> control_;
-  /// The ZAP handler when security.curve is on: bound before any socket, so no client is
-  /// ever admitted unchecked.
-  std::unique_ptr<CurveAuthenticator> authenticator_;
+  /// Every subject's live-view slot (when the view is on), shared with the workers.
+  std::shared_ptr<LiveViewBoard> view_board_;
   std::atomic<int> http_port_{0};
   std::mutex run_mutex_;
   std::condition_variable run_cv_;

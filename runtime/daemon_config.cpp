@@ -188,6 +188,12 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
   c.allow_remote = control.Bool("allow_remote", c.allow_remote);
   c.http_max_connections =
       control.Integer("http_max_connections", c.http_max_connections, 1, 10000);
+  c.live_view = control.Bool("live_view", c.live_view);
+  c.live_view_rate_hz = control.Number("live_view_rate_hz", c.live_view_rate_hz, 1.0, 120.0);
+  c.live_view_max_viewers =
+      control.Integer("live_view_max_viewers", c.live_view_max_viewers, 1, 256);
+  c.live_view_close_stalled_s =
+      control.Number("live_view_close_stalled_s", c.live_view_close_stalled_s, 0.1, 3600.0);
   c.http_token_file = control.String("http_token_file", "");
   if (!c.http_token_file.empty()) {
     if (std::filesystem::path(c.http_token_file).is_relative())

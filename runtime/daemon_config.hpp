@@ -67,6 +67,11 @@ struct DaemonConfig {
   std::string http_token_file;
   std::string http_token;
   int http_max_connections = 64;
+  /// The browser live view on the HTTP port (`/`, WebSocket `/live`).
+  bool live_view = true;
+  double live_view_rate_hz = 30.0;         ///< Frames a second sent to each page.
+  int live_view_max_viewers = 8;           ///< Pages open at once; more are refused (503).
+  double live_view_close_stalled_s = 5.0;  ///< A page that takes nothing this long is closed.
   double stats_interval_s = 1.0;
   double watchdog_timeout_s = 0.5;
   double model_suspect_mm = 20.0;  ///< Median sample-to-model distance that flags a model.

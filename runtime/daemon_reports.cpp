@@ -50,6 +50,38 @@ std::string FormatPrometheusMetrics(const DaemonStats& stats) {
           "HTTP connections closed unanswered: control.http_max_connections were open")
       .Add({})
       .Increment(static_cast<double>(stats.http_over_connections));
+  if (stats.live_view) {
+    gauge("mocapd_live_viewers", "Browser pages open on the live view")
+        .Add({})
+        .Set(stats.live_viewers);
+    const LiveViewCounters& live = stats.live_counters;
+    struct LiveCount {
+      const char* name;
+      const char* help;
+      uint64_t value;
+    };
+    for (const LiveCount& c :
+         {LiveCount{"mocapd_live_messages_sent_total", "Live-view messages sent to pages",
+                    live.messages_sent},
+          LiveCount{"mocapd_live_messages_skipped_total",
+                    "Live-view messages skipped: the page was still taking the last one",
+                    live.messages_skipped},
+          LiveCount{
+              "mocapd_live_viewers_closed_slow_total",
+              "Live-view pages closed for taking nothing for control.live_view_close_stalled_s",
+              live.viewers_closed_slow},
+          LiveCount{"mocapd_live_viewers_refused_total",
+                    "Live-view pages refused: control.live_view_max_viewers were open",
+                    live.viewers_refused},
+          LiveCount{"mocapd_live_unknown_subject_total",
+                    "Live-view sockets refused: ?subject= names no subject of this daemon",
+                    live.unknown_subject},
+          LiveCount{"mocapd_live_viewers_closed_bad_input_total",
+                    "Live-view pages closed for what they sent: a malformed WebSocket frame, "
+                    "a message over 4 kB",
+                    live.viewers_closed_bad_input}})
+      counter(c.name, c.help).Add({}).Increment(static_cast<double>(c.value));
+  }
   if (stats.curve) {
     auto& accepted = counter("mocapd_curve_clients_accepted_total",
                              "CURVE clients admitted: key in security.authorized_keys");

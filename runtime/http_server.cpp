@@ -4,9 +4,12 @@
 #include <algorithm>
 #include <boost/beast/core.hpp>
 #include <boost/beast/http.hpp>
+#include <boost/beast/websocket/rfc6455.hpp>
 #include <chrono>
 #include <stdexcept>
 #include <string_view>
+#include <utility>
+#include <vector>
 
 namespace mocapd {
 namespace {
@@ -45,7 +48,12 @@ class Session : public std::enable_shared_from_this<Session> {
     if (ec) return;  // client went away or timed out: nothing to answer
     HttpResponse answer;
     const std::string& token = shared_->options.bearer_token;
-    if (!token.empty() && !Authorized(token)) {
+    const std::string_view target(request_.target().data(), request_.target().size());
+    const std::string path(target.substr(0, target.find('?')));
+    const Credential credential = token.empty() ? Credential::kNone : Authorized(token, target);
+    const unsigned version = request_.version();
+    const bool head = request_.method() == http::verb::head;
+    if (!token.empty() && credential == Credential::kNone) {
       ++shared_->counters.unauthorized;
       answer = {401, "text/plain; charset=utf-8",
                 "unauthorized: send the header 'Authorization: Bearer TOKEN' "
@@ -53,20 +61,46 @@ class Session : public std::enable_shared_from_this<Session> {
       response_.set(http::field::www_authenticate, "Bearer realm=\"mocapd\"");
     } else if (request_.method() != http::verb::get && request_.method() != http::verb::head) {
       answer = {405, "text/plain; charset=utf-8", "only GET is served here\n"};
+    } else if (credential == Credential::kQuery && !beast::websocket::is_upgrade(request_)) {
+      // The token leaves the address bar (and the history) at once; the cookie keeps it.
+      const std::string location = WithoutToken(path, target);
+      answer = {303, "text/plain; charset=utf-8", "see " + location + "\n"};
+      extra_headers_.emplace_back(http::field::location, location);
+    } else if (beast::websocket::is_upgrade(request_) && !SameOrigin()) {
+      // Any web page may open a WebSocket to localhost: only this server's own page may.
+      answer = {403, "text/plain; charset=utf-8", "cross-origin WebSocket refused\n"};
+    } else if (beast::websocket::is_upgrade(request_)) {
+      const auto& upgrade = shared_->options.upgrade;
+      stream_.expires_never();
+      // The upgrade takes the socket out of this session's stream only when it accepts.
+      if (!upgrade) {
+        answer = {404, "text/plain; charset=utf-8", "no WebSocket here\n"};
+      } else {
+        auto refused = upgrade(path, stream_.socket(), std::move(request_));
+        if (!refused) return;
+        answer = std::move(*refused);
+      }
     } else {
       try {
-        answer = shared_->handler(std::string(request_.target()));
+        answer = shared_->handler(path);
       } catch (const std::exception& e) {
         answer = {500, "text/plain; charset=utf-8",
                   std::string("internal error: ") + e.what() + "\n"};
       }
     }
-    response_.version(request_.version());
+    response_.version(version);
     response_.result(static_cast<http::status>(answer.status));
     response_.set(http::field::server, "mocapd");
     response_.set(http::field::content_type, answer.content_type);
+    // A browser that opened the page with ?token= keeps it for the page's own requests
+    // (scripts, the live view's WebSocket), which cannot carry a header.
+    if (credential == Credential::kQuery)
+      response_.set(http::field::set_cookie,
+                    shared_->cookie_name + "=" + token + "; Path=/; HttpOnly; SameSite=Strict");
+    response_.set("Referrer-Policy", "no-referrer");
+    for (const auto& [name, value] : extra_headers_) response_.set(name, value);
     response_.keep_alive(false);
-    if (request_.method() != http::verb::head) response_.body() = std::move(answer.body);
+    if (!head) response_.body() = std::move(answer.body);
     response_.prepare_payload();
     stream_.expires_after(std::chrono::seconds(5));
     http::async_write(stream_, response_, [self = shared_from_this()](beast::error_code, size_t) {
@@ -75,28 +109,113 @@ class Session : public std::enable_shared_from_this<Session> {
     });
   }
 
-  bool Authorized(const std::string& token) const {
-    const auto header = request_.find(http::field::authorization);
-    if (header == request_.end()) return false;
-    constexpr std::string_view kScheme = "Bearer ";
-    const std::string_view value(header->value().data(), header->value().size());
-    return value.starts_with(kScheme) && SameSecret(value.substr(kScheme.size()), token);
+  enum class Credential { kNone, kHeader, kCookie, kQuery };
+
+  // A browser sends Origin with every WebSocket handshake; a page of this server has
+  // Origin http://<Host>. Clients that are not browsers send none.
+  bool SameOrigin() const {
+    const auto origin = request_.find(http::field::origin);
+    if (origin == request_.end()) return true;
+    const auto host = request_.find(http::field::host);
+    if (host == request_.end()) return false;
+    const std::string_view o(origin->value().data(), origin->value().size());
+    const std::string_view h(host->value().data(), host->value().size());
+    return o == "http://" + std::string(h) || o == "https://" + std::string(h);
+  }
+
+  // Where a valid token came from, or kNone.
+  Credential Authorized(const std::string& token, std::string_view target) const {
+    if (const auto header = request_.find(http::field::authorization); header != request_.end()) {
+      constexpr std::string_view kScheme = "Bearer ";
+      const std::string_view value(header->value().data(), header->value().size());
+      if (value.starts_with(kScheme) && SameSecret(value.substr(kScheme.size()), token))
+        return Credential::kHeader;
+    }
+    if (const auto cookies = request_.find(http::field::cookie); cookies != request_.end()) {
+      const std::string_view list(cookies->value().data(), cookies->value().size());
+      if (SameSecret(ParameterValue(list, shared_->cookie_name, ';'), token))
+        return Credential::kCookie;
+    }
+    if (const auto query = target.find('?'); query != std::string_view::npos) {
+      if (SameSecret(ParameterValue(target.substr(query + 1), "token", '&'), token))
+        return Credential::kQuery;
+    }
+    return Credential::kNone;
+  }
+
+  // The address without its token: the other parameters (a subject to show) stay.
+  static std::string WithoutToken(const std::string& path, std::string_view target) {
+    const size_t query = target.find('?');
+    std::string kept;
+    for (std::string_view rest = target.substr(query + 1); !rest.empty();) {
+      const size_t end = std::min(rest.find('&'), rest.size());
+      const std::string_view item = rest.substr(0, end);
+      if (!item.empty() && !item.starts_with("token=") && item != "token")
+        kept += (kept.empty() ? "" : "&") + std::string(item);
+      rest.remove_prefix(std::min(end + 1, rest.size()));
+    }
+    return kept.empty() ? path : path + "?" + kept;
+  }
+
+  // The value of name in "a=1<sep> name=2<sep>...", or "" (never a valid token).
+  static std::string_view ParameterValue(std::string_view list, std::string_view name,
+                                         char separator) {
+    while (!list.empty()) {
+      const size_t end = std::min(list.find(separator), list.size());
+      std::string_view item = list.substr(0, end);
+      while (!item.empty() && item.front() == ' ') item.remove_prefix(1);
+      if (item.size() > name.size() && item.starts_with(name) && item[name.size()] == '=')
+        return item.substr(name.size() + 1);
+      list.remove_prefix(std::min(end + 1, list.size()));
+    }
+    return {};
   }
 
   beast::tcp_stream stream_;
   beast::flat_buffer buffer_;
   http::request<http::string_body> request_;
   http::response<http::string_body> response_;
+  std::vector<std::pair<http::field, std::string>> extra_headers_;
   std::shared_ptr<HttpServer::Shared> shared_;
 };
 
 }  // namespace
 
+std::string QueryParameter(std::string_view target, std::string_view name) {
+  const size_t query = target.find('?');
+  if (query == std::string_view::npos) return {};
+  for (std::string_view rest = target.substr(query + 1); !rest.empty();) {
+    const size_t end = std::min(rest.find('&'), rest.size());
+    const std::string_view item = rest.substr(0, end);
+    rest.remove_prefix(std::min(end + 1, rest.size()));
+    if (item.size() <= name.size() || !item.starts_with(name) || item[name.size()] != '=') continue;
+    std::string value;
+    const std::string_view encoded = item.substr(name.size() + 1);
+    for (size_t i = 0; i < encoded.size(); ++i) {
+      const auto hex = [](char c) {
+        return c >= '0' && c <= '9'   ? c - '0'
+               : c >= 'a' && c <= 'f' ? c - 'a' + 10
+               : c >= 'A' && c <= 'F' ? c - 'A' + 10
+                                      : -1;
+      };
+      if (encoded[i] == '%' && i + 2 < encoded.size() && hex(encoded[i + 1]) >= 0 &&
+          hex(encoded[i + 2]) >= 0) {
+        value += static_cast<char>(hex(encoded[i + 1]) * 16 + hex(encoded[i + 2]));
+        i += 2;
+      } else {
+        value += encoded[i] == '+' ? ' ' : encoded[i];
+      }
+    }
+    return value;
+  }
+  return {};
+}
+
 HttpServer::HttpServer(boost::asio::io_context& io, const std::string& address, int port,
                        Handler handler, HttpServerOptions options)
     : io_(io),
       acceptor_(io),
-      shared_(std::make_shared<Shared>(Shared{std::move(handler), std::move(options), {}, 0})) {
+      shared_(std::make_shared<Shared>(Shared{std::move(handler), std::move(options), {}, 0, {}})) {
   boost::system::error_code ec;
   const auto ip = boost::asio::ip::make_address(address == "localhost" ? "127.0.0.1" : address, ec);
   if (ec) throw std::runtime_error("HTTP address '" + address + "': " + ec.message());
@@ -109,6 +228,7 @@ HttpServer::HttpServer(boost::asio::io_context& io, const std::string& address, 
     throw std::runtime_error("cannot serve HTTP on " + address + ":" + std::to_string(port) + ": " +
                              ec.message());
   port_ = acceptor_.local_endpoint().port();
+  shared_->cookie_name = "mocapd_token_" + std::to_string(port_);
   Accept();
 }
 

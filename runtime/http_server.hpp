@@ -1,15 +1,23 @@
 // A small HTTP/1.1 server (Boost.Beast) on the control plane's io_context, for the
-// daemon's /health, /subjects and /metrics endpoints. GET only; one request per
-// connection; every read and write has a timeout so a stuck client cannot pin it; a
-// bounded number of connections at once (more are closed at once, counted); optionally a
-// bearer token every request must carry (others get 401, counted).
+// daemon's /health, /subjects and /metrics endpoints and the live view's page and
+// WebSocket. GET only; one request per connection (or an upgrade to a WebSocket, handed
+// over); every read and write has a timeout so a stuck client cannot pin it; a bounded
+// number of connections at once (more are closed at once, counted); optionally a bearer
+// token every request must carry (others get 401, counted): in the Authorization header,
+// or, for a browser, once as "?token=" (answered with a redirect that drops it from the
+// address and a cookie that carries it on the page's own requests). A WebSocket upgrade
+// must come from a page of this server (its Origin, when sent, names this Host).
 #pragma once
 
 #include <boost/asio/io_context.hpp>
 #include <boost/asio/ip/tcp.hpp>
+#include <boost/beast/http/message.hpp>
+#include <boost/beast/http/string_body.hpp>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
+#include <string_view>
 
 namespace mocapd {
 
@@ -19,10 +27,22 @@ struct HttpResponse {
   std::string body;
 };
 
+using HttpRequest = boost::beast::http::request<boost::beast::http::string_body>;
+
 struct HttpServerOptions {
   std::string bearer_token;  ///< Empty: no authentication.
   int max_connections = 64;  ///< Open at once; beyond, a connection is closed unanswered.
+  /// An authorized WebSocket upgrade for path: take the socket and return nothing, or
+  /// return the answer to send instead (nothing taken: 404 for an unknown path, 503 when
+  /// full, ...). Empty: upgrades get 404.
+  std::function<std::optional<HttpResponse>(
+      const std::string& path, boost::asio::ip::tcp::socket& socket, HttpRequest request)>
+      upgrade;
 };
+
+/// The value of a request target's query parameter, percent-decoded ('+' is a space);
+/// empty if it is absent.
+std::string QueryParameter(std::string_view target, std::string_view name);
 
 /// What the server turned away (read on the io_context's thread).
 struct HttpServerCounters {
@@ -32,7 +52,9 @@ struct HttpServerCounters {
 
 class HttpServer {
  public:
-  using Handler = std::function<HttpResponse(const std::string& target)>;
+  /// Called with the request's path (without its query; QueryParameter reads it from
+  /// the target).
+  using Handler = std::function<HttpResponse(const std::string& path)>;
   /// Binds address:port (port 0: any free port). Throws std::runtime_error naming the
   /// address if it cannot bind.
   HttpServer(boost::asio::io_context& io, const std::string& address, int port, Handler handler,
@@ -48,6 +70,7 @@ class HttpServer {
     HttpServerOptions options;
     HttpServerCounters counters;
     int open_connections = 0;
+    std::string cookie_name;  ///< mocapd_token_<port>: one per daemon on a host.
   };
 
  private:

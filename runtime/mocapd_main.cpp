@@ -94,6 +94,14 @@ int main(int argc, char** argv) {
       ->check(CLI::ExistingFile);
   proc_cmd->add_option("--out-character-bvh", proc.output_character_bvh,
                        "The retargeted character's motion (BVH)");
+  proc_cmd->add_option("--plot", proc.plot_dir,
+                       "Write SVG plots to this directory: markers.svg, solve.svg (and "
+                       "joint_error.svg with --truth-bvh)");
+  proc_cmd
+      ->add_option("--truth-bvh", proc.truth_bvh,
+                   "The take's true motion (mocap-sim synth --truth-bvh): report and plot the "
+                   "joint error")
+      ->check(CLI::ExistingFile);
   std::vector<std::string> joint_map_args;
   proc_cmd
       ->add_option("--joint-map", joint_map_args,

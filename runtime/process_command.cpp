@@ -2,18 +2,77 @@
 #include "runtime/process_command.hpp"
 
 #include <chrono>
+#include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <optional>
 
 #include "filters/pose_error.hpp"
 #include "formats/bvh.hpp"
 #include "formats/c3d.hpp"
 #include "formats/retarget_map.hpp"
 #include "formats/subject_file.hpp"
+#include "formats/svg_plot.hpp"
 #include "formats/take_frames.hpp"
 
 namespace mocapd {
+namespace {
+
+// What the plots show, collected frame by frame.
+struct PlotData {
+  std::vector<std::vector<uint8_t>> marker_category;  // per marker, per frame
+  std::vector<double> residual_mm, iterations;        // per frame
+  std::vector<double> truth_mean_cm, truth_worst_cm;  // per frame (with a truth)
+};
+
+// Marker timeline categories: observed, repaired by each detector (the wire's reason
+// codes 1..10), unrecoverable.
+const std::vector<svg::Category>& MarkerCategories() {
+  static const std::vector<svg::Category> categories = {
+      {"observed", "#d9dde3"},    {"gap filled", "#4d8fdc"}, {"disagreement", "#9b59b6"},
+      {"residual", "#e67e22"},    {"spike", "#e84393"},      {"rigid distance", "#16a085"},
+      {"swap", "#f1c40f"},        {"frozen", "#6ab04c"},     {"fallen off", "#a0785a"},
+      {"small track", "#48c9b0"}, {"trimmed", "#7f8cff"},    {"unrecoverable", "#c0392b"},
+      {"repaired", "#34495e"}};
+  return categories;
+}
+
+void WritePlot(const std::filesystem::path& path, const std::string& svg, std::ostream& out) {
+  std::ofstream file(path);
+  if (!file) throw std::runtime_error(path.string() + ": cannot open for writing");
+  file << svg;
+  out << "wrote " << path.string() << "\n";
+}
+
+void WritePlots(const ProcessCommandOptions& options, const PlotData& data,
+                const MarkerSet& markers, double rate_hz, std::ostream& out) {
+  const std::filesystem::path dir(options.plot_dir);
+  std::filesystem::create_directories(dir);
+  const std::string take = std::filesystem::path(options.input_c3d).filename().string();
+  std::vector<svg::TimelineRow> rows;
+  for (int m = 0; m < markers.num_markers(); ++m)
+    rows.push_back({markers.marker(m).name, data.marker_category[static_cast<size_t>(m)]});
+  WritePlot(dir / "markers.svg",
+            svg::Timeline(take + ": each marker's samples as published", 1.0 / rate_hz, rows,
+                          MarkerCategories()),
+            out);
+  WritePlot(dir / "solve.svg",
+            svg::LineCharts(take + ": the final solve, frame by frame", 1.0 / rate_hz,
+                            {{"RMS residual (mm)", {{"residual", "#2a7fc1", data.residual_mm}}},
+                             {"LM iterations", {{"iterations", "#e67e22", data.iterations}}}}),
+            out);
+  if (!data.truth_mean_cm.empty())
+    WritePlot(dir / "joint_error.svg",
+              svg::LineCharts(take + ": joint position error against the truth", 1.0 / rate_hz,
+                              {{"error (cm)",
+                                {{"mean over joints", "#2a7fc1", data.truth_mean_cm},
+                                 {"worst joint", "#c0392b", data.truth_worst_cm}}}}),
+              out);
+}
+
+}  // namespace
 
 ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostream& out) {
   const SubjectModel subject = ReadSubjectModel(options.subject);
@@ -45,6 +104,39 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
   times_us.reserve(static_cast<size_t>(take.num_frames));
   C3dTake cleaned = take;  // untouched samples keep their exact file values
 
+  // The truth, frame for frame, and which of its joints each solved joint is.
+  std::optional<BvhTake> truth;
+  std::vector<std::pair<int, int>> truth_joints;  // (solved, truth)
+  if (!options.truth_bvh.empty()) {
+    truth = ReadBvh(options.truth_bvh);
+    // Paired frame by frame: a truth of another length is another take (or rate).
+    if (truth->num_frames() != take.num_frames)
+      throw std::runtime_error(options.truth_bvh + ": " + std::to_string(truth->num_frames()) +
+                               " frames, the take has " + std::to_string(take.num_frames) +
+                               ": not the truth of this take");
+    for (int j = 0; j < subject.skeleton->num_joints(); ++j)
+      if (const auto t = truth->skeleton.FindJoint(subject.skeleton->joint(j).name))
+        truth_joints.emplace_back(j, static_cast<int>(*t));
+    if (truth_joints.empty())
+      throw std::runtime_error(options.truth_bvh +
+                               ": no joint named like the subject's: not its truth");
+  }
+  PlotData plot;
+  const bool plotting = !options.plot_dir.empty();
+  if (plotting) {
+    plot.marker_category.assign(observed.size(),
+                                std::vector<uint8_t>(static_cast<size_t>(take.num_frames), 0));
+    plot.residual_mm.assign(static_cast<size_t>(take.num_frames), std::nan(""));
+    plot.iterations.assign(static_cast<size_t>(take.num_frames), std::nan(""));
+  }
+  if (truth && plotting) {
+    plot.truth_mean_cm.assign(static_cast<size_t>(take.num_frames), std::nan(""));
+    plot.truth_worst_cm.assign(static_cast<size_t>(take.num_frames), std::nan(""));
+  }
+  std::optional<KinematicsWorkspace> truth_kinematics;
+  if (truth) truth_kinematics.emplace(truth->skeleton);
+  double truth_sum = 0.0;
+  int64_t truth_count = 0;
   KinematicsWorkspace solved(*subject.skeleton);
   std::vector<double> residuals, sum_sq(observed.size(), 0.0);
   std::vector<int> residual_count(observed.size(), 0);
@@ -53,6 +145,36 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
     const auto f = static_cast<int>(frame.frame);
     poses[static_cast<size_t>(f)] = frame.pose;
     ForwardKinematics(*subject.skeleton, frame.pose, &solved);
+    const auto frame_index = static_cast<size_t>(f);
+    if (plotting) {
+      plot.residual_mm[frame_index] = frame.final_solve.rms_residual_m * 1e3;
+      plot.iterations[frame_index] = frame.final_solve.iterations;
+      for (size_t m = 0; m < observed.size(); ++m)
+        plot.marker_category[m][frame_index] =
+            frame.status[m] == MarkerStatus::kObserved        ? 0
+            : frame.status[m] == MarkerStatus::kUnrecoverable ? 11
+            : frame.reason[m] == MaskReason::kNone            ? 12
+                                                   : static_cast<uint8_t>(frame.reason[m]);
+    }
+    if (truth && f < truth->num_frames()) {
+      ForwardKinematics(truth->skeleton, truth->frames[frame_index], &*truth_kinematics);
+      double sum = 0.0, worst = 0.0;
+      for (const auto& [j, t] : truth_joints) {
+        const double e =
+            (solved.p_WJ[static_cast<size_t>(j)] - truth_kinematics->p_WJ[static_cast<size_t>(t)])
+                .norm() *
+            100.0;
+        sum += e;
+        worst = std::max(worst, e);
+      }
+      if (plotting) {
+        plot.truth_mean_cm[frame_index] = sum / static_cast<double>(truth_joints.size());
+        plot.truth_worst_cm[frame_index] = worst;
+      }
+      truth_sum += sum;
+      truth_count += static_cast<int64_t>(truth_joints.size());
+      summary.truth_worst_cm = std::max(summary.truth_worst_cm, worst);
+    }
     for (size_t m = 0; m < observed.size(); ++m) {
       if (frame.status[m] != MarkerStatus::kObserved) continue;
       const double r =
@@ -93,6 +215,10 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
   if (options.progress) out << "\n";
 
   summary.counters = pipeline.counters();
+  if (truth_count > 0) {
+    summary.has_truth = true;
+    summary.truth_mean_cm = truth_sum / static_cast<double>(truth_count);
+  }
   std::vector<double> marker_rms;
   for (size_t m = 0; m < observed.size(); ++m)
     if (residual_count[m] > 0) marker_rms.push_back(std::sqrt(sum_sq[m] / residual_count[m]));
@@ -186,6 +312,14 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
                 summary.residual_median_mm, summary.marker_rms_median_mm,
                 summary.marker_rms_worst_mm);
   out << line;
+  if (summary.has_truth) {
+    std::snprintf(line, sizeof(line),
+                  "against the truth (%zu joints matched by name): mean %.2f cm, worst frame's "
+                  "worst joint %.2f cm\n",
+                  truth_joints.size(), summary.truth_mean_cm, summary.truth_worst_cm);
+    out << line;
+  }
+  if (plotting) WritePlots(options, plot, markers, take.rate_hz, out);
   if (!options.report_json.empty()) {
     std::ofstream report(options.report_json);
     if (!report) throw std::runtime_error(options.report_json + ": cannot open for writing");
@@ -222,7 +356,11 @@ nlohmann::json ProcessSummaryJson(const ProcessSummary& summary,
             {"marker_rms_median", summary.marker_rms_median_mm},
             {"marker_rms_worst", summary.marker_rms_worst_mm}}},
           {"retarget_per_frame_us",
-           {{"p50", summary.retarget_p50_us}, {"p99", summary.retarget_p99_us}}}};
+           {{"p50", summary.retarget_p50_us}, {"p99", summary.retarget_p99_us}}},
+          {"truth_joint_error_cm",
+           summary.has_truth
+               ? nlohmann::json{{"mean", summary.truth_mean_cm}, {"worst", summary.truth_worst_cm}}
+               : nlohmann::json(nullptr)}};
 }
 
 }  // namespace mocapd

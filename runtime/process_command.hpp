@@ -25,6 +25,13 @@ struct ProcessCommandOptions {
       retarget_bvh;  ///< Character to retarget onto (its hierarchy and rest pose); empty: none.
   std::string output_character_bvh;              ///< With retarget_bvh: the character's motion.
   std::map<std::string, std::string> joint_map;  ///< Retarget overrides: role -> character joint.
+  /// Write SVG plots here (created if missing): markers.svg (each marker's status over
+  /// the take), solve.svg (residual and iterations per frame), and with truth_bvh
+  /// joint_error.svg. Empty: none.
+  std::string plot_dir;
+  /// The take's true motion (mocap-sim synth --truth-bvh), frame for frame: the joint
+  /// error over time is plotted and summarised. Empty: none.
+  std::string truth_bvh;
 };
 
 struct ProcessSummary {
@@ -37,6 +44,9 @@ struct ProcessSummary {
   /// How well the solved skeleton fits the captured samples it published as observed:
   /// per sample (median), and per marker (the RMS of each, their median and worst), mm.
   double residual_median_mm = 0.0, marker_rms_median_mm = 0.0, marker_rms_worst_mm = 0.0;
+  /// With a truth: joint position error against it (joints matched by name), cm.
+  bool has_truth = false;
+  double truth_mean_cm = 0.0, truth_worst_cm = 0.0;
 };
 
 /// Runs the command, printing progress and the summary to out. Throws std::runtime_error

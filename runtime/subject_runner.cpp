@@ -1,6 +1,8 @@
 // Per-subject frame accounting, sequencing and output encoding for the daemon.
 #include "runtime/subject_runner.hpp"
 
+#include "runtime/live_view.hpp"
+
 #include <chrono>
 #include <cmath>
 
@@ -327,8 +329,34 @@ void SubjectRunner::Publish(int64_t trigger_receive_ns, OutputSink& sink) {
     protocol::EncodeSkeletonFrame(c, &buffer_);
     sink.Send(character_topic_, buffer_);
   }
+  if (live_view_ && live_view_->Watched()) ShowLive(out, stamp, publish_ns);
   if (trigger_receive_ns >= 0)
     counters_.processing.Add(static_cast<double>(SteadyNs() - trigger_receive_ns) * 1e-9);
+}
+
+void SubjectRunner::ShowLive(const CleanFrame& out, const Stamp& stamp, uint64_t publish_ns) {
+  // The steady clock paces the copies: a wall-clock step must not freeze the view.
+  LiveViewFrame* v = live_view_->BeginWrite(SteadyNs());
+  if (v == nullptr) return;  // too soon, or being read
+  v->frame_number = stamp.frame_number;
+  v->published_ns = static_cast<int64_t>(publish_ns);
+  v->stream = stamp.stream;
+  v->state = state_;
+  v->residual_m = skeleton_message_.residual_m;
+  const size_t markers = v->raw.size();
+  const auto received = received_.begin() + static_cast<ptrdiff_t>(static_cast<size_t>(out.frame) %
+                                                                   stamps_.size() * markers);
+  std::copy(received, received + static_cast<ptrdiff_t>(markers), v->raw.begin());
+  for (size_t m = 0; m < markers; ++m) {
+    v->cleaned[m] = out.markers[m];
+    v->status[m] = static_cast<uint8_t>(out.status[m]);
+    v->reason[m] = static_cast<uint8_t>(out.reason[m]);
+  }
+  std::copy(kinematics_.p_WJ.begin(), kinematics_.p_WJ.end(), v->joints.begin());
+  if (retargeter_)
+    std::copy(retargeter_->kinematics().p_WJ.begin(), retargeter_->kinematics().p_WJ.end(),
+              v->character_joints.begin());
+  live_view_->EndWrite();
 }
 
 bool SubjectRunner::CheckStall(int64_t now_ns, int64_t timeout_ns, OutputSink& sink) {

@@ -23,6 +23,8 @@
 
 namespace mocapd {
 
+class LiveViewSlot;
+
 /// Why an incoming message was not turned into a published frame.
 enum class DropReason : uint8_t {
   kOversized,       ///< Longer than input.max_message_bytes.
@@ -128,6 +130,9 @@ class SubjectRunner {
   /// Carries the counters of a runner this one replaces (a reload changed its model).
   void InheritCounters(const SubjectRunner& previous);
   const protocol::SubjectDescriptionMessage& description() const { return description_; }
+  /// From now on, hands a published frame to the browser view's slot while someone
+  /// watches (at most the view's rate; never waiting for it).
+  void AttachLiveView(std::shared_ptr<LiveViewSlot> slot) { live_view_ = std::move(slot); }
 
  private:
   struct Stamp {
@@ -141,6 +146,7 @@ class SubjectRunner {
   void Publish(int64_t trigger_receive_ns, OutputSink& sink);
   void UpdateModelDistance(int64_t frame);
   void Resynchronise(OutputSink& sink);
+  void ShowLive(const CleanFrame& out, const Stamp& stamp, uint64_t publish_ns);
 
   std::string name_;
   int rank_ = 0;
@@ -185,6 +191,7 @@ class SubjectRunner {
   protocol::SubjectDescriptionMessage character_description_;
   std::string character_topic_;
   std::vector<uint8_t> buffer_;
+  std::shared_ptr<LiveViewSlot> live_view_;
   std::string skeleton_topic_, cleaned_topic_, description_topic_, status_topic_;
 };
 

@@ -16,6 +16,7 @@ daemon=$!
 trap 'kill -TERM $daemon 2>/dev/null || true' EXIT
 sleep 0.5
 kill -0 $daemon 2>/dev/null || { echo "demo: the daemon did not start (see its error above)"; exit 1; }
+echo "demo: watch it live in a browser on this machine: http://127.0.0.1:8480/"
 
 status=0
 build/release/sim/mocap-sim replay --humanoid mixed --seconds 20 --corrupt medium \

@@ -9,6 +9,7 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev
   clang libclang-rt-14-dev clang-format
   python3 python3-zmq python3-prometheus-client
+  libjs-three chromium python3-websocket python3-pil
 )
 missing=()
 for p in "${packages[@]}"; do

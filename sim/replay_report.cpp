@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "filters/pose_error.hpp"
+#include "formats/svg_plot.hpp"
 
 namespace mocapd {
 namespace {
@@ -134,59 +135,8 @@ std::string ReplayReport::FormatTable() const {
 }
 
 std::string LatencyHistogramSvg(const std::vector<double>& latencies_ms, const std::string& title) {
-  // Log-spaced bins from 10 us to 100 ms; anything outside lands in the end bins.
-  constexpr int kBins = 48;
-  constexpr double kLo = 0.01, kHi = 100.0;
-  std::vector<int> counts(kBins, 0);
-  for (double v : latencies_ms) {
-    const double x = std::log10(std::clamp(v, kLo, kHi) / kLo) / std::log10(kHi / kLo);
-    ++counts[static_cast<size_t>(std::min(kBins - 1, static_cast<int>(x * kBins)))];
-  }
-  const int peak = std::max(1, *std::max_element(counts.begin(), counts.end()));
-  const double w = 720, h = 360, left = 60, right = 20, top = 40, bottom = 50;
-  const double plot_w = w - left - right, plot_h = h - top - bottom;
-  std::ostringstream s;
-  s << "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"" << w << "\" height=\"" << h
-    << "\" font-family=\"sans-serif\" font-size=\"12\">\n";
-  s << "<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n";
-  std::string escaped;
-  for (char c : title) escaped += c == '<' ? "&lt;" : c == '&' ? "&amp;" : std::string(1, c);
-  s << "<text x=\"" << w / 2 << "\" y=\"22\" text-anchor=\"middle\" font-size=\"14\">" << escaped
-    << "</text>\n";
-  for (int b = 0; b < kBins; ++b) {
-    const double bh = plot_h * counts[static_cast<size_t>(b)] / peak;
-    s << "<rect x=\"" << left + plot_w * b / kBins << "\" y=\"" << top + plot_h - bh
-      << "\" width=\"" << plot_w / kBins - 1 << "\" height=\"" << bh
-      << "\" fill=\"#4878a8\"><title>" << counts[static_cast<size_t>(b)] << "</title></rect>\n";
-  }
-  s << "<line x1=\"" << left << "\" y1=\"" << top + plot_h << "\" x2=\"" << left + plot_w
-    << "\" y2=\"" << top + plot_h << "\" stroke=\"black\"/>\n";
-  s << "<line x1=\"" << left << "\" y1=\"" << top << "\" x2=\"" << left << "\" y2=\""
-    << top + plot_h << "\" stroke=\"black\"/>\n";
-  const char* ticks[] = {"0.01", "0.1", "1", "10", "100"};
-  for (int d = 0; d <= 4; ++d) {
-    const double x = left + plot_w * d / 4.0;
-    s << "<text x=\"" << x << "\" y=\"" << top + plot_h + 16 << "\" text-anchor=\"middle\">"
-      << ticks[d] << "</text>\n";
-  }
-  s << "<text x=\"" << left + plot_w / 2 << "\" y=\"" << h - 12
-    << "\" text-anchor=\"middle\">processing latency (ms, log scale)</text>\n";
-  s << "<text x=\"14\" y=\"" << top + plot_h / 2 << "\" transform=\"rotate(-90 14 "
-    << top + plot_h / 2 << ")\" text-anchor=\"middle\">frames</text>\n";
-  s << "<text x=\"" << left + 4 << "\" y=\"" << top + 12 << "\">peak " << peak << "</text>\n";
-  if (!latencies_ms.empty()) {
-    for (const auto& [q, name] : {std::pair{0.5, "p50"}, std::pair{0.99, "p99"}}) {
-      const double v = Quantile(latencies_ms, q);
-      const double x =
-          left + plot_w * std::log10(std::clamp(v, kLo, kHi) / kLo) / std::log10(kHi / kLo);
-      s << "<line x1=\"" << x << "\" y1=\"" << top << "\" x2=\"" << x << "\" y2=\"" << top + plot_h
-        << "\" stroke=\"#c04040\" stroke-dasharray=\"4 3\"/>\n";
-      s << "<text x=\"" << x + 3 << "\" y=\"" << top + 26 + (q > 0.9 ? 14 : 0)
-        << "\" fill=\"#c04040\">" << name << " " << v << " ms</text>\n";
-    }
-  }
-  s << "</svg>\n";
-  return s.str();
+  return svg::LogHistogram(title, "processing latency (ms, log scale)", latencies_ms, 0.01, 100.0,
+                           {0.5, 0.99, 0.999}, "ms");
 }
 
 }  // namespace mocapd

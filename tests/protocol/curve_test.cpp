@@ -51,6 +51,14 @@ TEST(CurveKeysTest, KeygenWritesAPublicAndAPrivateCertificateThatReadBack) {
             }).find("already exists"),
             std::string::npos);
   EXPECT_EQ(ReadCertificate(dir + "/daemon.key_secret", true).secret_key, keys.secret_key);
+  // Nor is a public half written beside a secret one it would not match.
+  std::filesystem::remove(dir + "/daemon.key");
+  EXPECT_ANY_THROW(WriteCertificates(dir + "/daemon", GenerateKeyPair()));
+  EXPECT_FALSE(std::filesystem::exists(dir + "/daemon.key"));
+  // And never through a symlink (a dangling one would otherwise be written through).
+  std::filesystem::create_symlink(dir + "/elsewhere", dir + "/linked.key_secret");
+  EXPECT_ANY_THROW(WriteCertificates(dir + "/linked", GenerateKeyPair()));
+  EXPECT_FALSE(std::filesystem::exists(dir + "/elsewhere"));
 }
 
 TEST(CurveKeysTest, MalformedCertificatesAreErrorsNamingFileAndLine) {

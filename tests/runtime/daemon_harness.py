@@ -21,14 +21,17 @@ def free_ports(n):
     return ports
 
 
-def http_get(port, path):
-    with urllib.request.urlopen(f"http://127.0.0.1:{port}{path}", timeout=5) as r:
+def http_get(port, path, token=None):
+    request = urllib.request.Request(f"http://127.0.0.1:{port}{path}")
+    if token:
+        request.add_header("Authorization", f"Bearer {token}")
+    with urllib.request.urlopen(request, timeout=5) as r:
         return r.status, r.read().decode()
 
 
-def metrics(port):
+def metrics(port, token=None):
     """The daemon's /metrics, parsed by a real Prometheus parser: {(sample name, sorted labels): value}."""
-    _, text = http_get(port, "/metrics")
+    _, text = http_get(port, "/metrics", token)
     values = {}
     for family in text_string_to_metric_families(text):
         for sample in family.samples:
@@ -53,14 +56,21 @@ class Daemon:
     workers: [input] workers (None: the default, one per core)."""
 
     def __init__(self, mocapd, config_dir, work, lookahead=12, subjects=("actor1",), rate_hz=120.0, input=None,
-                 shard=None, workers=None, curve=False):
+                 shard=None, workers=None, curve=False, http_token=None):
         os.makedirs(work, exist_ok=True)
         security = ""
         # curve: fresh keys (`mocapd keygen`) for the daemon and for the replay, which is both
         # its capture publisher and an authorized consumer; replay_curve_args passes them on.
         self.replay_curve_args = []
+        self.keys_dir = None
+        self.http_token = http_token
+        control = ""
+        if http_token:  # every HTTP request must then carry it
+            with open(os.path.join(work, "http.token"), "w") as f:
+                f.write(http_token + "\n")
+            control = f"http_token_file = \"{os.path.join(work, 'http.token')}\"\n"
         if curve:
-            keys = os.path.join(work, "keys")
+            keys = self.keys_dir = os.path.join(work, "keys")
             shutil.rmtree(keys, ignore_errors=True)
             os.makedirs(os.path.join(keys, "authorized"))
             for name in ("mocapd", "authorized/replay"):
@@ -79,7 +89,7 @@ class Daemon:
             if workers is not None:
                 shard_line += f"workers = {workers}\n"
             f.write(f"format_version = 1\n[input]\nendpoint = \"{self.input}\"\n{shard_line}[output]\nendpoint = \"{self.output}\"\n"
-                    f"[control]\nhttp_port = {self.http_port}\nstats_interval_s = 0.2\n{security}[pipeline]\nlookahead = {lookahead}\n")
+                    f"[control]\nhttp_port = {self.http_port}\nstats_interval_s = 0.2\n{control}{security}[pipeline]\nlookahead = {lookahead}\n")
             for name in subjects:
                 f.write(f"[[subject]]\nname = \"{name}\"\nmodel = \"{model}\"\nrate_hz = {rate_hz}\n")
         self.log = open(os.path.join(work, "mocapd.log"), "w+")
@@ -87,7 +97,7 @@ class Daemon:
         for _ in range(200):
             assert self.process.poll() is None, "the daemon exited at start-up:\n" + self.read_log()
             try:
-                if http_get(self.http_port, "/health")[0] == 200:
+                if http_get(self.http_port, "/health", http_token)[0] == 200:
                     return
             except OSError:
                 time.sleep(0.05)

@@ -6,15 +6,24 @@
 
 #include <gtest/gtest.h>
 
+#include <sys/socket.h>
+#include <sys/time.h>
+
 #include <boost/asio/connect.hpp>
 #include <boost/asio/ip/tcp.hpp>
+#include <boost/asio/read.hpp>
+#include <boost/asio/read_until.hpp>
+#include <boost/asio/write.hpp>
 #include <boost/beast/core.hpp>
 #include <boost/beast/http.hpp>
+#include <boost/beast/websocket.hpp>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <functional>
 #include <map>
+#include <nlohmann/json.hpp>
+#include <optional>
 #include <set>
 #include <thread>
 #include <zmq.hpp>
@@ -691,8 +700,8 @@ TEST(DaemonTest, ARetargetedCharacterIsPublishedBesideTheActor) {
   EXPECT_LT(worst_deg, 10.0);  // planted feet are held, so not exactly the actor's angles
 }
 
-std::pair<int, std::string> HttpGet(int port, const std::string& target,
-                                    const std::string& authorization = "") {
+boost::beast::http::response<boost::beast::http::string_body> HttpRequestFor(
+    int port, const std::string& target, const std::string& authorization = "") {
   namespace beast = boost::beast;
   boost::asio::io_context io;
   boost::asio::ip::tcp::resolver resolver(io);
@@ -705,7 +714,19 @@ std::pair<int, std::string> HttpGet(int port, const std::string& target,
   beast::flat_buffer buffer;
   beast::http::response<beast::http::string_body> response;
   beast::http::read(stream, buffer, response);
+  return response;
+}
+
+std::pair<int, std::string> HttpGet(int port, const std::string& target,
+                                    const std::string& authorization = "") {
+  const auto response = HttpRequestFor(port, target, authorization);
   return {response.result_int(), response.body()};
+}
+
+// A sample's value in Prometheus text ("name value" or "name{labels} value"); -1 if absent.
+double MetricValue(const std::string& text, const std::string& sample) {
+  const size_t at = text.find("\n" + sample + " ");
+  return at == std::string::npos ? -1.0 : std::stod(text.substr(at + sample.size() + 2));
 }
 
 TEST(DaemonTest, HttpServesHealthSubjectsAndMetrics) {
@@ -870,7 +891,8 @@ TEST(DaemonTest, CurveAdmitsOnlyAuthorizedKeysAndCountsEveryoneElse) {
   EXPECT_EQ(s.published_total(), static_cast<uint64_t>(frames));
   EXPECT_GE(s.curve_counts.accepted[static_cast<int>(CurveSocket::kInput)], 1u);
   EXPECT_GE(s.curve_counts.accepted[static_cast<int>(CurveSocket::kOutput)], 1u);
-  ASSERT_TRUE(trusted_sub.WaitFor([&] { return trusted_sub.skeletons["actor1"].size() == 120; }));
+  ASSERT_TRUE(trusted_sub.WaitFor(
+      [&] { return trusted_sub.skeletons["actor1"].size() == static_cast<size_t>(frames); }));
   for (Subscriber* shut_out : {&stranger_sub, &plain_sub}) {
     std::lock_guard lock(shut_out->mutex);
     EXPECT_EQ(shut_out->statuses, 0);
@@ -906,14 +928,282 @@ TEST(DaemonTest, ACurveSubInputTakesFramesOnlyFromThePublisherWhoseKeyItHolds) {
     for (int t = 0; t < 20; ++t) forged.Send(t, static_cast<uint64_t>(t), "markers/actor1/");
   }
   EXPECT_EQ(daemon->Stats().messages_in, 0u);
-  Sender real(capture_context, in, f.take, model, zmq::socket_type::pub, &capture);
+  // libzmq releases the forged publisher's port a little after its socket closed.
+  std::optional<Sender> real;
+  for (int attempt = 0; attempt < 500 && !real; ++attempt) {
+    try {
+      real.emplace(capture_context, in, f.take, model, zmq::socket_type::pub, &capture);
+    } catch (const zmq::error_t&) {
+      std::this_thread::sleep_for(10ms);
+    }
+  }
+  ASSERT_TRUE(real.has_value());
   uint64_t t = 0;
   ASSERT_TRUE(WaitForStats(*daemon, [&](const DaemonStats& s) {
-    real.Send(0, t++, "markers/actor1/");
+    real->Send(0, t++, "markers/actor1/");
     return s.messages_in > 0;
   }));
   daemon.Stop();
   EXPECT_TRUE(daemon->Stats().Balanced());
+}
+
+// A browser's side of the live view, synchronous: the upgrade, then whole messages.
+class LiveViewClient {
+ public:
+  explicit LiveViewClient(int port, const std::string& cookie = "", int receive_buffer = 0,
+                          const std::string& target = "/live")
+      : ws_(io_) {
+    auto& socket = ws_.next_layer();
+    socket.open(boost::asio::ip::tcp::v4());
+    if (receive_buffer > 0)  // a page that reads slowly: the kernel queues little for it
+      socket.set_option(boost::asio::socket_base::receive_buffer_size(receive_buffer));
+    socket.connect({boost::asio::ip::make_address("127.0.0.1"), static_cast<uint16_t>(port)});
+    ws_.set_option(boost::beast::websocket::stream_base::decorator(
+        [cookie](boost::beast::websocket::request_type& request) {
+          if (!cookie.empty()) request.set(boost::beast::http::field::cookie, cookie);
+        }));
+    ws_.handshake("127.0.0.1:" + std::to_string(port), target);
+  }
+  nlohmann::json Read() {
+    boost::beast::flat_buffer buffer;
+    ws_.read(buffer);
+    return nlohmann::json::parse(boost::beast::buffers_to_string(buffer.data()));
+  }
+  boost::beast::websocket::stream<boost::asio::ip::tcp::socket>& stream() { return ws_; }
+
+ private:
+  boost::asio::io_context io_;
+  boost::beast::websocket::stream<boost::asio::ip::tcp::socket> ws_;
+};
+
+// The live view: a page gets the subject's description, then frames with every marker and
+// joint, decimated; a page that never reads is skipped, then closed, and the data plane
+// publishes every frame meanwhile.
+TEST(DaemonTest, TheLiveViewFeedsAPageWhileAStalledPageIsSkippedThenClosed) {
+  const testing::HumanoidFixture f = testing::MakeHumanoidFixture("walk", 20.0, 120.0);
+  DaemonConfig config = TestConfig("inproc://view-in", "inproc://view-out", 4);
+  config.live_view_close_stalled_s = 0.5;
+  zmq::context_t context;
+  RunningDaemon daemon(context, config);
+  const int port = daemon->http_port();
+  const auto [page_code, page] = HttpGet(port, "/");
+  EXPECT_EQ(page_code, 200);
+  EXPECT_NE(page.find("mocapd live view"), std::string::npos);
+  EXPECT_EQ(HttpGet(port, "/live_view.js").first, 200);
+  const auto [three_code, three] = HttpGet(port, "/three/three.min.js");
+  if (std::filesystem::exists("/usr/share/javascript/three/three.min.js"))
+    EXPECT_EQ(three_code, 200);
+  else
+    EXPECT_NE(three.find("install Debian's libjs-three"), std::string::npos) << three;
+
+  LiveViewClient page_client(port);
+  const nlohmann::json description = page_client.Read();
+  ASSERT_EQ(description["type"], "subjects");
+  ASSERT_EQ(description["subjects"].size(), 1u);
+  EXPECT_EQ(description["subjects"][0]["markers"].size(), 59u);
+  const size_t joints = description["subjects"][0]["parents"].size();
+  LiveViewClient stalled(port, "", 2048);  // never reads after its handshake
+  Sender sender(context, "inproc://view-in", f.take, MakeHumanoidSubject("actor1"),
+                zmq::socket_type::push);
+  std::atomic<bool> feeding{true};
+  int sent = 0;
+  std::thread feed([&] {
+    for (; feeding && sent < f.take.num_frames; ++sent) {
+      sender.Send(sent, static_cast<uint64_t>(sent));
+      std::this_thread::sleep_for(std::chrono::microseconds(8333));
+    }
+  });
+  // The reading page reads all along (as a browser does), on its own thread.
+  std::atomic<int> frames{0};
+  std::atomic<bool> reading{true};
+  std::string frame_problem;
+  std::thread reader([&] {
+    while (reading) {
+      nlohmann::json m;
+      try {
+        m = page_client.Read();
+      } catch (const std::exception&) {
+        return;  // the daemon closed the page at shutdown
+      }
+      if (m["type"] != "frame") continue;
+      const nlohmann::json& subject = m["subjects"][0];
+      if (subject["name"] != "actor1" || subject["markers"].size() != 59u * 3 ||
+          subject["raw"].size() != 59u * 3 || subject["status"].size() != 59u ||
+          subject["joints"].size() != joints * 3)
+        frame_problem = m.dump().substr(0, 300);
+      ++frames;
+    }
+  });
+  const bool closed = WaitForStats(*daemon, [&](const DaemonStats&) {
+    return frames >= 10 && MetricValue(HttpGet(port, "/metrics").second,
+                                       "mocapd_live_viewers_closed_slow_total") >= 1;
+  });
+  const std::string metrics = HttpGet(port, "/metrics").second;
+  feeding = false;
+  feed.join();
+  EXPECT_TRUE(closed) << metrics;
+  EXPECT_GE(frames, 10);
+  EXPECT_EQ(frame_problem, "");
+  EXPECT_GT(MetricValue(metrics, "mocapd_live_messages_skipped_total"), 0) << metrics;
+  EXPECT_EQ(MetricValue(metrics, "mocapd_live_viewers"), 1) << metrics;  // the reader
+  daemon.Stop();  // closes the page: its reader's Read throws, or returns a last frame
+  reading = false;
+  reader.join();
+  const DaemonStats s = daemon->Stats();
+  EXPECT_TRUE(s.Balanced());
+  EXPECT_EQ(s.published_total(), static_cast<uint64_t>(sent));
+}
+
+// The page and its socket are behind the same token as the rest: a browser opens
+// /?token=T once and its cookie carries the token to the socket; no token, no view.
+TEST(DaemonTest, TheLiveViewHonoursTheTokenAndItsViewerLimit) {
+  DaemonConfig config = TestConfig("inproc://viewtok-in", "inproc://viewtok-out", 4);
+  config.http_token = "0123456789abcdef-view";
+  config.live_view_max_viewers = 1;
+  zmq::context_t context;
+  RunningDaemon daemon(context, config);
+  const int port = daemon->http_port();
+  EXPECT_EQ(HttpGet(port, "/").first, 401);
+  EXPECT_EQ(HttpGet(port, "/?token=wrong-token-0123456").first, 401);
+  // The token in the address: a redirect that drops it, and a cookie that keeps it.
+  const auto opened = HttpRequestFor(port, "/?token=" + config.http_token);
+  EXPECT_EQ(opened.result_int(), 303);
+  EXPECT_EQ(opened[boost::beast::http::field::location], "/");
+  const std::string set_cookie(opened[boost::beast::http::field::set_cookie]);
+  const std::string cookie = set_cookie.substr(0, set_cookie.find(';'));
+  EXPECT_EQ(cookie, "mocapd_token_" + std::to_string(port) + "=" + config.http_token);
+  EXPECT_NE(set_cookie.find("HttpOnly"), std::string::npos);
+  // Only the token leaves the address: a subject to show stays.
+  EXPECT_EQ(HttpRequestFor(port, "/?subject=actor1&token=" +
+                                     config.http_token)[boost::beast::http::field::location],
+            "/?subject=actor1");
+  EXPECT_ANY_THROW(LiveViewClient{port});  // the upgrade is answered 401
+  {
+    LiveViewClient viewer(port, "theme=dark; " + cookie);
+    EXPECT_EQ(viewer.Read()["type"], "subjects");
+    EXPECT_ANY_THROW(LiveViewClient(port, cookie));  // 503: the one viewer allowed is open
+  }
+  // The page's socket closes; the slot frees once the server has seen it go.
+  std::this_thread::sleep_for(200ms);
+  LiveViewClient by_query(port, "", 0, "/live?token=" + config.http_token);
+  EXPECT_EQ(by_query.Read()["type"], "subjects");
+}
+
+// Bad input on the live view: a subject it does not solve, another path, a malformed
+// frame, an oversized message and 100 connections at once. Each gets a clear answer or a
+// close, each is counted, and the daemon goes on (a page for one subject still works).
+TEST(DaemonTest, TheLiveViewAnswersOrClosesBadClientsAndCountsThem) {
+  DaemonConfig config = TestConfig("inproc://viewbad-in", "inproc://viewbad-out", 4);
+  SubjectConfig second = config.subjects[0];
+  second.name = "actor2";
+  second.model = MakeHumanoidSubject("actor2");
+  config.subjects.push_back(second);
+  config.live_view_max_viewers = 8;
+  zmq::context_t context;
+  RunningDaemon daemon(context, config);
+  const int port = daemon->http_port();
+  const auto metric = [&](const char* name) {
+    return MetricValue(HttpGet(port, "/metrics").second, name);
+  };
+
+  const auto upgrade_request = [&](const std::string& target) {
+    return "GET " + target + " HTTP/1.1\r\nHost: 127.0.0.1:" + std::to_string(port) +
+           "\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+           "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n";
+  };
+  const auto answer_to = [&](const std::string& target) {
+    boost::asio::io_context io;
+    boost::asio::ip::tcp::socket socket(io);
+    socket.connect({boost::asio::ip::make_address("127.0.0.1"), static_cast<uint16_t>(port)});
+    boost::asio::write(socket, boost::asio::buffer(upgrade_request(target)));
+    std::string answer;
+    boost::system::error_code ec;
+    boost::asio::read(socket, boost::asio::dynamic_buffer(answer), ec);  // to the close
+    return answer;
+  };
+  const std::string unknown = answer_to("/live?subject=nob%6Fdy");
+  EXPECT_TRUE(unknown.starts_with("HTTP/1.1 404")) << unknown;
+  EXPECT_NE(unknown.find("unknown subject 'nobody'; this daemon solves: actor1, actor2"),
+            std::string::npos)
+      << unknown;
+  EXPECT_TRUE(answer_to("/elsewhere").starts_with("HTTP/1.1 404"));
+  {
+    LiveViewClient one(port, "", 0, "/live?subject=actor2");
+    const nlohmann::json description = one.Read();
+    ASSERT_EQ(description["subjects"].size(), 1u);  // that subject alone
+    EXPECT_EQ(description["subjects"][0]["name"], "actor2");
+  }
+  {
+    // A client's frame must be masked (RFC 6455 5.1): this one is not.
+    LiveViewClient unmasked(port);
+    EXPECT_EQ(unmasked.Read()["type"], "subjects");
+    const uint8_t frame[] = {0x81, 0x05, 'h', 'e', 'l', 'l', 'o'};
+    boost::asio::write(unmasked.stream().next_layer(), boost::asio::buffer(frame));
+    // The server answers with a close frame (protocol error) and waits for the client to
+    // go, as RFC 6455 asks; this one goes.
+    unmasked.stream().next_layer().shutdown(boost::asio::ip::tcp::socket::shutdown_send);
+    LiveViewClient oversized(port);
+    EXPECT_EQ(oversized.Read()["type"], "subjects");
+    boost::system::error_code closed_on_us;  // the server may close before it is all sent
+    oversized.stream().write(boost::asio::buffer(std::string(64 * 1024, 'x')), closed_on_us);
+    oversized.stream().next_layer().shutdown(boost::asio::ip::tcp::socket::shutdown_send,
+                                             closed_on_us);
+    // (The live view's counters are the control plane's: read them as /metrics shows them.)
+    EXPECT_TRUE(WaitForStats(*daemon, [&](const DaemonStats&) {
+      return metric("mocapd_live_viewers_closed_bad_input_total") >= 2;
+    }));
+  }
+
+  // 100 upgrade requests at once: each is a viewer (at most 8), refused with 503, or
+  // closed unanswered (over http_max_connections); every one accounted for.
+  const std::string upgrade = upgrade_request("/live");
+  boost::asio::io_context io;
+  std::vector<boost::asio::ip::tcp::socket> crowd;
+  for (int i = 0; i < 100; ++i) {
+    crowd.emplace_back(io);
+    crowd.back().connect({boost::asio::ip::make_address("127.0.0.1"), static_cast<uint16_t>(port)});
+    const timeval five_seconds{5, 0};  // a server that never answered would fail, not hang
+    setsockopt(crowd.back().native_handle(), SOL_SOCKET, SO_RCVTIMEO, &five_seconds,
+               sizeof(five_seconds));
+  }
+  for (auto& socket : crowd) {
+    boost::system::error_code ignored;
+    boost::asio::write(socket, boost::asio::buffer(upgrade), ignored);
+  }
+  int switched = 0, refused = 0, closed = 0, other = 0;
+  for (auto& socket : crowd) {
+    std::string status;
+    boost::system::error_code ec;
+    boost::asio::read_until(socket, boost::asio::dynamic_buffer(status), "\r\n", ec);
+    if (status.starts_with("HTTP/1.1 101"))
+      ++switched;
+    else if (status.starts_with("HTTP/1.1 503"))
+      ++refused;
+    else if (ec == boost::asio::error::eof || ec == boost::asio::error::connection_reset)
+      ++closed;
+    else
+      ++other;
+  }
+  EXPECT_LE(switched, 8);
+  EXPECT_EQ(other, 0);
+  EXPECT_EQ(switched + refused + closed, 100);
+  // /metrics is rendered at most every 20 ms: wait for the one that has them all.
+  EXPECT_TRUE(WaitForStats(*daemon, [&](const DaemonStats&) {
+    return metric("mocapd_live_viewers_refused_total") == refused &&
+           metric("mocapd_http_over_connections_total") == closed;
+  }));
+  const std::string metrics = HttpGet(port, "/metrics").second;
+  EXPECT_EQ(MetricValue(metrics, "mocapd_live_viewers_refused_total"), refused) << metrics;
+  EXPECT_EQ(MetricValue(metrics, "mocapd_http_over_connections_total"), closed) << metrics;
+  EXPECT_EQ(MetricValue(metrics, "mocapd_live_unknown_subject_total"), 1) << metrics;
+  EXPECT_GE(MetricValue(metrics, "mocapd_live_viewers_closed_bad_input_total"), 2) << metrics;
+  crowd.clear();
+  // The crowd gone, the view has room again.
+  ASSERT_TRUE(WaitForStats(*daemon,
+                           [&](const DaemonStats&) { return metric("mocapd_live_viewers") == 0; }));
+  LiveViewClient after(port);
+  EXPECT_EQ(after.Read()["type"], "subjects");
+  EXPECT_EQ(HttpGet(port, "/health").first, 200);
 }
 
 }  // namespace

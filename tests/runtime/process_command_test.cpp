@@ -17,14 +17,19 @@
 namespace mocapd {
 namespace {
 
-TEST(ProcessCommandTest, CleansATakeAndWritesAlignedBvhCleanedC3dAndReport) {
-  const auto f = testing::MakeHumanoidFixture("mixed", 6.0, 120.0);
-  const std::string dir = testing::TempDir("process");
+// The fixture's own skeleton and markers as a subject file: the true model of its take.
+void WriteFixtureSubject(const testing::HumanoidFixture& f, const std::string& path) {
   SubjectModel subject;
   subject.name = "actor";
   subject.skeleton = f.skeleton;
   subject.markers = f.markers;
-  WriteSubjectModel(dir + "/actor.toml", subject);
+  WriteSubjectModel(path, subject);
+}
+
+TEST(ProcessCommandTest, CleansATakeAndWritesAlignedBvhCleanedC3dAndReport) {
+  const auto f = testing::MakeHumanoidFixture("mixed", 6.0, 120.0);
+  const std::string dir = testing::TempDir("process");
+  WriteFixtureSubject(f, dir + "/actor.toml");
   CorruptionOptions corruption;
   const CorruptedTake bad = CorruptTake(f.take, f.markers.get(), corruption);
   WriteC3d(dir + "/take.c3d", bad.take);
@@ -82,10 +87,7 @@ TEST(ProcessCommandTest, CleansATakeAndWritesAlignedBvhCleanedC3dAndReport) {
 TEST(ProcessCommandTest, RefusesATakeWithoutTheSubjectsMarkers) {
   const auto f = testing::MakeHumanoidFixture("walk", 1.0, 60.0);
   const std::string dir = testing::TempDir("process_mismatch");
-  SubjectModel subject;
-  subject.skeleton = f.skeleton;
-  subject.markers = f.markers;
-  WriteSubjectModel(dir + "/actor.toml", subject);
+  WriteFixtureSubject(f, dir + "/actor.toml");
   C3dTake other;
   other.labels = {"X", "Y"};
   other.rate_hz = 60;
@@ -97,6 +99,55 @@ TEST(ProcessCommandTest, RefusesATakeWithoutTheSubjectsMarkers) {
   options.output_bvh = dir + "/o.bvh";
   std::ostringstream out;
   EXPECT_THROW(RunProcessCommand(options, out), std::invalid_argument);
+}
+
+// --plot draws what the cleanup did: every marker's row with the repairs it made, the
+// solve over time, and with the truth (what mocap-sim synth --truth-bvh writes) the
+// joint error over time, reported too.
+TEST(ProcessCommandTest, PlotsShowEveryMarkerTheSolveAndTheErrorAgainstTheTruth) {
+  const auto f = testing::MakeHumanoidFixture("walk", 4.0, 120.0);
+  const std::string dir = testing::TempDir("process_plot");
+  WriteFixtureSubject(f, dir + "/actor.toml");
+  const CorruptedTake bad = CorruptTake(f.take, f.markers.get(), CorruptionOptions{});
+  WriteC3d(dir + "/take.c3d", bad.take);
+  WriteBvh(dir + "/truth.bvh", MakeBvhTake(*f.skeleton, f.motion, 1.0 / 120.0, "cm"));
+
+  ProcessCommandOptions options;
+  options.subject = dir + "/actor.toml";
+  options.input_c3d = dir + "/take.c3d";
+  options.output_bvh = dir + "/solved.bvh";
+  options.plot_dir = dir + "/plots";
+  options.truth_bvh = dir + "/truth.bvh";
+  std::ostringstream out;
+  const ProcessSummary summary = RunProcessCommand(options, out);
+  ASSERT_TRUE(summary.has_truth);
+  EXPECT_LT(summary.truth_mean_cm, 1.0);
+  EXPECT_GE(summary.truth_worst_cm, summary.truth_mean_cm);
+  EXPECT_NE(out.str().find("against the truth"), std::string::npos) << out.str();
+  const auto read = [](const std::string& path) {
+    std::ifstream in(path);
+    return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  };
+  const std::string markers = read(dir + "/plots/markers.svg");
+  ASSERT_FALSE(markers.empty());
+  for (int m = 0; m < f.markers->num_markers(); ++m)
+    EXPECT_NE(markers.find(">" + f.markers->marker(m).name + "<"), std::string::npos);
+  EXPECT_NE(markers.find("gap filled"), std::string::npos);  // the corruption's gaps, filled
+  EXPECT_NE(markers.find("observed"), std::string::npos);
+  EXPECT_NE(read(dir + "/plots/solve.svg").find("LM iterations"), std::string::npos);
+  EXPECT_NE(read(dir + "/plots/joint_error.svg").find("worst joint"), std::string::npos);
+  // A truth of another take is refused, naming it.
+  WriteBvh(dir + "/short.bvh",
+           MakeBvhTake(*f.skeleton, std::vector<Pose>(f.motion.begin(), f.motion.begin() + 10),
+                       1.0 / 120.0, "cm"));
+  options.truth_bvh = dir + "/short.bvh";
+  try {
+    RunProcessCommand(options, out);
+    ADD_FAILURE() << "a 10-frame truth was taken";
+  } catch (const std::exception& e) {
+    EXPECT_NE(std::string(e.what()).find("short.bvh: 10 frames, the take has"), std::string::npos)
+        << e.what();
+  }
 }
 
 }  // namespace

@@ -7,6 +7,7 @@
 
 #include "formats/marker_layout.hpp"
 #include "formats/take_frames.hpp"
+#include "runtime/live_view.hpp"
 #include "sim/humanoid.hpp"
 #include "sim/humanoid_subject.hpp"
 #include "tests/support/allocation_counter.hpp"
@@ -64,6 +65,19 @@ class SubjectRunnerTest : public ::testing::Test {
     map_.FillMessage(fixture_.take, take_frame, &m);
     return m;
   }
+
+  // Built before an allocation count starts: the messages themselves allocate.
+  std::vector<protocol::MarkerFrameMessage> Frames(int first, int end) const {
+    std::vector<protocol::MarkerFrameMessage> frames;
+    for (int f = first; f < end; ++f) frames.push_back(Frame(f, static_cast<uint64_t>(f), 0));
+    return frames;
+  }
+
+  // Publishing without keeping anything, for the allocation counts.
+  class NullSink : public OutputSink {
+   public:
+    void Send(std::string_view, std::span<const uint8_t>) override {}
+  };
 
   static void ExpectBalanced(const SubjectRunner& r) {
     const SubjectCounters& c = r.counters();
@@ -410,15 +424,56 @@ TEST_F(SubjectRunnerTest, AModelAtTheWrongScaleIsFlaggedSuspect) {
 TEST_F(SubjectRunnerTest, SteadyStateAcceptAllocatesNothing) {
   SubjectRunner runner(subject_, daemon_);
   for (int f = 0; f < 40; ++f) ASSERT_FALSE(runner.Accept(Frame(f, f, 0), 0, sink_).has_value());
-  std::vector<protocol::MarkerFrameMessage> frames;
-  for (int f = 40; f < 80; ++f) frames.push_back(Frame(f, f, 0));
-  class NullSink : public OutputSink {
-   public:
-    void Send(std::string_view, std::span<const uint8_t>) override {}
-  } null_sink;
+  const std::vector<protocol::MarkerFrameMessage> frames = Frames(40, 80);
+  NullSink null_sink;
   testing::ScopedAllocationCounter counter;
   for (const auto& frame : frames) ASSERT_FALSE(runner.Accept(frame, 0, null_sink).has_value());
   EXPECT_EQ(counter.count(), 0u);
+}
+
+// The live view's copy: none while nobody watches; while someone does, at most one per
+// view period (an hour here, so the test does not depend on how fast frames go), and with
+// no period the newest frame wins; every marker and joint copied; nothing allocated.
+TEST_F(SubjectRunnerTest, TheLiveViewGetsTheNewestFrameOnlyWhileWatchedAndAllocatesNothing) {
+  SubjectRunner runner(subject_, daemon_);
+  LiveViewBoard board(30.0);
+  const auto& model = subject_.model;
+  runner.AttachLiveView(board.Register("actor1", *model.skeleton, *model.markers, nullptr));
+  const auto slot = board.Slots().at(0);
+  LiveViewFrame frame;
+  for (int f = 0; f < 40; ++f) ASSERT_FALSE(runner.Accept(Frame(f, f, 0), 0, sink_).has_value());
+  EXPECT_FALSE(slot->Take(&frame));  // nobody watching: nothing copied
+  board.demand().viewers = 1;
+  board.demand().period_ns = int64_t{3600} * 1'000'000'000;
+  const std::vector<protocol::MarkerFrameMessage> frames = Frames(40, 80);
+  NullSink null_sink;
+  {
+    testing::ScopedAllocationCounter counter;
+    for (const auto& m : frames) ASSERT_FALSE(runner.Accept(m, 0, null_sink).has_value());
+    EXPECT_EQ(counter.count(), 0u);
+  }
+  ASSERT_TRUE(slot->Take(&frame));
+  EXPECT_FALSE(slot->Take(&frame));  // taken once
+  // One copy in the period: the first frame published once someone watched.
+  EXPECT_EQ(frame.frame_number, 40u - 4u);
+  EXPECT_EQ(frame.raw.size(), static_cast<size_t>(model.markers->num_markers()));
+  EXPECT_EQ(frame.joints.size(), static_cast<size_t>(model.skeleton->num_joints()));
+  for (size_t m = 0; m < frame.raw.size(); ++m) {
+    if (std::isfinite(frame.raw[m].x())) {
+      EXPECT_LT((frame.raw[m] - frame.cleaned[m]).norm(), 0.05);
+    }
+  }
+  EXPECT_LT((frame.joints[0] - frame.cleaned[0]).norm(), 0.5);  // the pelvis by its marker
+
+  // A view with no period: every frame overwrites the slot, and the reader gets the newest.
+  LiveViewBoard every_frame(30.0);
+  every_frame.demand().viewers = 1;
+  every_frame.demand().period_ns = 0;
+  runner.AttachLiveView(every_frame.Register("actor1", *model.skeleton, *model.markers, nullptr));
+  for (int f = 80; f < 90; ++f)
+    ASSERT_FALSE(runner.Accept(Frame(f, f, 0), 0, null_sink).has_value());
+  ASSERT_TRUE(every_frame.Slots().at(0)->Take(&frame));
+  EXPECT_EQ(frame.frame_number, 90u - 1u - 4u);  // the newest published (lookahead 4)
 }
 
 }  // namespace
