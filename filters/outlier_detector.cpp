@@ -126,6 +126,28 @@ void OutlierDetector::ReadmitConsistentSegments(const WindowFrame& s) {
         markers_.marker(static_cast<int>(m)).num_attachments == 1)
       weights_[m] = 1.0;
   }
+  // One trusted marker cannot tell a segment's rotation about it: the reference turns
+  // where the prior takes it, and an excluded marker of the segment stays far from it
+  // however clean it is (a toe whose other marker froze for half a second stayed out for
+  // the rest of the take, its repairs 5-10 cm off). An excluded marker that keeps its
+  // rigid distance to the one trusted marker of its segment is on the segment: taken back.
+  for (size_t k = 0; k < rigid_pairs_.size(); ++k) {
+    const auto i = static_cast<size_t>(rigid_pairs_[k].first),
+               j = static_cast<size_t>(rigid_pairs_[k].second);
+    const auto joint = static_cast<size_t>(markers_.primary_joint(rigid_pairs_[k].first));
+    if (trusted_on_joint_[joint] != 1 || !s.valid[i] || !s.valid[j]) continue;
+    const auto trusted = [&](size_t m) {
+      return !tracks_[m].frozen && !tracks_[m].fallen && !tracks_[m].stray;
+    };
+    const bool i_trusted = trusted(i), j_trusted = trusted(j);
+    if (i_trusted == j_trusted) continue;
+    const size_t excluded = i_trusted ? j : i;
+    if (tracks_[excluded].frozen ||
+        markers_.marker(static_cast<int>(excluded)).num_attachments != 1)
+      continue;
+    if (std::abs((s.raw[i] - s.raw[j]).norm() - rigid_distance_[k]) <= options_.rigid_tolerance_m)
+      weights_[excluded] = 1.0;
+  }
 }
 
 // Relabels swapped pairs before the frame is solved, so the reference is computed from

@@ -172,6 +172,25 @@ TEST_F(OutlierDetectorTest, AFootFrozenTogetherUnderAMovingShinIsFrozenNotItsToe
   EXPECT_GT(toes_kept, 2 * 120 * 9 / 10);
 }
 
+TEST_F(OutlierDetectorTest, AToeMarkerThatFrozeIsTakenBackOnceItMovesWithTheToeAgain) {
+  // One of the toe's two markers sticks for half a second, then moves with the toe again.
+  // While it was out, the toe's one other marker could not hold the toe's rotation, so
+  // the reference turned away from it; it must not stay out for that (it did: for the
+  // rest of the take, published 5-10 cm off).
+  const int stuck = Marker("RTOE2");
+  for (int f = 300; f < 360; ++f) Sample(f, stuck) = Truth(299, stuck);
+  const auto out = Run(CleanupOptions{});
+  int observed = 0, far = 0;
+  const int from = 480, to = static_cast<int>(frames_.size()) - 20;
+  for (int f = from; f < to; ++f) {
+    const auto uf = static_cast<size_t>(f);
+    observed += out[uf].status[static_cast<size_t>(stuck)] == MarkerStatus::kObserved;
+    far += (out[uf].markers[static_cast<size_t>(stuck)] - Truth(f, stuck)).norm() > 0.01;
+  }
+  EXPECT_GT(observed, (to - from) * 9 / 10);
+  EXPECT_LT(far, (to - from) / 20);
+}
+
 TEST_F(OutlierDetectorTest, FallenOffMarkerIsClassifiedAndExcluded) {
   const int m = Marker("RUPA2");
   for (int f = 300; f < static_cast<int>(frames_.size()); ++f)

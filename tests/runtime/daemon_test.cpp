@@ -267,8 +267,10 @@ TEST_P(DaemonTransportTest, EveryFrameOfACorruptedTakeComesOutSolved) {
     in = "ipc://" + dir + "/in";
     out = "ipc://" + dir + "/out";
   } else {
-    in = "tcp://127.0.0.1:47311";
-    out = "tcp://127.0.0.1:47312";
+    // Fixed ports below Linux's ephemeral range (32768-60999): no other test's client
+    // connection can be holding them as its local port.
+    in = "tcp://127.0.0.1:27311";
+    out = "tcp://127.0.0.1:27312";
   }
   zmq::context_t context;
   RunningDaemon daemon(context, TestConfig(in, out));
@@ -849,7 +851,7 @@ struct CurveTestKeys {
 TEST(DaemonTest, CurveAdmitsOnlyAuthorizedKeysAndCountsEveryoneElse) {
   const testing::HumanoidFixture f = testing::MakeHumanoidFixture("walk", 1.0, 120.0);
   const CurveTestKeys keys("daemon_curve");
-  const std::string in = "tcp://127.0.0.1:47331", out = "tcp://127.0.0.1:47332";
+  const std::string in = "tcp://127.0.0.1:27331", out = "tcp://127.0.0.1:27332";
   zmq::context_t context;
   RunningDaemon daemon(context, keys.Apply(TestConfig(in, out, 4)));
   const auto refused = [](const DaemonStats& s, CurveSocket which) {
@@ -909,7 +911,7 @@ TEST(DaemonTest, ACurveSubInputTakesFramesOnlyFromThePublisherWhoseKeyItHolds) {
   const testing::HumanoidFixture f = testing::MakeHumanoidFixture("walk", 1.0, 120.0);
   const CurveTestKeys keys("daemon_curve_sub");
   const curve::ClientKeys capture{curve::GenerateKeyPair(), ""};
-  const std::string in = "tcp://127.0.0.1:47341", out = "tcp://127.0.0.1:47342";
+  const std::string in = "tcp://127.0.0.1:27341", out = "tcp://127.0.0.1:27342";
   DaemonConfig config = keys.Apply(TestConfig(in, out, 0));
   config.input_pattern = InputPattern::kSub;
   config.curve_input_server_key = capture.own.public_key;
