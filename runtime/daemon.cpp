@@ -805,6 +805,7 @@ void Daemon::Run(bool handle_signals) {
         if (control_->http) {
           stats.http_unauthorized = control_->http->counters().unauthorized;
           stats.http_over_connections = control_->http->counters().over_connections;
+          stats.http_foreign_host = control_->http->counters().foreign_host;
         }
         if (control_->live) {
           stats.live_view = true;

@@ -68,6 +68,7 @@ struct DaemonStats {
   uint64_t reload_failures = 0;
   uint64_t http_unauthorized = 0;      ///< HTTP requests without the bearer token.
   uint64_t http_over_connections = 0;  ///< HTTP connections closed: too many open.
+  uint64_t http_foreign_host = 0;      ///< HTTP requests for another Host (403).
   bool live_view = false;              ///< The browser view is served.
   int live_viewers = 0;                ///< Pages open on it now.
   LiveViewCounters live_counters;

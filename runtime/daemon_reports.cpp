@@ -50,6 +50,10 @@ std::string FormatPrometheusMetrics(const DaemonStats& stats) {
           "HTTP connections closed unanswered: control.http_max_connections were open")
       .Add({})
       .Increment(static_cast<double>(stats.http_over_connections));
+  counter("mocapd_http_foreign_host_total",
+          "HTTP requests refused: a loopback server asked under another host name")
+      .Add({})
+      .Increment(static_cast<double>(stats.http_foreign_host));
   if (stats.live_view) {
     gauge("mocapd_live_viewers", "Browser pages open on the live view")
         .Add({})

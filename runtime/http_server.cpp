@@ -53,7 +53,11 @@ class Session : public std::enable_shared_from_this<Session> {
     const Credential credential = token.empty() ? Credential::kNone : Authorized(token, target);
     const unsigned version = request_.version();
     const bool head = request_.method() == http::verb::head;
-    if (!token.empty() && credential == Credential::kNone) {
+    if (shared_->loopback && !LoopbackHost()) {
+      ++shared_->counters.foreign_host;
+      answer = {403, "text/plain; charset=utf-8",
+                "this server answers only to 127.0.0.1, localhost or [::1] (Host header)\n"};
+    } else if (!token.empty() && credential == Credential::kNone) {
       ++shared_->counters.unauthorized;
       answer = {401, "text/plain; charset=utf-8",
                 "unauthorized: send the header 'Authorization: Bearer TOKEN' "
@@ -121,6 +125,24 @@ class Session : public std::enable_shared_from_this<Session> {
     const std::string_view o(origin->value().data(), origin->value().size());
     const std::string_view h(host->value().data(), host->value().size());
     return o == "http://" + std::string(h) || o == "https://" + std::string(h);
+  }
+
+  // The Host header names a loopback address or localhost (any port). A request without
+  // one is no browser's, so no rebound page's.
+  bool LoopbackHost() const {
+    const auto host = request_.find(http::field::host);
+    if (host == request_.end()) return true;
+    std::string_view name(host->value().data(), host->value().size());
+    if (name.starts_with('[')) {  // [::1]:port
+      const size_t close = name.find(']');
+      name = close == std::string_view::npos ? std::string_view{} : name.substr(1, close - 1);
+    } else if (const size_t colon = name.rfind(':'); colon != std::string_view::npos) {
+      name = name.substr(0, colon);
+    }
+    if (name == "localhost") return true;
+    boost::system::error_code ec;
+    const auto address = boost::asio::ip::make_address(std::string(name), ec);
+    return !ec && address.is_loopback();
   }
 
   // Where a valid token came from, or kNone.
@@ -229,6 +251,7 @@ HttpServer::HttpServer(boost::asio::io_context& io, const std::string& address, 
                              ec.message());
   port_ = acceptor_.local_endpoint().port();
   shared_->cookie_name = "mocapd_token_" + std::to_string(port_);
+  shared_->loopback = ip.is_loopback();
   Accept();
 }
 

@@ -6,7 +6,10 @@
 // token every request must carry (others get 401, counted): in the Authorization header,
 // or, for a browser, once as "?token=" (answered with a redirect that drops it from the
 // address and a cookie that carries it on the page's own requests). A WebSocket upgrade
-// must come from a page of this server (its Origin, when sent, names this Host).
+// must come from a page of this server (its Origin, when sent, names this Host). A server
+// bound to loopback answers only requests addressed to a loopback name (127.0.0.1,
+// localhost, [::1]): a web page that rebinds its own domain name to 127.0.0.1 (DNS
+// rebinding) cannot read it.
 #pragma once
 
 #include <boost/asio/io_context.hpp>
@@ -48,6 +51,7 @@ std::string QueryParameter(std::string_view target, std::string_view name);
 struct HttpServerCounters {
   uint64_t unauthorized = 0;      ///< Requests without the bearer token (401).
   uint64_t over_connections = 0;  ///< Connections closed because max_connections were open.
+  uint64_t foreign_host = 0;      ///< Loopback server asked under another host name (403).
 };
 
 class HttpServer {
@@ -71,6 +75,7 @@ class HttpServer {
     HttpServerCounters counters;
     int open_connections = 0;
     std::string cookie_name;  ///< mocapd_token_<port>: one per daemon on a host.
+    bool loopback = false;    ///< Bound to a loopback address: only loopback Host names.
   };
 
  private:

@@ -703,14 +703,15 @@ TEST(DaemonTest, ARetargetedCharacterIsPublishedBesideTheActor) {
 }
 
 boost::beast::http::response<boost::beast::http::string_body> HttpRequestFor(
-    int port, const std::string& target, const std::string& authorization = "") {
+    int port, const std::string& target, const std::string& authorization = "",
+    const std::string& host = "127.0.0.1") {
   namespace beast = boost::beast;
   boost::asio::io_context io;
   boost::asio::ip::tcp::resolver resolver(io);
   beast::tcp_stream stream(io);
   stream.connect(resolver.resolve("127.0.0.1", std::to_string(port)));
   beast::http::request<beast::http::empty_body> request(beast::http::verb::get, target, 11);
-  request.set(beast::http::field::host, "127.0.0.1");
+  request.set(beast::http::field::host, host);
   if (!authorization.empty()) request.set(beast::http::field::authorization, authorization);
   beast::http::write(stream, request);
   beast::flat_buffer buffer;
@@ -947,6 +948,25 @@ TEST(DaemonTest, ACurveSubInputTakesFramesOnlyFromThePublisherWhoseKeyItHolds) {
   }));
   daemon.Stop();
   EXPECT_TRUE(daemon->Stats().Balanced());
+}
+
+// DNS rebinding: a web page whose domain name is made to resolve to 127.0.0.1 reaches a
+// loopback daemon with its own name in the Host header. Only loopback names are answered.
+TEST(DaemonTest, ALoopbackHttpServerAnswersOnlyLoopbackHostNames) {
+  DaemonConfig config = TestConfig("inproc://host-in", "inproc://host-out", 4);
+  zmq::context_t context;
+  RunningDaemon daemon(context, config);
+  const int port = daemon->http_port();
+  const std::string p = ":" + std::to_string(port);
+  EXPECT_EQ(HttpRequestFor(port, "/subjects", "", "127.0.0.1" + p).result_int(), 200);
+  EXPECT_EQ(HttpRequestFor(port, "/subjects", "", "localhost" + p).result_int(), 200);
+  EXPECT_EQ(HttpRequestFor(port, "/subjects", "", "[::1]" + p).result_int(), 200);
+  EXPECT_EQ(HttpRequestFor(port, "/subjects", "", "127.0.0.1").result_int(), 200);
+  const auto rebound = HttpRequestFor(port, "/metrics", "", "attacker.example" + p);
+  EXPECT_EQ(rebound.result_int(), 403);
+  EXPECT_NE(rebound.body().find("Host"), std::string::npos) << rebound.body();
+  EXPECT_EQ(HttpRequestFor(port, "/", "", "127.0.0.1.attacker.example").result_int(), 403);
+  EXPECT_EQ(MetricValue(HttpGet(port, "/metrics").second, "mocapd_http_foreign_host_total"), 2);
 }
 
 // A browser's side of the live view, synchronous: the upgrade, then whole messages.
