@@ -55,7 +55,7 @@ class Tokens {
   void Expect(const std::string& word) {
     const int at = line();
     const std::string got = Next(word.c_str());
-    if (got != word) FailAt(at, "expected '" + word + "', found '" + got + "'");
+    if (got != word) FailAt(at, "expected '" + word + "', found " + Shown(got));
   }
   double Number(const char* what) {
     const int at = line();
@@ -63,8 +63,16 @@ class Tokens {
     char* end = nullptr;
     const double v = std::strtod(t.c_str(), &end);
     if (end == t.c_str() || *end != '\0' || !std::isfinite(v))
-      FailAt(at, std::string("expected a number for ") + what + ", found '" + t + "'");
+      FailAt(at, std::string("expected a number for ") + what + ", found " + Shown(t));
     return v;
+  }
+  // A token as an error message may quote it: a binary file (a C3D given as a BVH) must
+  // not print its bytes to the terminal.
+  static std::string Shown(const std::string& token) {
+    const bool printable = std::all_of(token.begin(), token.end(),
+                                       [](unsigned char c) { return c >= 0x20 && c < 0x7f; });
+    if (!printable) return "binary data (is this a BVH file?)";
+    return "'" + (token.size() > 40 ? token.substr(0, 40) + "..." : token) + "'";
   }
   [[noreturn]] void Fail(const std::string& what) const { FailAt(line(), what); }
   [[noreturn]] void FailAt(int at, const std::string& what) const {
@@ -145,7 +153,7 @@ void ParseJoint(Tokens& t, int parent, std::vector<RawJoint>* joints,
       t.Expect("}");
       end_sites->push_back({index, offset});
     } else {
-      t.Fail("expected JOINT, End Site or '}', found '" + word + "'");
+      t.Fail("expected JOINT, End Site or '}', found " + Tokens::Shown(word));
     }
   }
 }

@@ -74,6 +74,22 @@ bool IsZ85Key(std::string_view key) {
 }
 
 void WriteCertificates(const std::string& base_path, const KeyPair& keys) {
+  const std::filesystem::path base(base_path);
+  const std::string name = base.filename().string();
+  if (name.empty() || name.starts_with('.') || name.ends_with(".key") ||
+      name.ends_with(".key_secret"))
+    throw std::runtime_error(
+        "'" + base_path +
+        "': give the key pair's path without an extension, ending in its name (e.g. "
+        "keys/mocapd writes keys/mocapd.key and keys/mocapd.key_secret)");
+  // A keys directory is made on the way, as `mkdir -p` would: readable by its owner only.
+  if (base.has_parent_path() && !std::filesystem::exists(base.parent_path())) {
+    std::error_code ec;
+    std::filesystem::create_directories(base.parent_path(), ec);
+    if (ec)
+      throw std::runtime_error(base.parent_path().string() + ": cannot create: " + ec.message());
+    std::filesystem::permissions(base.parent_path(), std::filesystem::perms::owner_all, ec);
+  }
   // Neither half is written if either exists: a public key must match its secret one.
   for (const std::string& path : {base_path + ".key", base_path + ".key_secret"}) {
     struct stat st {};
@@ -99,7 +115,9 @@ void WriteCertificates(const std::string& base_path, const KeyPair& keys) {
 
 KeyPair ReadCertificate(const std::string& path, bool need_secret) {
   std::ifstream in(path, std::ios::binary);
-  if (!in) throw std::runtime_error(path + ": cannot read the CURVE certificate");
+  if (!in)
+    throw std::runtime_error(path + ": cannot read the CURVE certificate: " + std::strerror(errno) +
+                             " (a relative path is taken from the config file's directory)");
   KeyPair keys;
   std::string line;
   int line_number = 0;

@@ -842,6 +842,10 @@ void Daemon::Run(bool handle_signals) {
           cp.io, cp.config.http_address, cp.config.http_port,
           [this, render](const std::string& target) {
             if (target != "/metrics" && target != "/subjects" && target != "/health") {
+              if (control_->live && target == "/live")
+                return HttpResponse{426, "text/plain; charset=utf-8",
+                                    "/live is the live view's WebSocket: open / in a browser, "
+                                    "or connect with a WebSocket client\n"};
               if (control_->live)
                 if (auto file = LiveViewFile(target))
                   return HttpResponse{file->status, file->content_type, std::move(file->body)};

@@ -5,6 +5,7 @@
 #include <boost/beast/core.hpp>
 #include <boost/beast/http.hpp>
 #include <boost/beast/websocket/rfc6455.hpp>
+#include <cctype>
 #include <chrono>
 #include <stdexcept>
 #include <string_view>
@@ -61,7 +62,7 @@ class Session : public std::enable_shared_from_this<Session> {
       ++shared_->counters.unauthorized;
       answer = {401, "text/plain; charset=utf-8",
                 "unauthorized: send the header 'Authorization: Bearer TOKEN' "
-                "(control.http_token_file)\n"};
+                "(control.http_token_file); in a browser, open /?token=TOKEN once\n"};
       response_.set(http::field::www_authenticate, "Bearer realm=\"mocapd\"");
     } else if (request_.method() != http::verb::get && request_.method() != http::verb::head) {
       answer = {405, "text/plain; charset=utf-8", "only GET is served here\n"};
@@ -139,7 +140,11 @@ class Session : public std::enable_shared_from_this<Session> {
     } else if (const size_t colon = name.rfind(':'); colon != std::string_view::npos) {
       name = name.substr(0, colon);
     }
-    if (name == "localhost") return true;
+    if (name.ends_with('.')) name.remove_suffix(1);  // the absolute form, "localhost."
+    if (name.size() == 9 && std::equal(name.begin(), name.end(), "localhost", [](char a, char b) {
+          return std::tolower(static_cast<unsigned char>(a)) == b;
+        }))
+      return true;
     boost::system::error_code ec;
     const auto address = boost::asio::ip::make_address(std::string(name), ec);
     return !ec && address.is_loopback();

@@ -67,17 +67,29 @@ int WaitForDaemon(Sockets& s, const std::vector<SubjectLog>& logs, const Schedul
   };
   while (!(all(subscribed) && all(described))) {
     if (SteadyNs() > deadline) {
+      char seconds[32];
+      std::snprintf(seconds, sizeof(seconds), "%g s", o.connect_timeout_s);
+      // Under CURVE a refused handshake looks like silence: name the keys to check.
+      const std::string curve_send =
+          o.curve_key_file.empty()
+              ? ""
+              : "; with CURVE: is the daemon's input_server_key_file this replay's public key?";
+      const std::string curve_listen =
+          o.curve_key_file.empty()
+              ? ""
+              : "; with CURVE: is this replay's public key in the daemon's authorized_keys, "
+                "and --curve-server-key the daemon's?";
       for (size_t k = 0; k < logs.size(); ++k) {
         if (!subscribed[k])
           throw std::runtime_error("replay: nothing subscribed to " + logs[k].topic + " on " +
-                                   o.to + " within " + std::to_string(o.connect_timeout_s) +
-                                   " s (is the daemon running with subject '" + logs[k].name +
-                                   "'?)");
+                                   o.to + " within " + seconds +
+                                   " (is the daemon running with subject '" + logs[k].name + "'?" +
+                                   curve_send + ")");
         if (!described[k])
           throw std::runtime_error("replay: no description of subject '" + logs[k].name +
-                                   "' from " + o.from + " within " +
-                                   std::to_string(o.connect_timeout_s) +
-                                   " s (is the daemon publishing there, with that subject?)");
+                                   "' from " + o.from + " within " + seconds +
+                                   " (is the daemon publishing there, with that subject?" +
+                                   curve_listen + ")");
       }
     }
     std::vector<zmq::pollitem_t> items = {{s.out.handle(), 0, ZMQ_POLLIN, 0}};

@@ -113,6 +113,11 @@ def main():
     for subject, numbers in sorted(character_frames.items()):
         print(f"summary: {subject}: {len(numbers)} character frames")
     print(f"summary: {total} skeleton frames, {errors} undecodable messages")
+    if total == 0 and args.curve_key:
+        # A refused CURVE handshake is silent on this side: say what to check.
+        print("no frame: with CURVE, is this key's .key in the daemon's authorized_keys, and "
+              "--curve-server-key the daemon's public key? (the daemon counts refusals in "
+              "mocapd_curve_clients_refused_total)", file=sys.stderr)
     return 0 if errors == 0 and (args.frames == 0 or total >= args.frames) else 1
 
 

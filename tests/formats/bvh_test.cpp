@@ -167,6 +167,9 @@ TEST(BvhTest, MalformedFilesGetErrorsNamingTheLine) {
   std::string unclosed = good.substr(0, good.find("MOTION"));
   unclosed.erase(unclosed.rfind('}'));
   ExpectError(unclosed + "MOTION\n", "expected JOINT, End Site or '}'");
+  // A C3D given as a BVH: named as binary, its bytes never printed.
+  ExpectError(std::string("\x02\x50\x3b\x00\x01", 5) + "\x90\xff junk",
+              "bad.bvh:1: expected 'HIERARCHY', found binary data (is this a BVH file?)");
 }
 
 TEST(BvhTest, MissingFileIsAClearError) {

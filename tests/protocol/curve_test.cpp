@@ -61,6 +61,27 @@ TEST(CurveKeysTest, KeygenWritesAPublicAndAPrivateCertificateThatReadBack) {
   EXPECT_FALSE(std::filesystem::exists(dir + "/elsewhere"));
 }
 
+// `mocapd keygen --out keys/authorized/viewer` on a fresh clone: the directories are made;
+// a path that names no key pair (empty, a directory, one with the extension already) is
+// refused with what to give instead, before anything is written.
+TEST(CurveKeysTest, KeygenMakesItsDirectoryAndRefusesPathsThatNameNoKeyPair) {
+  const std::string dir = testing::TempDir("curve_keygen_paths");
+  WriteCertificates(dir + "/keys/authorized/viewer", GenerateKeyPair());
+  EXPECT_TRUE(std::filesystem::exists(dir + "/keys/authorized/viewer.key_secret"));
+  for (const std::string& bad : {std::string(""), dir + "/keys/", dir + "/keys/x.key",
+                                 dir + "/keys/x.key_secret", dir + "/keys/.hidden"})
+    EXPECT_NE(
+        ErrorOf([&] { WriteCertificates(bad, GenerateKeyPair()); }).find("without an extension"),
+        std::string::npos)
+        << "'" << bad << "'";
+  EXPECT_FALSE(std::filesystem::exists(dir + "/keys/x.key.key"));
+  EXPECT_FALSE(std::filesystem::exists(dir + "/keys/.key"));
+  EXPECT_NE(ErrorOf([&] {
+              ReadCertificate(dir + "/nowhere.key", false);
+            }).find("No such file or directory"),
+            std::string::npos);
+}
+
 TEST(CurveKeysTest, MalformedCertificatesAreErrorsNamingFileAndLine) {
   const std::string dir = testing::TempDir("curve_bad");
   const auto write = [&](const std::string& name, const std::string& text) {

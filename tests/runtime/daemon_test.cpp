@@ -962,6 +962,8 @@ TEST(DaemonTest, ALoopbackHttpServerAnswersOnlyLoopbackHostNames) {
   EXPECT_EQ(HttpRequestFor(port, "/subjects", "", "localhost" + p).result_int(), 200);
   EXPECT_EQ(HttpRequestFor(port, "/subjects", "", "[::1]" + p).result_int(), 200);
   EXPECT_EQ(HttpRequestFor(port, "/subjects", "", "127.0.0.1").result_int(), 200);
+  EXPECT_EQ(HttpRequestFor(port, "/subjects", "", "LocalHost." + p).result_int(), 200);
+  EXPECT_EQ(HttpRequestFor(port, "/subjects", "", "127.0.0.2" + p).result_int(), 200);
   const auto rebound = HttpRequestFor(port, "/metrics", "", "attacker.example" + p);
   EXPECT_EQ(rebound.result_int(), 403);
   EXPECT_NE(rebound.body().find("Host"), std::string::npos) << rebound.body();
@@ -1012,6 +1014,7 @@ TEST(DaemonTest, TheLiveViewFeedsAPageWhileAStalledPageIsSkippedThenClosed) {
   EXPECT_EQ(page_code, 200);
   EXPECT_NE(page.find("mocapd live view"), std::string::npos);
   EXPECT_EQ(HttpGet(port, "/live_view.js").first, 200);
+  EXPECT_EQ(HttpGet(port, "/live").first, 426);  // the socket, asked for without an upgrade
   const auto [three_code, three] = HttpGet(port, "/three/three.min.js");
   if (std::filesystem::exists("/usr/share/javascript/three/three.min.js"))
     EXPECT_EQ(three_code, 200);
@@ -1085,7 +1088,9 @@ TEST(DaemonTest, TheLiveViewHonoursTheTokenAndItsViewerLimit) {
   zmq::context_t context;
   RunningDaemon daemon(context, config);
   const int port = daemon->http_port();
-  EXPECT_EQ(HttpGet(port, "/").first, 401);
+  const auto [refused, how] = HttpGet(port, "/");
+  EXPECT_EQ(refused, 401);
+  EXPECT_NE(how.find("/?token=TOKEN"), std::string::npos) << how;  // a browser's way in
   EXPECT_EQ(HttpGet(port, "/?token=wrong-token-0123456").first, 401);
   // The token in the address: a redirect that drops it, and a cookie that keeps it.
   const auto opened = HttpRequestFor(port, "/?token=" + config.http_token);
