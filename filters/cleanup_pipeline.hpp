@@ -46,6 +46,8 @@ class CleanupPipeline {
   bool Flush();
   const CleanFrame& output() const { return out_; }
   const CleanupCounters& counters() const { return counters_; }
+  /// Carries on the counts of the pipeline this one replaces (a subject swapped in).
+  void AdoptCounters(const CleanupCounters& counters) { counters_ = counters; }
   const CleanupOptions& options() const { return options_; }
   /// Forgets all state (a capture restart); counters are kept.
   void Reset();

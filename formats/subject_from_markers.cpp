@@ -378,4 +378,95 @@ MarkersOnlyCalibration CalibrateFromMarkers(std::span<const C3dTake> takes,
   return out;
 }
 
+SubjectCalibrationRecord CalibrationRecordOf(const MarkersOnlyCalibration& calibration) {
+  SubjectCalibrationRecord record;
+  record.marker_set = calibration.marker_set;
+  record.poses = static_cast<int>(calibration.solve.frames_used.size());
+  record.median_residual_mm = calibration.solve.median_residual_m * 1e3;
+  for (const JointCalibrationReport& jr : calibration.solve.joints) {
+    record.joint_method.push_back(jr.method);
+    record.joint_uncertainty_mm.push_back(jr.method == "root" ? kNaN : jr.uncertainty_m * 1e3);
+  }
+  return record;
+}
+
+SubjectModel TemplateSubject(const MarkerSetDefinition& set, std::span<const std::string> labels,
+                             double height_m, const std::string& subject_name) {
+  const Skeleton templ = MakeTemplateHumanoid(height_m);
+  const std::vector<MarkerDefinition> placed =
+      PlaceMarkerSet(templ, TemplateRolesOf(templ), set, TemplateEndSites(templ, height_m));
+  std::vector<MarkerDefinition> ordered;
+  std::string unknown;
+  for (const std::string& label : labels) {
+    const auto m = set.Find(label);
+    if (!m) {
+      unknown += (unknown.empty() ? "" : ", ") + label;
+      continue;
+    }
+    MarkerDefinition d = placed[static_cast<size_t>(*m)];
+    d.name = label;
+    ordered.push_back(std::move(d));
+  }
+  if (!unknown.empty())
+    throw std::runtime_error("markers not in the " + set.name + " set: " + unknown);
+  SubjectModel model;
+  model.name = subject_name;
+  model.skeleton = std::make_shared<const Skeleton>(templ);
+  model.markers = std::make_shared<const MarkerSet>(*model.skeleton, std::move(ordered));
+  model.fit_rms_m.assign(labels.size(), kNaN);
+  return model;
+}
+
+std::optional<double> EstimateHeight(const Skeleton& template_skeleton,
+                                     const MarkerSet& template_markers, double template_height_m,
+                                     std::span<const Vec3> frame) {
+  const MarkerSet& markers = template_markers;
+  if (frame.size() != static_cast<size_t>(markers.num_markers())) return std::nullopt;
+  KinematicsWorkspace rest(template_skeleton);
+  ForwardKinematics(template_skeleton, RestPose(template_skeleton), &rest);
+  std::vector<Vec3> placed(frame.size());
+  EvaluateMarkers(markers, rest, placed);
+  std::vector<double> ratios;
+  for (int a = 0; a < markers.num_markers(); ++a)
+    for (int b = a + 1; b < markers.num_markers(); ++b) {
+      const auto ua = static_cast<size_t>(a), ub = static_cast<size_t>(b);
+      if (markers.primary_joint(a) != markers.primary_joint(b)) continue;
+      if (!frame[ua].allFinite() || !frame[ub].allFinite()) continue;
+      // Markers a few centimetres apart say more about noise than about size.
+      const double expected = (placed[ua] - placed[ub]).norm();
+      if (expected < 0.05) continue;
+      ratios.push_back((frame[ua] - frame[ub]).norm() / expected);
+    }
+  if (ratios.size() < 3) return std::nullopt;
+  const double height = Median(ratios) * template_height_m;
+  if (!(height >= 0.5 && height <= 2.6)) return std::nullopt;
+  return height;
+}
+
+SubjectModel InTemplateOrder(const MarkersOnlyCalibration& calibration,
+                             const SubjectModel& template_subject) {
+  const Skeleton& calibrated = *calibration.model.skeleton;
+  const Skeleton& templ = *template_subject.skeleton;
+  if (calibrated.num_joints() != templ.num_joints())
+    throw std::logic_error("calibrated skeleton differs from its template");
+  std::vector<MarkerDefinition> ordered;
+  std::vector<double> rms;
+  for (const MarkerDefinition& t : template_subject.markers->markers()) {
+    const auto found = calibration.model.markers->FindMarker(t.name);
+    if (found) {
+      ordered.push_back(calibration.model.markers->marker(found->value));
+      rms.push_back(calibration.model.fit_rms_m[static_cast<size_t>(found->value)]);
+    } else {
+      ordered.push_back(t);
+      rms.push_back(kNaN);
+    }
+  }
+  SubjectModel model = calibration.model;
+  model.name = template_subject.name;
+  model.markers = std::make_shared<const MarkerSet>(calibrated, std::move(ordered));
+  model.fit_rms_m = std::move(rms);
+  model.calibration = CalibrationRecordOf(calibration);
+  return model;
+}
+
 }  // namespace mocapd

@@ -6,6 +6,7 @@
 // them), and runs the bundle adjustment of filters/subject_calibration.hpp.
 #pragma once
 
+#include <optional>
 #include <span>
 #include <string>
 #include <vector>
@@ -56,6 +57,29 @@ struct MarkersOnlyCalibration {
 MarkersOnlyCalibration CalibrateFromMarkers(std::span<const C3dTake> takes,
                                             const MarkersOnlyOptions& options,
                                             const std::string& subject_name);
+
+/// What the subject file records of a calibration from markers.
+SubjectCalibrationRecord CalibrationRecordOf(const MarkersOnlyCalibration& calibration);
+
+/// The subject a live calibration starts from: the template humanoid at height_m with the
+/// set's markers placed on it, in the order of `labels` (the stream's). Throws
+/// std::runtime_error naming the labels the set does not have.
+SubjectModel TemplateSubject(const MarkerSetDefinition& set, std::span<const std::string> labels,
+                             double height_m, const std::string& subject_name);
+
+/// An actor's height from one frame of the template subject's markers (NaN: missing): the
+/// median ratio of observed to template distances between markers on the same segment
+/// (rigid in any pose), times the template's height. Nothing when fewer than three such
+/// pairs are seen or the answer is no human's (0.5-2.6 m).
+std::optional<double> EstimateHeight(const Skeleton& template_skeleton,
+                                     const MarkerSet& template_markers, double template_height_m,
+                                     std::span<const Vec3> frame);
+
+/// A calibration's subject with its markers in the template subject's order (the stream's):
+/// a marker the calibration could not place keeps its template placement on the calibrated
+/// skeleton, so the marker-set hash, and every frame's layout, stay the same.
+SubjectModel InTemplateOrder(const MarkersOnlyCalibration& calibration,
+                             const SubjectModel& template_subject);
 
 /// The name of a joint's mirror image ("thigh_l" <-> "thigh_r"), or "" if it has none.
 std::string MirrorRole(const std::string& role);

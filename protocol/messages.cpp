@@ -561,6 +561,70 @@ DecodeStatus DecodeEndOfStream(std::span<const uint8_t> bytes, EndOfStreamMessag
   return DecodeStatus::kOk;
 }
 
+const char* to_string(CalibrationState state) {
+  switch (state) {
+    case CalibrationState::kWaiting: return "waiting";
+    case CalibrationState::kCollecting: return "collecting";
+    case CalibrationState::kCalibrated: return "calibrated";
+    case CalibrationState::kFailed: return "failed";
+  }
+  return "?";
+}
+
+void EncodeCalibrationStatus(const CalibrationStatusMessage& m, std::vector<uint8_t>* out) {
+  if (m.joints.size() > kMaxJoints)
+    throw std::invalid_argument("calibration status: more joints than the wire carries");
+  out->clear();
+  ByteWriter w(out);
+  WriteHeader(w, MessageType::kCalibrationStatus, m.version);
+  WriteSubject(w, m.subject);
+  w.WriteU64(m.skeleton_hash);
+  w.WriteU8(static_cast<uint8_t>(m.state));
+  w.WriteU8(0);  // reserved
+  w.WriteU16(m.refinements);
+  w.WriteF32(m.height_m);
+  w.WriteF32(m.collected_s);
+  w.WriteU16(static_cast<uint16_t>(m.joints.size()));
+  for (const JointCalibrationReadiness& j : m.joints) {
+    w.WriteU8(j.directions_covered);
+    w.WriteU8(j.flags);
+    w.WriteF32(j.uncertainty_mm);
+    w.WriteF32(j.moved_mm);
+  }
+  FinishMessage(out);
+}
+
+DecodeStatus DecodeCalibrationStatus(std::span<const uint8_t> bytes, CalibrationStatusMessage* m) {
+  ByteReader r(bytes);
+  if (const DecodeStatus s =
+          ReadPrelude(r, MessageType::kCalibrationStatus, &m->version, &m->subject);
+      s != DecodeStatus::kOk)
+    return s;
+  uint8_t state = 0, reserved = 0;
+  uint16_t count = 0;
+  if (!r.ReadU64(&m->skeleton_hash) || !r.ReadU8(&state) || !r.ReadU8(&reserved) ||
+      !r.ReadU16(&m->refinements) || !r.ReadF32(&m->height_m) || !r.ReadF32(&m->collected_s) ||
+      !r.ReadU16(&count))
+    return DecodeStatus::kTooShort;
+  if (count > kMaxJoints) return DecodeStatus::kTooManyItems;
+  if (r.remaining() != static_cast<size_t>(count) * 10) return DecodeStatus::kSizeMismatch;
+  m->joints.resize(count);
+  for (JointCalibrationReadiness& j : m->joints)
+    if (!r.ReadU8(&j.directions_covered) || !r.ReadU8(&j.flags) || !r.ReadF32(&j.uncertainty_mm) ||
+        !r.ReadF32(&j.moved_mm))
+      return DecodeStatus::kTooShort;
+  if (state > static_cast<uint8_t>(CalibrationState::kFailed)) return DecodeStatus::kBadField;
+  if (!std::isfinite(m->height_m) || !std::isfinite(m->collected_s))
+    return DecodeStatus::kNonFinite;
+  for (const JointCalibrationReadiness& j : m->joints) {
+    if (j.directions_covered > 3) return DecodeStatus::kBadField;
+    if (!std::isfinite(j.uncertainty_mm) || !std::isfinite(j.moved_mm))
+      return DecodeStatus::kNonFinite;
+  }
+  m->state = static_cast<CalibrationState>(state);
+  return DecodeStatus::kOk;
+}
+
 DecodeStatus PeekType(std::span<const uint8_t> bytes, MessageType* type) {
   ByteReader r(bytes);
   uint32_t magic = 0;
@@ -570,7 +634,7 @@ DecodeStatus PeekType(std::span<const uint8_t> bytes, MessageType* type) {
   if (magic != kMagic) return DecodeStatus::kBadMagic;
   if (!KnownVersion(version)) return DecodeStatus::kUnsupportedVersion;
   if (raw < static_cast<uint16_t>(MessageType::kSubjectDescription) ||
-      raw > static_cast<uint16_t>(MessageType::kEndOfStream))
+      raw > static_cast<uint16_t>(MessageType::kCalibrationStatus))
     return DecodeStatus::kWrongType;
   *type = static_cast<MessageType>(raw);
   return DecodeStatus::kOk;

@@ -35,6 +35,7 @@ enum class MessageType : uint16_t {
   kCleanedMarkers = 4,
   kSubjectStatus = 5,
   kEndOfStream = 6,
+  kCalibrationStatus = 7,
 };
 
 /// How a subject is doing, carried by skeleton frames and status messages.
@@ -173,6 +174,41 @@ struct SubjectStatusMessage {
   uint64_t frames_dropped = 0;
 };
 
+/// A live-calibrated subject's progress (published with its status while it calibrates
+/// from its own stream): the calibration's state and, per joint of the subject's
+/// description (same order), how ready its centre is.
+enum class CalibrationState : uint8_t {
+  kWaiting = 0,
+  kCollecting = 1,
+  kCalibrated = 2,
+  kFailed = 3
+};
+const char* to_string(CalibrationState state);
+
+/// Bits of JointCalibrationReadiness::flags.
+inline constexpr uint8_t kJointCalibrated = 1;  ///< A refinement has placed the centre.
+inline constexpr uint8_t kJointReady = 2;       ///< The motion determines it in >= 2 directions.
+
+struct JointCalibrationReadiness {
+  uint8_t directions_covered = 0;  ///< 0..3: of the centre's directions, those the motion fixes.
+  uint8_t flags = 0;               ///< kJoint* bits.
+  float uncertainty_mm = -1.0f;    ///< The centre's; -1 before the first refinement.
+  float moved_mm = -1.0f;          ///< Since the previous refinement; -1 before a second.
+  bool operator==(const JointCalibrationReadiness&) const = default;
+};
+
+struct CalibrationStatusMessage {
+  uint16_t version = kVersion;  ///< Same payload in versions 1 and 2.
+  std::string subject;
+  uint64_t skeleton_hash =
+      0;  ///< The skeleton published now (the template's, then the calibrated one's).
+  CalibrationState state = CalibrationState::kWaiting;
+  uint16_t refinements = 0;
+  float height_m = 0.0f;     ///< The template's scale (0 before the first usable frame).
+  float collected_s = 0.0f;  ///< Motion kept for the calibration.
+  std::vector<JointCalibrationReadiness> joints;
+};
+
 /// Capture to daemon: the subject's stream ends here (a recorded take is over, or the
 /// capture stops). The daemon publishes everything its lookahead holds for the subject
 /// at once and starts the next frame afresh, instead of waiting for K more frames.
@@ -191,6 +227,7 @@ void EncodeSubjectDescription(const SubjectDescriptionMessage& message, std::vec
 void EncodeCleanedMarkers(const CleanedMarkersMessage& message, std::vector<uint8_t>* out);
 void EncodeSubjectStatus(const SubjectStatusMessage& message, std::vector<uint8_t>* out);
 void EncodeEndOfStream(const EndOfStreamMessage& message, std::vector<uint8_t>* out);
+void EncodeCalibrationStatus(const CalibrationStatusMessage& message, std::vector<uint8_t>* out);
 
 /// The description of a solved subject, from its model.
 SubjectDescriptionMessage DescribeSubject(const std::string& subject, const Skeleton& skeleton,
@@ -208,5 +245,7 @@ DecodeStatus DecodeSubjectDescription(std::span<const uint8_t> bytes,
 DecodeStatus DecodeCleanedMarkers(std::span<const uint8_t> bytes, CleanedMarkersMessage* message);
 DecodeStatus DecodeSubjectStatus(std::span<const uint8_t> bytes, SubjectStatusMessage* message);
 DecodeStatus DecodeEndOfStream(std::span<const uint8_t> bytes, EndOfStreamMessage* message);
+DecodeStatus DecodeCalibrationStatus(std::span<const uint8_t> bytes,
+                                     CalibrationStatusMessage* message);
 
 }  // namespace mocapd::protocol

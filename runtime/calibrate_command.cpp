@@ -111,15 +111,7 @@ int CalibrateFromMarkersOnly(const CalibrateCommandOptions& options, std::ostrea
   for (const ChannelNote& n : cal.rejected)
     out << "  REJECTED " << n.label << ": " << n.reason << "\n";
 
-  SubjectCalibrationRecord record;
-  record.marker_set = cal.marker_set;
-  record.poses = static_cast<int>(r.frames_used.size());
-  record.median_residual_mm = r.median_residual_m * 1e3;
-  for (const JointCalibrationReport& jr : r.joints) {
-    record.joint_method.push_back(jr.method);
-    record.joint_uncertainty_mm.push_back(jr.method == "root" ? kNaN : jr.uncertainty_m * 1e3);
-  }
-  cal.model.calibration = record;
+  cal.model.calibration = CalibrationRecordOf(cal);
   WriteSubjectModel(options.out_subject, cal.model);
   out << "wrote " << options.out_subject << ": " << sk.num_joints() << " joints, "
       << cal.markers.size() << " markers\n";

@@ -11,6 +11,8 @@
 
 #include <pthread.h>
 #include <sched.h>
+#include <sys/resource.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <csignal>
@@ -75,8 +77,10 @@ bool PollRetryingOnSignals(zmq::pollitem_t* items, size_t count,
 
 // A subject's runner, with its live-view slot when the view is on.
 static std::unique_ptr<SubjectRunner> MakeRunner(const SubjectConfig& subject,
-                                                 const DaemonConfig& config, LiveViewBoard* board) {
+                                                 const DaemonConfig& config, LiveViewBoard* board,
+                                                 LiveCalibrationBoard& calibrations) {
   auto runner = std::make_unique<SubjectRunner>(subject, config);
+  if (subject.live.enabled) runner->AttachLiveCalibration(calibrations.Attach(subject, config));
   if (board)
     runner->AttachLiveView(board->Register(subject.name, *subject.model.skeleton,
                                            *subject.model.markers, subject.character.get()));
@@ -88,13 +92,13 @@ static std::unique_ptr<SubjectRunner> MakeRunner(const SubjectConfig& subject,
 
 struct Daemon::DataPlane final : OutputSink {
   DataPlane(DaemonConfig cfg, zmq::context_t& shared_context, int worker_index,
-            std::shared_ptr<LiveViewBoard> board)
+            std::shared_ptr<LiveViewBoard> board, LiveCalibrationBoard& calibrations)
       : context(shared_context),
         config(std::move(cfg)),
         index(worker_index),
         view_board(std::move(board)) {
     for (const SubjectConfig& s : config.subjects)
-      runners.push_back(MakeRunner(s, config, view_board.get()));
+      runners.push_back(MakeRunner(s, config, view_board.get(), calibrations));
     frame.positions.reserve(protocol::kMaxMarkers);
     frame.valid.reserve(protocol::kMaxMarkers);
     frame.subject.reserve(protocol::kMaxSubjectName);
@@ -535,8 +539,8 @@ Daemon::Daemon(DaemonConfig config, std::string config_path, zmq::context_t* con
   planes_.resize(static_cast<size_t>(workers));
   AssignWorkers(config);
   for (int i = 0; i < workers; ++i) {
-    planes_[static_cast<size_t>(i)] =
-        std::make_unique<DataPlane>(WorkerConfig(config, i), *context_, i, view_board_);
+    planes_[static_cast<size_t>(i)] = std::make_unique<DataPlane>(
+        WorkerConfig(config, i), *context_, i, view_board_, *calibrations_);
     planes_[static_cast<size_t>(i)]->forwarded = workers > 1;
     planes_[static_cast<size_t>(i)]->authenticator = authenticator_.get();
   }
@@ -574,8 +578,39 @@ void Daemon::StopProxy() {
   if (proxy_) proxy_->Stop();
 }
 
+void Daemon::RunCalibrations() {
+  // Below the data plane: a refinement is a bundle adjustment of hundreds of milliseconds,
+  // and a frame must never wait for it.
+  (void)setpriority(PRIO_PROCESS, static_cast<id_t>(gettid()), 10);
+  std::unique_lock lock(calibration_mutex_);
+  while (!calibration_stop_) {
+    calibration_cv_.wait_for(lock, std::chrono::seconds(1));
+    if (calibration_stop_) break;
+    lock.unlock();
+    for (const auto& calibration : calibrations_->All()) {
+      calibration->Collect();
+      try {
+        calibration->Refine();
+      } catch (const std::exception& e) {
+        spdlog::error("subject '{}': live calibration: {}", calibration->subject(), e.what());
+      }
+    }
+    lock.lock();
+  }
+}
+
+void Daemon::StopCalibrations() {
+  {
+    std::lock_guard lock(calibration_mutex_);
+    calibration_stop_ = true;
+  }
+  calibration_cv_.notify_all();
+  if (calibration_thread_.joinable()) calibration_thread_.join();
+}
+
 Daemon::~Daemon() {
   Stop();
+  StopCalibrations();
   for (auto& plane : planes_) {
     if (plane && plane->thread.joinable()) {
       plane->stop.store(true);
@@ -673,7 +708,7 @@ void Daemon::ApplyReload(DaemonConfig config) {
       const bool unchanged = before != nullptr && SubjectFingerprint(*before, old) ==
                                                       SubjectFingerprint(s, pending->config);
       pending->runners.push_back(
-          MakeRunner(s, pending->config, unchanged ? nullptr : view_board_.get()));
+          MakeRunner(s, pending->config, unchanged ? nullptr : view_board_.get(), *calibrations_));
     }
     parts.push_back(std::move(pending));
   }
@@ -728,6 +763,7 @@ DaemonStats Daemon::Stats() const {
     std::stable_sort(
         stats.subjects.begin(), stats.subjects.end(),
         [](const SubjectStats& a, const SubjectStats& b) { return a.config_rank < b.config_rank; });
+  for (SubjectStats& s : stats.subjects) s.calibration = calibrations_->StatusOf(s.name);
   stats.reload_failures = reload_failures_.load();
   stats.curve = authenticator_ != nullptr;
   if (authenticator_) stats.curve_counts = authenticator_->Counts();
@@ -884,6 +920,7 @@ void Daemon::Run(bool handle_signals) {
     spdlog::info("data plane: {} workers{}{}", planes_.size(),
                  cp.config.pin_workers ? ", pinned" : "", split);
   }
+  calibration_thread_ = std::thread([this] { RunCalibrations(); });
   const unsigned cores = std::max(1u, std::thread::hardware_concurrency());
   for (auto& plane : planes_) {
     plane->Snapshot(true);
@@ -1035,6 +1072,7 @@ void Daemon::Run(bool handle_signals) {
       plane->thread.join();
     }
   }
+  StopCalibrations();
   StopProxy();
   const DaemonStats final_stats = Stats();
   spdlog::info("mocapd stopped: {} messages in, {} frames published, {} dropped, {} pending ({})",

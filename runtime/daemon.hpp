@@ -13,12 +13,14 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include "runtime/curve_authenticator.hpp"
 #include "runtime/daemon_config.hpp"
+#include "runtime/live_calibration.hpp"
 #include "runtime/live_view.hpp"
 #include "runtime/subject_runner.hpp"
 
@@ -47,6 +49,8 @@ struct SubjectStats {
   double model_distance_mm = 0.0;  ///< Median sample-to-model distance, over about a second.
   int worker = 0;                  ///< The data-plane thread that solves it.
   int config_rank = 0;             ///< Its place in the config's subject list.
+  /// A live-calibrated subject's progress (filled from the calibration, not the worker).
+  std::optional<LiveCalibrationStatus> calibration;
 };
 
 struct DaemonStats {
@@ -144,6 +148,14 @@ class Daemon {
   std::unique_ptr<ControlPlane> control_;
   /// Every subject's live-view slot (when the view is on), shared with the workers.
   std::shared_ptr<LiveViewBoard> view_board_;
+  /// Every live calibration, and the thread that refines them (off the data plane).
+  std::shared_ptr<LiveCalibrationBoard> calibrations_ = std::make_shared<LiveCalibrationBoard>();
+  std::thread calibration_thread_;
+  std::mutex calibration_mutex_;
+  std::condition_variable calibration_cv_;
+  bool calibration_stop_ = false;
+  void RunCalibrations();
+  void StopCalibrations();
   std::atomic<int> http_port_{0};
   std::mutex run_mutex_;
   std::condition_variable run_cv_;

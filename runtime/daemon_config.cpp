@@ -16,6 +16,7 @@
 
 #include "formats/bvh.hpp"
 #include "formats/retarget_map.hpp"
+#include "formats/subject_from_markers.hpp"
 #include "formats/toml_reader.hpp"
 #include "protocol/messages.hpp"
 
@@ -120,6 +121,11 @@ std::string SubjectFingerprint(const SubjectConfig& s, const DaemonConfig& c) {
     << s.character_path << ' ' << s.character_map.report << ' ' << s.retarget.damping << ' '
     << s.retarget.contact_height_m << ' ' << s.retarget.contact_speed_m_s << ' '
     << s.retarget.release_frames << ' ' << s.retarget.points_per_bone;
+  if (s.live.enabled) {
+    f << "\nlive " << s.live.marker_set << ' ' << s.live.out_path << ' ' << s.live.min_seconds
+      << ' ' << s.live.max_seconds;
+    for (const std::string& label : s.live.labels) f << ' ' << label;
+  }
   return f.str();
 }
 
@@ -333,9 +339,24 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
     if (c.FindSubject(s.name) != nullptr ||
         std::count(c.other_shards_subjects.begin(), c.other_shards_subjects.end(), s.name) > 0)
       t.Fail(table->get("name"), "name", "subject '" + s.name + "' is listed twice");
-    s.model_path = t.String("model", "", true);
-    if (!s.model_path.empty() && std::filesystem::path(s.model_path).is_relative())
-      s.model_path = (std::filesystem::path(base_dir) / s.model_path).lexically_normal().string();
+    s.live.enabled = t.Choice("calibrate", "no", {"no", "live"}) == "live";
+    s.model_path = resolve(t.String("model", "", !s.live.enabled));
+    if (s.live.enabled && !s.model_path.empty())
+      t.Fail(table->get("model"), "model",
+             "give a model or calibrate = \"live\", not both (a live calibration starts from "
+             "the template humanoid)");
+    const std::string marker_set = t.String("marker_set", "", s.live.enabled);
+    std::vector<std::string> labels = t.Strings("markers");
+    const std::string calibration_out = t.String("calibration_out", "");
+    s.live.min_seconds = t.Number("calibration_min_s", s.live.min_seconds, 1, 3600);
+    s.live.max_seconds = t.Number("calibration_max_s", s.live.max_seconds, 1, 36000);
+    if (!s.live.enabled)
+      for (const char* key :
+           {"marker_set", "markers", "calibration_out", "calibration_min_s", "calibration_max_s"})
+        if (t.Has(key)) t.Fail(table->get(key), key, "only for calibrate = \"live\"");
+    if (s.live.max_seconds < s.live.min_seconds)
+      t.Fail(table->get("calibration_max_s"), "calibration_max_s",
+             "shorter than calibration_min_s");
     s.rate_hz = t.Number("rate_hz", s.rate_hz, 1, 2000);
     s.cleanup = defaults;
     s.cleanup.rate_hz = s.rate_hz;
@@ -349,10 +370,29 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
           (std::filesystem::path(base_dir) / s.character_path).lexically_normal().string();
     const std::map<std::string, std::string> joint_map = t.StringMap("character_joint_map");
     t.RejectUnknown();
-    try {
-      s.model = ReadSubjectModel(s.model_path);
-    } catch (const std::exception& e) {
-      t.Fail(table->get("model"), "model", e.what());
+    if (s.live.enabled) {
+      try {
+        s.live.marker_set = marker_set.ends_with(".toml") ? resolve(marker_set) : marker_set;
+        s.live.set = FindMarkerSet(s.live.marker_set);
+      } catch (const std::exception& e) {
+        t.Fail(table->get("marker_set"), "marker_set", e.what());
+      }
+      if (labels.empty())
+        for (const MarkerSetMarker& m : s.live.set.markers) labels.push_back(m.name);
+      s.live.labels = labels;
+      s.live.out_path =
+          resolve(calibration_out.empty() ? s.name + ".calibrated.toml" : calibration_out);
+      try {
+        s.model = TemplateSubject(s.live.set, s.live.labels, 1.75, s.name);
+      } catch (const std::exception& e) {
+        t.Fail(table->get("markers"), "markers", e.what());
+      }
+    } else {
+      try {
+        s.model = ReadSubjectModel(s.model_path);
+      } catch (const std::exception& e) {
+        t.Fail(table->get("model"), "model", e.what());
+      }
     }
     if (const std::string problem = WireProblem(*s.model.skeleton, s.model.markers.get());
         !problem.empty())
@@ -370,6 +410,8 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
         s.character = std::make_shared<const Skeleton>(character.skeleton);
         s.character_map =
             MakeRetargetMap(*s.model.skeleton, {}, *s.character, character.end_sites, joint_map);
+        s.character_end_sites = character.end_sites;
+        s.character_joint_map = joint_map;
       } catch (const std::exception& e) {
         t.Fail(table->get("character"), "character", e.what());
       }

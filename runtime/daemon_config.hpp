@@ -5,12 +5,14 @@
 // a typo is caught at start-up (or at a SIGHUP reload, which then keeps the old config).
 #pragma once
 
+#include <map>
 #include <memory>
 #include <string>
 #include <vector>
 
 #include "filters/cleanup_pipeline.hpp"
 #include "filters/retarget.hpp"
+#include "formats/marker_set.hpp"
 #include "formats/subject_file.hpp"
 #include "protocol/curve.hpp"
 
@@ -18,18 +20,35 @@ namespace mocapd {
 
 enum class InputPattern { kSub, kPull };
 
+/// A subject the daemon calibrates from its own stream (`calibrate = "live"`): it is
+/// solved at once with the template humanoid scaled to the first usable frame, then the
+/// subject calibrated from the frames seen so far swaps in once the motion has shown every joint.
+struct LiveCalibrationConfig {
+  bool enabled = false;
+  std::string marker_set;           ///< As configured: a built-in set's name or a path.
+  MarkerSetDefinition set;          ///< ...read at load.
+  std::vector<std::string> labels;  ///< The stream's marker order (default: the set's).
+  std::string out_path;             ///< Where the calibrated subject is written.
+  double min_seconds = 10.0;        ///< Motion collected before the first refinement.
+  double max_seconds = 60.0;        ///< The last refinement by then swaps in, ready or not.
+};
+
 struct SubjectConfig {
   std::string name;        ///< Topic name; frames must carry it.
   int rank = 0;            ///< Its place in the daemon's subject list (set per worker).
-  std::string model_path;  ///< Resolved against the config file's directory.
+  std::string model_path;  ///< Resolved against the config file's directory ("": live).
   double rate_hz = 120.0;
   CleanupOptions cleanup;  ///< Pipeline options (rate, lookahead, window, thresholds).
-  SubjectModel model;      ///< Loaded from model_path.
+  SubjectModel model;      ///< Loaded from model_path (live: the template at 1.75 m).
+  LiveCalibrationConfig live;
   // Retargeting (optional): the character this actor drives, published beside it.
   std::string character_path;  ///< BVH; empty: no retargeting.
   std::shared_ptr<const Skeleton> character;
   RetargetMap character_map;
   RetargetOptions retarget;
+  /// What the map was made from, to make it again for a live calibration's subject.
+  std::vector<BvhEndSite> character_end_sites;
+  std::map<std::string, std::string> character_joint_map;
 };
 
 struct DaemonConfig {

@@ -10,6 +10,7 @@
 
 #include "runtime/daemon.hpp"
 
+#include <algorithm>
 #include <cstdio>
 
 namespace mocapd {
@@ -142,6 +143,15 @@ std::string FormatPrometheusMetrics(const DaemonStats& stats) {
                            "Whole frames that jumped further than a body moves, taken as missing");
   auto& resyncs = counter("mocapd_capture_resyncs_total",
                           "Whole-frame jumps that persisted, taken as a re-synchronisation");
+  auto& calibration_state =
+      gauge("mocapd_live_calibration_state",
+            "Live calibration: 0 waiting, 1 collecting, 2 calibrated, 3 failed");
+  auto& calibration_collected = gauge("mocapd_live_calibration_collected_seconds",
+                                      "Live calibration: seconds of motion collected");
+  auto& calibration_ready =
+      gauge("mocapd_live_calibration_joints_ready", "Live calibration: joints ready");
+  auto& calibration_swaps = counter("mocapd_live_calibration_swaps_total",
+                                    "Live calibration: calibrated subjects swapped in");
   auto& latency = BuildHistogram()
                       .Name("mocapd_processing_latency_seconds")
                       .Help("From receiving the frame that completes a publication to sending it")
@@ -178,6 +188,13 @@ std::string FormatPrometheusMetrics(const DaemonStats& stats) {
     std::vector<double> buckets(s.counters.processing.counts.begin(),
                                 s.counters.processing.counts.end());
     latency.Add(subject, bounds).ObserveMultiple(buckets, s.counters.processing.sum_s);
+    if (const auto& c = s.calibration) {
+      calibration_state.Add(subject).Set(static_cast<double>(c->state));
+      calibration_collected.Add(subject).Set(c->collected_s);
+      calibration_ready.Add(subject).Set(static_cast<double>(std::count_if(
+          c->joints.begin(), c->joints.end(), [](const auto& j) { return j.ready; })));
+      calibration_swaps.Add(subject).Increment(static_cast<double>(c->swaps));
+    }
   }
   return prometheus::TextSerializer().Serialize(registry.Collect());
 }
@@ -234,11 +251,41 @@ nlohmann::json SubjectJson(const SubjectStats& s) {
           {"mean_processing_latency_us", mean_latency_us}};
 }
 
+// A live calibration's progress: the state, and per joint how ready its centre is.
+nlohmann::json CalibrationJson(const LiveCalibrationStatus& c) {
+  nlohmann::json joints = nlohmann::json::array();
+  for (const JointReadiness& j : c.joints) {
+    auto known = [](double v) { return v >= 0.0 ? nlohmann::json(v) : nlohmann::json(nullptr); };
+    joints.push_back(
+        {{"joint", j.name},
+         {"method", j.method.empty() ? nlohmann::json(nullptr) : nlohmann::json(j.method)},
+         {"directions_covered", j.directions_covered},
+         {"uncertainty_mm", known(j.uncertainty_mm)},
+         {"moved_mm", known(j.moved_mm)},
+         {"ready", j.ready}});
+  }
+  return {
+      {"state", to_string(c.state)},
+      {"height_m", c.height_m},
+      {"collected_s", c.collected_s},
+      {"refinements", c.refinements},
+      {"median_residual_mm",
+       c.median_residual_mm >= 0 ? nlohmann::json(c.median_residual_mm) : nlohmann::json(nullptr)},
+      {"swapped_in", c.swaps},
+      {"written_to", c.written_to.empty() ? nlohmann::json(nullptr) : nlohmann::json(c.written_to)},
+      {"message", c.message},
+      {"joints", joints}};
+}
+
 }  // namespace
 
 std::string FormatSubjectsJson(const DaemonStats& stats) {
   nlohmann::json subjects = nlohmann::json::array();
-  for (const SubjectStats& s : stats.subjects) subjects.push_back(SubjectJson(s));
+  for (const SubjectStats& s : stats.subjects) {
+    nlohmann::json subject = SubjectJson(s);
+    if (s.calibration) subject["calibration"] = CalibrationJson(*s.calibration);
+    subjects.push_back(std::move(subject));
+  }
   return subjects.dump(2) + "\n";
 }
 

@@ -464,6 +464,23 @@ void LiveViewHub::OnStats(const DaemonStats& stats) {
     };
     int64_t repaired = 0;
     for (int64_t n : s.cleanup.repaired_by) repaired += n;
+    // A live calibration's readiness: the state, and the joints the motion has yet to show.
+    json calibration = nullptr;
+    if (const auto& c = s.calibration) {
+      json waiting = json::array();
+      int ready = 0;
+      for (const JointReadiness& j : c->joints) {
+        if (j.ready)
+          ++ready;
+        else
+          waiting.push_back(j.name);
+      }
+      calibration = {{"state", to_string(c->state)},
+                     {"collected_s", c->collected_s},
+                     {"joints_ready", ready},
+                     {"joints", c->joints.size()},
+                     {"waiting_for", std::move(waiting)}};
+    }
     subjects.push_back({{"name", s.name},
                         {"state", protocol::to_string(s.state)},
                         {"latency_p50_ms", quantile_ms(0.5)},
@@ -474,7 +491,8 @@ void LiveViewHub::OnStats(const DaemonStats& stats) {
                         {"samples_unrecoverable", s.cleanup.unrecoverable},
                         {"stalls", s.counters.stalls},
                         {"restarts", s.counters.restarts},
-                        {"model_suspect", s.model_suspect}});
+                        {"model_suspect", s.model_suspect},
+                        {"calibration", std::move(calibration)}});
     last = now;
   }
   hub.last_stats = std::make_shared<const std::string>(json{

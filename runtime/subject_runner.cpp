@@ -1,6 +1,8 @@
 // Per-subject frame accounting, sequencing and output encoding for the daemon.
 #include "runtime/subject_runner.hpp"
 
+#include "formats/subject_from_markers.hpp"
+#include "runtime/live_calibration.hpp"
 #include "runtime/live_view.hpp"
 
 #include <chrono>
@@ -73,7 +75,8 @@ SubjectRunner::SubjectRunner(const SubjectConfig& config, const DaemonConfig& da
       publish_globals_(daemon.publish_global_transforms),
       skeleton_(config.model.skeleton),
       markers_(config.model.markers),
-      pipeline_(config.model.skeleton, config.model.markers, config.cleanup),
+      pipeline_(std::make_unique<CleanupPipeline>(config.model.skeleton, config.model.markers,
+                                                  config.cleanup)),
       stamps_(static_cast<size_t>(config.cleanup.lookahead + 2)),
       missing_(static_cast<size_t>(config.model.markers->num_markers()), Vec3::Constant(kNaN)),
       kinematics_(*config.model.skeleton),
@@ -139,6 +142,18 @@ SubjectRunner::SubjectRunner(const SubjectConfig& config, const DaemonConfig& da
   const size_t character_joints =
       config.character ? static_cast<size_t>(config.character->num_joints()) : 0;
   buffer_.reserve(256 + 64 * markers + 128 * std::max(joints, character_joints));
+}
+
+SubjectRunner::~SubjectRunner() = default;
+
+void SubjectRunner::AttachLiveCalibration(std::shared_ptr<LiveCalibration> calibration) {
+  live_ = std::move(calibration);
+  calibration_topic_ = Topic("calibration", name_);
+  // Warm: the lookahead and half a second of history for the incoming subject's detectors
+  // and solves. In seconds, so any rate swaps alike.
+  const int lookahead = pipeline_->options().lookahead;
+  warm_frames_ = std::max(lookahead + 2, static_cast<int>(std::lround(0.5 * rate_hz_)));
+  blend_pose_ = RestPose(*skeleton_);
 }
 
 uint64_t SubjectRunner::pending() const { return static_cast<uint64_t>(pushed_ - published_); }
@@ -211,14 +226,102 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
   counters_.last_stream = frame.stream;
   if (state_ == protocol::SubjectState::kWaiting || state_ == protocol::SubjectState::kStalled)
     state_ = protocol::SubjectState::kTracking;
+  if (live_) {
+    if (!live_scaled_) ScaleTemplate(frame.positions, sink);
+    live_->Offer(frame.positions);
+    if (leftovers_) (void)live_->Retire(leftovers_);
+    if (!swap_ && !leftovers_ && live_->SwapReady()) {
+      swap_ = live_->TakeSwap();
+      swap_stage_ = SwapStage::kWarming;
+      shadow_base_ = pushed_;
+      shadow_outputs_ = 0;
+      shadow_has_output_ = false;
+    }
+  }
   Push(frame.positions, Stamp{frame.frame_number, frame.capture_time_ns, false, frame.stream},
        receive_ns, sink);
   return std::nullopt;
 }
 
+void SubjectRunner::ScaleTemplate(std::span<const Vec3> positions, OutputSink& sink) {
+  size_t valid = 0;
+  for (const Vec3& p : positions) valid += p.allFinite();
+  if (10 * valid < 6 * positions.size()) return;
+  const std::optional<double> height = EstimateHeight(*skeleton_, *markers_, 1.75, positions);
+  if (!height) return;
+  // What the unscaled template held goes out as it was; the scaled one starts with this
+  // frame. Building it allocates, once, like the runner's construction.
+  Flush(sink);
+  std::unique_ptr<LiveSwap> scaled =
+      live_->Build(TemplateSubject(live_->config().set, live_->config().labels, *height, name_));
+  scaled->pipeline->AdoptCounters(pipeline_->counters());
+  pipeline_ = std::move(scaled->pipeline);
+  skeleton_ = scaled->model.skeleton;
+  markers_ = scaled->model.markers;
+  if (scaled->retargeter) retargeter_ = std::move(scaled->retargeter);
+  description_ = std::move(scaled->description);
+  skeleton_hash_ = description_.skeleton_hash;
+  skeleton_message_.model_hash = skeleton_hash_;
+  pushed_ = published_ = 0;
+  frame_base_ = 0;
+  live_scaled_ = true;
+  live_->Started(*height);
+  PublishDescription(sink);
+}
+
+void SubjectRunner::SwitchModel(OutputSink& sink) {
+  std::swap(pipeline_, swap_->pipeline);
+  std::swap(frame_base_, shadow_base_);
+  pipeline_->AdoptCounters(swap_->pipeline->counters());
+  std::swap(skeleton_, swap_->model.skeleton);
+  std::swap(markers_, swap_->model.markers);
+  if (swap_->retargeter) std::swap(retargeter_, swap_->retargeter);
+  std::swap(description_, swap_->description);
+  skeleton_hash_ = description_.skeleton_hash;
+  skeleton_message_.model_hash = skeleton_hash_;
+  swap_stage_ = SwapStage::kBlending;
+  blend_step_ = 0;
+  // The cross-fade lasts a quarter of a second, or as long as it takes to turn the joints
+  // that differ most at kFadeDegPerSecond over the motion: the template and the calibrated
+  // subject can disagree on a segment's twist by tens of degrees (an upper arm with two
+  // markers), and a quarter of a second of that is a visible spin.
+  double differ_deg = 0.0;
+  const Pose& from = swap_->pipeline->output().pose;
+  const Pose& to = pipeline_->output().pose;
+  for (size_t j = 0; j < from.rotation.size(); ++j)
+    differ_deg =
+        std::max(differ_deg, from.rotation[j].angularDistance(to.rotation[j]) * 180.0 / M_PI);
+  constexpr double kFadeDegPerSecond = 60.0;
+  blend_frames_ = static_cast<int>(std::clamp(
+      std::ceil(std::max(0.25, differ_deg / kFadeDegPerSecond) * rate_hz_), 1.0, 3.0 * rate_hz_));
+  fade_differ_deg_ = differ_deg;
+  ++swaps_;
+  // Consumers learn the new rest pose before its first frame.
+  PublishDescription(sink);
+}
+
+void SubjectRunner::EndSwap() {
+  leftovers_ = std::move(swap_);
+  swap_stage_ = SwapStage::kWarming;
+  shadow_has_output_ = false;
+  if (live_) (void)live_->Retire(leftovers_);
+}
+
+void SubjectRunner::ResetPipelines() {
+  pipeline_->Reset();
+  frame_base_ = 0;
+  if (!swap_) return;
+  if (swap_stage_ == SwapStage::kBlending) return EndSwap();
+  // A restart while warming: the incoming subject warms up again on the new stream.
+  swap_->pipeline->Reset();
+  if (swap_->retargeter) swap_->retargeter->Reset();
+  shadow_base_ = shadow_outputs_ = 0;
+  shadow_has_output_ = false;
+}
+
 void SubjectRunner::Resynchronise(OutputSink& sink) {
   Flush(sink);
-  pipeline_.Reset();
+  ResetPipelines();
   if (retargeter_) retargeter_->Reset();
   pushed_ = published_ = 0;
   started_ = false;
@@ -227,7 +330,7 @@ void SubjectRunner::Resynchronise(OutputSink& sink) {
 
 void SubjectRunner::EndOfStream(OutputSink& sink) {
   Flush(sink);
-  pipeline_.Reset();
+  ResetPipelines();
   if (retargeter_) retargeter_->Reset();
   pushed_ = published_ = 0;
   started_ = false;
@@ -244,16 +347,60 @@ void SubjectRunner::Push(std::span<const Vec3> positions, const Stamp& stamp, in
   std::copy(positions.begin(), positions.end(), received_.begin() + slot * positions.size());
   ++pushed_;
   next_frame_number_ = stamp.frame_number + 1;
-  if (pipeline_.Push(positions)) Publish(receive_ns, sink);
+  if (swap_) {
+    shadow_has_output_ = swap_->pipeline->Push(positions);
+    if (shadow_has_output_) {
+      ++shadow_outputs_;
+      if (swap_stage_ == SwapStage::kWarming && swap_->retargeter)
+        (void)swap_->retargeter->Retarget(swap_->pipeline->output().pose);
+    }
+  }
+  if (pipeline_->Push(positions)) Publish(receive_ns, sink);
 }
 
 void SubjectRunner::Flush(OutputSink& sink) {
-  while (pipeline_.Flush()) Publish(-1, sink);
+  if (swap_) {
+    while (swap_->pipeline->Flush()) {
+    }
+    shadow_has_output_ = false;
+  }
+  while (pipeline_->Flush()) Publish(-1, sink);
 }
 
 void SubjectRunner::Publish(int64_t trigger_receive_ns, OutputSink& sink) {
-  const CleanFrame& out = pipeline_.output();
-  const Stamp& stamp = stamps_[static_cast<size_t>(out.frame) % stamps_.size()];
+  const int64_t index = pipeline_->output().frame + frame_base_;
+  // A swap: once the incoming subject has solved long enough in the shadow, it becomes the
+  // published one, its poses cross-faded from the outgoing one's over blend_frames_.
+  const CleanFrame* fade_from = nullptr;
+  double fade = 1.0;
+  if (swap_) {
+    const auto aligned = [&] {
+      return shadow_has_output_ && swap_->pipeline->output().frame + shadow_base_ == index;
+    };
+    if (swap_stage_ == SwapStage::kWarming && shadow_outputs_ >= warm_frames_ && aligned())
+      SwitchModel(sink);
+    if (swap_stage_ == SwapStage::kBlending) {
+      if (aligned() && blend_step_ < blend_frames_) {
+        ++blend_step_;
+        fade = blend_step_ / (blend_frames_ + 1.0);
+        fade_from = &swap_->pipeline->output();
+      } else {
+        EndSwap();
+      }
+    }
+  }
+  const CleanFrame& out = pipeline_->output();
+  const Pose* pose = &out.pose;
+  if (fade_from != nullptr) {
+    for (size_t j = 0; j < blend_pose_.rotation.size(); ++j) {
+      blend_pose_.rotation[j] = fade_from->pose.rotation[j].slerp(fade, out.pose.rotation[j]);
+      blend_pose_.translation[j] = out.pose.translation[j];
+    }
+    blend_pose_.translation[0] = fade_from->pose.translation[0] +
+                                 fade * (out.pose.translation[0] - fade_from->pose.translation[0]);
+    pose = &blend_pose_;
+  }
+  const Stamp& stamp = stamps_[static_cast<size_t>(index) % stamps_.size()];
   ++published_;
   if (stamp.inserted) {
     ++counters_.inserted_published;
@@ -278,10 +425,10 @@ void SubjectRunner::Publish(int64_t trigger_receive_ns, OutputSink& sink) {
   s.residual_m = std::isfinite(out.final_solve.rms_residual_m)
                      ? static_cast<float>(out.final_solve.rms_residual_m)
                      : 0.0f;
-  s.root_translation = out.pose.translation[0];
-  for (size_t j = 0; j < s.rotations.size(); ++j) s.rotations[j] = out.pose.rotation[j];
-  ForwardKinematics(*skeleton_, out.pose, &kinematics_);
-  UpdateModelDistance(out.frame);
+  s.root_translation = pose->translation[0];
+  for (size_t j = 0; j < s.rotations.size(); ++j) s.rotations[j] = pose->rotation[j];
+  ForwardKinematics(*skeleton_, *pose, &kinematics_);
+  UpdateModelDistance(index);
   if (publish_globals_) {
     for (size_t j = 0; j < s.rotations.size(); ++j) {
       s.global_rotations[j] = Quat(kinematics_.R_WJ[j]);
@@ -306,7 +453,7 @@ void SubjectRunner::Publish(int64_t trigger_receive_ns, OutputSink& sink) {
     sink.Send(cleaned_topic_, buffer_);
   }
   if (retargeter_) {
-    const Pose& character = retargeter_->Retarget(out.pose);
+    const Pose& character = retargeter_->Retarget(*pose);
     protocol::SkeletonFrameMessage& c = character_message_;
     c.stream = stamp.stream;
     c.frame_number = stamp.frame_number;
@@ -329,12 +476,13 @@ void SubjectRunner::Publish(int64_t trigger_receive_ns, OutputSink& sink) {
     protocol::EncodeSkeletonFrame(c, &buffer_);
     sink.Send(character_topic_, buffer_);
   }
-  if (live_view_ && live_view_->Watched()) ShowLive(out, stamp, publish_ns);
+  if (live_view_ && live_view_->Watched()) ShowLive(out, index, stamp, publish_ns);
   if (trigger_receive_ns >= 0)
     counters_.processing.Add(static_cast<double>(SteadyNs() - trigger_receive_ns) * 1e-9);
 }
 
-void SubjectRunner::ShowLive(const CleanFrame& out, const Stamp& stamp, uint64_t publish_ns) {
+void SubjectRunner::ShowLive(const CleanFrame& out, int64_t index, const Stamp& stamp,
+                             uint64_t publish_ns) {
   // The steady clock paces the copies: a wall-clock step must not freeze the view.
   LiveViewFrame* v = live_view_->BeginWrite(SteadyNs());
   if (v == nullptr) return;  // too soon, or being read
@@ -344,7 +492,7 @@ void SubjectRunner::ShowLive(const CleanFrame& out, const Stamp& stamp, uint64_t
   v->state = state_;
   v->residual_m = skeleton_message_.residual_m;
   const size_t markers = v->raw.size();
-  const auto received = received_.begin() + static_cast<ptrdiff_t>(static_cast<size_t>(out.frame) %
+  const auto received = received_.begin() + static_cast<ptrdiff_t>(static_cast<size_t>(index) %
                                                                    stamps_.size() * markers);
   std::copy(received, received + static_cast<ptrdiff_t>(markers), v->raw.begin());
   for (size_t m = 0; m < markers; ++m) {
@@ -377,6 +525,8 @@ bool SubjectRunner::CheckStall(int64_t now_ns, int64_t timeout_ns, OutputSink& s
 // large residuals of the kept ones. The median stays with the majority of samples, so
 // corruption of a minority (swaps, spikes, glitches) does not move it.
 void SubjectRunner::UpdateModelDistance(int64_t frame) {
+  // A cross-fade's poses are neither subject's solve: they fit neither model.
+  if (swap_ && swap_stage_ == SwapStage::kBlending) return;
   const size_t count = missing_.size();
   const Vec3* received = received_.data() + static_cast<size_t>(frame) % stamps_.size() * count;
   distances_.clear();
@@ -390,7 +540,8 @@ void SubjectRunner::UpdateModelDistance(int64_t frame) {
   const auto middle = distances_.begin() + static_cast<std::ptrdiff_t>(distances_.size() / 2);
   std::nth_element(distances_.begin(), middle, distances_.end());
   model_distance_m_ += model_distance_weight_ * (*middle - model_distance_m_);
-  if (model_distance_m_ > model_suspect_m_) model_suspect_ = true;
+  // A live subject's template is an approximation until its calibration swaps in.
+  if (model_distance_m_ > model_suspect_m_ && !(live_ && swaps_ == 0)) model_suspect_ = true;
   if (model_distance_m_ < 0.75 * model_suspect_m_) model_suspect_ = false;
 }
 
@@ -417,6 +568,7 @@ void SubjectRunner::PublishStatus(int64_t now_ns, OutputSink& sink) {
   m.frames_dropped = counters_.dropped_total();
   protocol::EncodeSubjectStatus(m, &buffer_);
   sink.Send(status_topic_, buffer_);
+  if (live_) live_->SendStatus(sink, calibration_topic_, skeleton_hash_);
 }
 
 }  // namespace mocapd

@@ -24,6 +24,8 @@
 namespace mocapd {
 
 class LiveViewSlot;
+class LiveCalibration;
+struct LiveSwap;
 
 /// Why an incoming message was not turned into a published frame.
 enum class DropReason : uint8_t {
@@ -126,13 +128,25 @@ class SubjectRunner {
   bool model_suspect() const { return model_suspect_; }
   int64_t last_receive_ns() const { return last_receive_ns_; }
   const SubjectCounters& counters() const { return counters_; }
-  const CleanupCounters& cleanup_counters() const { return pipeline_.counters(); }
+  const CleanupCounters& cleanup_counters() const { return pipeline_->counters(); }
   /// Carries the counters of a runner this one replaces (a reload changed its model).
   void InheritCounters(const SubjectRunner& previous);
   const protocol::SubjectDescriptionMessage& description() const { return description_; }
   /// From now on, hands a published frame to the browser view's slot while someone
   /// watches (at most the view's rate; never waiting for it).
   void AttachLiveView(std::shared_ptr<LiveViewSlot> slot) { live_view_ = std::move(slot); }
+  /// Makes this a live-calibrated subject: the template is scaled to the first usable
+  /// frame, frames are offered to the calibration, and its calibrated subject swaps in at
+  /// a frame boundary: solved in the shadow of the published one until it is warm, then
+  /// cross-faded in (no frame lost, no pop).
+  void AttachLiveCalibration(std::shared_ptr<LiveCalibration> calibration);
+  /// Calibrated subjects swapped in (0 or 1), and whether a swap is under way.
+  int swaps() const { return swaps_; }
+  bool swapping() const { return swap_ != nullptr; }
+  /// The last swap: how far the subjects' joints differed when it began, and its fade.
+  double fade_differ_deg() const { return fade_differ_deg_; }
+  double fade_seconds() const { return blend_frames_ / rate_hz_; }
+  ~SubjectRunner();
 
  private:
   struct Stamp {
@@ -146,7 +160,11 @@ class SubjectRunner {
   void Publish(int64_t trigger_receive_ns, OutputSink& sink);
   void UpdateModelDistance(int64_t frame);
   void Resynchronise(OutputSink& sink);
-  void ShowLive(const CleanFrame& out, const Stamp& stamp, uint64_t publish_ns);
+  void ShowLive(const CleanFrame& out, int64_t index, const Stamp& stamp, uint64_t publish_ns);
+  void ScaleTemplate(std::span<const Vec3> positions, OutputSink& sink);
+  void SwitchModel(OutputSink& sink);  // the swap's subject becomes the published one
+  void EndSwap();                      // its leftovers go back to the calibration
+  void ResetPipelines();               // a restart: both pipelines start afresh
 
   std::string name_;
   int rank_ = 0;
@@ -160,7 +178,8 @@ class SubjectRunner {
   bool publish_globals_ = false;
   std::shared_ptr<const Skeleton> skeleton_;
   std::shared_ptr<const MarkerSet> markers_;
-  CleanupPipeline pipeline_;
+  std::unique_ptr<CleanupPipeline> pipeline_;
+  int64_t frame_base_ = 0;     ///< Frames pushed before pipeline_'s first (a swap's offset).
   std::vector<Stamp> stamps_;  ///< Ring by pipeline frame: what each pushed frame was.
   int64_t pushed_ = 0;         ///< Frames pushed since the last reset.
   int64_t published_ = 0;      ///< Frames published since the last reset.
@@ -192,6 +211,21 @@ class SubjectRunner {
   std::string character_topic_;
   std::vector<uint8_t> buffer_;
   std::shared_ptr<LiveViewSlot> live_view_;
+  // Live calibration.
+  std::shared_ptr<LiveCalibration> live_;
+  bool live_scaled_ = false;
+  enum class SwapStage { kWarming, kBlending };
+  std::unique_ptr<LiveSwap> swap_;       ///< Warming: the incoming subject; blending: the outgoing.
+  std::unique_ptr<LiveSwap> leftovers_;  ///< Waiting to go back to the calibration thread.
+  SwapStage swap_stage_ = SwapStage::kWarming;
+  int64_t shadow_base_ = 0;  ///< Frames pushed before the shadow pipeline's first.
+  int64_t shadow_outputs_ = 0;
+  bool shadow_has_output_ = false;  ///< The last push gave the shadow an output.
+  int warm_frames_ = 0, blend_frames_ = 0, blend_step_ = 0;
+  int swaps_ = 0;
+  double fade_differ_deg_ = 0.0;  ///< The last swap's largest joint difference at its start.
+  Pose blend_pose_;
+  std::string calibration_topic_;
   std::string skeleton_topic_, cleaned_topic_, description_topic_, status_topic_;
 };
 

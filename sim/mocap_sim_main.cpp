@@ -122,6 +122,7 @@ struct ReplayCommand {
   double synth_rate_hz = 120.0;
   double noise_mm = 0.5;
   std::string subject;
+  std::string marker_set;
   std::string bvh_units;
   std::string rate = "realtime";
   std::string report;
@@ -149,7 +150,7 @@ int RunReplayCommand(ReplayCommand& c) {
   } else if (c.take.size() > 4 && c.take.substr(c.take.size() - 4) == ".bvh") {
     source = mocapd::BvhReplaySource(c.take, c.synth_rate_hz, c.bvh_units);
   } else {
-    source = mocapd::C3dReplaySource(c.take, c.subject);
+    source = mocapd::C3dReplaySource(c.take, c.subject, c.marker_set);
   }
   if (c.rate == "realtime")
     c.options.rate_hz = 0.0;
@@ -300,6 +301,12 @@ int main(int argc, char** argv) {
       ->add_option("--subject", replay.subject,
                    "Subject model giving a C3D's marker order (default: the built-in humanoid)")
       ->check(CLI::ExistingFile);
+  replay_cmd
+      ->add_option("--marker-set", replay.marker_set,
+                   "Send a C3D's markers in this set's order (a daemon calibrating the subject "
+                   "live with this marker_set expects it): plug-in-gait-full, cmu-41, ... or a "
+                   "set file")
+      ->excludes("--subject");
   replay_cmd->add_option("--bvh-units", replay.bvh_units,
                          "BVH length unit: mm, cm, m or in (default: guess)");
   replay_cmd

@@ -7,6 +7,7 @@
 #include "formats/bvh.hpp"
 #include "formats/marker_layout.hpp"
 #include "formats/subject_file.hpp"
+#include "formats/subject_from_markers.hpp"
 #include "sim/humanoid.hpp"
 #include "sim/humanoid_subject.hpp"
 #include "sim/synthesis.hpp"
@@ -48,10 +49,18 @@ ReplaySource BvhReplaySource(const std::string& path, double rate_hz, const std:
   return s;
 }
 
-ReplaySource C3dReplaySource(const std::string& path, const std::string& subject_path) {
+ReplaySource C3dReplaySource(const std::string& path, const std::string& subject_path,
+                             const std::string& marker_set) {
   ReplaySource s;
-  const SubjectModel model =
-      subject_path.empty() ? MakeHumanoidSubject("actor1") : ReadSubjectModel(subject_path);
+  SubjectModel model;
+  if (!marker_set.empty()) {
+    const MarkerSetDefinition set = FindMarkerSet(marker_set);
+    std::vector<std::string> labels;
+    for (const MarkerSetMarker& m : set.markers) labels.push_back(m.name);
+    model = TemplateSubject(set, labels, 1.75, "actor1");
+  } else {
+    model = subject_path.empty() ? MakeHumanoidSubject("actor1") : ReadSubjectModel(subject_path);
+  }
   s.skeleton = model.skeleton;
   s.markers = model.markers;
   s.take = ReadC3d(path);

@@ -30,7 +30,9 @@ ReplaySource HumanoidReplaySource(const std::string& motion, double seconds, dou
 /// rate_hz (0: the file's rate); the truth is the motion.
 ReplaySource BvhReplaySource(const std::string& path, double rate_hz, const std::string& units);
 /// A recorded C3D: markers matched by label to the subject's (subject_path, or the
-/// built-in humanoid when empty).
-ReplaySource C3dReplaySource(const std::string& path, const std::string& subject_path);
+/// built-in humanoid when empty), or with marker_set (a built-in set's name or a set file),
+/// sent in the set's order: what a daemon calibrating that subject live expects.
+ReplaySource C3dReplaySource(const std::string& path, const std::string& subject_path,
+                             const std::string& marker_set = "");
 
 }  // namespace mocapd

@@ -20,6 +20,8 @@ SKELETON_FRAME = 3
 CLEANED_MARKERS = 4
 SUBJECT_STATUS = 5
 END_OF_STREAM = 6
+CALIBRATION_STATUS = 7
+CALIBRATION_STATES = ("waiting", "collecting", "calibrated", "failed")
 SUBJECT_STATES = ("tracking", "repairing", "lost", "stalled", "waiting")
 MARKER_STATUS = ("observed", "repaired", "unrecoverable")
 MASK_REASONS = ("none", "missing", "disagreement", "residual", "spike", "rigid_distance", "swap", "frozen",
@@ -233,6 +235,32 @@ def decode_end_of_stream(data):
     return {"subject": subject, "last_frame": last_frame}
 
 
+def decode_calibration_status(data):
+    r, version = _check_type(data, CALIBRATION_STATUS)
+    subject = r.subject()
+    skeleton_hash, state, _r8, refinements, height, collected, count = r.take("<QBBHffH")
+    if count > MAX_JOINTS:
+        raise ValueError("too_many_items")
+    if len(data) - r.offset != 10 * count:
+        raise ValueError("size_mismatch")
+    joints = []
+    for _ in range(count):
+        covered, flags, uncertainty, moved = r.take("<BBff")
+        if covered > 3:
+            raise ValueError("bad_field")
+        if not (math.isfinite(uncertainty) and math.isfinite(moved)):
+            raise ValueError("non_finite")
+        joints.append({"directions_covered": covered, "calibrated": bool(flags & 1), "ready": bool(flags & 2),
+                       "uncertainty_mm": None if uncertainty < 0 else uncertainty,
+                       "moved_mm": None if moved < 0 else moved})
+    if state >= len(CALIBRATION_STATES):
+        raise ValueError("bad_field")
+    if not (math.isfinite(height) and math.isfinite(collected)):
+        raise ValueError("non_finite")
+    return {"subject": subject, "skeleton_hash": skeleton_hash, "state": CALIBRATION_STATES[state],
+            "refinements": refinements, "height_m": height, "collected_s": collected, "joints": joints}
+
+
 DECODERS = {
     SUBJECT_DESCRIPTION: ("subject_description", decode_subject_description),
     MARKER_FRAME: ("marker_frame", decode_marker_frame),
@@ -240,6 +268,7 @@ DECODERS = {
     CLEANED_MARKERS: ("cleaned_markers", decode_cleaned_markers),
     SUBJECT_STATUS: ("subject_status", decode_subject_status),
     END_OF_STREAM: ("end_of_stream", decode_end_of_stream),
+    CALIBRATION_STATUS: ("calibration_status", decode_calibration_status),
 }
 
 

@@ -266,15 +266,25 @@
   }
 
   function onStats(message) {
-    const rows = ["<tr><th>subject</th><th>state</th><th>published</th><th>repaired</th><th>unrecoverable</th><th>stalls</th><th>restarts</th></tr>"];
+    const rows = ["<tr><th>subject</th><th>state</th><th>published</th><th>repaired</th><th>unrecoverable</th><th>stalls</th><th>restarts</th><th>calibration</th></tr>"];
     for (const s of message.subjects) {
       (latency[s.name] = latency[s.name] || []).push([s.latency_p50_ms, s.latency_p99_ms]);
       if (latency[s.name].length > 120) latency[s.name].shift();
       rows.push(`<tr><td>${escapeHtml(s.name)}</td><td>${s.state}${s.model_suspect ? " (model?)" : ""}</td><td>${s.frames_published}</td>` +
-                `<td>${s.samples_repaired}</td><td>${s.samples_unrecoverable}</td><td>${s.stalls}</td><td>${s.restarts}</td></tr>`);
+                `<td>${s.samples_repaired}</td><td>${s.samples_unrecoverable}</td><td>${s.stalls}</td><td>${s.restarts}</td>` +
+                `<td>${calibrationText(s.calibration)}</td></tr>`);
     }
     counterTable.innerHTML = rows.join("");
     drawSpark();
+  }
+
+  // A live calibration's progress: its state, joints ready, and those still waiting for
+  // the motion to show them.
+  function calibrationText(c) {
+    if (!c) return "–";
+    let text = `${c.state} ${c.collected_s.toFixed(0)} s, ${c.joints_ready}/${c.joints} joints ready`;
+    if (c.waiting_for.length) text += ` (waiting: ${c.waiting_for.slice(0, 4).join(", ")}${c.waiting_for.length > 4 ? ", …" : ""})`;
+    return escapeHtml(text);
   }
 
   function drawSpark() {

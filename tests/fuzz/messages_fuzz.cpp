@@ -12,6 +12,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   static mocapd::protocol::CleanedMarkersMessage cleaned;
   static mocapd::protocol::SubjectStatusMessage status;
   static mocapd::protocol::EndOfStreamMessage end;
+  static mocapd::protocol::CalibrationStatusMessage calibration;
   const std::span<const uint8_t> bytes(data, size);
   mocapd::protocol::MessageType type;
   (void)mocapd::protocol::PeekType(bytes, &type);
@@ -21,5 +22,6 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   (void)mocapd::protocol::DecodeCleanedMarkers(bytes, &cleaned);
   (void)mocapd::protocol::DecodeSubjectStatus(bytes, &status);
   (void)mocapd::protocol::DecodeEndOfStream(bytes, &end);
+  (void)mocapd::protocol::DecodeCalibrationStatus(bytes, &calibration);
   return 0;
 }

@@ -268,6 +268,51 @@ TEST(MessagesTest, SubjectStatusRoundTrips) {
   EXPECT_EQ(type, MessageType::kSubjectStatus);
 }
 
+TEST(MessagesTest, CalibrationStatusRoundTripsWithEveryJointsReadiness) {
+  CalibrationStatusMessage m;
+  m.subject = "actor3";
+  m.skeleton_hash = 0x1234567890abcdefULL;
+  m.state = CalibrationState::kCalibrated;
+  m.refinements = 4;
+  m.height_m = 1.62f;
+  m.collected_s = 17.5f;
+  m.joints = {{0, kJointCalibrated | kJointReady, 0.0f, 0.0f},
+              {3, kJointCalibrated | kJointReady, 1.5f, 2.25f},
+              {1, kJointCalibrated, 30.0f, -1.0f}};
+  std::vector<uint8_t> bytes;
+  EncodeCalibrationStatus(m, &bytes);
+  EXPECT_EQ(bytes.size(), kHeaderBytes + 1 + 6 + 22 + 10 * 3);
+  CalibrationStatusMessage dut;
+  ASSERT_EQ(DecodeCalibrationStatus(bytes, &dut), DecodeStatus::kOk);
+  EXPECT_EQ(dut.subject, "actor3");
+  EXPECT_EQ(dut.skeleton_hash, m.skeleton_hash);
+  EXPECT_EQ(dut.state, CalibrationState::kCalibrated);
+  EXPECT_EQ(dut.refinements, 4);
+  EXPECT_EQ(dut.height_m, 1.62f);
+  EXPECT_EQ(dut.joints, m.joints);
+  ExpectEveryTruncationRejected<CalibrationStatusMessage>(bytes, DecodeCalibrationStatus);
+  MessageType type;
+  EXPECT_EQ(PeekType(bytes, &type), DecodeStatus::kOk);
+  EXPECT_EQ(type, MessageType::kCalibrationStatus);
+  const size_t state_at = kHeaderBytes + 1 + 6 + 8;
+  std::vector<uint8_t> bad = bytes;
+  bad[state_at] = 4;
+  EXPECT_EQ(DecodeCalibrationStatus(bad, &dut), DecodeStatus::kBadField);
+  bad = bytes;
+  bad[state_at + 14] = 4;  // the first joint's directions
+  EXPECT_EQ(DecodeCalibrationStatus(bad, &dut), DecodeStatus::kBadField);
+  bad = bytes;
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  std::memcpy(&bad[state_at + 16], &nan, 4);
+  EXPECT_EQ(DecodeCalibrationStatus(bad, &dut), DecodeStatus::kNonFinite);
+  bad = bytes;
+  bad[state_at + 12] = 0xff;  // joint count far beyond the bytes
+  bad[state_at + 13] = 0x7f;
+  EXPECT_EQ(DecodeCalibrationStatus(bad, &dut), DecodeStatus::kTooManyItems);
+  SubjectStatusMessage other;
+  EXPECT_EQ(DecodeSubjectStatus(bytes, &other), DecodeStatus::kWrongType);
+}
+
 TEST(MessagesTest, EveryTruncationAndExtensionIsRejected) {
   std::vector<uint8_t> bytes;
   EncodeMarkerFrame(SampleMarkers(), &bytes);

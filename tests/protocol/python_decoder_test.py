@@ -53,7 +53,14 @@ def main(directory):
     assert kind == "subject_status" and st["state"] == "stalled" and st["since_last_input_ns"] == 1500000000
     assert st["rejecting_input"] and not st["model_suspect"]
     assert st["frames_in"] == 1235 and st["frames_out"] == 1223
-    for name in ("skeleton_frame_globals.bin", "subject_description.bin", "cleaned_markers.bin", "subject_status.bin"):
+    kind, cal = mocapd_protocol.decode(read(directory, "calibration_status.bin"))
+    assert kind == "calibration_status" and cal["state"] == "collecting" and cal["skeleton_hash"] == 77
+    assert cal["refinements"] == 3 and cal["height_m"] == 1.75 and cal["collected_s"] == 12.5
+    assert cal["joints"][0] == {"directions_covered": 0, "calibrated": True, "ready": True,
+                                "uncertainty_mm": 0.0, "moved_mm": 0.5}
+    assert cal["joints"][1]["ready"] is False and cal["joints"][1]["moved_mm"] is None
+    for name in ("skeleton_frame_globals.bin", "subject_description.bin", "cleaned_markers.bin", "subject_status.bin",
+                 "calibration_status.bin"):
         data = read(directory, name)
         for n in range(len(data)):
             try:

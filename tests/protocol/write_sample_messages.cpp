@@ -99,6 +99,17 @@ int main(int argc, char** argv) {
   status.problems = protocol::kProblemRejectingInput;
   protocol::EncodeSubjectStatus(status, &other);
   Write(dir + "/subject_status.bin", other);
+  protocol::CalibrationStatusMessage calibration;
+  calibration.subject = "actor1";
+  calibration.skeleton_hash = 77;
+  calibration.state = protocol::CalibrationState::kCollecting;
+  calibration.refinements = 3;
+  calibration.height_m = 1.75f;
+  calibration.collected_s = 12.5f;
+  calibration.joints = {{0, protocol::kJointCalibrated | protocol::kJointReady, 0.0f, 0.5f},
+                        {2, protocol::kJointCalibrated, 4.5f, -1.0f}};
+  protocol::EncodeCalibrationStatus(calibration, &other);
+  Write(dir + "/calibration_status.bin", other);
   bytes[0] = 'X';
   Write(dir + "/bad_magic.bin", bytes);
   return 0;

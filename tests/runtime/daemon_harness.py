@@ -53,10 +53,11 @@ def wait_for_metric(port, name, labels, at_least, timeout_s=5.0):
 class Daemon:
     """`mocapd run` on fresh loopback ports with the demo subject; logs to WORK/mocapd.log.
     input: the capture feed to connect to (default: a fresh port); shard: "I/N" or None;
-    workers: [input] workers (None: the default, one per core)."""
+    workers: [input] workers (None: the default, one per core); live: a subject's lines for
+    calibrate = "live" (None: the demo subject's model)."""
 
     def __init__(self, mocapd, config_dir, work, lookahead=12, subjects=("actor1",), rate_hz=120.0, input=None,
-                 shard=None, workers=None, curve=False, http_token=None):
+                 shard=None, workers=None, curve=False, http_token=None, live=None):
         os.makedirs(work, exist_ok=True)
         security = ""
         # curve: fresh keys (`mocapd keygen`) for the daemon and for the replay, which is both
@@ -91,7 +92,9 @@ class Daemon:
             f.write(f"format_version = 1\n[input]\nendpoint = \"{self.input}\"\n{shard_line}[output]\nendpoint = \"{self.output}\"\n"
                     f"[control]\nhttp_port = {self.http_port}\nstats_interval_s = 0.2\n{control}{security}[pipeline]\nlookahead = {lookahead}\n")
             for name in subjects:
-                f.write(f"[[subject]]\nname = \"{name}\"\nmodel = \"{model}\"\nrate_hz = {rate_hz}\n")
+                # live: the lines of a subject calibrated from its stream, instead of a model.
+                source = live if live is not None else f"model = \"{model}\"\n"
+                f.write(f"[[subject]]\nname = \"{name}\"\n{source}rate_hz = {rate_hz}\n")
         self.log = open(os.path.join(work, "mocapd.log"), "w+")
         self.process = subprocess.Popen([mocapd, "run", "--config", self.config], stdout=self.log, stderr=subprocess.STDOUT)
         for _ in range(200):
