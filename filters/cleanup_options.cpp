@@ -57,6 +57,9 @@ const std::array kFields = {
     F{"fill_reference_acceleration_mps2", nullptr, "fill_reference_acceleration_mps2", kNone, 0,
       1e6, &O::fill_reference_acceleration_mps2},
     F{"fill_snap_release_s", nullptr, "fill_snap_release_ms", kMs, 0, 1e6, &O::fill_snap_release_s},
+    F{"fill_start_velocity_s", nullptr, "fill_start_velocity_ms", kMs, 0, 1e6,
+      &O::fill_start_velocity_s},
+    F{"fill_end_velocity_s", nullptr, "fill_end_velocity_ms", kMs, 0, 1e6, &O::fill_end_velocity_s},
     F{"repaired_weight", nullptr, "repaired_weight", kNone, 0, 1, &O::repaired_weight},
     F{"interpolated_weight", nullptr, "interpolated_weight", kNone, 0, 1, &O::interpolated_weight},
     F{"fill_weight_growth_per_s", nullptr, "fill_weight_growth_per_s", kNone, 0, 1e6,
@@ -135,6 +138,9 @@ CleanupFrameRules FrameRules(const CleanupOptions& o) {
   r.max_offset_velocity_m = o.max_offset_velocity_mps / rate;
   r.fill_snap_release =
       o.fill_snap_release_s > 0.0 ? 1.0 - std::exp(-dt / o.fill_snap_release_s) : 1.0;
+  r.fill_start_velocity_weight =
+      o.fill_start_velocity_s > 0.0 ? 1.0 - std::exp(-dt / o.fill_start_velocity_s) : 1.0;
+  r.fill_end_velocity_frames = frames(o.fill_end_velocity_s, 1);
   r.fill_weight_ramp =
       o.fill_weight_growth_per_s > 0.0 ? std::exp(o.fill_weight_growth_per_s * dt) : 1.0;
   r.data_catchup_m = o.data_catchup_mps / rate;

@@ -67,6 +67,12 @@ struct CleanupOptions {
   /// The snaps a one-sided fill has not followed are taken up with this time constant,
   /// so a reference that really moved fast is caught up smoothly (0: at once).
   double fill_snap_release_s = 0.079;
+  /// A gap's fill starts from the offset velocity of the samples before it, smoothed with
+  /// this time constant (0: the last frame's change alone, which carries the capture's
+  /// noise into the whole fill: with 1 mm of noise that is most of a short gap's error)...
+  double fill_start_velocity_s = 0.05;
+  /// ...and ends on the returning track's offset velocity over up to this long.
+  double fill_end_velocity_s = 0.05;
 
   // Final solve (filters/final_solve.hpp).
   /// Weight of a one-sided repair in the final solve (observed samples weigh 1): it is
@@ -131,6 +137,8 @@ struct CleanupFrameRules {
   double trim_slope_m;                ///< Per frame.
   double max_offset_velocity_m;       ///< Per frame.
   double fill_snap_release;           ///< Share taken up per frame.
+  double fill_start_velocity_weight;  ///< A new frame's share of the smoothed velocity.
+  int fill_end_velocity_frames;       ///< At least 1.
   double fill_weight_ramp;            ///< Factor per frame (<= 1: no limit).
   double data_catchup_m;              ///< Per frame.
   double data_motion_acceleration_m;  ///< Change of the per-frame motion, per frame.

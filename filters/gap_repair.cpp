@@ -47,7 +47,14 @@ void GapRepair::Repair(const CleanupWindow& window, int64_t tau, int64_t newest,
       if (s.relabelled[m]) reason = MaskReason::kSwap;
       status = s.relabelled[m] ? MarkerStatus::kRepaired : MarkerStatus::kObserved;
       const Vec3 offset = x - ref;
-      track.offset_velocity = track.has_published ? Vec3(offset - track.offset) : Vec3::Zero();
+      // Smoothed over consecutive captured samples: a fill starts from this velocity, and
+      // one frame's change is mostly the capture's noise.
+      const Vec3 step = offset - track.offset;
+      const double w = rules_.fill_start_velocity_weight;
+      track.offset_velocity = !track.has_published ? Vec3::Zero()
+                              : track.last_observed == tau - 1
+                                  ? Vec3(w * step + (1.0 - w) * track.offset_velocity)
+                                  : step;
       track.offset = offset;
       track.output_velocity = track.has_published ? Vec3(x - track.output) : Vec3::Zero();
       track.reference_velocity =
@@ -104,11 +111,19 @@ void GapRepair::Repair(const CleanupWindow& window, int64_t tau, int64_t newest,
           const WindowFrame& e = window.at(end);
           const Vec3 snap_at_end = snap_now + reference_snap(m, tau + 1, end, &velocity);
           h.p1 = e.raw[m] - (e.reference[m] - snap_at_end);
-          h.m1 = end_slope_known
-                     ? ClampNorm((window.at(end + 1).raw[m] - window.at(end + 1).reference[m]) -
-                                     (e.raw[m] - e.reference[m]),
-                                 max_v)
-                     : Vec3::Zero();
+          // The returning track's offset velocity over as many captured frames as the
+          // lookahead shows, up to fill_end_velocity_frames.
+          int span = 0;
+          while (span < rules_.fill_end_velocity_frames && end + span + 1 <= newest &&
+                 window.at(end + span + 1).mask[m] == MaskReason::kNone)
+            ++span;
+          const WindowFrame& later = window.at(end + span);
+          h.m1 =
+              span > 0
+                  ? ClampNorm(((later.raw[m] - later.reference[m]) - (e.raw[m] - e.reference[m])) /
+                                  static_cast<double>(span),
+                              max_v)
+                  : Vec3::Zero();
           h.length = static_cast<double>(end - tau + 1);
         } else {
           h.p1 = h.p0;

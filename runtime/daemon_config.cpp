@@ -348,7 +348,8 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
     const std::string marker_set = t.String("marker_set", "", s.live.enabled);
     std::vector<std::string> labels = t.Strings("markers");
     const std::string calibration_out = t.String("calibration_out", "");
-    s.live.min_seconds = t.Number("calibration_min_s", s.live.min_seconds, 1, 3600);
+    // At most what a live calibration keeps (LiveCalibration::kMaxKeptSeconds).
+    s.live.min_seconds = t.Number("calibration_min_s", s.live.min_seconds, 1, 120);
     s.live.max_seconds = t.Number("calibration_max_s", s.live.max_seconds, 1, 36000);
     if (!s.live.enabled)
       for (const char* key :

@@ -64,8 +64,9 @@ void LiveCalibration::Offer(std::span<const Vec3> frame) {
   if (offered_++ % static_cast<uint64_t>(sample_every_) != 0) return;
   std::unique_lock lock(frames_mutex_, std::try_to_lock);
   if (!lock.owns_lock()) return;  // the calibration is copying: one sample fewer
-  std::copy(frame.begin(), frame.end(),
-            frames_.begin() + static_cast<ptrdiff_t>(kept_ % capacity_ * markers_));
+  Vec3* slot = frames_.data() + kept_ % capacity_ * markers_;
+  for (size_t m = 0; m < markers_; ++m)
+    slot[m] = Plausible(frame[m]) ? frame[m] : Vec3::Constant(kNaN);
   ++kept_;
 }
 
@@ -82,8 +83,7 @@ bool LiveCalibration::Retire(std::unique_ptr<LiveSwap>& leftovers) {
   // The vector was reserved: pushing allocates nothing on the data plane.
   if (retired_.size() == retired_.capacity()) return false;
   retired_.push_back(std::move(leftovers));
-  std::lock_guard status(status_mutex_);
-  ++status_.swaps;
+  swaps_.fetch_add(1, std::memory_order_relaxed);
   return true;
 }
 
@@ -124,7 +124,14 @@ void LiveCalibration::EncodeStatus() {
 
 LiveCalibrationStatus LiveCalibration::Status() const {
   std::lock_guard lock(status_mutex_);
-  return status_;
+  LiveCalibrationStatus status = status_;
+  status.swaps = swaps_.load(std::memory_order_relaxed);
+  return status;
+}
+
+std::optional<SubjectModel> LiveCalibration::CalibratedModel() const {
+  std::lock_guard lock(status_mutex_);
+  return calibrated_;
 }
 
 bool LiveCalibration::Refine(bool force) {
@@ -168,9 +175,8 @@ bool LiveCalibration::Refine(bool force) {
   }
   kept_at_last_refinement_ = kept;
   const double collected = take.num_frames / kept_hz;
-  const bool last_chance =
-      collected >= std::min(subject_.live.max_seconds, kMaxKeptSeconds) - 1e-9 ||
-      static_cast<double>(kept) / kept_hz >= subject_.live.max_seconds;
+  // Measured on everything offered, not on what the storage still holds.
+  const bool last_chance = static_cast<double>(kept) / kept_hz >= subject_.live.max_seconds;
 
   MarkersOnlyOptions options;
   options.marker_set = subject_.live.marker_set;
@@ -227,9 +233,20 @@ bool LiveCalibration::Refine(bool force) {
   if (!ready && !last_chance) return false;
 
   // Everything the data plane will need, built here.
-  std::unique_ptr<LiveSwap> swap =
-      Build(InTemplateOrder(calibration, TemplateSubject(subject_.live.set, subject_.live.labels,
-                                                         height, subject_.name)));
+  std::unique_ptr<LiveSwap> swap;
+  try {
+    swap =
+        Build(InTemplateOrder(calibration, TemplateSubject(subject_.live.set, subject_.live.labels,
+                                                           height, subject_.name)));
+  } catch (const std::exception& e) {
+    std::lock_guard status(status_mutex_);
+    status_.state = LiveCalibrationState::kFailed;
+    status_.message = std::string("the calibrated subject could not be built: ") + e.what();
+    EncodeStatus();
+    done_ = true;
+    spdlog::error("subject '{}': {}", subject_.name, status_.message);
+    return false;
+  }
   std::string written;
   try {
     WriteSubjectModel(subject_.live.out_path, swap->model);
@@ -238,6 +255,7 @@ bool LiveCalibration::Refine(bool force) {
     spdlog::warn("subject '{}': the calibrated subject could not be written: {}", subject_.name,
                  e.what());
   }
+  const SubjectModel swap_model = swap->model;
   {
     std::lock_guard lock(swap_mutex_);
     retired_.reserve(4);
@@ -247,6 +265,7 @@ bool LiveCalibration::Refine(bool force) {
   {
     std::lock_guard status(status_mutex_);
     status_.state = LiveCalibrationState::kCalibrated;
+    calibrated_ = swap_model;
     status_.written_to = written;
     status_.message = written.empty() ? "calibrated; the subject file could not be written"
                                       : "calibrated; written to " + written;

@@ -63,7 +63,7 @@ struct LiveCalibrationStatus {
   std::vector<JointReadiness> joints;
   std::string message;     ///< The last refinement's problem, or where the subject went.
   std::string written_to;  ///< The calibrated subject's file, once written.
-  uint64_t swaps = 0;      ///< Calibrated subjects the data plane swapped in.
+  uint64_t swaps = 0;      ///< Calibrated subjects the data plane swapped in (fade done).
 };
 
 /// What the data plane swaps in, built off the data plane.
@@ -96,6 +96,11 @@ class LiveCalibration {
   /// A received frame (the subject's marker order, NaN where missing); kept when its turn
   /// comes (about kSampleHz) and the calibration thread is not reading.
   void Offer(std::span<const Vec3> frame);
+  /// A sample the calibration may use: finite and inside any capture volume (exporters
+  /// write 1e30 or FLT_MAX for "not seen").
+  static bool Plausible(const Vec3& p) { return p.allFinite() && p.cwiseAbs().maxCoeff() < 1e4; }
+  /// The calibrated subject, once there is one (a runner built after it starts from it).
+  std::optional<SubjectModel> CalibratedModel() const;
   /// A calibrated subject waits to be swapped in.
   bool SwapReady() const { return swap_ready_.load(std::memory_order_acquire); }
   /// Takes it (nullptr when busy or none).
@@ -141,6 +146,8 @@ class LiveCalibration {
   std::unique_ptr<LiveSwap> swap_;
   std::atomic<bool> swap_ready_{false};
   std::vector<std::unique_ptr<LiveSwap>> retired_;
+  std::atomic<uint64_t> swaps_{0};          ///< Counted by the data plane, which must not wait.
+  std::optional<SubjectModel> calibrated_;  ///< Under status_mutex_.
   // What is reported.
   mutable std::mutex status_mutex_;
   LiveCalibrationStatus status_;

@@ -154,6 +154,14 @@ void SubjectRunner::AttachLiveCalibration(std::shared_ptr<LiveCalibration> calib
   const int lookahead = pipeline_->options().lookahead;
   warm_frames_ = std::max(lookahead + 2, static_cast<int>(std::lround(0.5 * rate_hz_)));
   blend_pose_ = RestPose(*skeleton_);
+  // Calibrated already (a reload rebuilt this subject's runner): start from that subject.
+  if (std::optional<SubjectModel> calibrated = live_->CalibratedModel()) {
+    class Nowhere : public OutputSink {
+     public:
+      void Send(std::string_view, std::span<const uint8_t>) override {}
+    } nowhere;  // nothing was published yet
+    Install(live_->Build(std::move(*calibrated)), nowhere);
+  }
 }
 
 uint64_t SubjectRunner::pending() const { return static_cast<uint64_t>(pushed_ - published_); }
@@ -244,28 +252,38 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
 }
 
 void SubjectRunner::ScaleTemplate(std::span<const Vec3> positions, OutputSink& sink) {
+  // A try at most every 0.1 s: estimating allocates (once it succeeds, never again).
+  const auto every = std::max<uint64_t>(1, static_cast<uint64_t>(0.1 * rate_hz_));
+  if (scale_tries_++ % every != 0) return;
   size_t valid = 0;
-  for (const Vec3& p : positions) valid += p.allFinite();
+  for (const Vec3& p : positions) valid += LiveCalibration::Plausible(p);
   if (10 * valid < 6 * positions.size()) return;
-  const std::optional<double> height = EstimateHeight(*skeleton_, *markers_, 1.75, positions);
+  std::vector<Vec3> gated(positions.begin(), positions.end());
+  for (Vec3& p : gated)
+    if (!LiveCalibration::Plausible(p)) p = Vec3::Constant(kNaN);
+  const std::optional<double> height = EstimateHeight(*skeleton_, *markers_, 1.75, gated);
   if (!height) return;
   // What the unscaled template held goes out as it was; the scaled one starts with this
   // frame. Building it allocates, once, like the runner's construction.
   Flush(sink);
-  std::unique_ptr<LiveSwap> scaled =
-      live_->Build(TemplateSubject(live_->config().set, live_->config().labels, *height, name_));
-  scaled->pipeline->AdoptCounters(pipeline_->counters());
-  pipeline_ = std::move(scaled->pipeline);
-  skeleton_ = scaled->model.skeleton;
-  markers_ = scaled->model.markers;
-  if (scaled->retargeter) retargeter_ = std::move(scaled->retargeter);
-  description_ = std::move(scaled->description);
+  Install(
+      live_->Build(TemplateSubject(live_->config().set, live_->config().labels, *height, name_)),
+      sink);
+  live_->Started(*height);
+}
+
+void SubjectRunner::Install(std::unique_ptr<LiveSwap> subject, OutputSink& sink) {
+  subject->pipeline->AdoptCounters(pipeline_->counters());
+  pipeline_ = std::move(subject->pipeline);
+  skeleton_ = subject->model.skeleton;
+  markers_ = subject->model.markers;
+  if (subject->retargeter) retargeter_ = std::move(subject->retargeter);
+  description_ = std::move(subject->description);
   skeleton_hash_ = description_.skeleton_hash;
   skeleton_message_.model_hash = skeleton_hash_;
   pushed_ = published_ = 0;
   frame_base_ = 0;
   live_scaled_ = true;
-  live_->Started(*height);
   PublishDescription(sink);
 }
 
@@ -359,12 +377,17 @@ void SubjectRunner::Push(std::span<const Vec3> positions, const Stamp& stamp, in
 }
 
 void SubjectRunner::Flush(OutputSink& sink) {
+  // During a swap both pipelines flush in step, so a cross-fade goes on through the frames
+  // the lookahead held (a stall or an end of stream mid-fade must not snap the pose).
+  while (pipeline_->Flush()) {
+    if (swap_) shadow_has_output_ = swap_->pipeline->Flush();
+    Publish(-1, sink);
+  }
   if (swap_) {
     while (swap_->pipeline->Flush()) {
     }
     shadow_has_output_ = false;
   }
-  while (pipeline_->Flush()) Publish(-1, sink);
 }
 
 void SubjectRunner::Publish(int64_t trigger_receive_ns, OutputSink& sink) {

@@ -162,6 +162,8 @@ class SubjectRunner {
   void Resynchronise(OutputSink& sink);
   void ShowLive(const CleanFrame& out, int64_t index, const Stamp& stamp, uint64_t publish_ns);
   void ScaleTemplate(std::span<const Vec3> positions, OutputSink& sink);
+  /// Makes a subject the published one at once (nothing pending: flushed before).
+  void Install(std::unique_ptr<LiveSwap> subject, OutputSink& sink);
   void SwitchModel(OutputSink& sink);  // the swap's subject becomes the published one
   void EndSwap();                      // its leftovers go back to the calibration
   void ResetPipelines();               // a restart: both pipelines start afresh
@@ -214,6 +216,7 @@ class SubjectRunner {
   // Live calibration.
   std::shared_ptr<LiveCalibration> live_;
   bool live_scaled_ = false;
+  uint64_t scale_tries_ = 0;
   enum class SwapStage { kWarming, kBlending };
   std::unique_ptr<LiveSwap> swap_;       ///< Warming: the incoming subject; blending: the outgoing.
   std::unique_ptr<LiveSwap> leftovers_;  ///< Waiting to go back to the calibration thread.

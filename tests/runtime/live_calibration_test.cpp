@@ -239,6 +239,54 @@ TEST_F(LiveCalibrationTest, TheDataPlaneAllocatesNothingWhileCollectingSwappingA
   EXPECT_EQ(allocations, 0u);
 }
 
+TEST_F(LiveCalibrationTest,
+       AnEndOfStreamMidFadeKeepsFadingAndSentinelSamplesNeverReachTheCalibration) {
+  LiveSubject live(*this, "calibration_min_s = 12\n");
+  const SubjectConfig& subject = live.subject;
+  SubjectRunner& runner = live.runner;
+  LiveCalibration* calibration = live.calibration.get();
+  RecordingSink sink;
+  int f = 0;
+  size_t ended_at = 0;
+  for (; f < take_.num_frames; ++f) {
+    protocol::MarkerFrameMessage m = Frame(subject, f);
+    m.positions[3] = Vec3::Constant(1e30);  // an exporter's "not seen", every frame
+    EXPECT_FALSE(runner.Accept(m, 0, sink).has_value());
+    if (f % static_cast<int>(kRate) == 0) (void)calibration->Refine();
+    // Five frames into the cross-fade, the stream ends: the lookahead is flushed.
+    if (sink.descriptions.size() == 2 && runner.swapping() &&
+        sink.skeletons.size() == sink.description_at[1] + 5) {
+      runner.EndOfStream(sink);
+      ended_at = sink.skeletons.size();
+      break;
+    }
+  }
+  ASSERT_GT(ended_at, 0u) << calibration->Status().message;
+  EXPECT_EQ(calibration->Status().state, LiveCalibrationState::kCalibrated);
+  EXPECT_EQ(sink.skeletons.size(), static_cast<size_t>(f) + 1);  // every frame out
+  // The flushed frames went on fading: no frame turns a joint more than the motion does.
+  auto change = [&](size_t k) {
+    double worst = 0.0;
+    for (size_t j = 0; j < sink.skeletons[k].rotations.size(); ++j)
+      worst = std::max(
+          worst, AngleDeg(sink.skeletons[k - 1].rotations[j], sink.skeletons[k].rotations[j]));
+    return worst;
+  };
+  const size_t swap = sink.description_at[1];
+  double natural = 0.0, across = 0.0;
+  for (size_t k = swap - static_cast<size_t>(kRate); k < swap; ++k)
+    natural = std::max(natural, change(k));
+  for (size_t k = swap; k < ended_at; ++k) across = std::max(across, change(k));
+  EXPECT_LT(across, natural + 2.0) << "natural " << natural;
+  // A runner built afterwards (a reload) starts from the calibrated subject.
+  SubjectRunner rebuilt(subject, live.config);
+  rebuilt.AttachLiveCalibration(live.calibration);
+  const auto& offsets = rebuilt.description().rest_offsets;
+  ASSERT_EQ(offsets.size(), sink.descriptions[1].rest_offsets.size());
+  for (size_t j = 0; j < offsets.size(); ++j)  // the wire carries floats
+    EXPECT_LT((offsets[j] - sink.descriptions[1].rest_offsets[j]).norm(), 1e-6) << j;
+}
+
 TEST_F(LiveCalibrationTest, AStreamWithoutMotionFailsAtTheTimeLimitAndKeepsTheScaledTemplate) {
   LiveSubject live(*this,
                    "calibration_min_s = 2\n"
