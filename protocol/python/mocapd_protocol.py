@@ -243,6 +243,11 @@ def decode_calibration_status(data):
         raise ValueError("too_many_items")
     if len(data) - r.offset != 10 * count:
         raise ValueError("size_mismatch")
+    # The C++ decoder's order: the state, the floats before the joints, then each joint.
+    if state >= len(CALIBRATION_STATES):
+        raise ValueError("bad_field")
+    if not (math.isfinite(height) and math.isfinite(collected)):
+        raise ValueError("non_finite")
     joints = []
     for _ in range(count):
         covered, flags, uncertainty, moved = r.take("<BBff")
@@ -253,10 +258,6 @@ def decode_calibration_status(data):
         joints.append({"directions_covered": covered, "calibrated": bool(flags & 1), "ready": bool(flags & 2),
                        "uncertainty_mm": None if uncertainty < 0 else uncertainty,
                        "moved_mm": None if moved < 0 else moved})
-    if state >= len(CALIBRATION_STATES):
-        raise ValueError("bad_field")
-    if not (math.isfinite(height) and math.isfinite(collected)):
-        raise ValueError("non_finite")
     return {"subject": subject, "skeleton_hash": skeleton_hash, "state": CALIBRATION_STATES[state],
             "refinements": refinements, "height_m": height, "collected_s": collected, "joints": joints}
 
