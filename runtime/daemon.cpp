@@ -811,9 +811,12 @@ void LogStartup(const DaemonConfig& c, int http_port) {
     const double budget_ms = 1e3 / s.rate_hz;
     spdlog::info(
         "  subject '{}': {} markers, {} joints, {:.0f} Hz, lookahead K={} ({:.1f} ms delay), frame "
-        "budget {:.2f} ms, model {}",
+        "budget {:.2f} ms, {}",
         s.name, s.model.markers->num_markers(), s.model.skeleton->num_joints(), s.rate_hz,
-        s.cleanup.lookahead, s.cleanup.lookahead * budget_ms, budget_ms, s.model_path);
+        s.cleanup.lookahead, s.cleanup.lookahead * budget_ms, budget_ms,
+        s.live.enabled ? "calibrated live (" + s.live.marker_set + "; the subject goes to " +
+                             s.live.out_path + ")"
+                       : "model " + s.model_path);
   }
   if (http_port > 0) {
     spdlog::info(

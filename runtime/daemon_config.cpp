@@ -340,12 +340,27 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
         std::count(c.other_shards_subjects.begin(), c.other_shards_subjects.end(), s.name) > 0)
       t.Fail(table->get("name"), "name", "subject '" + s.name + "' is listed twice");
     s.live.enabled = t.Choice("calibrate", "no", {"no", "live"}) == "live";
-    s.model_path = resolve(t.String("model", "", !s.live.enabled));
+    s.model_path = resolve(t.String("model", ""));
+    if (!s.live.enabled && s.model_path.empty())
+      t.Fail(nullptr, t.Has("marker_set") ? "marker_set" : "model",
+             t.Has("marker_set")
+                 ? "a marker_set is for a subject calibrated live: add calibrate = \"live\" (or "
+                   "give a model instead)"
+                 : "missing: give the subject's model file, or calibrate = \"live\" with a "
+                   "marker_set");
     if (s.live.enabled && !s.model_path.empty())
       t.Fail(table->get("model"), "model",
              "give a model or calibrate = \"live\", not both (a live calibration starts from "
              "the template humanoid)");
-    const std::string marker_set = t.String("marker_set", "", s.live.enabled);
+    const std::string marker_set = t.String("marker_set", "");
+    if (s.live.enabled && marker_set.empty()) {
+      std::string names;
+      for (const MarkerSetDefinition& set : BuiltInMarkerSets())
+        names += (names.empty() ? "" : ", ") + set.name;
+      t.Fail(nullptr, "marker_set",
+             "missing: calibrate = \"live\" needs the stream's marker set, one of " + names +
+                 ", or a set file (.toml)");
+    }
     std::vector<std::string> labels = t.Strings("markers");
     const std::string calibration_out = t.String("calibration_out", "");
     // At most what a live calibration keeps (LiveCalibration::kMaxKeptSeconds).
@@ -383,11 +398,25 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
       s.live.labels = labels;
       s.live.out_path =
           resolve(calibration_out.empty() ? s.name + ".calibrated.toml" : calibration_out);
+      // Found out now, not after a minute of calibrating.
+      const std::filesystem::path out_dir =
+          std::filesystem::path(s.live.out_path).parent_path().empty()
+              ? std::filesystem::path(".")
+              : std::filesystem::path(s.live.out_path).parent_path();
+      if (!std::filesystem::is_directory(out_dir))
+        t.Fail(table->get("calibration_out"), "calibration_out",
+               "'" + out_dir.string() +
+                   "' is not a directory: the calibrated subject could not be "
+                   "written there");
       try {
         s.model = TemplateSubject(s.live.set, s.live.labels, 1.75, s.name);
       } catch (const std::exception& e) {
         t.Fail(table->get("markers"), "markers", e.what());
       }
+      if (labels.size() < 3)
+        t.Fail(table->get("markers"), "markers",
+               "a live calibration needs at least 3 markers, " + std::to_string(labels.size()) +
+                   " given");
     } else {
       try {
         s.model = ReadSubjectModel(s.model_path);

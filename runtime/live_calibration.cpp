@@ -247,13 +247,14 @@ bool LiveCalibration::Refine(bool force) {
     spdlog::error("subject '{}': {}", subject_.name, status_.message);
     return false;
   }
-  std::string written;
+  std::string written, write_error;
   try {
     WriteSubjectModel(subject_.live.out_path, swap->model);
     written = subject_.live.out_path;
   } catch (const std::exception& e) {
+    write_error = e.what();
     spdlog::warn("subject '{}': the calibrated subject could not be written: {}", subject_.name,
-                 e.what());
+                 write_error);
   }
   const SubjectModel swap_model = swap->model;
   {
@@ -267,8 +268,9 @@ bool LiveCalibration::Refine(bool force) {
     status_.state = LiveCalibrationState::kCalibrated;
     calibrated_ = swap_model;
     status_.written_to = written;
-    status_.message = written.empty() ? "calibrated; the subject file could not be written"
-                                      : "calibrated; written to " + written;
+    status_.message = written.empty()
+                          ? "calibrated; the subject file could not be written: " + write_error
+                          : "calibrated; written to " + written;
     EncodeStatus();
   }
   done_ = true;

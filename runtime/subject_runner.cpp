@@ -154,6 +154,7 @@ void SubjectRunner::AttachLiveCalibration(std::shared_ptr<LiveCalibration> calib
   const int lookahead = pipeline_->options().lookahead;
   warm_frames_ = std::max(lookahead + 2, static_cast<int>(std::lround(0.5 * rate_hz_)));
   blend_pose_ = RestPose(*skeleton_);
+  fade_correction_.assign(blend_pose_.rotation.size(), Vec3::Zero());
   // Calibrated already (a reload rebuilt this subject's runner): start from that subject.
   if (std::optional<SubjectModel> calibrated = live_->CalibratedModel()) {
     class Nowhere : public OutputSink {
@@ -240,7 +241,6 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
     if (leftovers_) (void)live_->Retire(leftovers_);
     if (!swap_ && !leftovers_ && live_->SwapReady()) {
       swap_ = live_->TakeSwap();
-      swap_stage_ = SwapStage::kWarming;
       shadow_base_ = pushed_;
       shadow_outputs_ = 0;
       shadow_has_output_ = false;
@@ -297,30 +297,38 @@ void SubjectRunner::SwitchModel(OutputSink& sink) {
   std::swap(description_, swap_->description);
   skeleton_hash_ = description_.skeleton_hash;
   skeleton_message_.model_hash = skeleton_hash_;
-  swap_stage_ = SwapStage::kBlending;
-  blend_step_ = 0;
-  // The cross-fade lasts a quarter of a second, or as long as it takes to turn the joints
-  // that differ most at kFadeDegPerSecond over the motion: the template and the calibrated
-  // subject can disagree on a segment's twist by tens of degrees (an upper arm with two
-  // markers), and a quarter of a second of that is a visible spin.
+  // The fade: at this frame each joint's new rotation is corrected back to the old one's
+  // (new * C = old), and the correction, fixed from here on, decays to nothing. Not a
+  // slerp between the two solves as they go on: two rotations near 180 degrees apart
+  // would have their shortest path flip sides mid-fade (seen: a forearm turning 167
+  // degrees in one frame on CMU 01_01). The fade lasts a quarter of a second, or as long
+  // as undoing the largest correction at kFadeDegPerSecond takes: the template and the
+  // calibrated subject can disagree on a segment's twist by 100 degrees and more.
   double differ_deg = 0.0;
   const Pose& from = swap_->pipeline->output().pose;
   const Pose& to = pipeline_->output().pose;
-  for (size_t j = 0; j < from.rotation.size(); ++j)
-    differ_deg =
-        std::max(differ_deg, from.rotation[j].angularDistance(to.rotation[j]) * 180.0 / M_PI);
+  for (size_t j = 0; j < from.rotation.size(); ++j) {
+    Quat c = to.rotation[j].conjugate() * from.rotation[j];
+    if (c.w() < 0) c.coeffs() = -c.coeffs();  // the short way: at most 180 degrees
+    const Eigen::AngleAxisd turn(c.normalized());
+    fade_correction_[j] = turn.angle() * turn.axis();
+    differ_deg = std::max(differ_deg, turn.angle() * 180.0 / M_PI);
+  }
+  fade_root_offset_ = from.translation[0] - to.translation[0];
   constexpr double kFadeDegPerSecond = 60.0;
   blend_frames_ = static_cast<int>(std::clamp(
       std::ceil(std::max(0.25, differ_deg / kFadeDegPerSecond) * rate_hz_), 1.0, 3.0 * rate_hz_));
+  fade_left_ = blend_frames_;
   fade_differ_deg_ = differ_deg;
   ++swaps_;
+  // The outgoing subject is not needed for the fade: back to the calibration thread.
+  EndSwap();
   // Consumers learn the new rest pose before its first frame.
   PublishDescription(sink);
 }
 
 void SubjectRunner::EndSwap() {
   leftovers_ = std::move(swap_);
-  swap_stage_ = SwapStage::kWarming;
   shadow_has_output_ = false;
   if (live_) (void)live_->Retire(leftovers_);
 }
@@ -328,8 +336,8 @@ void SubjectRunner::EndSwap() {
 void SubjectRunner::ResetPipelines() {
   pipeline_->Reset();
   frame_base_ = 0;
+  fade_left_ = 0;  // a new stream: nothing to fade from
   if (!swap_) return;
-  if (swap_stage_ == SwapStage::kBlending) return EndSwap();
   // A restart while warming: the incoming subject warms up again on the new stream.
   swap_->pipeline->Reset();
   if (swap_->retargeter) swap_->retargeter->Reset();
@@ -369,16 +377,15 @@ void SubjectRunner::Push(std::span<const Vec3> positions, const Stamp& stamp, in
     shadow_has_output_ = swap_->pipeline->Push(positions);
     if (shadow_has_output_) {
       ++shadow_outputs_;
-      if (swap_stage_ == SwapStage::kWarming && swap_->retargeter)
-        (void)swap_->retargeter->Retarget(swap_->pipeline->output().pose);
+      if (swap_->retargeter) (void)swap_->retargeter->Retarget(swap_->pipeline->output().pose);
     }
   }
   if (pipeline_->Push(positions)) Publish(receive_ns, sink);
 }
 
 void SubjectRunner::Flush(OutputSink& sink) {
-  // During a swap both pipelines flush in step, so a cross-fade goes on through the frames
-  // the lookahead held (a stall or an end of stream mid-fade must not snap the pose).
+  // While a swap warms up, both pipelines flush in step: the incoming one may take over at
+  // any of these frames, and its frame indices must stay aligned with the published one's.
   while (pipeline_->Flush()) {
     if (swap_) shadow_has_output_ = swap_->pipeline->Flush();
     Publish(-1, sink);
@@ -393,34 +400,24 @@ void SubjectRunner::Flush(OutputSink& sink) {
 void SubjectRunner::Publish(int64_t trigger_receive_ns, OutputSink& sink) {
   const int64_t index = pipeline_->output().frame + frame_base_;
   // A swap: once the incoming subject has solved long enough in the shadow, it becomes the
-  // published one, its poses cross-faded from the outgoing one's over blend_frames_.
-  const CleanFrame* fade_from = nullptr;
-  double fade = 1.0;
-  if (swap_) {
-    const auto aligned = [&] {
-      return shadow_has_output_ && swap_->pipeline->output().frame + shadow_base_ == index;
-    };
-    if (swap_stage_ == SwapStage::kWarming && shadow_outputs_ >= warm_frames_ && aligned())
-      SwitchModel(sink);
-    if (swap_stage_ == SwapStage::kBlending) {
-      if (aligned() && blend_step_ < blend_frames_) {
-        ++blend_step_;
-        fade = blend_step_ / (blend_frames_ + 1.0);
-        fade_from = &swap_->pipeline->output();
-      } else {
-        EndSwap();
-      }
-    }
-  }
+  // published one, the correction back to the outgoing one's pose fading over blend_frames_.
+  if (swap_ && shadow_outputs_ >= warm_frames_ && shadow_has_output_ &&
+      swap_->pipeline->output().frame + shadow_base_ == index)
+    SwitchModel(sink);
   const CleanFrame& out = pipeline_->output();
   const Pose* pose = &out.pose;
-  if (fade_from != nullptr) {
+  if (fade_left_ > 0) {
+    const double share = fade_left_ / (blend_frames_ + 1.0);  // of the correction still applied
+    --fade_left_;
     for (size_t j = 0; j < blend_pose_.rotation.size(); ++j) {
-      blend_pose_.rotation[j] = fade_from->pose.rotation[j].slerp(fade, out.pose.rotation[j]);
+      const Vec3 c = share * fade_correction_[j];
+      const double angle = c.norm();
+      blend_pose_.rotation[j] =
+          angle > 0 ? Quat(out.pose.rotation[j] * Quat(Eigen::AngleAxisd(angle, c / angle)))
+                    : out.pose.rotation[j];
       blend_pose_.translation[j] = out.pose.translation[j];
     }
-    blend_pose_.translation[0] = fade_from->pose.translation[0] +
-                                 fade * (out.pose.translation[0] - fade_from->pose.translation[0]);
+    blend_pose_.translation[0] = out.pose.translation[0] + share * fade_root_offset_;
     pose = &blend_pose_;
   }
   const Stamp& stamp = stamps_[static_cast<size_t>(index) % stamps_.size()];
@@ -548,8 +545,8 @@ bool SubjectRunner::CheckStall(int64_t now_ns, int64_t timeout_ns, OutputSink& s
 // large residuals of the kept ones. The median stays with the majority of samples, so
 // corruption of a minority (swaps, spikes, glitches) does not move it.
 void SubjectRunner::UpdateModelDistance(int64_t frame) {
-  // A cross-fade's poses are neither subject's solve: they fit neither model.
-  if (swap_ && swap_stage_ == SwapStage::kBlending) return;
+  // A fade's poses are neither subject's solve: they fit neither model.
+  if (fade_left_ > 0) return;
   const size_t count = missing_.size();
   const Vec3* received = received_.data() + static_cast<size_t>(frame) % stamps_.size() * count;
   distances_.clear();

@@ -143,6 +143,8 @@ class SubjectRunner {
   /// Calibrated subjects swapped in (0 or 1), and whether a swap is under way.
   int swaps() const { return swaps_; }
   bool swapping() const { return swap_ != nullptr; }
+  /// The swapped-in subject's poses are still being faded in.
+  bool fading() const { return fade_left_ > 0; }
   /// The last swap: how far the subjects' joints differed when it began, and its fade.
   double fade_differ_deg() const { return fade_differ_deg_; }
   double fade_seconds() const { return blend_frames_ / rate_hz_; }
@@ -217,14 +219,15 @@ class SubjectRunner {
   std::shared_ptr<LiveCalibration> live_;
   bool live_scaled_ = false;
   uint64_t scale_tries_ = 0;
-  enum class SwapStage { kWarming, kBlending };
-  std::unique_ptr<LiveSwap> swap_;       ///< Warming: the incoming subject; blending: the outgoing.
+  std::unique_ptr<LiveSwap> swap_;       ///< The incoming subject, warming up in the shadow.
   std::unique_ptr<LiveSwap> leftovers_;  ///< Waiting to go back to the calibration thread.
-  SwapStage swap_stage_ = SwapStage::kWarming;
-  int64_t shadow_base_ = 0;  ///< Frames pushed before the shadow pipeline's first.
+  int64_t shadow_base_ = 0;              ///< Frames pushed before the shadow pipeline's first.
   int64_t shadow_outputs_ = 0;
   bool shadow_has_output_ = false;  ///< The last push gave the shadow an output.
-  int warm_frames_ = 0, blend_frames_ = 0, blend_step_ = 0;
+  int warm_frames_ = 0, blend_frames_ = 0;
+  int fade_left_ = 0;                  ///< Frames of the fade still to publish.
+  std::vector<Vec3> fade_correction_;  ///< Per joint, new * exp(c) = old at the switch.
+  Vec3 fade_root_offset_ = Vec3::Zero();
   int swaps_ = 0;
   double fade_differ_deg_ = 0.0;  ///< The last swap's largest joint difference at its start.
   Pose blend_pose_;

@@ -117,7 +117,11 @@ int WaitForDaemon(Sockets& s, const std::vector<SubjectLog>& logs, const Schedul
         if (setup.check_hash && d.marker_set_hash != setup.marker_hash)
           throw std::runtime_error(
               "replay: the daemon's subject '" + d.subject +
-              "' has another marker set than this take's (model hash mismatch)");
+              "' expects other markers, or another order, than this replay sends (model hash "
+              "mismatch): a C3D's markers are sent in the order of --subject SUBJECT.toml "
+              "(default: "
+              "the built-in humanoid's), or with --marker-set NAME in that set's order, which a "
+              "subject calibrated live with that marker_set expects");
         described[k] = true;
         lookahead = d.lookahead_frames;
       }

@@ -162,7 +162,8 @@ TEST(DaemonConfigTest, SubjectsAreValidatedOneByOne) {
   EXPECT_NE(missing.find("test.toml:4: field 'subject[0].model':"), std::string::npos) << missing;
   EXPECT_NE(missing.find("nope.toml: cannot open"), std::string::npos) << missing;
   EXPECT_EQ(ErrorOf("format_version = 1\n[[subject]]\nname = \"a\"\n"),
-            "test.toml:2: field 'subject[0].model': missing");
+            "test.toml:2: field 'subject[0].model': missing: give the subject's model file, or "
+            "calibrate = \"live\" with a marker_set");
   EXPECT_EQ(ErrorOf(std::string(kMinimal) + "rate = 120\n"),
             "test.toml:5: field 'subject[0].rate': unknown field");
 }

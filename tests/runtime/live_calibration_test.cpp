@@ -254,7 +254,7 @@ TEST_F(LiveCalibrationTest,
     EXPECT_FALSE(runner.Accept(m, 0, sink).has_value());
     if (f % static_cast<int>(kRate) == 0) (void)calibration->Refine();
     // Five frames into the cross-fade, the stream ends: the lookahead is flushed.
-    if (sink.descriptions.size() == 2 && runner.swapping() &&
+    if (sink.descriptions.size() == 2 && runner.fading() &&
         sink.skeletons.size() == sink.description_at[1] + 5) {
       runner.EndOfStream(sink);
       ended_at = sink.skeletons.size();
@@ -361,9 +361,19 @@ TEST_F(LiveCalibrationTest, BadLiveConfigurationsNameTheirField) {
                   "calibration_max_s = 20\n")
                 .find("calibration_max_s"),
             std::string::npos);
+  EXPECT_NE(error("marker_set = \"cmu-41\"\n").find("add calibrate = \"live\""), std::string::npos);
+  EXPECT_NE(error("").find("give the subject's model file, or calibrate"), std::string::npos);
+  EXPECT_NE(error("calibrate = \"live\"\n").find("cmu-41"), std::string::npos);  // names the sets
+  EXPECT_NE(error("calibrate = \"live\"\nmarker_set = \"cmu-41\"\nmarkers = [\"LFHD\", \"RFHD\"]\n")
+                .find("at least 3"),
+            std::string::npos);
+  EXPECT_NE(error("calibrate = \"live\"\nmarker_set = \"cmu-41\"\n"
+                  "calibration_out = \"no/such/dir/a.toml\"\n")
+                .find("not a directory"),
+            std::string::npos);
   // A label subset in the stream's own order is fine.
-  const DaemonConfig config =
-      Config("calibrate = \"live\"\nmarker_set = \"cmu-41\"\nmarkers = [\"RFHD\", \"LFHD\"]\n");
+  const DaemonConfig config = Config(
+      "calibrate = \"live\"\nmarker_set = \"cmu-41\"\nmarkers = [\"RFHD\", \"LFHD\", \"LBHD\"]\n");
   EXPECT_EQ(config.subjects[0].model.markers->marker(0).name, "RFHD");
 }
 
