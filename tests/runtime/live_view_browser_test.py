@@ -89,6 +89,12 @@ def main():
         browser.evaluate("(() => { const s = document.getElementById('subject'); s.value = 'actor1';"
                          " s.dispatchEvent(new Event('change')); return s.value; })()")
         time.sleep(0.5)  # a few more frames drawn where the joints now are
+        # Paused, as an operator would to look: the joints are projected and the screenshot
+        # taken of the same frame (a walking actor moves 5-10 cm between two browser calls
+        # on a busy machine, which once left 13 of 20 joints on their pixels).
+        browser.evaluate("(() => { const p = document.getElementById('pause'); p.checked = true;"
+                         " p.dispatchEvent(new Event('change')); return p.checked; })()")
+        time.sleep(0.3)  # the last frame drawn again, the camera settled
         joints = browser.evaluate("mocapdView.projectedJoints()")
         colour = browser.evaluate("mocapdView.skeletonColor")
         panels = browser.evaluate(
