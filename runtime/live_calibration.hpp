@@ -63,18 +63,17 @@ struct LiveCalibrationStatus {
   std::vector<JointReadiness> joints;
   std::string message;     ///< The last refinement's problem, or where the subject went.
   std::string written_to;  ///< The calibrated subject's file, once written.
-  uint64_t swaps = 0;      ///< Calibrated subjects the data plane swapped in (fade done).
+  uint64_t swaps = 0;      ///< Calibrated subjects the data plane swapped in.
 };
 
-/// What the data plane swaps in, built off the data plane.
+/// What the data plane swaps in, built off the data plane. Once swapped in, the same
+/// object goes back (LiveCalibration::Retire) holding what it replaced: the outgoing
+/// model, pipeline and retargeter, freed off the data plane.
 struct LiveSwap {
   SubjectModel model;
   std::unique_ptr<CleanupPipeline> pipeline;
   std::unique_ptr<Retargeter> retargeter;  ///< When the subject drives a character.
   protocol::SubjectDescriptionMessage description;
-  /// Retired by the data plane (the pipeline and retargeter it replaced), freed here.
-  std::unique_ptr<CleanupPipeline> retired_pipeline;
-  std::unique_ptr<Retargeter> retired_retargeter;
 };
 
 class LiveCalibration {
