@@ -272,15 +272,19 @@ void SubjectRunner::ScaleTemplate(std::span<const Vec3> positions, OutputSink& s
   live_->Started(*height);
 }
 
-void SubjectRunner::Install(std::unique_ptr<LiveSwap> subject, OutputSink& sink) {
-  subject->pipeline->AdoptCounters(pipeline_->counters());
-  pipeline_ = std::move(subject->pipeline);
-  skeleton_ = subject->model.skeleton;
-  markers_ = subject->model.markers;
-  if (subject->retargeter) retargeter_ = std::move(subject->retargeter);
-  description_ = std::move(subject->description);
+void SubjectRunner::AdoptSubject(LiveSwap& incoming) {
+  std::swap(pipeline_, incoming.pipeline);
+  pipeline_->AdoptCounters(incoming.pipeline->counters());
+  std::swap(skeleton_, incoming.model.skeleton);
+  std::swap(markers_, incoming.model.markers);
+  if (incoming.retargeter) std::swap(retargeter_, incoming.retargeter);
+  std::swap(description_, incoming.description);
   skeleton_hash_ = description_.skeleton_hash;
   skeleton_message_.model_hash = skeleton_hash_;
+}
+
+void SubjectRunner::Install(std::unique_ptr<LiveSwap> subject, OutputSink& sink) {
+  AdoptSubject(*subject);
   pushed_ = published_ = 0;
   frame_base_ = 0;
   live_scaled_ = true;
@@ -288,15 +292,8 @@ void SubjectRunner::Install(std::unique_ptr<LiveSwap> subject, OutputSink& sink)
 }
 
 void SubjectRunner::SwitchModel(OutputSink& sink) {
-  std::swap(pipeline_, swap_->pipeline);
+  AdoptSubject(*swap_);
   std::swap(frame_base_, shadow_base_);
-  pipeline_->AdoptCounters(swap_->pipeline->counters());
-  std::swap(skeleton_, swap_->model.skeleton);
-  std::swap(markers_, swap_->model.markers);
-  if (swap_->retargeter) std::swap(retargeter_, swap_->retargeter);
-  std::swap(description_, swap_->description);
-  skeleton_hash_ = description_.skeleton_hash;
-  skeleton_message_.model_hash = skeleton_hash_;
   // The fade: at this frame each joint's new rotation is corrected back to the old one's
   // (new * C = old), and the correction, fixed from here on, decays to nothing. Not a
   // slerp between the two solves as they go on: two rotations near 180 degrees apart

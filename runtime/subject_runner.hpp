@@ -164,6 +164,9 @@ class SubjectRunner {
   void Resynchronise(OutputSink& sink);
   void ShowLive(const CleanFrame& out, int64_t index, const Stamp& stamp, uint64_t publish_ns);
   void ScaleTemplate(std::span<const Vec3> positions, OutputSink& sink);
+  /// Trades the published subject (pipeline, model, retargeter, description) for
+  /// incoming's, which then holds the old one; the counts carry over.
+  void AdoptSubject(LiveSwap& incoming);
   /// Makes a subject the published one at once (nothing pending: flushed before).
   void Install(std::unique_ptr<LiveSwap> subject, OutputSink& sink);
   void SwitchModel(OutputSink& sink);  // the swap's subject becomes the published one
