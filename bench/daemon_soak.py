@@ -1,6 +1,9 @@
 #!/usr/bin/env python3
 """Soak and load runs of the daemon as a process: N actors at a rate for a duration,
-fed by `mocap-sim replay` (built-in humanoid, medium corruption) over tcp loopback.
+fed by `mocap-sim replay` over tcp loopback with medium corruption: by default each actor
+on its own endless walk through a motion graph over the built-in humanoid's motions
+(`--graph humanoid`: new motion throughout, no loop boundary), or with `--source loop`
+the humanoid's 60 s mixed take looped as before.
 Samples the daemon's CPU and resident memory every few seconds from /proc, reads its
 /metrics at the end, and checks that frames in = frames out + counted drops.
 
@@ -98,9 +101,13 @@ def run(args, subjects, seconds, work):
     take_seconds = min(seconds, 60.0)
     loops = max(1, round(seconds / take_seconds))
     report_path = os.path.join(work, "replay.json")
+    if args.source == "loop":
+        source = ["--humanoid", "mixed", "--seconds", str(take_seconds), "--loop", str(loops)]
+    else:
+        source = ["--graph", args.graph, "--seconds", str(seconds)]
     try:
-        replay = subprocess.run([args.mocap_sim, "replay", "--humanoid", "mixed", "--seconds", str(take_seconds), "--synth-rate", str(args.rate),
-                                 "--loop", str(loops), "--subjects", str(subjects), "--corrupt", "medium", "--to", daemon.input,
+        replay = subprocess.run([args.mocap_sim, "replay", *source, "--synth-rate", str(args.rate),
+                                 "--subjects", str(subjects), "--corrupt", "medium", "--to", daemon.input,
                                  "--from", daemon.output, "--report", report_path, "--plot", os.path.join(work, "latency.svg"),
                                  "--latency-interval", str(args.interval_s), *daemon.replay_curve_args],
                                 capture_output=True, text=True)
@@ -133,6 +140,7 @@ def run(args, subjects, seconds, work):
     quarter = max(1, len(rss_mb) // 4)
     result = {
         "subjects": subjects, "rate_hz": args.rate, "seconds": seconds, "lookahead": args.lookahead,
+        "source": "loop of the humanoid's mixed take" if args.source == "loop" else f"motion graph {args.graph}",
         "frames_sent": r["frames_sent"], "frames_received_by_replay": r["frames_received"], "frames_lost": r["frames_lost"],
         "daemon_messages_in": received, "daemon_frames_published": published, "daemon_dropped": dropped,
         "daemon_control_messages": control, "daemon_pending": pending,
@@ -241,6 +249,11 @@ def main():
     parser.add_argument("--load-subjects", dest="load_subjects", default="1,2,4,6,8,10,12")
     parser.add_argument("--work", default=os.path.join(ROOT, "build", "soak"))
     parser.add_argument("--report", default="")
+    parser.add_argument("--source", choices=("graph", "loop"), default="graph",
+                        help="graph: each actor walks a motion graph (default); loop: the mixed take looped")
+    parser.add_argument("--graph", default="humanoid",
+                        help="with --source graph: a graph file from `mocap-sim graph build` (its subject must be the "
+                             "daemon's) or 'humanoid'")
     parser.add_argument("--curve", action="store_true", help="CURVE on every socket (fresh keys from mocapd keygen)")
     parser.add_argument("--interval-s", dest="interval_s", type=float, default=60.0,
                         help="latency percentiles and RSS per this many seconds")

@@ -2,7 +2,9 @@
 //   info   summarise a C3D or BVH take
 //   synth  place a virtual marker set on a BVH (or the built-in humanoid) and write the marker take
 //   replay publish a take's (or a recording's) marker frames to the daemon in real time and measure
-//   what comes back record subscribe to a capture publisher and record its stream with timing
+//          what comes back
+//   record subscribe to a capture publisher and record its stream with timing
+//   graph  motion graphs: build one over takes, synthesize under constraints, retrieve
 #include <CLI/CLI.hpp>
 #include <atomic>
 #include <csignal>
@@ -18,6 +20,7 @@
 #include "formats/marker_set.hpp"
 #include "formats/subject_file.hpp"
 #include "sim/corruption.hpp"
+#include "sim/graph_command.hpp"
 #include "sim/humanoid.hpp"
 #include "sim/recording.hpp"
 #include "sim/replay.hpp"
@@ -118,6 +121,7 @@ int RunSynth(const SynthOptions& o) {
 struct ReplayCommand {
   std::string take;
   std::string humanoid;
+  std::string graph;
   double seconds = 30.0;
   double synth_rate_hz = 120.0;
   double noise_mm = 0.5;
@@ -134,8 +138,14 @@ std::atomic<bool> g_stop{false};
 
 int RunReplayCommand(ReplayCommand& c) {
   mocapd::ReplaySource source;
-  if (!c.take.empty() && !c.humanoid.empty())
-    throw std::invalid_argument("replay: give a TAKE file or --humanoid, not both");
+  if (!c.take.empty() + !c.humanoid.empty() + !c.graph.empty() > 1)
+    throw std::invalid_argument("replay: give one of a TAKE file, --humanoid or --graph");
+  mocapd::GraphReplaySource graph_source;
+  if (!c.graph.empty()) {
+    if (c.options.loops != 1)
+      throw std::invalid_argument("replay: a graph stream never loops; --seconds sets its length");
+    graph_source = mocapd::GraphSource(c.graph);
+  }
   const bool recording = !c.take.empty() && mocapd::IsRecordingFile(c.take);
   if (recording) {
     if (c.rate != "realtime" && c.rate != "max")
@@ -144,6 +154,8 @@ int RunReplayCommand(ReplayCommand& c) {
     if (!c.options.corrupt.empty() || c.options.subjects != 1 || c.options.loops != 1)
       throw std::invalid_argument(
           "replay: --corrupt, --subjects and --loop apply to takes, not recordings");
+  } else if (!c.graph.empty()) {
+    // The graph stream is made while it plays.
   } else if (c.take.empty()) {
     source = mocapd::HumanoidReplaySource(c.humanoid.empty() ? "mixed" : c.humanoid, c.seconds,
                                           c.synth_rate_hz, c.noise_mm, c.options.seed);
@@ -172,7 +184,13 @@ int RunReplayCommand(ReplayCommand& c) {
   };
   std::signal(SIGINT, [](int) { g_stop = true; });
   std::signal(SIGTERM, [](int) { g_stop = true; });
-  if (!recording)
+  if (!c.graph.empty())
+    std::cout << "replaying " << graph_source.description << ": " << c.seconds << " s at "
+              << c.synth_rate_hz << " Hz to " << c.options.to << " (" << c.options.subjects
+              << " subject(s), each on its own walk, "
+              << (c.options.corrupt.empty() ? "clean" : c.options.corrupt + " corruption") << ")\n"
+              << std::flush;
+  else if (!recording)
     std::cout << "replaying " << source.description << " to " << c.options.to << " ("
               << c.options.subjects << " subject(s), " << c.options.loops << " loop(s), "
               << (c.options.corrupt.empty() ? "clean" : c.options.corrupt + " corruption") << ")\n"
@@ -187,6 +205,8 @@ int RunReplayCommand(ReplayCommand& c) {
               << c.options.to << "\n"
               << std::flush;
     report = mocapd::RunRecordingReplay(rec, c.take, c.options);
+  } else if (!c.graph.empty()) {
+    report = mocapd::RunGraphReplay(graph_source, c.seconds, c.synth_rate_hz, c.options);
   } else {
     report = mocapd::RunReplay(source, c.options);
   }
@@ -284,7 +304,15 @@ int main(int argc, char** argv) {
       ->add_option("--humanoid", replay.humanoid,
                    "Replay the built-in humanoid: walk | reach | turn | mixed")
       ->check(CLI::IsMember({"walk", "reach", "turn", "mixed"}));
-  replay_cmd->add_option("--seconds", replay.seconds, "Length of the built-in humanoid's take")
+  replay_cmd
+      ->add_option("--graph", replay.graph,
+                   "Stream endless motion from a motion graph (a file from `graph build`, or "
+                   "'humanoid' for one over the built-in humanoid's motions): each subject on its "
+                   "own seeded walk, for --seconds at --synth-rate")
+      ->check(CLI::ExistingFile | CLI::IsMember({"humanoid"}));
+  replay_cmd
+      ->add_option("--seconds", replay.seconds,
+                   "Length of the built-in humanoid's take (or the graph stream)")
       ->check(CLI::Range(0.1, 3600.0))
       ->capture_default_str();
   replay_cmd
@@ -399,8 +427,11 @@ int main(int argc, char** argv) {
                    "CURVE: the publisher's public key (FILE.key); needs --curve-key")
       ->check(CLI::ExistingFile);
 
+  mocapd::GraphCommands graph_commands(app);
+
   CLI11_PARSE(app, argc, argv);
   try {
+    if (graph_commands.Selected()) return graph_commands.Run();
     if (*info) {
       const mocapd::TakeInfo ti = mocapd::InspectTake(info_path);
       if (info_json)

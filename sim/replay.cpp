@@ -4,6 +4,10 @@
 
 #include <chrono>
 #include <cmath>
+#include <deque>
+#include <functional>
+#include <memory>
+#include <mutex>
 #include <random>
 #include <stdexcept>
 #include <utility>
@@ -11,8 +15,10 @@
 #include "formats/take_frames.hpp"
 #include "protocol/messages.hpp"
 #include "sim/corruption.hpp"
+#include "sim/graph_walker.hpp"
 #include "sim/recording.hpp"
 #include "sim/replay_schedule.hpp"
+#include "sim/synthesis.hpp"
 
 namespace mocapd {
 namespace {
@@ -58,6 +64,77 @@ protocol::Timecode TimecodeOf(uint64_t f, double rate_hz, int fps) {
   return tc;
 }
 
+// The wire options a take replay and a graph stream share.
+void CheckStreamOptions(const ReplayOptions& o) {
+  if (o.protocol_version != protocol::kVersion1 && o.protocol_version != protocol::kVersion2)
+    throw std::invalid_argument("replay: protocol version must be 1 or 2");
+  if (o.timecode_fps < 0 || o.timecode_fps > 1000)
+    throw std::invalid_argument("replay: timecode rate must be 0 (none) .. 1000 fps");
+  if (o.timecode_fps > 0 && o.protocol_version < protocol::kVersion2)
+    throw std::invalid_argument("replay: timecode needs protocol version 2");
+}
+
+// Frames go out subject after subject for each capture tick; when ends_pass says a pass is
+// over (after its last tick), an end of stream per subject. fill puts a subject's markers
+// for a tick into the message (positions and validity); the rest is filled here.
+struct TickProducerSetup {
+  std::vector<replay::SubjectLog>* logs = nullptr;
+  uint64_t total = 0;
+  int64_t period_ns = 0;
+  bool max_rate = false;
+  std::function<bool(uint64_t next_tick)> ends_pass;
+  std::function<void(size_t subject, uint64_t tick, protocol::MarkerFrameMessage*)> fill;
+  std::function<protocol::StreamInfo(uint64_t tick)> stream_of;
+  protocol::MarkerFrameMessage message;  ///< Hash, rate and version set.
+};
+
+replay::FrameProducer TickProducer(TickProducerSetup setup) {
+  struct State {
+    TickProducerSetup setup;
+    uint64_t seq = 0;
+    size_t subject = 0;
+    bool ending = false;
+  };
+  auto state = std::make_shared<State>();
+  state->setup = std::move(setup);
+  return [state](replay::Outgoing* next, std::vector<uint8_t>* bytes) {
+    State& st = *state;
+    TickProducerSetup& su = st.setup;
+    if (st.seq >= su.total && !st.ending) return false;
+    next->subject = st.subject;
+    next->due_ns =
+        su.max_rate ? -1 : static_cast<int64_t>(st.ending ? st.seq - 1 : st.seq) * su.period_ns;
+    replay::SubjectLog& log = (*su.logs)[st.subject];
+    if (st.ending) {
+      next->end_of_stream = true;
+      next->frame_number = st.seq - 1;
+      protocol::EncodeEndOfStream({log.name, st.seq - 1}, bytes);
+    } else {
+      protocol::MarkerFrameMessage& message = su.message;
+      su.fill(st.subject, st.seq, &message);
+      for (size_t m = 0; m < message.positions.size(); ++m)
+        if (message.valid[m]) message.positions[m] += log.offset;
+      message.subject = log.name;
+      message.frame_number = st.seq;
+      message.stream = su.stream_of(st.seq);
+      message.capture_time_ns = WallNs();
+      next->end_of_stream = false;
+      next->frame_number = st.seq;
+      protocol::EncodeMarkerFrame(message, bytes);
+    }
+    if (++st.subject == su.logs->size()) {
+      st.subject = 0;
+      if (st.ending) {
+        st.ending = false;
+      } else {
+        ++st.seq;
+        st.ending = su.ends_pass(st.seq);
+      }
+    }
+    return true;
+  };
+}
+
 // A session id per replay run: random, so that two runs never look like one capture.
 uint64_t NewSessionBase() {
   std::random_device device;
@@ -95,18 +172,8 @@ ReplayReport RunReplay(const ReplaySource& source, const ReplayOptions& o) {
       corrupted[static_cast<size_t>(k)] = CorruptTake(source.take, source.markers.get(), c).take;
     }
   }
-  // Frames go out subject after subject for each capture tick; after each pass over the
-  // take, an end of stream per subject (the next pass starts afresh).
-  protocol::MarkerFrameMessage message;
-  message.model_hash = marker_hash;
-  message.rate_hz = static_cast<float>(source.rate_hz);
-  message.version = static_cast<uint16_t>(o.protocol_version);
-  if (o.protocol_version != protocol::kVersion1 && o.protocol_version != protocol::kVersion2)
-    throw std::invalid_argument("replay: protocol version must be 1 or 2");
-  if (o.timecode_fps < 0 || o.timecode_fps > 1000)
-    throw std::invalid_argument("replay: timecode rate must be 0 (none) .. 1000 fps");
-  if (o.timecode_fps > 0 && o.protocol_version < protocol::kVersion2)
-    throw std::invalid_argument("replay: timecode needs protocol version 2");
+  // After each pass over the take, an end of stream per subject (the next pass starts afresh).
+  CheckStreamOptions(o);
   // Each pass over the take is a capture of its own when it ends with an end of stream.
   const uint64_t session_base = NewSessionBase();
   const std::pair<uint32_t, uint32_t> rate_fraction = RateFraction(source.rate_hz);
@@ -124,44 +191,23 @@ ReplayReport RunReplay(const ReplaySource& source, const ReplayOptions& o) {
     }
     return s;
   };
-  size_t seq = 0, subject = 0;
-  bool ending = false;
-  const int64_t period_ns = static_cast<int64_t>(1e9 / rate);
-  const replay::FrameProducer produce = [&](replay::Outgoing* next, std::vector<uint8_t>* bytes) {
-    if (seq >= total && !ending) return false;
-    next->subject = subject;
-    // An end of stream goes out right after its pass's last frame.
-    next->due_ns = max_rate ? -1 : static_cast<int64_t>(ending ? seq - 1 : seq) * period_ns;
-    replay::SubjectLog& log = logs[subject];
-    if (ending) {
-      next->end_of_stream = true;
-      next->frame_number = seq - 1;
-      protocol::EncodeEndOfStream({log.name, seq - 1}, bytes);
-    } else {
-      const int f = static_cast<int>(seq % static_cast<size_t>(n));
-      const C3dTake& take = o.corrupt.empty() ? source.take : corrupted[subject];
-      map.FillMessage(take, f, &message);
-      for (size_t m = 0; m < message.positions.size(); ++m)
-        if (message.valid[m]) message.positions[m] += log.offset;
-      message.subject = log.name;
-      message.frame_number = seq;
-      message.stream = stream_of(seq);
-      message.capture_time_ns = WallNs();
-      next->end_of_stream = false;
-      next->frame_number = seq;
-      protocol::EncodeMarkerFrame(message, bytes);
-    }
-    if (++subject == logs.size()) {
-      subject = 0;
-      if (ending) {
-        ending = false;
-      } else {
-        ++seq;
-        ending = o.end_of_stream && seq % static_cast<size_t>(n) == 0;
-      }
-    }
-    return true;
+  TickProducerSetup ticks;
+  ticks.logs = &logs;
+  ticks.total = total;
+  ticks.period_ns = static_cast<int64_t>(1e9 / rate);
+  ticks.max_rate = max_rate;
+  ticks.ends_pass = [&](uint64_t next) {
+    return o.end_of_stream && next % static_cast<uint64_t>(n) == 0;
   };
+  ticks.fill = [&](size_t subject, uint64_t seq, protocol::MarkerFrameMessage* message) {
+    const C3dTake& take = o.corrupt.empty() ? source.take : corrupted[subject];
+    map.FillMessage(take, static_cast<int>(seq % static_cast<uint64_t>(n)), message);
+  };
+  ticks.stream_of = stream_of;
+  ticks.message.model_hash = marker_hash;
+  ticks.message.rate_hz = static_cast<float>(source.rate_hz);
+  ticks.message.version = static_cast<uint16_t>(o.protocol_version);
+  const replay::FrameProducer produce = TickProducer(std::move(ticks));
   replay::ScheduleSetup setup;
   setup.marker_hash = marker_hash;
   setup.check_hash = true;
@@ -178,6 +224,185 @@ ReplayReport RunReplay(const ReplaySource& source, const ReplayOptions& o) {
   ReplayReport report = replay::RunSchedule(logs, produce, setup, o);
   report.source = source.description;
   report.rate_hz = rate;
+  return report;
+}
+
+namespace {
+
+// Graph actors stand this far apart: each walks around its own spot (within a few metres).
+constexpr double kGraphActorSpacingM = 8.0;
+// Markers are synthesized (and corrupted) this many seconds at a time, ahead of sending.
+constexpr double kGraphChunkSeconds = 2.0;
+
+// One actor's endless stream: the walk at the graph's rate, resampled to the replay's
+// rate a chunk at a time, and the recent chunks' truth for the receiver thread.
+class GraphActor {
+ public:
+  GraphActor(const GraphReplaySource& source, uint64_t seed, double rate_hz,
+             const std::string& corrupt, uint64_t corrupt_seed)
+      : source_(source),
+        walker_(*source.library, *source.graph, WalkOptions{.seed = seed}),
+        rate_hz_(rate_hz),
+        corrupt_(corrupt),
+        corrupt_seed_(corrupt_seed) {}
+
+  // The chunk holding frame_number, synthesizing the next one when the stream reaches it.
+  const C3dTake& ChunkFor(uint64_t frame_number, uint64_t total, int* frame_in_chunk) {
+    if (frame_number >= chunk_first_ + static_cast<uint64_t>(chunk_.num_frames) ||
+        chunk_.num_frames == 0)
+      NextChunk(frame_number, total);
+    *frame_in_chunk = static_cast<int>(frame_number - chunk_first_);
+    return chunk_;
+  }
+  const TakeMarkerMap& map() const { return *map_; }
+
+  // The truth of a frame sent in one of the last few chunks (nullptr if older).
+  const Pose* Truth(uint64_t frame_number, Pose* scratch) {
+    std::lock_guard<std::mutex> lock(truth_mutex_);
+    for (const auto& [first, poses] : truth_)
+      if (frame_number >= first && frame_number < first + poses.size()) {
+        *scratch = poses[static_cast<size_t>(frame_number - first)];
+        return scratch;
+      }
+    return nullptr;
+  }
+
+ private:
+  void NextChunk(uint64_t first, uint64_t total) {
+    const MotionLibrary& lib = *source_.library;
+    const auto n = static_cast<size_t>(std::min<uint64_t>(
+        total - first, static_cast<uint64_t>(std::llround(kGraphChunkSeconds * rate_hz_))));
+    std::vector<Pose> poses;
+    poses.reserve(n);
+    for (size_t k = 0; k < n; ++k) {
+      const double x = static_cast<double>(first + k) * lib.rate_hz / rate_hz_;
+      const auto i = static_cast<int64_t>(std::floor(x));
+      while (graph_base_ + static_cast<int64_t>(graph_frames_.size()) <= i + 1)
+        walker_.NextFrames(&graph_frames_);
+      const Pose& a = graph_frames_[static_cast<size_t>(i - graph_base_)];
+      const Pose& b = graph_frames_[static_cast<size_t>(i + 1 - graph_base_)];
+      const double alpha = x - static_cast<double>(i);
+      Pose p = a;
+      for (size_t j = 0; j < p.rotation.size(); ++j) {
+        p.rotation[j] = a.rotation[j].slerp(alpha, b.rotation[j]).normalized();
+        p.translation[j] = (1.0 - alpha) * a.translation[j] + alpha * b.translation[j];
+      }
+      poses.push_back(std::move(p));
+    }
+    // Frames the stream has passed are dropped, keeping the buffer to about a chunk.
+    const int64_t keep_from =
+        static_cast<int64_t>(std::floor(static_cast<double>(first + n) * lib.rate_hz / rate_hz_)) -
+        1;
+    if (keep_from > graph_base_) {
+      graph_frames_.erase(graph_frames_.begin(), graph_frames_.begin() + (keep_from - graph_base_));
+      graph_base_ = keep_from;
+    }
+    chunk_ = SynthesizeMarkers(*lib.skeleton, *source_.markers, poses, rate_hz_, SynthesisNoise{});
+    if (!corrupt_.empty()) {
+      CorruptionOptions c;
+      c.severity = ParseCorruptionSeverity(corrupt_);
+      c.seed = corrupt_seed_ + ++chunks_ * 1000003ull;
+      chunk_ = CorruptTake(chunk_, source_.markers.get(), c).take;
+    }
+    map_ = std::make_unique<TakeMarkerMap>(*source_.markers, chunk_);
+    chunk_first_ = first;
+    std::lock_guard<std::mutex> lock(truth_mutex_);
+    truth_.emplace_back(first, std::move(poses));
+    // The receiver scores frames a lookahead and a network hop behind: a few chunks do.
+    while (truth_.size() > 4) truth_.pop_front();
+  }
+
+  const GraphReplaySource& source_;
+  GraphWalker walker_;
+  double rate_hz_;
+  std::string corrupt_;
+  uint64_t corrupt_seed_;
+  uint64_t chunks_ = 0;
+  std::vector<Pose> graph_frames_;
+  int64_t graph_base_ = 0;
+  C3dTake chunk_;
+  uint64_t chunk_first_ = 0;
+  std::unique_ptr<TakeMarkerMap> map_;
+  std::mutex truth_mutex_;
+  std::deque<std::pair<uint64_t, std::vector<Pose>>> truth_;
+};
+
+}  // namespace
+
+ReplayReport RunGraphReplay(const GraphReplaySource& source, double seconds, double rate_hz,
+                            const ReplayOptions& o) {
+  if (o.subjects < 1) throw std::invalid_argument("replay: subjects must be at least 1");
+  if (!(seconds > 0) || !(rate_hz > 0))
+    throw std::invalid_argument("replay: seconds and rate must be > 0");
+  CheckStreamOptions(o);
+  const auto total = std::max<uint64_t>(1, static_cast<uint64_t>(std::llround(seconds * rate_hz)));
+  const double send_rate = o.rate_hz > 0 ? o.rate_hz : rate_hz;
+  const bool max_rate = o.rate_hz < 0;
+  const uint64_t marker_hash = protocol::MarkerSetHash(*source.markers);
+
+  std::vector<replay::SubjectLog> logs(static_cast<size_t>(o.subjects));
+  std::vector<std::unique_ptr<GraphActor>> actors;
+  for (int k = 0; k < o.subjects; ++k) {
+    replay::SubjectLog& log = logs[static_cast<size_t>(k)];
+    log.name = SubjectName(o, k);
+    log.topic = "markers/" + log.name + "/";
+    log.offset = Vec3(kGraphActorSpacingM * k, 0.0, 0.0);
+    log.sent.reserve(static_cast<size_t>(total) + 1);
+    log.received_ns.reserve(static_cast<size_t>(total));
+    for (uint64_t seq = 0; seq < total; ++seq) log.received_ns.emplace(seq, 0);
+    actors.push_back(std::make_unique<GraphActor>(source, o.seed + static_cast<uint64_t>(k),
+                                                  rate_hz, o.corrupt,
+                                                  o.seed + 7919ull * static_cast<uint64_t>(k)));
+  }
+  const uint64_t session = NewSessionBase();
+  const std::pair<uint32_t, uint32_t> rate_fraction = RateFraction(rate_hz);
+  const auto stream_of = [&](uint64_t frame_number) {
+    protocol::StreamInfo s;
+    if (o.protocol_version < protocol::kVersion2) return s;
+    s.session_id = session;
+    s.rate_numerator = rate_fraction.first;
+    s.rate_denominator = rate_fraction.second;
+    if (o.timecode_fps > 0) {
+      s.has_timecode = true;
+      s.timecode = TimecodeOf(frame_number, rate_hz, o.timecode_fps);
+    }
+    return s;
+  };
+  TickProducerSetup ticks;
+  ticks.logs = &logs;
+  ticks.total = total;
+  ticks.period_ns = static_cast<int64_t>(1e9 / send_rate);
+  ticks.max_rate = max_rate;
+  ticks.ends_pass = [&](uint64_t next) { return o.end_of_stream && next == total; };
+  ticks.fill = [&](size_t subject, uint64_t seq, protocol::MarkerFrameMessage* message) {
+    int f = 0;
+    GraphActor& actor = *actors[subject];
+    const C3dTake& chunk = actor.ChunkFor(seq, total, &f);
+    actor.map().FillMessage(chunk, f, message);
+  };
+  ticks.stream_of = stream_of;
+  ticks.message.model_hash = marker_hash;
+  ticks.message.rate_hz = static_cast<float>(rate_hz);
+  ticks.message.version = static_cast<uint16_t>(o.protocol_version);
+  const replay::FrameProducer produce = TickProducer(std::move(ticks));
+  replay::ScheduleSetup setup;
+  setup.marker_hash = marker_hash;
+  setup.check_hash = true;
+  setup.skeleton = source.library->skeleton.get();
+  setup.frame_period_s = 1.0 / send_rate;
+  if (o.protocol_version >= protocol::kVersion2)
+    setup.sent_stream = [&](size_t, uint64_t frame_number) { return stream_of(frame_number); };
+  setup.truth = [&](size_t k, uint64_t frame_number, Pose* scratch) -> const Pose* {
+    const Pose* p = actors[k]->Truth(frame_number, scratch);
+    // The actor's spot is in the world; the body root's translation is in its parent's frame.
+    if (p)
+      scratch->translation[static_cast<size_t>(source.library->body_root)] +=
+          source.library->parent_rotation.transpose() * logs[k].offset;
+    return p;
+  };
+  ReplayReport report = replay::RunSchedule(logs, produce, setup, o);
+  report.source = source.description;
+  report.rate_hz = send_rate;
   return report;
 }
 

@@ -56,6 +56,14 @@ struct ReplayOptions {
 /// within connect_timeout_s.
 ReplayReport RunReplay(const ReplaySource& source, const ReplayOptions& options);
 
+/// Replays endless motion from a motion graph: each actor walks the graph on its own
+/// (seeded by options.seed and its index), resampled to rate_hz, for `seconds`, with
+/// markers synthesized and (options.corrupt) corrupted a couple of seconds at a time, and
+/// the walk as the truth. One capture session; an end of stream at the end. Loops do not
+/// apply. Throws like RunReplay.
+ReplayReport RunGraphReplay(const GraphReplaySource& source, double seconds, double rate_hz,
+                            const ReplayOptions& options);
+
 struct Recording;
 /// Replays a recorded stream (sim/recording.hpp) with its original timing (rate_hz < 0:
 /// as fast as possible), measuring like RunReplay (no ground truth). Messages that were

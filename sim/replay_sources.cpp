@@ -49,6 +49,42 @@ ReplaySource BvhReplaySource(const std::string& path, double rate_hz, const std:
   return s;
 }
 
+GraphReplaySource GraphSource(const std::string& graph_path) {
+  GraphReplaySource s;
+  if (graph_path == "humanoid") {
+    const SubjectModel model = MakeHumanoidSubject("actor1");
+    std::vector<BvhTake> takes;
+    std::vector<std::string> names;
+    for (const char* motion : {"walk", "turn", "reach", "mixed"}) {
+      takes.push_back(
+          MakeBvhTake(*model.skeleton,
+                      MakeHumanoidMotion(*model.skeleton, ParseHumanoidMotion(motion), 30.0, 30.0),
+                      1.0 / 30.0));
+      names.push_back(motion);
+    }
+    auto library = std::make_shared<MotionLibrary>(
+        MakeMotionLibrary(takes, names, std::vector<uint64_t>(takes.size(), 0), 30.0));
+    s.graph = std::make_shared<const MotionGraph>(BuildMotionGraph(*library, GraphBuildOptions{}));
+    s.library = std::move(library);
+    s.markers = model.markers;
+    s.description = "motion graph over the built-in humanoid's walk, turn, reach and mixed motion";
+  } else {
+    auto graph = std::make_shared<const MotionGraph>(ReadMotionGraph(graph_path));
+    auto library = std::make_shared<const MotionLibrary>(LoadGraphLibrary(*graph, graph_path));
+    s.markers = std::make_shared<const MarkerSet>(
+        *library->skeleton, PlaceMarkers(*library->skeleton, MatchHumanoidRoles(*library->skeleton),
+                                         DefaultMarkerLayout(), library->layout.end_sites));
+    s.graph = std::move(graph);
+    s.library = std::move(library);
+    s.description = "motion graph " + graph_path;
+  }
+  char d[96];
+  std::snprintf(d, sizeof(d), " (%d takes, %zu transitions)", s.library->num_takes(),
+                s.graph->transitions.size());
+  s.description += d;
+  return s;
+}
+
 ReplaySource C3dReplaySource(const std::string& path, const std::string& subject_path,
                              const std::string& marker_set) {
   ReplaySource s;

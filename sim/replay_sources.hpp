@@ -10,6 +10,7 @@
 
 #include "filters/marker_model.hpp"
 #include "formats/c3d.hpp"
+#include "sim/motion_graph.hpp"
 
 namespace mocapd {
 
@@ -34,5 +35,19 @@ ReplaySource BvhReplaySource(const std::string& path, double rate_hz, const std:
 /// sent in the set's order: what a daemon calibrating that subject live expects.
 ReplaySource C3dReplaySource(const std::string& path, const std::string& subject_path,
                              const std::string& marker_set = "");
+
+/// What a motion-graph stream plays: endless random walks over a graph (one per actor),
+/// markers synthesized on the library's skeleton, the walk itself the truth.
+struct GraphReplaySource {
+  std::string description;
+  std::shared_ptr<const MotionLibrary> library;
+  std::shared_ptr<const MotionGraph> graph;
+  std::shared_ptr<const MarkerSet> markers;
+};
+
+/// "humanoid": a graph over the built-in humanoid's walk, turn, reach and mixed motion
+/// (config/demo_subject.toml's skeleton and markers, so the demo daemon takes it); else a
+/// graph file (markers: the default layout on the takes' skeleton, as for a BVH replay).
+GraphReplaySource GraphSource(const std::string& graph);
 
 }  // namespace mocapd

@@ -1,0 +1,432 @@
+// Constrained synthesis on a motion graph: a frame-exact reachability programme over
+// distance bitsets, then a backward search with the exact remaining distance.
+#include "sim/graph_planner.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <unordered_set>
+
+namespace mocapd {
+
+GraphPoint ParseGraphPoint(const MotionLibrary& lib, const std::string& text) {
+  const size_t colon = text.rfind(':');
+  if (colon == std::string::npos || colon == 0 || colon + 1 == text.size())
+    throw std::invalid_argument("'" + text + "' is not TAKE:FRAME");
+  GraphPoint p;
+  p.take = lib.TakeIndex(text.substr(0, colon));
+  const std::string frame = text.substr(colon + 1);
+  size_t used = 0;
+  try {
+    p.frame = std::stoi(frame, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (used != frame.size() || p.frame < 0 || p.frame >= lib.num_frames(p.take))
+    throw std::invalid_argument("'" + text + "': frame must be 0 .. " +
+                                std::to_string(lib.num_frames(p.take) - 1) + " (at " +
+                                std::to_string(static_cast<int>(lib.rate_hz)) + " Hz)");
+  return p;
+}
+
+GraphPlanner::GraphPlanner(const MotionLibrary& library, const MotionGraph& graph, double bin_m)
+    : lib_(library), graph_(graph), bin_m_(bin_m) {
+  if (!(bin_m > 0)) throw std::invalid_argument("planner: distance bin must be > 0");
+}
+
+double GraphPlanner::PlayDistance(int take, int frame, int count, bool starts_path) const {
+  if (count <= 0) return 0.0;
+  const auto& p = lib_.path_m[static_cast<size_t>(take)];
+  const double inside = p[static_cast<size_t>(frame + count - 1)] - p[static_cast<size_t>(frame)];
+  return inside + (starts_path ? 0.0 : lib_.Step(take, frame));
+}
+
+void GraphPlanner::Prepare(GraphPoint from, std::optional<GraphPoint> to, double max_seconds,
+                           double max_distance_m) {
+  auto check = [&](const GraphPoint& p, const char* what) {
+    if (p.take < 0 || p.take >= lib_.num_takes() || p.frame < 0 ||
+        p.frame >= lib_.num_frames(p.take))
+      throw std::invalid_argument(std::string("planner: the ") + what +
+                                  " point is outside its take");
+  };
+  check(from, "start");
+  if (to) check(*to, "end");
+  if (!(max_seconds > 0) || max_seconds > 3600.0)
+    throw std::invalid_argument("planner: time must be > 0 and at most an hour");
+  if (!(max_distance_m >= 0) || max_distance_m > 10000.0)
+    throw std::invalid_argument("planner: distance must be 0 .. 10 km");
+  from_ = from;
+  to_ = to;
+  horizon_ = std::max(1, static_cast<int>(std::lround(max_seconds * lib_.rate_hz)));
+  bins_ = static_cast<int>(std::ceil(max_distance_m / bin_m_)) + 2;
+  words_ = (bins_ + 63) / 64;
+  bins_ = words_ * 64;
+
+  // Nodes: the start, then every frame where a transition leaves a take, and the frame
+  // after the end point.
+  nodes_.clear();
+  edges_.clear();
+  nodes_.push_back({from.take, from.frame});
+  start_node_ = 0;
+  std::vector<std::vector<std::pair<int, int>>> events(static_cast<size_t>(lib_.num_takes()));
+  auto add_event = [&](int take, int frame) {
+    auto& list = events[static_cast<size_t>(take)];
+    for (const auto& [f, id] : list)
+      if (f == frame) return id;
+    nodes_.push_back({take, frame});
+    list.emplace_back(frame, static_cast<int>(nodes_.size()) - 1);
+    return static_cast<int>(nodes_.size()) - 1;
+  };
+  for (const GraphTransition& t : graph_.transitions) add_event(t.from_take, t.exit_frame());
+  end_node_ = to ? add_event(to->take, to->frame + 1) : -1;
+  for (auto& list : events) std::sort(list.begin(), list.end());
+  // The first event at or after frame (strictly after when strict), or -1.
+  auto next_event = [&](int take, int frame, bool strict) {
+    for (const auto& [f, id] : events[static_cast<size_t>(take)])
+      if (f > frame || (!strict && f == frame)) return id;
+    return -1;
+  };
+  for (int u = 0; u < static_cast<int>(nodes_.size()); ++u) {
+    const Node n = nodes_[static_cast<size_t>(u)];
+    const bool start = u == start_node_;
+    const int skip = next_event(n.take, n.frame, true);
+    if (skip >= 0) {
+      const int frames = nodes_[static_cast<size_t>(skip)].frame - n.frame;
+      edges_.push_back({u, skip, frames, PlayDistance(n.take, n.frame, frames, start), -1});
+    }
+    for (size_t k = 0; k < graph_.transitions.size(); ++k) {
+      const GraphTransition& t = graph_.transitions[k];
+      if (t.from_take != n.take || t.exit_frame() != n.frame) continue;
+      const int arrive = next_event(t.to_take, t.entry_frame(), false);
+      if (arrive < 0) continue;
+      const int play = nodes_[static_cast<size_t>(arrive)].frame - t.entry_frame();
+      const double d = (start ? 0.0 : lib_.Step(n.take, n.frame)) + t.blend_path_m +
+                       PlayDistance(t.to_take, t.entry_frame(), play, false);
+      edges_.push_back({u, arrive, t.blend_frames() + play, d, static_cast<int>(k)});
+    }
+  }
+  in_edges_.assign(nodes_.size(), {});
+  out_edges_.assign(nodes_.size(), {});
+  for (size_t e = 0; e < edges_.size(); ++e) {
+    in_edges_[static_cast<size_t>(edges_[e].to)].push_back(static_cast<int>(e));
+    out_edges_[static_cast<size_t>(edges_[e].from)].push_back(static_cast<int>(e));
+  }
+
+  const size_t cells = nodes_.size() * static_cast<size_t>(horizon_ + 1);
+  bits_.assign(cells * static_cast<size_t>(words_), 0);
+  reached_.assign(cells, 0);
+  Bits(start_node_, 0)[0] = 1;
+  reached_[static_cast<size_t>(start_node_) * static_cast<size_t>(horizon_ + 1)] = 1;
+  for (int t = 0; t <= horizon_; ++t) {
+    for (int u = 0; u < static_cast<int>(nodes_.size()); ++u) {
+      if (!reached_[static_cast<size_t>(u) * static_cast<size_t>(horizon_ + 1) +
+                    static_cast<size_t>(t)])
+        continue;
+      const uint64_t* src = Bits(u, t);
+      for (int e : out_edges_[static_cast<size_t>(u)]) {
+        const Edge& edge = edges_[static_cast<size_t>(e)];
+        const int t2 = t + edge.frames;
+        if (t2 > horizon_) continue;
+        const long shift = std::lround(edge.distance_m / bin_m_);
+        if (shift >= bins_) continue;
+        const int word_shift = static_cast<int>(shift / 64),
+                  bit_shift = static_cast<int>(shift % 64);
+        uint64_t* dst = Bits(edge.to, t2);
+        bool any = false;
+        for (int w = words_ - 1; w >= word_shift; --w) {
+          uint64_t v = src[w - word_shift] << bit_shift;
+          if (bit_shift > 0 && w - word_shift - 1 >= 0)
+            v |= src[w - word_shift - 1] >> (64 - bit_shift);
+          dst[w] |= v;
+          any = any || v != 0;
+        }
+        if (any)
+          reached_[static_cast<size_t>(edge.to) * static_cast<size_t>(horizon_ + 1) +
+                   static_cast<size_t>(t2)] = 1;
+      }
+    }
+  }
+}
+
+int GraphPlanner::NearestBin(int node, int t, long bin, int max_offset) const {
+  if (t < 0 || t > horizon_ ||
+      !reached_[static_cast<size_t>(node) * static_cast<size_t>(horizon_ + 1) +
+                static_cast<size_t>(t)])
+    return -1;
+  const uint64_t* b = Bits(node, t);
+  auto set = [&](long k) { return k >= 0 && k < bins_ && ((b[k / 64] >> (k % 64)) & 1u); };
+  for (long off = 0; off <= max_offset; ++off) {
+    if (set(bin - off)) return static_cast<int>(bin - off);
+    if (set(bin + off)) return static_cast<int>(bin + off);
+    if (bin - off < 0 && bin + off >= bins_) break;
+  }
+  return -1;
+}
+
+SynthesisResult GraphPlanner::Solve(double distance_m, double seconds) const {
+  if (nodes_.empty()) throw std::runtime_error("planner: Prepare was not called");
+  const int target_frames = static_cast<int>(std::lround(seconds * lib_.rate_hz));
+  // Ways to end: at the end node, or (no end point) anywhere, playing on from a node or
+  // from a blend's arrival for the frames that are left.
+  struct Ending {
+    int node, t;
+    double extra_m;    ///< Distance after (node, t).
+    int transition;    ///< A blend after the node, then play (-1: play only).
+    int play;          ///< Frames played after the node (or after the blend).
+    double miss;       ///< |nearest reachable distance - target|, for ordering.
+    double remaining;  ///< The distance to aim for before (node, t): the target's, if
+                       ///< reachable, else the nearest reachable.
+  };
+  std::vector<Ending> endings;
+  int frames = -1;
+  const int bins_max = bins_;
+  for (int off = 0; off <= horizon_ && endings.empty(); ++off) {
+    for (int sign : {0, -1, 1}) {
+      if ((off == 0) != (sign == 0)) continue;
+      const int n = target_frames + sign * off;
+      if (n < 1 || n > horizon_) continue;
+      auto consider = [&](int node, int t, double extra, int transition, int play) {
+        const double r = (distance_m - extra) / bin_m_;
+        const int nb = NearestBin(node, t, std::lround(r), bins_max);
+        if (nb < 0) return;
+        const double aim = std::abs(nb - r) <= 1.0 ? distance_m - extra : nb * bin_m_;
+        endings.push_back(
+            {node, t, extra, transition, play, std::abs(nb * bin_m_ + extra - distance_m), aim});
+      };
+      if (to_) {
+        consider(end_node_, n, 0.0, -1, 0);
+      } else {
+        for (int u = 0; u < static_cast<int>(nodes_.size()); ++u) {
+          const Node node = nodes_[static_cast<size_t>(u)];
+          const bool start = u == start_node_;
+          for (int t = 0; t < n; ++t) {
+            if (!reached_[static_cast<size_t>(u) * static_cast<size_t>(horizon_ + 1) +
+                          static_cast<size_t>(t)])
+              continue;
+            const int k = n - t;
+            if (node.frame + k <= lib_.num_frames(node.take))
+              consider(u, t, PlayDistance(node.take, node.frame, k, start), -1, k);
+            for (int e : out_edges_[static_cast<size_t>(u)]) {
+              const int tr = edges_[static_cast<size_t>(e)].transition;
+              if (tr < 0) continue;
+              const GraphTransition& g = graph_.transitions[static_cast<size_t>(tr)];
+              const int rest = n - t - g.blend_frames();
+              if (rest < 0 || g.entry_frame() + rest > lib_.num_frames(g.to_take)) continue;
+              consider(u, t,
+                       (start ? 0.0 : lib_.Step(node.take, node.frame)) + g.blend_path_m +
+                           PlayDistance(g.to_take, g.entry_frame(), rest, false),
+                       tr, rest);
+            }
+          }
+        }
+      }
+      if (!endings.empty()) {
+        frames = n;
+        break;
+      }
+    }
+  }
+  if (endings.empty())
+    throw std::runtime_error("no path from the start point reaches " +
+                             std::string(to_ ? "the end point" : "any frame") +
+                             " within the prepared time and distance");
+  std::stable_sort(endings.begin(), endings.end(), [](const Ending& a, const Ending& b) {
+    return a.miss != b.miss ? a.miss < b.miss : a.transition < b.transition;
+  });
+
+  // Backward search from the best endings: each step takes an edge into the current node
+  // whose source holds a bit near the exact remaining distance.
+  // Each edge's distance is rounded to a bin going forward, so a path's bits drift from
+  // its exact distance by up to half a bin per edge: the search looks that far around the
+  // exact remainder, starting narrow and widening when the narrow search finds nothing.
+  constexpr long kBudget = 200000;  // node expansions per tolerance
+  long expansions = 0;
+  int tolerance = 3;
+  const double good_enough = endings.front().miss + 0.5 * bin_m_;
+  std::vector<int> best_edges;
+  const Ending* best_ending = nullptr;
+  double best_miss = std::numeric_limits<double>::infinity();
+  struct Frame {
+    int node, t;
+    double remaining;
+    std::vector<std::pair<double, int>> options;  // (preference, edge)
+    size_t next = 0;
+  };
+  std::unordered_set<uint64_t> visited;
+  for (; tolerance <= 96 && !best_ending; tolerance *= 2) {
+    expansions = 0;
+    visited.clear();
+    for (const Ending& ending : endings) {
+      if (expansions > kBudget || best_miss <= good_enough) break;
+      if (ending.miss > best_miss + tolerance * bin_m_) break;
+      std::vector<Frame> stack;
+      std::vector<int> chosen;
+      auto expand = [&](int node, int t, double remaining) {
+        Frame f{node, t, remaining, {}, 0};
+        for (int e : in_edges_[static_cast<size_t>(node)]) {
+          const Edge& edge = edges_[static_cast<size_t>(e)];
+          const int t0 = t - edge.frames;
+          if (t0 < 0) continue;
+          const double r = remaining - edge.distance_m;
+          const int nb = NearestBin(edge.from, t0, std::lround(r / bin_m_), tolerance);
+          if (nb < 0) continue;
+          const double closeness = std::abs(nb - r / bin_m_);
+          const double cost =
+              edge.transition < 0
+                  ? 0.0
+                  : 1.0 + graph_.transitions[static_cast<size_t>(edge.transition)].cost_m;
+          f.options.emplace_back(closeness + 2.0 * cost, e);
+        }
+        std::sort(f.options.begin(), f.options.end());
+        stack.push_back(std::move(f));
+        ++expansions;
+      };
+      // The miss of a path that leaves `left` of the aimed distance at the start.
+      const auto miss_of = [&](double left) {
+        return std::abs(ending.extra_m + ending.remaining - left - distance_m);
+      };
+      expand(ending.node, ending.t, ending.remaining);
+      if (ending.node == start_node_ && ending.t == 0) {
+        const double miss = miss_of(ending.remaining);
+        if (miss < best_miss) {
+          best_miss = miss;
+          best_edges.clear();
+          best_ending = &ending;
+        }
+        continue;
+      }
+      while (!stack.empty() && expansions <= kBudget && best_miss > good_enough) {
+        Frame& top = stack.back();
+        if (top.next >= top.options.size()) {
+          stack.pop_back();
+          if (!chosen.empty()) chosen.pop_back();
+          continue;
+        }
+        const int e = top.options[top.next++].second;
+        const Edge& edge = edges_[static_cast<size_t>(e)];
+        const int t0 = top.t - edge.frames;
+        const double r = top.remaining - edge.distance_m;
+        if (edge.from == start_node_ && t0 == 0) {
+          const double miss = std::abs(r);
+          if (miss < best_miss) {
+            best_miss = miss;
+            best_edges = chosen;
+            best_edges.push_back(e);
+            best_ending = &ending;
+          }
+          continue;
+        }
+        const uint64_t key = (static_cast<uint64_t>(edge.from) << 40) ^
+                             (static_cast<uint64_t>(t0) << 20) ^
+                             static_cast<uint64_t>(std::lround(r / bin_m_) & 0xFFFFF);
+        if (!visited.insert(key).second) continue;
+        chosen.push_back(e);
+        expand(edge.from, t0, r);
+      }
+    }
+  }
+  if (!best_ending) throw std::runtime_error("planner: the backward search found no path");
+
+  // The path: edges from the start, then the ending.
+  GraphPath path;
+  auto play = [&](int take, int first, int count) {
+    if (count <= 0) return;
+    if (!path.empty() && path.back().transition < 0 && path.back().take == take &&
+        path.back().first + path.back().count == first) {
+      path.back().count += count;
+      return;
+    }
+    path.push_back({take, first, count, -1});
+  };
+  for (auto it = best_edges.rbegin(); it != best_edges.rend(); ++it) {
+    const Edge& edge = edges_[static_cast<size_t>(*it)];
+    const Node& a = nodes_[static_cast<size_t>(edge.from)];
+    const Node& b = nodes_[static_cast<size_t>(edge.to)];
+    if (edge.transition < 0) {
+      play(a.take, a.frame, b.frame - a.frame);
+    } else {
+      const GraphTransition& t = graph_.transitions[static_cast<size_t>(edge.transition)];
+      path.push_back({-1, 0, 0, edge.transition});
+      play(t.to_take, t.entry_frame(), b.frame - t.entry_frame());
+    }
+  }
+  const Node& last = nodes_[static_cast<size_t>(best_ending->node)];
+  if (best_ending->transition >= 0) {
+    const GraphTransition& t = graph_.transitions[static_cast<size_t>(best_ending->transition)];
+    path.push_back({-1, 0, 0, best_ending->transition});
+    play(t.to_take, t.entry_frame(), best_ending->play);
+  } else {
+    play(last.take, last.frame, best_ending->play);
+  }
+  SynthesisResult result;
+  result.path = path;
+  result.frames = PathFrames(graph_, path);
+  result.seconds = result.frames / lib_.rate_hz;
+  result.distance_m = PathDistance(lib_, graph_, path);
+  result.distance_miss_m = result.distance_m - distance_m;
+  result.time_miss_s = result.seconds - seconds;
+  result.exact_time = frames == target_frames;
+  result.best_possible_miss_m = endings.front().miss;
+  for (const PathStep& s : path)
+    if (s.transition >= 0) {
+      ++result.transitions;
+      result.transition_cost_m += graph_.transitions[static_cast<size_t>(s.transition)].cost_m;
+    }
+  return result;
+}
+
+BvhTake SynthesisTake(const MotionLibrary& lib, const MotionGraph& graph, const GraphPath& path) {
+  BvhTake take = lib.layout;
+  take.skeleton = *lib.skeleton;
+  take.frames = RenderPath(lib, graph, path);
+  take.frame_time_s = 1.0 / lib.rate_hz;
+  return take;
+}
+
+std::string DescribePath(const MotionLibrary& lib, const MotionGraph& graph,
+                         const GraphPath& path) {
+  std::string out;
+  for (const PathStep& s : path) {
+    if (!out.empty()) out += " | ";
+    if (s.transition >= 0) {
+      const GraphTransition& t = graph.transitions[static_cast<size_t>(s.transition)];
+      out += "blend " + lib.names[static_cast<size_t>(t.from_take)] + ":" +
+             std::to_string(t.exit_frame()) + "->" + lib.names[static_cast<size_t>(t.to_take)] +
+             ":" + std::to_string(t.entry_frame() - 1);
+    } else {
+      out += lib.names[static_cast<size_t>(s.take)] + " " + std::to_string(s.first) + "-" +
+             std::to_string(s.first + s.count - 1);
+    }
+  }
+  return out;
+}
+
+}  // namespace mocapd
+
+namespace mocapd {
+
+SynthesisResult Synthesize(const MotionLibrary& lib, const MotionGraph& graph, GraphPoint from,
+                           std::optional<GraphPoint> to, double distance_m, double seconds,
+                           double bin_m) {
+  try {
+    GraphPlanner planner(lib, graph, bin_m);
+    planner.Prepare(from, to, seconds + 1.0, distance_m * 1.25 + 2.0);
+    SynthesisResult r = planner.Solve(distance_m, seconds);
+    if (r.exact_time) return r;
+  } catch (const std::runtime_error&) {
+  }
+  // Nothing lasts the time within that distance: look wider, and coarser (about a thousand
+  // bins, so the tables stay tens of megabytes), for the nearest path.
+  double speed = 0.0;
+  for (int t = 0; t < lib.num_takes(); ++t)
+    speed = std::max(speed, lib.path_m[static_cast<size_t>(t)].back() * lib.rate_hz /
+                                std::max(1, lib.num_frames(t) - 1));
+  const double horizon = 1.5 * seconds + 5.0;
+  const double range = (1.5 * speed + 0.5) * horizon + distance_m + 2.0;
+  GraphPlanner planner(lib, graph, std::max(bin_m, range / 1024.0));
+  planner.Prepare(from, to, horizon, range);
+  return planner.Solve(distance_m, seconds);
+}
+
+}  // namespace mocapd
