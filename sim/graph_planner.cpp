@@ -3,10 +3,10 @@
 #include "sim/graph_planner.hpp"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
-#include <unordered_set>
 
 namespace mocapd {
 
@@ -93,7 +93,8 @@ void GraphPlanner::Prepare(GraphPoint from, std::optional<GraphPoint> to, double
     const int skip = next_event(n.take, n.frame, true);
     if (skip >= 0) {
       const int frames = nodes_[static_cast<size_t>(skip)].frame - n.frame;
-      edges_.push_back({u, skip, frames, PlayDistance(n.take, n.frame, frames, start), -1});
+      const double d = PlayDistance(n.take, n.frame, frames, start);
+      edges_.push_back({u, skip, frames, d, std::lround(d / bin_m_), -1});
     }
     for (size_t k = 0; k < graph_.transitions.size(); ++k) {
       const GraphTransition& t = graph_.transitions[k];
@@ -103,7 +104,8 @@ void GraphPlanner::Prepare(GraphPoint from, std::optional<GraphPoint> to, double
       const int play = nodes_[static_cast<size_t>(arrive)].frame - t.entry_frame();
       const double d = (start ? 0.0 : lib_.Step(n.take, n.frame)) + t.blend_path_m +
                        PlayDistance(t.to_take, t.entry_frame(), play, false);
-      edges_.push_back({u, arrive, t.blend_frames() + play, d, static_cast<int>(k)});
+      edges_.push_back(
+          {u, arrive, t.blend_frames() + play, d, std::lround(d / bin_m_), static_cast<int>(k)});
     }
   }
   in_edges_.assign(nodes_.size(), {});
@@ -115,53 +117,80 @@ void GraphPlanner::Prepare(GraphPoint from, std::optional<GraphPoint> to, double
 
   const size_t cells = nodes_.size() * static_cast<size_t>(horizon_ + 1);
   bits_.assign(cells * static_cast<size_t>(words_), 0);
-  reached_.assign(cells, 0);
+  // Per cell, the words that hold bits [lo, hi]: early on only short distances are
+  // reachable, so most of each bitset stays empty and is skipped.
+  word_lo_.assign(cells, std::numeric_limits<uint16_t>::max());
+  word_hi_.assign(cells, 0);
   Bits(start_node_, 0)[0] = 1;
-  reached_[static_cast<size_t>(start_node_) * static_cast<size_t>(horizon_ + 1)] = 1;
+  word_lo_[Cell(start_node_, 0)] = word_hi_[Cell(start_node_, 0)] = 0;
   for (int t = 0; t <= horizon_; ++t) {
     for (int u = 0; u < static_cast<int>(nodes_.size()); ++u) {
-      if (!reached_[static_cast<size_t>(u) * static_cast<size_t>(horizon_ + 1) +
-                    static_cast<size_t>(t)])
-        continue;
+      const size_t cell = Cell(u, t);
+      if (word_lo_[cell] > word_hi_[cell]) continue;
       const uint64_t* src = Bits(u, t);
+      const int lo = word_lo_[cell], hi = word_hi_[cell];
       for (int e : out_edges_[static_cast<size_t>(u)]) {
         const Edge& edge = edges_[static_cast<size_t>(e)];
         const int t2 = t + edge.frames;
         if (t2 > horizon_) continue;
-        const long shift = std::lround(edge.distance_m / bin_m_);
+        const long shift = edge.bins;
         if (shift >= bins_) continue;
         const int word_shift = static_cast<int>(shift / 64),
                   bit_shift = static_cast<int>(shift % 64);
         uint64_t* dst = Bits(edge.to, t2);
-        bool any = false;
-        for (int w = words_ - 1; w >= word_shift; --w) {
-          uint64_t v = src[w - word_shift] << bit_shift;
-          if (bit_shift > 0 && w - word_shift - 1 >= 0)
+        const int first = lo + word_shift;
+        const int last = std::min(words_ - 1, hi + word_shift + (bit_shift > 0 ? 1 : 0));
+        int new_lo = std::numeric_limits<int>::max(), new_hi = -1;
+        for (int w = first; w <= last; ++w) {
+          uint64_t v = w - word_shift <= hi ? src[w - word_shift] << bit_shift : 0;
+          if (bit_shift > 0 && w - word_shift - 1 >= lo)
             v |= src[w - word_shift - 1] >> (64 - bit_shift);
+          if (v == 0) continue;
           dst[w] |= v;
-          any = any || v != 0;
+          new_lo = std::min(new_lo, w);
+          new_hi = w;
         }
-        if (any)
-          reached_[static_cast<size_t>(edge.to) * static_cast<size_t>(horizon_ + 1) +
-                   static_cast<size_t>(t2)] = 1;
+        if (new_hi < 0) continue;
+        const size_t dst_cell = Cell(edge.to, t2);
+        word_lo_[dst_cell] = static_cast<uint16_t>(std::min<int>(word_lo_[dst_cell], new_lo));
+        word_hi_[dst_cell] = static_cast<uint16_t>(std::max<int>(word_hi_[dst_cell], new_hi));
       }
     }
   }
 }
 
 int GraphPlanner::NearestBin(int node, int t, long bin, int max_offset) const {
-  if (t < 0 || t > horizon_ ||
-      !reached_[static_cast<size_t>(node) * static_cast<size_t>(horizon_ + 1) +
-                static_cast<size_t>(t)])
-    return -1;
+  if (t < 0 || t > horizon_) return -1;
+  const size_t cell = Cell(node, t);
+  if (word_lo_[cell] > word_hi_[cell]) return -1;
   const uint64_t* b = Bits(node, t);
-  auto set = [&](long k) { return k >= 0 && k < bins_ && ((b[k / 64] >> (k % 64)) & 1u); };
-  for (long off = 0; off <= max_offset; ++off) {
-    if (set(bin - off)) return static_cast<int>(bin - off);
-    if (set(bin + off)) return static_cast<int>(bin + off);
-    if (bin - off < 0 && bin + off >= bins_) break;
-  }
-  return -1;
+  const long lo_bit = static_cast<long>(word_lo_[cell]) * 64,
+             hi_bit = static_cast<long>(word_hi_[cell]) * 64 + 63;
+  // The nearest set bit at or above `from`, and at or below it, a word at a time.
+  auto up = [&](long from) -> long {
+    for (long k = std::max(from, lo_bit); k <= hi_bit;) {
+      const uint64_t w = b[k / 64] >> (k % 64);
+      if (w) return k + std::countr_zero(w);
+      k = (k / 64 + 1) * 64;
+    }
+    return -1;
+  };
+  auto down = [&](long from) -> long {
+    for (long k = std::min(from, hi_bit); k >= lo_bit;) {
+      const int shift = 63 - static_cast<int>(k % 64);
+      const uint64_t w = b[k / 64] << shift;
+      if (w) return k - std::countl_zero(w);
+      k = (k / 64) * 64 - 1;
+    }
+    return -1;
+  };
+  const long above = up(std::max(bin, 0L));
+  const long below = bin >= 0 ? down(std::min(bin, static_cast<long>(bins_) - 1)) : -1;
+  long best = -1;
+  if (above >= 0) best = above;
+  if (below >= 0 && (best < 0 || bin - below <= best - bin)) best = below;
+  if (best < 0 || std::abs(best - bin) > max_offset) return -1;
+  return static_cast<int>(best);
 }
 
 SynthesisResult GraphPlanner::Solve(double distance_m, double seconds) const {
@@ -171,12 +200,11 @@ SynthesisResult GraphPlanner::Solve(double distance_m, double seconds) const {
   // from a blend's arrival for the frames that are left.
   struct Ending {
     int node, t;
-    double extra_m;    ///< Distance after (node, t).
-    int transition;    ///< A blend after the node, then play (-1: play only).
-    int play;          ///< Frames played after the node (or after the blend).
-    double miss;       ///< |nearest reachable distance - target|, for ordering.
-    double remaining;  ///< The distance to aim for before (node, t): the target's, if
-                       ///< reachable, else the nearest reachable.
+    double extra_m;  ///< Distance after (node, t).
+    int transition;  ///< A blend after the node, then play (-1: play only).
+    int play;        ///< Frames played after the node (or after the blend).
+    double miss;     ///< |nearest reachable distance - target| in the bins, for ordering.
+    int bin;         ///< The reachable bin at (node, t) the path is rebuilt from.
   };
   std::vector<Ending> endings;
   int frames = -1;
@@ -190,9 +218,8 @@ SynthesisResult GraphPlanner::Solve(double distance_m, double seconds) const {
         const double r = (distance_m - extra) / bin_m_;
         const int nb = NearestBin(node, t, std::lround(r), bins_max);
         if (nb < 0) return;
-        const double aim = std::abs(nb - r) <= 1.0 ? distance_m - extra : nb * bin_m_;
         endings.push_back(
-            {node, t, extra, transition, play, std::abs(nb * bin_m_ + extra - distance_m), aim});
+            {node, t, extra, transition, play, std::abs(nb * bin_m_ + extra - distance_m), nb});
       };
       if (to_) {
         consider(end_node_, n, 0.0, -1, 0);
@@ -201,9 +228,7 @@ SynthesisResult GraphPlanner::Solve(double distance_m, double seconds) const {
           const Node node = nodes_[static_cast<size_t>(u)];
           const bool start = u == start_node_;
           for (int t = 0; t < n; ++t) {
-            if (!reached_[static_cast<size_t>(u) * static_cast<size_t>(horizon_ + 1) +
-                          static_cast<size_t>(t)])
-              continue;
+            if (word_lo_[Cell(u, t)] > word_hi_[Cell(u, t)]) continue;
             const int k = n - t;
             if (node.frame + k <= lib_.num_frames(node.take))
               consider(u, t, PlayDistance(node.take, node.frame, k, start), -1, k);
@@ -235,98 +260,56 @@ SynthesisResult GraphPlanner::Solve(double distance_m, double seconds) const {
     return a.miss != b.miss ? a.miss < b.miss : a.transition < b.transition;
   });
 
-  // Backward search from the best endings: each step takes an edge into the current node
-  // whose source holds a bit near the exact remaining distance.
-  // Each edge's distance is rounded to a bin going forward, so a path's bits drift from
-  // its exact distance by up to half a bin per edge: the search looks that far around the
-  // exact remainder, starting narrow and widening when the narrow search finds nothing.
-  constexpr long kBudget = 200000;  // node expansions per tolerance
-  long expansions = 0;
-  int tolerance = 3;
-  const double good_enough = endings.front().miss + 0.5 * bin_m_;
+  // Rebuild paths backwards from the best endings. The bits are exact sums of the edges'
+  // binned distances, so every set bit leads back to the start: from (node, t, bin) any
+  // edge whose source holds bin - its bins at t - its frames is a step of a real path.
+  // Among those steps, the one that keeps the exact distance closest to the binned one
+  // (the bins' rounding then cancels instead of adding up), staying in a take unless a
+  // transition is at least half a bin better.
+  constexpr size_t kEndingsTried = 16;
   std::vector<int> best_edges;
   const Ending* best_ending = nullptr;
   double best_miss = std::numeric_limits<double>::infinity();
-  struct Frame {
-    int node, t;
-    double remaining;
-    std::vector<std::pair<double, int>> options;  // (preference, edge)
-    size_t next = 0;
-  };
-  std::unordered_set<uint64_t> visited;
-  for (; tolerance <= 96 && !best_ending; tolerance *= 2) {
-    expansions = 0;
-    visited.clear();
-    for (const Ending& ending : endings) {
-      if (expansions > kBudget || best_miss <= good_enough) break;
-      if (ending.miss > best_miss + tolerance * bin_m_) break;
-      std::vector<Frame> stack;
-      std::vector<int> chosen;
-      auto expand = [&](int node, int t, double remaining) {
-        Frame f{node, t, remaining, {}, 0};
-        for (int e : in_edges_[static_cast<size_t>(node)]) {
-          const Edge& edge = edges_[static_cast<size_t>(e)];
-          const int t0 = t - edge.frames;
-          if (t0 < 0) continue;
-          const double r = remaining - edge.distance_m;
-          const int nb = NearestBin(edge.from, t0, std::lround(r / bin_m_), tolerance);
-          if (nb < 0) continue;
-          const double closeness = std::abs(nb - r / bin_m_);
-          const double cost =
-              edge.transition < 0
-                  ? 0.0
-                  : 1.0 + graph_.transitions[static_cast<size_t>(edge.transition)].cost_m;
-          f.options.emplace_back(closeness + 2.0 * cost, e);
-        }
-        std::sort(f.options.begin(), f.options.end());
-        stack.push_back(std::move(f));
-        ++expansions;
-      };
-      // The miss of a path that leaves `left` of the aimed distance at the start.
-      const auto miss_of = [&](double left) {
-        return std::abs(ending.extra_m + ending.remaining - left - distance_m);
-      };
-      expand(ending.node, ending.t, ending.remaining);
-      if (ending.node == start_node_ && ending.t == 0) {
-        const double miss = miss_of(ending.remaining);
-        if (miss < best_miss) {
-          best_miss = miss;
-          best_edges.clear();
-          best_ending = &ending;
-        }
-        continue;
-      }
-      while (!stack.empty() && expansions <= kBudget && best_miss > good_enough) {
-        Frame& top = stack.back();
-        if (top.next >= top.options.size()) {
-          stack.pop_back();
-          if (!chosen.empty()) chosen.pop_back();
-          continue;
-        }
-        const int e = top.options[top.next++].second;
+  for (size_t k = 0; k < endings.size() && k < kEndingsTried; ++k) {
+    const Ending& ending = endings[k];
+    if (ending.miss > best_miss + bin_m_) break;
+    std::vector<int> chosen;
+    int node = ending.node, t = ending.t;
+    long bin = ending.bin;
+    double error = 0.0;  // exact - binned distance of the edges chosen so far
+    while (!(node == start_node_ && t == 0)) {
+      int pick = -1;
+      double pick_score = std::numeric_limits<double>::infinity(), pick_error = 0.0;
+      for (int e : in_edges_[static_cast<size_t>(node)]) {
         const Edge& edge = edges_[static_cast<size_t>(e)];
-        const int t0 = top.t - edge.frames;
-        const double r = top.remaining - edge.distance_m;
-        if (edge.from == start_node_ && t0 == 0) {
-          const double miss = std::abs(r);
-          if (miss < best_miss) {
-            best_miss = miss;
-            best_edges = chosen;
-            best_edges.push_back(e);
-            best_ending = &ending;
-          }
-          continue;
+        const int t0 = t - edge.frames;
+        const long b0 = bin - edge.bins;
+        if (t0 < 0 || b0 < 0 || NearestBin(edge.from, t0, b0, 0) != b0) continue;
+        const double err = error + edge.distance_m - static_cast<double>(edge.bins) * bin_m_;
+        const double score = std::abs(err) + (edge.transition >= 0 ? 0.5 * bin_m_ : 0.0);
+        if (score < pick_score) {
+          pick_score = score;
+          pick = e;
+          pick_error = err;
         }
-        const uint64_t key = (static_cast<uint64_t>(edge.from) << 40) ^
-                             (static_cast<uint64_t>(t0) << 20) ^
-                             static_cast<uint64_t>(std::lround(r / bin_m_) & 0xFFFFF);
-        if (!visited.insert(key).second) continue;
-        chosen.push_back(e);
-        expand(edge.from, t0, r);
       }
+      // A set bit always has a predecessor; this guards a broken invariant.
+      if (pick < 0) throw std::logic_error("planner: a reachable state has no predecessor");
+      const Edge& edge = edges_[static_cast<size_t>(pick)];
+      chosen.push_back(pick);
+      node = edge.from;
+      t -= edge.frames;
+      bin -= edge.bins;
+      error = pick_error;
+    }
+    const double miss = std::abs(ending.bin * bin_m_ + error + ending.extra_m - distance_m);
+    if (miss < best_miss) {
+      best_miss = miss;
+      best_edges = std::move(chosen);
+      best_ending = &ending;
     }
   }
-  if (!best_ending) throw std::runtime_error("planner: the backward search found no path");
+  if (!best_ending) throw std::runtime_error("planner: no path could be rebuilt");
 
   // The path: edges from the start, then the ending.
   GraphPath path;

@@ -6,11 +6,11 @@
 // Method (an exact dynamic programme in place of the paper's walk enumeration and integer
 // programme): time is counted in frames, so a path's duration is exact to a frame, and the
 // distances a path can reach by each frame are kept as a bitset per graph node (bins of
-// distance_bin_m). The nodes are the frames where a transition leaves a take; an edge
-// plays a take from one such frame to the next, or blends through a transition and plays
-// on to the destination's next such frame. A backward search then follows set bits from
-// the end to the start while tracking the exact remaining distance, so the bins' rounding
-// does not add up along the path.
+// distance_bin_m; each edge's distance rounded to bins, so the sets are exact sums). The
+// nodes are the frames where a transition leaves a take; an edge plays a take from one
+// such frame to the next, or blends through a transition and plays on to the
+// destination's next such frame. The path is rebuilt backwards along set bits, choosing
+// at each step the edge whose rounding best cancels the rounding so far.
 #pragma once
 
 #include <cstdint>
@@ -48,7 +48,7 @@ struct SynthesisResult {
 class GraphPlanner {
  public:
   GraphPlanner(const MotionLibrary& library, const MotionGraph& graph,
-               double distance_bin_m = 0.02);
+               double distance_bin_m = 0.01);
 
   /// Computes what can be reached from `from` (the first frame played) within max_seconds
   /// and max_distance_m, ending at `to` (the last frame played) if given. Throws
@@ -70,6 +70,7 @@ class GraphPlanner {
     int from, to;
     int frames;
     double distance_m;
+    long bins;       ///< distance_m rounded to bins: what the programme adds up.
     int transition;  ///< -1: a play within the take.
   };
   const uint64_t* Bits(int node, int t) const {
@@ -101,7 +102,11 @@ class GraphPlanner {
   std::vector<Edge> edges_;
   std::vector<std::vector<int>> in_edges_, out_edges_;
   std::vector<uint64_t> bits_;
-  std::vector<uint8_t> reached_;  ///< Per (node, t): any bit set.
+  size_t Cell(int node, int t) const {
+    return static_cast<size_t>(node) * static_cast<size_t>(horizon_ + 1) + static_cast<size_t>(t);
+  }
+  /// Per (node, t): the first and last words holding set bits (lo > hi: none).
+  std::vector<uint16_t> word_lo_, word_hi_;
 };
 
 /// Plans one synthesis: first within the target's time and a little more than its
@@ -111,7 +116,7 @@ class GraphPlanner {
 /// point cannot be reached at all.
 SynthesisResult Synthesize(const MotionLibrary& library, const MotionGraph& graph, GraphPoint from,
                            std::optional<GraphPoint> to, double distance_m, double seconds,
-                           double distance_bin_m = 0.02);
+                           double distance_bin_m = 0.01);
 
 /// The motion of a synthesis result, and a BVH of it.
 BvhTake SynthesisTake(const MotionLibrary& library, const MotionGraph& graph,
