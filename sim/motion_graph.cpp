@@ -141,8 +141,10 @@ std::string Text(const nlohmann::json& object, const std::string& key, const std
 }
 
 constexpr int kGraphFileVersion = 1;
-// A foot this close to the ground (its lowest in the library) is taken to be down.
+// A foot this close to the ground (its lowest in the library) is taken to be down, and
+// planted if it also moves slower than this.
 constexpr double kContactHeightM = 0.05;
+constexpr double kPlantedSpeed = 0.5;  // m/s
 
 }  // namespace
 
@@ -290,9 +292,31 @@ MotionLibrary MakeMotionLibrary(const std::vector<BvhTake>& bvh,
     }
     std::sort(heights.begin(), heights.end());
     lib.ground_y = heights[heights.size() / 100];
+    for (const auto& positions : lib.foot_position) {
+      std::vector<std::array<bool, 2>> planted(positions.size());
+      for (size_t f = 0; f < positions.size(); ++f)
+        for (size_t side = 0; side < 2; ++side) {
+          const size_t f0 = f > 0 ? f - 1 : f, f1 = std::min(positions.size() - 1, f + 1);
+          Vec3 d = positions[f1][side] - positions[f0][side];
+          d.y() = 0.0;
+          const double speed =
+              f1 > f0 ? d.norm() * lib.rate_hz / static_cast<double>(f1 - f0) : 0.0;
+          planted[f][side] =
+              positions[f][side].y() <= lib.ground_y + kContactHeightM && speed < kPlantedSpeed;
+        }
+      lib.foot_planted.push_back(std::move(planted));
+    }
+    const HumanoidRoles roles = MatchHumanoidRoles(sk);
+    for (size_t side = 0; side < 2; ++side) {
+      const std::string suffix = side == 0 ? "_l" : "_r";
+      lib.legs[side] = {roles.joint_of_role.at("thigh" + suffix),
+                        roles.joint_of_role.at("shin" + suffix),
+                        roles.joint_of_role.at("foot" + suffix)};
+    }
   } catch (const std::invalid_argument&) {
     lib.ground_y = -1e9;
     lib.foot_position.clear();
+    lib.foot_planted.clear();
   }
   return lib;
 }
@@ -675,6 +699,97 @@ void ValidatePath(const MotionLibrary& lib, const MotionGraph& g, const GraphPat
   }
 }
 
+namespace {
+
+// Two-bone leg IK: turns the knee, then the hip, so the ankle reaches target; the foot
+// keeps its world orientation.
+void ReachAnkle(const Skeleton& sk, const std::array<int, 3>& leg, const Vec3& target, Pose* pose,
+                KinematicsWorkspace* ws) {
+  const auto hip = static_cast<size_t>(leg[0]), knee = static_cast<size_t>(leg[1]),
+             ankle = static_cast<size_t>(leg[2]);
+  ForwardKinematics(sk, *pose, ws);
+  const Mat3 ankle_world = ws->R_WJ[ankle];
+  const Vec3 H = ws->p_WJ[hip], K = ws->p_WJ[knee], A = ws->p_WJ[ankle];
+  const Vec3 u = H - K, v = A - K;
+  const double l1 = u.norm(), l2 = v.norm();
+  if (l1 < 1e-6 || l2 < 1e-6) return;
+  const double d = std::clamp((target - H).norm(), std::abs(l1 - l2) + 1e-4, l1 + l2 - 1e-4);
+  const double current = std::acos(std::clamp(u.dot(v) / (l1 * l2), -1.0, 1.0));
+  const double wanted =
+      std::acos(std::clamp((l1 * l1 + l2 * l2 - d * d) / (2 * l1 * l2), -1.0, 1.0));
+  Vec3 axis = u.cross(v);
+  axis = axis.norm() > 1e-9 ? Vec3(axis.normalized()) : Vec3(ws->R_WJ[knee] * Vec3::UnitX());
+  auto set_world = [&](size_t j, const Mat3& R_W) {
+    const int parent = sk.joint(static_cast<int>(j)).parent.value;
+    const Mat3 R_P = parent >= 0 ? ws->R_WJ[static_cast<size_t>(parent)] : Mat3::Identity();
+    pose->rotation[j] = Quat(R_P.transpose() * R_W).normalized();
+  };
+  set_world(knee, Eigen::AngleAxisd(wanted - current, axis).toRotationMatrix() * ws->R_WJ[knee]);
+  ForwardKinematics(sk, *pose, ws);
+  const Quat swing = Quat::FromTwoVectors(ws->p_WJ[ankle] - H, target - H);
+  set_world(hip, swing.toRotationMatrix() * ws->R_WJ[hip]);
+  ForwardKinematics(sk, *pose, ws);
+  set_world(ankle, ankle_world);
+}
+
+// Keeps a foot that is planted (in the take that dominates the blend at that frame)
+// where it was when the blend found it down: blending two feet at slightly different
+// places, or a planted one with a moving one, would slide it. The correction
+// fades over a few frames where the foot lifts, or where the window ends with it down
+// (the destination's own foot takes over there, which the alignment put in the same spot).
+void KeepPlantedFeet(const MotionLibrary& lib, const GraphTransition& t, Pose* frames) {
+  if (lib.foot_planted.empty()) return;
+  const Skeleton& sk = *lib.skeleton;
+  const int n = t.blend_frames();
+  KinematicsWorkspace ws(sk);
+  std::vector<std::array<Vec3, 2>> ankle(static_cast<size_t>(n));
+  for (int k = 0; k < n; ++k) {
+    ForwardKinematics(sk, frames[k], &ws);
+    for (size_t side = 0; side < 2; ++side)
+      ankle[static_cast<size_t>(k)][side] = ws.p_WJ[static_cast<size_t>(lib.legs[side][2])];
+  }
+  constexpr int kFade = 3;
+  for (size_t side = 0; side < 2; ++side) {
+    std::vector<Vec3> offset(static_cast<size_t>(n), Vec3::Zero());
+    auto down = [&](int k) {
+      const bool a = lib.foot_planted[static_cast<size_t>(t.from_take)]
+                                     [static_cast<size_t>(t.exit_frame() + k)][side];
+      const bool b = lib.foot_planted[static_cast<size_t>(t.to_take)]
+                                     [static_cast<size_t>(t.to_frame - t.half_window + k)][side];
+      return 2 * k < n ? a : b;  // the source that dominates the blend there
+    };
+    for (int k0 = 0; k0 < n;) {
+      if (!down(k0)) {
+        ++k0;
+        continue;
+      }
+      int k1 = k0;
+      while (k1 + 1 < n && down(k1 + 1)) ++k1;
+      const Vec3 anchor = ankle[static_cast<size_t>(k0)][side];
+      for (int k = k0; k <= k1; ++k) {
+        Vec3 o = anchor - ankle[static_cast<size_t>(k)][side];
+        o.y() = 0.0;
+        // Down to the window's end: hand over to the destination's foot by the last frame.
+        const double w =
+            k1 == n - 1 ? std::clamp(static_cast<double>(k1 - k) / kFade, 0.0, 1.0) : 1.0;
+        offset[static_cast<size_t>(k)] = w * o;
+      }
+      // Lifting inside the window: let the correction go over the next frames.
+      for (int k = k1 + 1; k < n && k <= k1 + kFade; ++k)
+        offset[static_cast<size_t>(k)] =
+            offset[static_cast<size_t>(k1)] * (1.0 - static_cast<double>(k - k1) / (kFade + 1));
+      k0 = k1 + 1;
+    }
+    for (int k = 0; k < n; ++k)
+      if (offset[static_cast<size_t>(k)].squaredNorm() > 1e-10)
+        ReachAnkle(sk, lib.legs[side],
+                   ankle[static_cast<size_t>(k)][side] + offset[static_cast<size_t>(k)], &frames[k],
+                   &ws);
+  }
+}
+
+}  // namespace
+
 void RenderStep(const MotionLibrary& lib, const MotionGraph& g, const PathStep& s,
                 PlanarTransform* transform, std::vector<Pose>* out, std::vector<uint8_t>* blended) {
   RenderStep(lib, g, s, transform, out);
@@ -704,6 +819,7 @@ void RenderStep(const MotionLibrary& lib, const MotionGraph& g, const PathStep& 
       BlendInto(a, b, x * x * (3.0 - 2.0 * x), &out->back());
     }
   }
+  KeepPlantedFeet(lib, t, &(*out)[out->size() - static_cast<size_t>(t.blend_frames())]);
   *transform = to;
 }
 

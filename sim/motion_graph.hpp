@@ -45,9 +45,13 @@ struct MotionLibrary {
   /// Per take: cumulative horizontal path of the body root; [f] = path from frame 0 to f.
   std::vector<std::vector<double>> path_m;
   double ground_y = 0.0;  ///< The lowest the feet get (1st percentile), for contacts.
-  /// Per take, per frame: the feet's world positions (left, right); empty for a rig
+  /// Per take, per frame: the feet's world positions (left, right), and whether each is
+  /// planted (within 5 cm of the ground and moving under 0.5 m/s); empty for a rig
   /// without recognisable feet.
   std::vector<std::vector<std::array<Vec3, 2>>> foot_position;
+  std::vector<std::vector<std::array<bool, 2>>> foot_planted;
+  /// Per side (left, right): hip, knee and ankle joints (-1: no recognisable legs).
+  std::array<std::array<int, 3>, 2> legs{{{-1, -1, -1}, {-1, -1, -1}}};
   /// The body root's parent's world transform (constant: its ancestors never move).
   Mat3 parent_rotation = Mat3::Identity();
   Vec3 parent_position = Vec3::Zero();
