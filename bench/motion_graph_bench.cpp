@@ -244,6 +244,12 @@ int main(int argc, char** argv) {
   while (walk.size() < static_cast<size_t>(walk_seconds * lib.rate_hz))
     walker.NextFrames(&walk, &blended);
   const MotionSmoothness m = MeasureSmoothness(lib, walk);
+  double farthest = 0.0;
+  for (const Pose& p : walk) {
+    const Vec3 root = lib.parent_position +
+                      lib.parent_rotation * p.translation[static_cast<size_t>(lib.body_root)];
+    farthest = std::max(farthest, std::hypot(root.x(), root.z()));
+  }
   std::vector<double> acc, slide;
   for (size_t f = 1; f + 1 < walk.size(); ++f)
     if (blended[f]) {
@@ -257,8 +263,10 @@ int main(int argc, char** argv) {
                std::count_if(v.begin(), v.end(), [&](double x) { return x > limit; })) /
            static_cast<double>(std::max<size_t>(1, v.size()));
   };
-  std::printf("transitions (%.0f s random walk, %d blends, %zu blended frames):\n", walk_seconds,
-              walker.transitions_taken(), acc.size());
+  std::printf(
+      "transitions (%.0f s random walk, %d blends, %zu blended frames; farthest from home %.1f "
+      "m):\n",
+      walk_seconds, walker.transitions_taken(), acc.size(), farthest);
   std::printf(
       "  joint acceleration m/s^2: source p50 %.2f p99 %.2f | blended p50 %.2f p99 %.2f max %.2f; "
       "%.2f %% of blended frames above the source p99\n",

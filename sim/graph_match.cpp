@@ -108,7 +108,7 @@ Eigen::MatrixXd Features(const RoleTrack& t, double velocity_weight_frames) {
 MatchResult MatchQuery(const MotionLibrary& lib, const MotionGraph& graph, const BvhTake& query,
                        const MatchOptions& o) {
   const std::vector<Pose> q_frames =
-      ResampleMotion(query.skeleton, query.frames, query.rate_hz(), lib.rate_hz);
+      ResampleMotion(query.skeleton, query.frames, TakeRate(query), lib.rate_hz);
   if (q_frames.size() < 2) throw std::invalid_argument("match: the query needs at least 2 frames");
   const double vw = o.velocity_weight_s * lib.rate_hz;
   const RoleTrack q_track = TrackRoles(query.skeleton, q_frames);

@@ -31,7 +31,7 @@ GraphPoint ParseGraphPoint(const MotionLibrary& lib, const std::string& text) {
 }
 
 GraphPlanner::GraphPlanner(const MotionLibrary& library, const MotionGraph& graph, double bin_m)
-    : lib_(library), graph_(graph), bin_m_(bin_m) {
+    : lib_(library), graph_(graph), requested_bin_m_(bin_m), bin_m_(bin_m) {
   if (!(bin_m > 0)) throw std::invalid_argument("planner: distance bin must be > 0");
 }
 
@@ -59,9 +59,7 @@ void GraphPlanner::Prepare(GraphPoint from, std::optional<GraphPoint> to, double
   from_ = from;
   to_ = to;
   horizon_ = std::max(1, static_cast<int>(std::lround(max_seconds * lib_.rate_hz)));
-  bins_ = static_cast<int>(std::ceil(max_distance_m / bin_m_)) + 2;
-  words_ = (bins_ + 63) / 64;
-  bins_ = words_ * 64;
+  bin_m_ = requested_bin_m_;
 
   // Nodes: the start, then every frame where a transition leaves a take, and the frame
   // after the end point.
@@ -94,7 +92,7 @@ void GraphPlanner::Prepare(GraphPoint from, std::optional<GraphPoint> to, double
     if (skip >= 0) {
       const int frames = nodes_[static_cast<size_t>(skip)].frame - n.frame;
       const double d = PlayDistance(n.take, n.frame, frames, start);
-      edges_.push_back({u, skip, frames, d, std::lround(d / bin_m_), -1});
+      edges_.push_back({u, skip, frames, d, 0, -1});
     }
     for (size_t k = 0; k < graph_.transitions.size(); ++k) {
       const GraphTransition& t = graph_.transitions[k];
@@ -104,8 +102,7 @@ void GraphPlanner::Prepare(GraphPoint from, std::optional<GraphPoint> to, double
       const int play = nodes_[static_cast<size_t>(arrive)].frame - t.entry_frame();
       const double d = (start ? 0.0 : lib_.Step(n.take, n.frame)) + t.blend_path_m +
                        PlayDistance(t.to_take, t.entry_frame(), play, false);
-      edges_.push_back(
-          {u, arrive, t.blend_frames() + play, d, std::lround(d / bin_m_), static_cast<int>(k)});
+      edges_.push_back({u, arrive, t.blend_frames() + play, d, 0, static_cast<int>(k)});
     }
   }
   in_edges_.assign(nodes_.size(), {});
@@ -115,7 +112,23 @@ void GraphPlanner::Prepare(GraphPoint from, std::optional<GraphPoint> to, double
     out_edges_[static_cast<size_t>(edges_[e].from)].push_back(static_cast<int>(e));
   }
 
+  // The tables hold a bitset per node and frame: keep them within kMaxTableBytes by
+  // widening the bins when a long time and distance would need more.
   const size_t cells = nodes_.size() * static_cast<size_t>(horizon_ + 1);
+  const size_t max_words = kMaxTableBytes / (cells * sizeof(uint64_t) + 1);
+  if (max_words < 1)
+    throw std::runtime_error("planner: " + std::to_string(max_seconds) +
+                             " s is too long for this graph's " + std::to_string(nodes_.size()) +
+                             " branch points (the tables would exceed " +
+                             std::to_string(kMaxTableBytes >> 20) + " MB)");
+  const double wanted_words = std::ceil((max_distance_m / bin_m_ + 2.0) / 64.0);
+  if (wanted_words > static_cast<double>(std::min<size_t>(max_words, 65535)))
+    bin_m_ =
+        max_distance_m / (static_cast<double>(std::min<size_t>(max_words, 65535)) * 64.0 - 2.0);
+  bins_ = static_cast<int>(std::ceil(max_distance_m / bin_m_)) + 2;
+  words_ = (bins_ + 63) / 64;
+  bins_ = words_ * 64;
+  for (Edge& e : edges_) e.bins = std::lround(e.distance_m / bin_m_);
   bits_.assign(cells * static_cast<size_t>(words_), 0);
   // Per cell, the words that hold bits [lo, hi]: early on only short distances are
   // reachable, so most of each bitset stays empty and is skipped.
@@ -267,46 +280,61 @@ SynthesisResult GraphPlanner::Solve(double distance_m, double seconds) const {
   // (the bins' rounding then cancels instead of adding up), staying in a take unless a
   // transition is at least half a bin better.
   constexpr size_t kEndingsTried = 16;
+  // Rebuilds from (node, t, bin); returns the edges (end first) and the signed miss of the
+  // whole path against the target.
+  auto rebuild = [&](const Ending& ending, long end_bin, std::vector<int>* chosen) {
+    int node = ending.node, t = ending.t;
+    long bin = end_bin;
+    double miss = static_cast<double>(end_bin) * bin_m_ + ending.extra_m - distance_m;
+    while (!(node == start_node_ && t == 0)) {
+      int pick = -1;
+      double pick_score = std::numeric_limits<double>::infinity(), pick_miss = 0.0;
+      for (int e : in_edges_[static_cast<size_t>(node)]) {
+        const Edge& edge = edges_[static_cast<size_t>(e)];
+        const int t0 = t - edge.frames;
+        const long b0 = bin - edge.bins;
+        if (t0 < 0 || b0 < 0 || NearestBin(edge.from, t0, b0, 0) != b0) continue;
+        const double m = miss + edge.distance_m - static_cast<double>(edge.bins) * bin_m_;
+        const double score = std::abs(m) + (edge.transition >= 0 ? 0.5 * bin_m_ : 0.0);
+        if (score < pick_score) {
+          pick_score = score;
+          pick = e;
+          pick_miss = m;
+        }
+      }
+      // A set bit always has a predecessor; this guards a broken invariant.
+      if (pick < 0) throw std::logic_error("planner: a reachable state has no predecessor");
+      const Edge& edge = edges_[static_cast<size_t>(pick)];
+      chosen->push_back(pick);
+      node = edge.from;
+      t -= edge.frames;
+      bin -= edge.bins;
+      miss = pick_miss;
+    }
+    return miss;
+  };
   std::vector<int> best_edges;
   const Ending* best_ending = nullptr;
   double best_miss = std::numeric_limits<double>::infinity();
   for (size_t k = 0; k < endings.size() && k < kEndingsTried; ++k) {
     const Ending& ending = endings[k];
     if (ending.miss > best_miss + bin_m_) break;
-    std::vector<int> chosen;
-    int node = ending.node, t = ending.t;
-    long bin = ending.bin;
-    double error = 0.0;  // exact - binned distance of the edges chosen so far
-    while (!(node == start_node_ && t == 0)) {
-      int pick = -1;
-      double pick_score = std::numeric_limits<double>::infinity(), pick_error = 0.0;
-      for (int e : in_edges_[static_cast<size_t>(node)]) {
-        const Edge& edge = edges_[static_cast<size_t>(e)];
-        const int t0 = t - edge.frames;
-        const long b0 = bin - edge.bins;
-        if (t0 < 0 || b0 < 0 || NearestBin(edge.from, t0, b0, 0) != b0) continue;
-        const double err = error + edge.distance_m - static_cast<double>(edge.bins) * bin_m_;
-        const double score = std::abs(err) + (edge.transition >= 0 ? 0.5 * bin_m_ : 0.0);
-        if (score < pick_score) {
-          pick_score = score;
-          pick = e;
-          pick_error = err;
-        }
+    // A loop repeated many times repeats its rounding too, which no choice of steps can
+    // cancel: aim the next try that much the other way, where such a path exists.
+    long end_bin = ending.bin;
+    for (int attempt = 0; attempt < 4; ++attempt) {
+      std::vector<int> chosen;
+      const double miss = rebuild(ending, end_bin, &chosen);
+      if (std::abs(miss) < best_miss) {
+        best_miss = std::abs(miss);
+        best_edges = std::move(chosen);
+        best_ending = &ending;
       }
-      // A set bit always has a predecessor; this guards a broken invariant.
-      if (pick < 0) throw std::logic_error("planner: a reachable state has no predecessor");
-      const Edge& edge = edges_[static_cast<size_t>(pick)];
-      chosen.push_back(pick);
-      node = edge.from;
-      t -= edge.frames;
-      bin -= edge.bins;
-      error = pick_error;
-    }
-    const double miss = std::abs(ending.bin * bin_m_ + error + ending.extra_m - distance_m);
-    if (miss < best_miss) {
-      best_miss = miss;
-      best_edges = std::move(chosen);
-      best_ending = &ending;
+      const long next = end_bin - std::lround(miss / bin_m_);
+      if (std::abs(miss) <= 0.5 * bin_m_ || next == end_bin || next < 0 ||
+          NearestBin(ending.node, ending.t, next, 0) != next)
+        break;
+      end_bin = next;
     }
   }
   if (!best_ending) throw std::runtime_error("planner: no path could be rebuilt");
@@ -351,6 +379,7 @@ SynthesisResult GraphPlanner::Solve(double distance_m, double seconds) const {
   result.time_miss_s = result.seconds - seconds;
   result.exact_time = frames == target_frames;
   result.best_possible_miss_m = endings.front().miss;
+  result.distance_bin_m = bin_m_;
   for (const PathStep& s : path)
     if (s.transition >= 0) {
       ++result.transitions;
@@ -394,20 +423,21 @@ SynthesisResult Synthesize(const MotionLibrary& lib, const MotionGraph& graph, G
                            double bin_m) {
   try {
     GraphPlanner planner(lib, graph, bin_m);
-    planner.Prepare(from, to, seconds + 1.0, distance_m * 1.25 + 2.0);
+    // Only distances near the target matter here: what lies beyond is the second pass's.
+    planner.Prepare(from, to, seconds + 1.0, distance_m + std::max(1.0, 0.1 * distance_m));
     SynthesisResult r = planner.Solve(distance_m, seconds);
     if (r.exact_time) return r;
   } catch (const std::runtime_error&) {
   }
-  // Nothing lasts the time within that distance: look wider, and coarser (about a thousand
-  // bins, so the tables stay tens of megabytes), for the nearest path.
+  // Nothing lasts the time within that distance: look wider (the bins widen to keep the
+  // tables within their budget) for the nearest path.
   double speed = 0.0;
   for (int t = 0; t < lib.num_takes(); ++t)
     speed = std::max(speed, lib.path_m[static_cast<size_t>(t)].back() * lib.rate_hz /
                                 std::max(1, lib.num_frames(t) - 1));
   const double horizon = 1.5 * seconds + 5.0;
   const double range = (1.5 * speed + 0.5) * horizon + distance_m + 2.0;
-  GraphPlanner planner(lib, graph, std::max(bin_m, range / 1024.0));
+  GraphPlanner planner(lib, graph, bin_m);  // widened to fit the tables' budget
   planner.Prepare(from, to, horizon, range);
   return planner.Solve(distance_m, seconds);
 }

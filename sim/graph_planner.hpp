@@ -43,6 +43,7 @@ struct SynthesisResult {
   /// The smallest distance miss any path of that duration can have, as the programme
   /// sees it (to its 2 cm bins): above the tolerance, the graph cannot meet the target.
   double best_possible_miss_m = 0.0;
+  double distance_bin_m = 0.0;  ///< The programme's bins (widened for long plans).
 };
 
 class GraphPlanner {
@@ -89,8 +90,12 @@ class GraphPlanner {
   /// first one counted unless it starts the path).
   double PlayDistance(int take, int frame, int count, bool starts_path) const;
 
+  /// The tables' budget: long times and distances widen the bins to stay within it.
+  static constexpr size_t kMaxTableBytes = size_t{256} << 20;
+
   const MotionLibrary& lib_;
   const MotionGraph& graph_;
+  double requested_bin_m_;
   double bin_m_;
   GraphPoint from_;
   std::optional<GraphPoint> to_;
@@ -109,9 +114,9 @@ class GraphPlanner {
   std::vector<uint16_t> word_lo_, word_hi_;
 };
 
-/// Plans one synthesis: first within the target's time and a little more than its
-/// distance; if nothing lasts the time there, again over 1.5 times the time and every
-/// distance the takes' speeds allow (coarser bins), for the nearest path. Throws
+/// Plans one synthesis: first within the target's time and its distance plus 10 % (at
+/// least 1 m); if nothing lasts the time there, again over 1.5 times the time and every
+/// distance the takes' speeds allow (in wider bins), for the nearest path. Throws
 /// std::invalid_argument for points outside their takes, std::runtime_error if the end
 /// point cannot be reached at all.
 SynthesisResult Synthesize(const MotionLibrary& library, const MotionGraph& graph, GraphPoint from,

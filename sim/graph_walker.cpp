@@ -115,25 +115,25 @@ GraphWalker::GraphWalker(const MotionLibrary& lib, const MotionGraph& graph,
   transform_.shift_z = -root.z();
 }
 
-Vec3 GraphWalker::RootAfter(const PathStep& step, const PlanarTransform& transform) const {
-  if (step.transition < 0)
-    return transform.Apply(lib_.root_position[static_cast<size_t>(step.take)]
-                                             [static_cast<size_t>(step.first + step.count - 1)]);
-  const GraphTransition& t = graph_.transitions[static_cast<size_t>(step.transition)];
-  return transform.Compose(t.align).Apply(
-      lib_.root_position[static_cast<size_t>(t.to_take)][static_cast<size_t>(t.entry_frame() - 1)]);
+PlanarTransform GraphWalker::Follow(const Option& option, const PlanarTransform& transform) const {
+  return option.transition < 0
+             ? transform
+             : transform.Compose(graph_.transitions[static_cast<size_t>(option.transition)].align);
 }
 
-void GraphWalker::NextFrames(std::vector<Pose>* out, std::vector<uint8_t>* blended) {
-  const auto un = static_cast<size_t>(node_);
-  const int take = connectivity_.node_take[un];
-  const int frame = connectivity_.node_frame[un];
-  // The options: play on to the next branch point, or leave through a transition (each
-  // followed by the play to the branch point after it); only into the walkable part.
-  struct Option {
-    int transition;  // -1: play on
-    int next;
-  };
+double GraphWalker::HomeScore(int node, const PlanarTransform& transform) const {
+  const auto take = static_cast<size_t>(connectivity_.node_take[static_cast<size_t>(node)]);
+  const auto frame = static_cast<size_t>(connectivity_.node_frame[static_cast<size_t>(node)]);
+  const Vec3 p = transform.Apply(lib_.root_position[take][frame]);
+  // Where the walk would be after going on a little in the direction the body faces:
+  // near home and facing it scores best, so a turn towards home counts before the walk back.
+  const double heading = lib_.root_yaw[take][frame] + transform.yaw_rad + lib_.forward_yaw_offset;
+  const double ahead = std::min(std::hypot(p.x(), p.z()), options_.home_radius_m);
+  return std::hypot(p.x() + ahead * std::sin(heading), p.z() + ahead * std::cos(heading));
+}
+
+std::vector<GraphWalker::Option> GraphWalker::OptionsAt(int node) const {
+  const auto un = static_cast<size_t>(node);
   std::vector<Option> options;
   const int skip = connectivity_.skip[un];
   if (skip >= 0 && connectivity_.node_in_walk[static_cast<size_t>(skip)])
@@ -142,35 +142,47 @@ void GraphWalker::NextFrames(std::vector<Pose>* out, std::vector<uint8_t>* blend
     if (connectivity_.node_in_walk[static_cast<size_t>(next)]) options.push_back({t, next});
   // In the walkable part every node has a way on; this only guards a broken invariant.
   if (options.empty()) throw std::logic_error("graph walk: a walkable node has no way on");
+  return options;
+}
 
-  auto steps_of = [&](const Option& o) {
-    std::vector<PathStep> steps;
-    const int next_frame = connectivity_.node_frame[static_cast<size_t>(o.next)];
-    if (o.transition < 0) {
-      steps.push_back({take, frame, next_frame - frame, -1});
-    } else {
-      const GraphTransition& t = graph_.transitions[static_cast<size_t>(o.transition)];
-      steps.push_back({-1, 0, 0, o.transition});
-      if (next_frame > t.entry_frame())
-        steps.push_back({t.to_take, t.entry_frame(), next_frame - t.entry_frame(), -1});
-    }
-    return steps;
-  };
+std::vector<PathStep> GraphWalker::StepsOf(int node, const Option& o) const {
+  const int take = connectivity_.node_take[static_cast<size_t>(node)];
+  const int frame = connectivity_.node_frame[static_cast<size_t>(node)];
+  const int next_frame = connectivity_.node_frame[static_cast<size_t>(o.next)];
+  std::vector<PathStep> steps;
+  if (o.transition < 0) {
+    steps.push_back({take, frame, next_frame - frame, -1});
+  } else {
+    const GraphTransition& t = graph_.transitions[static_cast<size_t>(o.transition)];
+    steps.push_back({-1, 0, 0, o.transition});
+    if (next_frame > t.entry_frame())
+      steps.push_back({t.to_take, t.entry_frame(), next_frame - t.entry_frame(), -1});
+  }
+  return steps;
+}
+
+double GraphWalker::ClosestToHome(int node, const PlanarTransform& transform, int depth) const {
+  double best = HomeScore(node, transform);
+  if (depth <= 0) return best;
+  for (const Option& o : OptionsAt(node))
+    best = std::min(best, ClosestToHome(o.next, Follow(o, transform), depth - 1));
+  return best;
+}
+
+void GraphWalker::NextFrames(std::vector<Pose>* out, std::vector<uint8_t>* blended) {
+  const int take = connectivity_.node_take[static_cast<size_t>(node_)];
+  const int frame = connectivity_.node_frame[static_cast<size_t>(node_)];
+  const std::vector<Option> options = OptionsAt(node_);
   size_t pick = 0;
   const Vec3 here =
       transform_.Apply(lib_.root_position[static_cast<size_t>(take)][static_cast<size_t>(frame)]);
   if (std::hypot(here.x(), here.z()) > options_.home_radius_m) {
-    // Strayed: the option whose end lands nearest home.
+    // Strayed: the option from which the walk can best head home within a few branch
+    // points (one step ahead is not enough where the way back starts with a turn).
     double best = 1e300;
     for (size_t k = 0; k < options.size(); ++k) {
-      PlanarTransform t = transform_;
-      Vec3 end = here;
-      for (const PathStep& s : steps_of(options[k])) {
-        end = RootAfter(s, t);
-        if (s.transition >= 0)
-          t = t.Compose(graph_.transitions[static_cast<size_t>(s.transition)].align);
-      }
-      const double d = std::hypot(end.x(), end.z());
+      const double d =
+          ClosestToHome(options[k].next, Follow(options[k], transform_), kLookahead - 1);
       if (d < best) {
         best = d;
         pick = k;
@@ -186,7 +198,7 @@ void GraphWalker::NextFrames(std::vector<Pose>* out, std::vector<uint8_t>* blend
       pick = first + std::uniform_int_distribution<size_t>(0, options.size() - 1 - first)(rng_);
     }
   }
-  for (const PathStep& s : steps_of(options[pick])) {
+  for (const PathStep& s : StepsOf(node_, options[pick])) {
     RenderStep(lib_, graph_, s, &transform_, out, blended);
     if (s.transition >= 0) ++transitions_;
   }

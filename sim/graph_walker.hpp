@@ -48,7 +48,24 @@ class GraphWalker {
   int transitions_taken() const { return transitions_; }
 
  private:
-  Vec3 RootAfter(const PathStep& step, const PlanarTransform& transform) const;
+  struct Option {
+    int transition;  ///< -1: play on in the take.
+    int next;        ///< The branch point it leads to.
+  };
+  /// Branch points looked ahead when steering home.
+  static constexpr int kLookahead = 4;
+
+  /// The running transform after taking an option.
+  PlanarTransform Follow(const Option& option, const PlanarTransform& transform) const;
+  /// How well a branch point (under a transform) heads home: the distance from home after
+  /// going on a little the way the body faces.
+  double HomeScore(int node, const PlanarTransform& transform) const;
+  /// The ways on from a branch point, into the walkable part: play on, or each transition
+  /// (then the play to the branch point after it).
+  std::vector<Option> OptionsAt(int node) const;
+  std::vector<PathStep> StepsOf(int node, const Option& option) const;
+  /// The best HomeScore the walk can reach within depth more steps.
+  double ClosestToHome(int node, const PlanarTransform& transform, int depth) const;
 
   const MotionLibrary& lib_;
   const MotionGraph& graph_;

@@ -148,6 +148,13 @@ constexpr double kPlantedSpeed = 0.5;  // m/s
 
 }  // namespace
 
+double TakeRate(const BvhTake& take) {
+  // A BVH's frame time is printed to a few digits (0.0333333): 30.00003 Hz is 30 Hz, and
+  // taking it at its printed value would drop a take's last frame when resampled to 30.
+  const double rate = take.rate_hz();
+  return std::abs(rate - std::round(rate)) < 1e-5 * rate ? std::round(rate) : rate;
+}
+
 Vec3 PlanarTransform::Apply(const Vec3& p) const {
   return RotateY(yaw_rad, p) + Vec3(shift_x, 0.0, shift_z);
 }
@@ -227,10 +234,7 @@ MotionLibrary MakeMotionLibrary(const std::vector<BvhTake>& bvh,
   lib.layout = bvh.front();
   lib.layout.frames.clear();
   lib.layout.skeleton = sk;
-  lib.rate_hz = rate_hz > 0 ? rate_hz : bvh.front().rate_hz();
-  // A BVH's frame time is printed to a few digits (0.0333333): 30.00000003 Hz is 30 Hz.
-  if (std::abs(lib.rate_hz - std::round(lib.rate_hz)) < 1e-5 * lib.rate_hz)
-    lib.rate_hz = std::round(lib.rate_hz);
+  lib.rate_hz = rate_hz > 0 ? rate_hz : TakeRate(bvh.front());
   lib.body_root = -1;
   for (int j = 0; j < sk.num_joints() && lib.body_root < 0; ++j)
     if (sk.joint(j).type == JointType::kFree) lib.body_root = j;
@@ -248,7 +252,7 @@ MotionLibrary MakeMotionLibrary(const std::vector<BvhTake>& bvh,
     lib.names.push_back(name);
     lib.paths.push_back(paths[t]);
     lib.file_hashes.push_back(file_hashes[t]);
-    lib.takes.push_back(ResampleMotion(sk, bvh[t].frames, bvh[t].rate_hz(), lib.rate_hz));
+    lib.takes.push_back(ResampleMotion(sk, bvh[t].frames, TakeRate(bvh[t]), lib.rate_hz));
   }
   KinematicsWorkspace ws(sk);
   ForwardKinematics(sk, lib.takes.front().front(), &ws);
@@ -274,6 +278,18 @@ MotionLibrary MakeMotionLibrary(const std::vector<BvhTake>& bvh,
     lib.root_position.push_back(std::move(position));
     lib.root_yaw.push_back(std::move(yaw));
     lib.path_m.push_back(std::move(path));
+  }
+  {
+    double sum_sin = 0.0, sum_cos = 0.0;
+    for (size_t t = 0; t < lib.takes.size(); ++t)
+      for (size_t f = 1; f < lib.takes[t].size(); ++f) {
+        const Vec3 v = lib.root_position[t][f] - lib.root_position[t][f - 1];
+        if (std::hypot(v.x(), v.z()) * lib.rate_hz < 0.3) continue;
+        const double offset = std::atan2(v.x(), v.z()) - lib.root_yaw[t][f];
+        sum_sin += std::sin(offset);
+        sum_cos += std::cos(offset);
+      }
+    if (sum_sin != 0.0 || sum_cos != 0.0) lib.forward_yaw_offset = std::atan2(sum_sin, sum_cos);
   }
   // The ground: where the feet get lowest (a low percentile, so one odd frame does not
   // set it). A rig without recognisable feet has no contacts to keep.

@@ -44,6 +44,9 @@ struct MotionLibrary {
   std::vector<std::vector<double>> root_yaw;
   /// Per take: cumulative horizontal path of the body root; [f] = path from frame 0 to f.
   std::vector<std::vector<double>> path_m;
+  /// The direction of travel relative to the root's yaw (mean over frames moving faster
+  /// than 0.3 m/s): which way a body faces, for any rig's rest orientation.
+  double forward_yaw_offset = 0.0;
   double ground_y = 0.0;  ///< The lowest the feet get (1st percentile), for contacts.
   /// Per take, per frame: the feet's world positions (left, right), and whether each is
   /// planted (within 5 cm of the ground and moving under 0.5 m/s); empty for a rig
@@ -65,6 +68,9 @@ struct MotionLibrary {
   /// The horizontal distance the body root covers stepping from frame f-1 to f (0 at f=0).
   double Step(int take, int f) const;
 };
+
+/// A take's frame rate, a whole number of hertz when its printed frame time means one.
+double TakeRate(const BvhTake& take);
 
 /// Reads BVH takes into a library. rate_hz 0: the first take's rate. units: as for
 /// ReadBvh ("" guesses from bone lengths). Throws std::runtime_error naming the file when a

@@ -215,10 +215,23 @@ ReplayReport RunReplay(const ReplaySource& source, const ReplayOptions& o) {
   setup.frame_period_s = 1.0 / rate;
   if (o.protocol_version >= protocol::kVersion2)
     setup.sent_stream = [&](size_t, uint64_t frame_number) { return stream_of(frame_number); };
+  // Where an actor stands moves the joint that carries the travel (Hips below a fixed
+  // joint_Root in some BVH rigs), in its parent's frame.
+  int travel_joint = 0;
+  Mat3 travel_parent = Mat3::Identity();
+  if (!source.truth.empty()) {
+    for (int j = source.skeleton->num_joints() - 1; j >= 0; --j)
+      if (source.skeleton->joint(j).type == JointType::kFree) travel_joint = j;
+    KinematicsWorkspace ws(*source.skeleton);
+    ForwardKinematics(*source.skeleton, source.truth.front(), &ws);
+    const int parent = source.skeleton->joint(travel_joint).parent.value;
+    if (parent >= 0) travel_parent = ws.R_WJ[static_cast<size_t>(parent)];
+  }
   setup.truth = [&](size_t k, uint64_t frame_number, Pose* scratch) -> const Pose* {
     if (source.truth.empty()) return nullptr;
     *scratch = source.truth[frame_number % static_cast<uint64_t>(n)];
-    scratch->translation[0] += logs[k].offset;
+    scratch->translation[static_cast<size_t>(travel_joint)] +=
+        travel_parent.transpose() * logs[k].offset;
     return scratch;
   };
   ReplayReport report = replay::RunSchedule(logs, produce, setup, o);

@@ -70,6 +70,8 @@ nlohmann::json ReplayReport::ToJson() const {
                        {"frame_number", worst_frame_number},
                        {"joint", worst_frame_joint}}},
                      {"mean_joint_rotation_error_deg", mean_rotation_error_deg}};
+  if (frames_unscored > 0)
+    j["accuracy_unscored"] = {{"frames", frames_unscored}, {"reason", unscored_reason}};
   return j;
 }
 
@@ -131,6 +133,8 @@ std::string ReplayReport::FormatTable() const {
                                 worst_frame_joint + ")");
     row("joint rotation error mean (deg)", num(mean_rotation_error_deg, 3));
   }
+  if (frames_unscored > 0)
+    row("accuracy not scored", std::to_string(frames_unscored) + " frames: " + unscored_reason);
   return s.str();
 }
 

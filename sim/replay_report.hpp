@@ -51,6 +51,9 @@ struct ReplayReport {
   std::string worst_frame_subject;     ///< Where the worst frame was.
   uint64_t worst_frame_number = 0;
   std::string worst_frame_joint;
+  /// Frames with a ground truth the replay could not score, and the first reason why.
+  uint64_t frames_unscored = 0;
+  std::string unscored_reason;
   nlohmann::json ToJson() const;
   std::string FormatTable() const;
 };

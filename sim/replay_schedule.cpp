@@ -135,7 +135,11 @@ class SkeletonReceiver {
  public:
   SkeletonReceiver(zmq::socket_t& in, std::vector<SubjectLog>& logs, const ScheduleSetup& setup)
       : in_(in), logs_(logs), setup_(setup) {
-    if (setup_.skeleton != nullptr) accuracy_.emplace(*setup_.skeleton);
+    if (setup_.skeleton != nullptr) {
+      accuracy_.emplace(*setup_.skeleton);
+      for (int j = setup_.skeleton->num_joints() - 1; j >= 0; --j)
+        if (setup_.skeleton->joint(j).type == JointType::kFree) translating_joint_ = j;
+    }
     thread_ = std::thread([this] { Run(); });
   }
   ~SkeletonReceiver() { Stop(); }
@@ -152,6 +156,9 @@ class SkeletonReceiver {
   uint64_t stream_mismatched() const { return stream_mismatched_.load(); }
   /// Valid after Stop().
   const std::optional<PoseErrorAccumulator>& accuracy() const { return accuracy_; }
+  /// Valid after Stop(): frames with a truth that could not be scored, and why (the first reason).
+  uint64_t unscored() const { return unscored_; }
+  const std::string& unscored_reason() const { return unscored_reason_; }
   /// Valid after Stop(): which subject and frame number each scored frame was.
   const std::vector<std::pair<size_t, uint64_t>>& scored() const { return scored_; }
 
@@ -196,13 +203,31 @@ class SkeletonReceiver {
         }
         const Pose* expected =
             setup_.truth ? setup_.truth(k, message.frame_number, &scratch) : nullptr;
-        if (expected == nullptr ||
-            static_cast<int>(message.rotations.size()) != skeleton->num_joints())
+        if (expected == nullptr) continue;
+        if (static_cast<int>(message.rotations.size()) != skeleton->num_joints()) {
+          Unscored("the daemon's skeleton has " + std::to_string(message.rotations.size()) +
+                   " joints, the take's " + std::to_string(skeleton->num_joints()) +
+                   ": the daemon's subject is not this take's");
           continue;
-        for (size_t j = 0; j < message.rotations.size(); ++j)
-          solved.rotation[j] = message.rotations[j].normalized();
-        solved.translation[0] = message.root_translation;
-        ForwardKinematics(*skeleton, solved, &*solved_fk);
+        }
+        if (message.global_positions.size() == message.rotations.size()) {
+          // The global block: exact for any skeleton.
+          for (size_t j = 0; j < message.global_positions.size(); ++j) {
+            solved_fk->p_WJ[j] = message.global_positions[j];
+            solved_fk->R_WJ[j] = message.global_rotations[j].normalized().toRotationMatrix();
+          }
+        } else if (translating_joint_ > 0) {
+          // Only joint 0's translation is on the wire (protocol/README.md, "Skeleton pose").
+          Unscored("the skeleton translates at joint '" + skeleton->joint(translating_joint_).name +
+                   "', not joint 0, and the daemon sends no global transforms (set [output] "
+                   "global_transforms = true to score it)");
+          continue;
+        } else {
+          for (size_t j = 0; j < message.rotations.size(); ++j)
+            solved.rotation[j] = message.rotations[j].normalized();
+          solved.translation[0] = message.root_translation;
+          ForwardKinematics(*skeleton, solved, &*solved_fk);
+        }
         ForwardKinematics(*skeleton, *expected, &*truth_fk);
         accuracy_->Add(*truth_fk, *solved_fk);
         scored_.push_back({k, message.frame_number});
@@ -214,6 +239,14 @@ class SkeletonReceiver {
   std::vector<SubjectLog>& logs_;
   const ScheduleSetup& setup_;
   std::optional<PoseErrorAccumulator> accuracy_;
+  int translating_joint_ = 0;  ///< The first free joint of the truth's skeleton.
+  uint64_t unscored_ = 0;
+  std::string unscored_reason_;
+
+  void Unscored(const std::string& reason) {
+    ++unscored_;
+    if (unscored_reason_.empty()) unscored_reason_ = reason;
+  }
   std::vector<std::pair<size_t, uint64_t>> scored_;
   std::atomic<bool> running_{true};
   std::atomic<uint64_t> received_{0}, duplicated_{0}, stream_checked_{0}, stream_mismatched_{0};
@@ -337,6 +370,8 @@ ReplayReport RunSchedule(std::vector<SubjectLog>& logs, const FrameProducer& pro
   report.throughput_fps = report.send_seconds > 0
                               ? static_cast<double>(report.frames_received) / report.send_seconds
                               : 0.0;
+  report.frames_unscored = receiver->unscored();
+  report.unscored_reason = receiver->unscored_reason();
   const auto& accuracy = receiver->accuracy();
   if (accuracy && accuracy->frames() > 0) {
     report.has_truth = true;

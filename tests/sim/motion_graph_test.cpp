@@ -280,6 +280,8 @@ TEST_F(MotionGraphTest, TheWalkNeverJumpsAndStaysNearHome) {
     max_radius =
         std::max(max_radius, std::hypot(walk[f].translation[b].x(), walk[f].translation[b].z()));
   }
+  std::printf("10 min walk: largest step %.3f m (takes' %.3f), farthest from home %.2f m\n",
+              max_step, max_source_step, max_radius);
   EXPECT_LE(max_step, 1.5 * max_source_step);
   EXPECT_LT(max_radius, 15.0);
   // Seeded: the same seed walks the same way.
