@@ -168,6 +168,7 @@ int main(int argc, char** argv) {
     const double prep_s = Seconds(prep);
     std::vector<double> dm, tm, dm_feasible, tm_feasible;
     int met = 0;
+    long transitions = 0;
     double solve_s = 0.0;
     for (int d = 1; d <= max_d; ++d)
       for (int t = 1; t <= max_t; ++t) {
@@ -187,6 +188,7 @@ int main(int argc, char** argv) {
           tm_feasible.push_back(tm.back());
         }
         met += std::abs(r.distance_miss_m) <= 0.2 && std::abs(r.time_miss_s) <= 0.1;
+        transitions += r.transitions;
       }
     // Syntheses alone, as `mocap-sim graph synth` runs them (its own programme each, and
     // a wider second one when the target cannot be met): the slowest of a spread of targets.
@@ -221,6 +223,8 @@ int main(int argc, char** argv) {
           "  %-44s %22s %22s   (the %zu targets the graph can meet; alone, unmet %.0f ms)\n", "",
           stats(dm_feasible).c_str(), stats(tm_feasible).c_str(), dm_feasible.size(),
           alone_unmet_ms);
+    std::printf("  %-44s %.1f transitions per synthesis on average\n", "",
+                static_cast<double>(transitions) / static_cast<double>(dm.size()));
     feasible_d.insert(feasible_d.end(), dm_feasible.begin(), dm_feasible.end());
     all_d.insert(all_d.end(), dm.begin(), dm.end());
     all_t.insert(all_t.end(), tm.begin(), tm.end());

@@ -69,7 +69,7 @@ GraphCommands::GraphCommands(CLI::App& app) : state_(std::make_unique<State>()) 
   s.synth->add_option("--graph", s.graph_path, "Graph file")->required()->check(CLI::ExistingFile);
   s.synth->add_option("--distance", s.distance_m, "Distance the root travels, metres")
       ->required()
-      ->check(CLI::Range(0.0, 10000.0));
+      ->check(CLI::Range(0.0, 5000.0));
   s.synth->add_option("--time", s.seconds, "Duration, seconds")
       ->required()
       ->check(CLI::Range(0.01, 3600.0));
@@ -93,6 +93,9 @@ GraphCommands::~GraphCommands() = default;
 bool GraphCommands::Selected() const { return state_->graph->parsed(); }
 
 namespace {
+
+// A synthesis within this of its distance (and on the frame of its time) meets its target.
+constexpr double kMetDistanceM = 0.2;
 
 nlohmann::json PathJson(const MotionLibrary& lib, const MotionGraph& graph, const GraphPath& path) {
   nlohmann::json steps = nlohmann::json::array();
@@ -154,13 +157,31 @@ int GraphCommands::Run() {
     }
     std::printf("  endless part (largest strongly connected): %d of %d branch points, %d takes\n",
                 connectivity.walk_nodes, connectivity.nodes, connectivity.walk_takes);
+    if (connectivity.walk_nodes == 0)
+      std::printf(
+          "warning: no walk can loop through this graph, so `replay --graph` cannot use it "
+          "and syntheses are as long as the takes; check --units, or allow looser "
+          "transitions (--max-cost-m, --transitions-per-pair)\n");
     std::printf("wrote %s\n", s.out.c_str());
     return 0;
   }
   const MotionGraph graph = ReadMotionGraph(s.graph_path);
   const MotionLibrary lib = LoadGraphLibrary(graph, s.graph_path);
   if (s.synth->parsed()) {
-    const GraphPoint from = s.from.empty() ? GraphPoint{0, 0} : ParseGraphPoint(lib, s.from);
+    GraphPoint from{0, 0};
+    if (s.from.empty()) {
+      // The first take a walk can loop through: from there every target has a chance.
+      const GraphConnectivity c = AnalyseConnectivity(lib, graph);
+      for (int t = 0; t < lib.num_takes(); ++t)
+        if (c.take_in_walk[static_cast<size_t>(t)]) {
+          from.take = t;
+          break;
+        }
+      std::printf("from %s:0 (no --from: the first take a walk can loop through)\n",
+                  lib.names[static_cast<size_t>(from.take)].c_str());
+    } else {
+      from = ParseGraphPoint(lib, s.from);
+    }
     std::optional<GraphPoint> to;
     if (!s.to.empty()) to = ParseGraphPoint(lib, s.to);
     const auto start = std::chrono::steady_clock::now();
@@ -174,8 +195,15 @@ int GraphCommands::Run() {
         r.distance_m, s.distance_m, r.distance_miss_m, r.seconds, s.seconds, r.time_miss_s);
     std::printf("%d transitions (distortion %.3f m in all), planned in %.1f ms\n", r.transitions,
                 r.transition_cost_m, ms);
-    if (!r.exact_time || std::abs(r.distance_miss_m) > 0.2)
-      std::printf("note: no path meets the constraints; this is the nearest one\n");
+    const bool met = r.exact_time && std::abs(r.distance_miss_m) <= kMetDistanceM;
+    if (!met)
+      std::printf(
+          "note: no path meets the constraints (within %.1f m and a frame); this is the "
+          "nearest one (exit status 2)\n",
+          kMetDistanceM);
+    if (r.distance_bin_m > 0.011)
+      std::printf("note: planned in %.0f cm distance steps (a long plan widens them)\n",
+                  r.distance_bin_m * 100.0);
     std::printf("wrote %s (%d frames)\n", s.out.c_str(), r.frames);
     if (!s.path_out.empty()) {
       WriteJson(s.path_out, {{"distance_m", r.distance_m},
@@ -187,7 +215,7 @@ int GraphCommands::Run() {
                              {"steps", PathJson(lib, graph, r.path)}});
       std::printf("wrote %s\n", s.path_out.c_str());
     }
-    return 0;
+    return met ? 0 : 2;
   }
   if (s.match->parsed()) {
     BvhReadOptions read;

@@ -30,8 +30,13 @@ GraphPoint ParseGraphPoint(const MotionLibrary& lib, const std::string& text) {
   return p;
 }
 
-GraphPlanner::GraphPlanner(const MotionLibrary& library, const MotionGraph& graph, double bin_m)
-    : lib_(library), graph_(graph), requested_bin_m_(bin_m), bin_m_(bin_m) {
+GraphPlanner::GraphPlanner(const MotionLibrary& library, const MotionGraph& graph, double bin_m,
+                           size_t max_table_bytes)
+    : lib_(library),
+      graph_(graph),
+      requested_bin_m_(bin_m),
+      max_table_bytes_(max_table_bytes),
+      bin_m_(bin_m) {
   if (!(bin_m > 0)) throw std::invalid_argument("planner: distance bin must be > 0");
 }
 
@@ -112,15 +117,15 @@ void GraphPlanner::Prepare(GraphPoint from, std::optional<GraphPoint> to, double
     out_edges_[static_cast<size_t>(edges_[e].from)].push_back(static_cast<int>(e));
   }
 
-  // The tables hold a bitset per node and frame: keep them within kMaxTableBytes by
+  // The tables hold a bitset per node and frame: keep them within max_table_bytes_ by
   // widening the bins when a long time and distance would need more.
   const size_t cells = nodes_.size() * static_cast<size_t>(horizon_ + 1);
-  const size_t max_words = kMaxTableBytes / (cells * sizeof(uint64_t) + 1);
+  const size_t max_words = max_table_bytes_ / (cells * sizeof(uint64_t) + 1);
   if (max_words < 1)
     throw std::runtime_error("planner: " + std::to_string(max_seconds) +
                              " s is too long for this graph's " + std::to_string(nodes_.size()) +
                              " branch points (the tables would exceed " +
-                             std::to_string(kMaxTableBytes >> 20) + " MB)");
+                             std::to_string(max_table_bytes_ >> 20) + " MB)");
   const double wanted_words = std::ceil((max_distance_m / bin_m_ + 2.0) / 64.0);
   if (wanted_words > static_cast<double>(std::min<size_t>(max_words, 65535)))
     bin_m_ =
@@ -280,6 +285,9 @@ SynthesisResult GraphPlanner::Solve(double distance_m, double seconds) const {
   // (the bins' rounding then cancels instead of adding up), staying in a take unless a
   // transition is at least half a bin better.
   constexpr size_t kEndingsTried = 16;
+  // What a transition is worth in distance: a path with one more must come this much
+  // closer to the target (a blend is never as good as the take's own motion).
+  constexpr double kTransitionWorthM = 0.01;
   // Rebuilds from (node, t, bin); returns the edges (end first) and the signed miss of the
   // whole path against the target.
   auto rebuild = [&](const Ending& ending, long end_bin, std::vector<int>* chosen) {
@@ -295,7 +303,7 @@ SynthesisResult GraphPlanner::Solve(double distance_m, double seconds) const {
         const long b0 = bin - edge.bins;
         if (t0 < 0 || b0 < 0 || NearestBin(edge.from, t0, b0, 0) != b0) continue;
         const double m = miss + edge.distance_m - static_cast<double>(edge.bins) * bin_m_;
-        const double score = std::abs(m) + (edge.transition >= 0 ? 0.5 * bin_m_ : 0.0);
+        const double score = std::abs(m) + (edge.transition >= 0 ? kTransitionWorthM : 0.0);
         if (score < pick_score) {
           pick_score = score;
           pick = e;
@@ -315,18 +323,22 @@ SynthesisResult GraphPlanner::Solve(double distance_m, double seconds) const {
   };
   std::vector<int> best_edges;
   const Ending* best_ending = nullptr;
-  double best_miss = std::numeric_limits<double>::infinity();
+  double best_score = std::numeric_limits<double>::infinity();
   for (size_t k = 0; k < endings.size() && k < kEndingsTried; ++k) {
     const Ending& ending = endings[k];
-    if (ending.miss > best_miss + bin_m_) break;
+    if (ending.miss > best_score + bin_m_) break;
     // A loop repeated many times repeats its rounding too, which no choice of steps can
     // cancel: aim the next try that much the other way, where such a path exists.
     long end_bin = ending.bin;
     for (int attempt = 0; attempt < 4; ++attempt) {
       std::vector<int> chosen;
       const double miss = rebuild(ending, end_bin, &chosen);
-      if (std::abs(miss) < best_miss) {
-        best_miss = std::abs(miss);
+      // Fewer transitions win over a closer distance, up to kTransitionWorthM each.
+      double score = std::abs(miss) + (ending.transition >= 0 ? kTransitionWorthM : 0.0);
+      for (int e : chosen)
+        if (edges_[static_cast<size_t>(e)].transition >= 0) score += kTransitionWorthM;
+      if (score < best_score) {
+        best_score = score;
         best_edges = std::move(chosen);
         best_ending = &ending;
       }
@@ -437,9 +449,34 @@ SynthesisResult Synthesize(const MotionLibrary& lib, const MotionGraph& graph, G
                                 std::max(1, lib.num_frames(t) - 1));
   const double horizon = 1.5 * seconds + 5.0;
   const double range = (1.5 * speed + 0.5) * horizon + distance_m + 2.0;
-  GraphPlanner planner(lib, graph, bin_m);  // widened to fit the tables' budget
+  // Widened to fit a smaller budget: this pass is for the nearest path, not for centimetres.
+  GraphPlanner planner(lib, graph, bin_m, size_t{48} << 20);
   planner.Prepare(from, to, horizon, range);
-  return planner.Solve(distance_m, seconds);
+  try {
+    return planner.Solve(distance_m, seconds);
+  } catch (const std::runtime_error&) {
+    if (!to) throw;
+  }
+  // The end frame is never reached: say where the graph enters its take.
+  const std::string end =
+      lib.names[static_cast<size_t>(to->take)] + ":" + std::to_string(to->frame);
+  int earliest = -1;
+  for (const GraphTransition& t : graph.transitions)
+    if (t.to_take == to->take && (earliest < 0 || t.entry_frame() - 1 < earliest))
+      earliest = t.entry_frame() - 1;
+  if (from.take == to->take && from.frame <= to->frame) earliest = from.frame;
+  if (earliest < 0)
+    throw std::runtime_error("no path reaches " + end + ": no transition enters take '" +
+                             lib.names[static_cast<size_t>(to->take)] + "'");
+  if (earliest > to->frame)
+    throw std::runtime_error("no path reaches " + end + ": the graph enters take '" +
+                             lib.names[static_cast<size_t>(to->take)] + "' at frame " +
+                             std::to_string(earliest) +
+                             " at the earliest; choose a later --to frame");
+  throw std::runtime_error("no path from " + lib.names[static_cast<size_t>(from.take)] + ":" +
+                           std::to_string(from.frame) + " reaches " + end + " within " +
+                           std::to_string(static_cast<int>(std::ceil(horizon))) +
+                           " s (the start may not lead to that part of the graph)");
 }
 
 }  // namespace mocapd

@@ -48,8 +48,9 @@ struct SynthesisResult {
 
 class GraphPlanner {
  public:
-  GraphPlanner(const MotionLibrary& library, const MotionGraph& graph,
-               double distance_bin_m = 0.01);
+  /// max_table_bytes: the tables' budget; long times and distances widen the bins to fit.
+  GraphPlanner(const MotionLibrary& library, const MotionGraph& graph, double distance_bin_m = 0.01,
+               size_t max_table_bytes = size_t{256} << 20);
 
   /// Computes what can be reached from `from` (the first frame played) within max_seconds
   /// and max_distance_m, ending at `to` (the last frame played) if given. Throws
@@ -90,12 +91,10 @@ class GraphPlanner {
   /// first one counted unless it starts the path).
   double PlayDistance(int take, int frame, int count, bool starts_path) const;
 
-  /// The tables' budget: long times and distances widen the bins to stay within it.
-  static constexpr size_t kMaxTableBytes = size_t{256} << 20;
-
   const MotionLibrary& lib_;
   const MotionGraph& graph_;
   double requested_bin_m_;
+  size_t max_table_bytes_;
   double bin_m_;
   GraphPoint from_;
   std::optional<GraphPoint> to_;

@@ -654,9 +654,11 @@ MotionGraph ReadMotionGraph(const std::string& path) {
     GraphTransition t;
     t.from_take = take_of(trs[k], "from", where);
     t.to_take = take_of(trs[k], "to", where);
-    t.half_window = Integer(trs[k], "half_window", path, where, 1, 100000);
     const int na = g.takes[static_cast<size_t>(t.from_take)].frames;
     const int nb = g.takes[static_cast<size_t>(t.to_take)].frames;
+    // The window must fit both takes before its centres can be checked against it.
+    t.half_window =
+        Integer(trs[k], "half_window", path, where, 1, std::max(1, (std::min(na, nb) - 1) / 2));
     t.from_frame =
         Integer(trs[k], "from_frame", path, where, t.half_window, na - 1 - t.half_window);
     t.to_frame = Integer(trs[k], "to_frame", path, where, t.half_window, nb - 1 - t.half_window);
@@ -681,10 +683,16 @@ MotionLibrary LoadGraphLibrary(const MotionGraph& graph, const std::string& grap
   for (const GraphTakeRef& t : graph.takes) paths.push_back(t.path);
   MotionLibrary lib = LoadMotionLibrary(paths, graph.rate_hz, graph.units);
   for (size_t k = 0; k < graph.takes.size(); ++k) {
-    if (lib.file_hashes[k] != graph.takes[k].file_hash ||
-        lib.num_frames(static_cast<int>(k)) != graph.takes[k].frames)
+    if (lib.file_hashes[k] != graph.takes[k].file_hash)
       throw std::runtime_error(graph_path + ": take '" + graph.takes[k].name + "' (" + paths[k] +
                                ") changed since the graph was built; build it again");
+    if (lib.num_frames(static_cast<int>(k)) != graph.takes[k].frames)
+      throw std::runtime_error(graph_path + ": take '" + graph.takes[k].name + "' has " +
+                               std::to_string(lib.num_frames(static_cast<int>(k))) + " frames at " +
+                               std::to_string(graph.rate_hz) + " Hz, the graph says " +
+                               std::to_string(graph.takes[k].frames) +
+                               " (fields 'rate_hz' or 'takes[" + std::to_string(k) +
+                               "].frames' were edited); build the graph again");
     lib.names[k] = graph.takes[k].name;
   }
   return lib;

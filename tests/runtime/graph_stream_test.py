@@ -46,8 +46,11 @@ def main(mocapd, mocap_sim, config_dir, work):
     info = sim(mocap_sim, "info", synth_bvh)
     assert re.search(r"frames\s+300\b", info), info  # 10 s at 30 Hz
     out = sim(mocap_sim, "graph", "synth", "--graph", graph, "--distance", "500", "--time", "5",
-              "--out", os.path.join(work, "far.bvh"))
+              "--out", os.path.join(work, "far.bvh"), expect=2)
     assert "nearest one" in out, out
+    out = sim(mocap_sim, "graph", "synth", "--graph", graph, "--distance", "5", "--time", "20",
+              "--from", "walk:0", "--to", "turn:2", "--out", os.path.join(work, "y.bvh"), expect=1)
+    assert "turn:2" in out and "choose a later --to frame" in out, out
 
     out = sim(mocap_sim, "graph", "match", takes[0], "--graph", graph, "--out", os.path.join(work, "match.bvh"))
     assert "joint velocity difference" in out, out
