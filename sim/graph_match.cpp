@@ -127,7 +127,17 @@ MatchResult MatchQuery(const MotionLibrary& lib, const MotionGraph& graph, const
     const Eigen::MatrixXd f = Features(tracks[static_cast<size_t>(t)], vw);
     fl.middleRows(take_start[static_cast<size_t>(t)], f.rows()) = f;
   }
-  // Retrieval cost: squared feature distance, query frames x library frames.
+  // The trellis holds a cost and a way in per query frame and library frame (and the
+  // retrieval costs as many doubles): refuse what would not fit rather than swap.
+  constexpr double kMaxTrellisBytes = 1024.0 * 1024.0 * 1024.0;
+  const double trellis_bytes =
+      static_cast<double>(q_frames.size()) * total * (2 * sizeof(double) + sizeof(int));
+  if (trellis_bytes > kMaxTrellisBytes)
+    throw std::invalid_argument(
+        "match: a " + std::to_string(q_frames.size()) + "-frame query against " +
+        std::to_string(total) + " library frames needs " +
+        std::to_string(static_cast<long>(trellis_bytes / (1 << 20))) + " MB; split the query");
+  // Retrieval cost: feature distance, query frames x library frames.
   Eigen::MatrixXd cost = -2.0 * fq * fl.transpose();
   cost.colwise() += fq.rowwise().squaredNorm();
   cost.rowwise() += fl.rowwise().squaredNorm().transpose();
@@ -191,6 +201,11 @@ MatchResult MatchQuery(const MotionLibrary& lib, const MotionGraph& graph, const
   int row = 0;
   for (int r = 1; r < total; ++r)
     if (best[cell(Q - 1, r)] < best[cell(Q - 1, row)]) row = r;
+  if (!std::isfinite(best[cell(Q - 1, row)]))
+    throw std::runtime_error(
+        "match: no path through the graph lasts the query's " + std::to_string(Q) +
+        " frames (its takes are shorter and too few transitions join them; "
+        "build the graph with more or looser transitions, or split the query)");
   auto take_of = [&](int r) {
     int t = 0;
     while (t + 1 < lib.num_takes() && take_start[static_cast<size_t>(t + 1)] <= r) ++t;

@@ -9,6 +9,13 @@
 #include <stdexcept>
 
 namespace mocapd {
+namespace {
+
+// The planner's limits: beyond them a table cannot stay within any sensible budget.
+constexpr double kMaxSeconds = 4 * 3600.0;
+constexpr double kMaxDistanceM = 100000.0;
+
+}  // namespace
 
 GraphPoint ParseGraphPoint(const MotionLibrary& lib, const std::string& text) {
   const size_t colon = text.rfind(':');
@@ -47,8 +54,7 @@ double GraphPlanner::PlayDistance(int take, int frame, int count, bool starts_pa
   return inside + (starts_path ? 0.0 : lib_.Step(take, frame));
 }
 
-void GraphPlanner::Prepare(GraphPoint from, std::optional<GraphPoint> to, double max_seconds,
-                           double max_distance_m) {
+void GraphPlanner::BuildGraph(GraphPoint from, std::optional<GraphPoint> to, double max_seconds) {
   auto check = [&](const GraphPoint& p, const char* what) {
     if (p.take < 0 || p.take >= lib_.num_takes() || p.frame < 0 ||
         p.frame >= lib_.num_frames(p.take))
@@ -57,14 +63,11 @@ void GraphPlanner::Prepare(GraphPoint from, std::optional<GraphPoint> to, double
   };
   check(from, "start");
   if (to) check(*to, "end");
-  if (!(max_seconds > 0) || max_seconds > 3600.0)
-    throw std::invalid_argument("planner: time must be > 0 and at most an hour");
-  if (!(max_distance_m >= 0) || max_distance_m > 10000.0)
-    throw std::invalid_argument("planner: distance must be 0 .. 10 km");
+  if (!(max_seconds > 0) || max_seconds > kMaxSeconds)
+    throw std::invalid_argument("planner: time must be > 0 and at most 4 hours");
   from_ = from;
   to_ = to;
   horizon_ = std::max(1, static_cast<int>(std::lround(max_seconds * lib_.rate_hz)));
-  bin_m_ = requested_bin_m_;
 
   // Nodes: the start, then every frame where a transition leaves a take, and the frame
   // after the end point.
@@ -110,17 +113,39 @@ void GraphPlanner::Prepare(GraphPoint from, std::optional<GraphPoint> to, double
       edges_.push_back({u, arrive, t.blend_frames() + play, d, 0, static_cast<int>(k)});
     }
   }
+  exits_.assign(nodes_.size(), {});
+  for (int u = 0; u < static_cast<int>(nodes_.size()); ++u)
+    for (size_t k = 0; k < graph_.transitions.size(); ++k)
+      if (graph_.transitions[k].from_take == nodes_[static_cast<size_t>(u)].take &&
+          graph_.transitions[k].exit_frame() == nodes_[static_cast<size_t>(u)].frame)
+        exits_[static_cast<size_t>(u)].push_back(static_cast<int>(k));
   in_edges_.assign(nodes_.size(), {});
   out_edges_.assign(nodes_.size(), {});
   for (size_t e = 0; e < edges_.size(); ++e) {
     in_edges_[static_cast<size_t>(edges_[e].to)].push_back(static_cast<int>(e));
     out_edges_[static_cast<size_t>(edges_[e].from)].push_back(static_cast<int>(e));
   }
+}
+
+void GraphPlanner::Prepare(GraphPoint from, std::optional<GraphPoint> to, double max_seconds,
+                           double max_distance_m) {
+  if (!(max_distance_m >= 0) || max_distance_m > kMaxDistanceM)
+    throw std::invalid_argument("planner: distance must be 0 .. 100 km");
+  BuildGraph(from, to, max_seconds);
+  extremes_ = false;
+  min_m_.clear();
+  max_m_.clear();
+  min_via_.clear();
+  max_via_.clear();
+  bin_m_ = requested_bin_m_;
 
   // The tables hold a bitset per node and frame: keep them within max_table_bytes_ by
   // widening the bins when a long time and distance would need more.
   const size_t cells = nodes_.size() * static_cast<size_t>(horizon_ + 1);
-  const size_t max_words = max_table_bytes_ / (cells * sizeof(uint64_t) + 1);
+  // Per cell: the words, and the two word indices of the range that holds bits.
+  const size_t fixed = cells * 2 * sizeof(uint16_t);
+  const size_t max_words =
+      fixed < max_table_bytes_ ? (max_table_bytes_ - fixed) / (cells * sizeof(uint64_t)) : 0;
   if (max_words < 1)
     throw std::runtime_error("planner: " + std::to_string(max_seconds) +
                              " s is too long for this graph's " + std::to_string(nodes_.size()) +
@@ -211,59 +236,119 @@ int GraphPlanner::NearestBin(int node, int t, long bin, int max_offset) const {
   return static_cast<int>(best);
 }
 
-SynthesisResult GraphPlanner::Solve(double distance_m, double seconds) const {
-  if (nodes_.empty()) throw std::runtime_error("planner: Prepare was not called");
-  const int target_frames = static_cast<int>(std::lround(seconds * lib_.rate_hz));
-  // Ways to end: at the end node, or (no end point) anywhere, playing on from a node or
-  // from a blend's arrival for the frames that are left.
-  struct Ending {
-    int node, t;
-    double extra_m;  ///< Distance after (node, t).
-    int transition;  ///< A blend after the node, then play (-1: play only).
-    int play;        ///< Frames played after the node (or after the blend).
-    double miss;     ///< |nearest reachable distance - target| in the bins, for ordering.
-    int bin;         ///< The reachable bin at (node, t) the path is rebuilt from.
+bool GraphPlanner::Reached(int node, int t) const {
+  if (t < 0 || t > horizon_) return false;
+  const size_t cell = Cell(node, t);
+  return extremes_ ? std::isfinite(min_m_[cell]) : word_lo_[cell] <= word_hi_[cell];
+}
+
+template <typename F>
+void GraphPlanner::ForEachEnding(int n, F&& consider) const {
+  if (to_) {
+    if (Reached(end_node_, n)) consider(Ending{end_node_, n, 0.0, -1, 0});
+    return;
+  }
+  for (int u = 0; u < static_cast<int>(nodes_.size()); ++u) {
+    const Node node = nodes_[static_cast<size_t>(u)];
+    const bool start = u == start_node_;
+    for (int t = 0; t < n; ++t) {
+      if (!Reached(u, t)) continue;
+      const int k = n - t;
+      if (node.frame + k <= lib_.num_frames(node.take))
+        consider(Ending{u, t, PlayDistance(node.take, node.frame, k, start), -1, k});
+      for (int tr : exits_[static_cast<size_t>(u)]) {
+        const GraphTransition& g = graph_.transitions[static_cast<size_t>(tr)];
+        const int rest = n - t - g.blend_frames();
+        if (rest < 0 || g.entry_frame() + rest > lib_.num_frames(g.to_take)) continue;
+        consider(Ending{u, t,
+                        (start ? 0.0 : lib_.Step(node.take, node.frame)) + g.blend_path_m +
+                            PlayDistance(g.to_take, g.entry_frame(), rest, false),
+                        tr, rest});
+      }
+    }
+  }
+}
+
+SynthesisResult GraphPlanner::Finish(const std::vector<int>& edges_last_first, const Ending& ending,
+                                     double distance_m, double seconds, int frames) const {
+  GraphPath path;
+  auto play = [&](int take, int first, int count) {
+    if (count <= 0) return;
+    if (!path.empty() && path.back().transition < 0 && path.back().take == take &&
+        path.back().first + path.back().count == first) {
+      path.back().count += count;
+      return;
+    }
+    path.push_back({take, first, count, -1});
   };
-  std::vector<Ending> endings;
+  double planned = ending.extra_m;
+  for (auto it = edges_last_first.rbegin(); it != edges_last_first.rend(); ++it) {
+    const Edge& edge = edges_[static_cast<size_t>(*it)];
+    planned += edge.distance_m;
+    const Node& a = nodes_[static_cast<size_t>(edge.from)];
+    const Node& b = nodes_[static_cast<size_t>(edge.to)];
+    if (edge.transition < 0) {
+      play(a.take, a.frame, b.frame - a.frame);
+    } else {
+      const GraphTransition& t = graph_.transitions[static_cast<size_t>(edge.transition)];
+      path.push_back({-1, 0, 0, edge.transition});
+      play(t.to_take, t.entry_frame(), b.frame - t.entry_frame());
+    }
+  }
+  const Node& last = nodes_[static_cast<size_t>(ending.node)];
+  if (ending.transition >= 0) {
+    const GraphTransition& t = graph_.transitions[static_cast<size_t>(ending.transition)];
+    path.push_back({-1, 0, 0, ending.transition});
+    play(t.to_take, t.entry_frame(), ending.play);
+  } else {
+    play(last.take, last.frame, ending.play);
+  }
+  SynthesisResult result;
+  result.path = path;
+  result.frames = PathFrames(graph_, path);
+  result.seconds = result.frames / lib_.rate_hz;
+  result.distance_m = PathDistance(lib_, graph_, path);
+  result.planned_distance_m = planned;
+  result.distance_miss_m = result.distance_m - distance_m;
+  result.time_miss_s = result.seconds - seconds;
+  result.exact_time = frames == static_cast<int>(std::lround(seconds * lib_.rate_hz));
+  result.distance_bin_m = extremes_ ? 0.0 : bin_m_;
+  for (const PathStep& st : path)
+    if (st.transition >= 0) {
+      ++result.transitions;
+      result.transition_cost_m += graph_.transitions[static_cast<size_t>(st.transition)].cost_m;
+    }
+  return result;
+}
+
+SynthesisResult GraphPlanner::Solve(double distance_m, double seconds, bool other_times) const {
+  if (nodes_.empty() || extremes_) throw std::runtime_error("planner: Prepare was not called");
+  const int target_frames = static_cast<int>(std::lround(seconds * lib_.rate_hz));
+  struct BinnedEnding {
+    Ending ending;
+    double miss;  ///< |nearest reachable distance - target| in the bins, for ordering.
+    int bin;      ///< The reachable bin at (node, t) the path is rebuilt from.
+  };
+  std::vector<BinnedEnding> endings;
   int frames = -1;
-  const int bins_max = bins_;
-  for (int off = 0; off <= horizon_ && endings.empty(); ++off) {
+  for (int off = 0; off <= (other_times ? horizon_ : 0) && endings.empty(); ++off) {
     for (int sign : {0, -1, 1}) {
       if ((off == 0) != (sign == 0)) continue;
       const int n = target_frames + sign * off;
       if (n < 1 || n > horizon_) continue;
-      auto consider = [&](int node, int t, double extra, int transition, int play) {
-        const double r = (distance_m - extra) / bin_m_;
-        const int nb = NearestBin(node, t, std::lround(r), bins_max);
+      ForEachEnding(n, [&](const Ending& e) {
+        const double r = (distance_m - e.extra_m) / bin_m_;
+        const int nb = NearestBin(e.node, e.t, std::lround(r), bins_);
         if (nb < 0) return;
-        endings.push_back(
-            {node, t, extra, transition, play, std::abs(nb * bin_m_ + extra - distance_m), nb});
-      };
-      if (to_) {
-        consider(end_node_, n, 0.0, -1, 0);
-      } else {
-        for (int u = 0; u < static_cast<int>(nodes_.size()); ++u) {
-          const Node node = nodes_[static_cast<size_t>(u)];
-          const bool start = u == start_node_;
-          for (int t = 0; t < n; ++t) {
-            if (word_lo_[Cell(u, t)] > word_hi_[Cell(u, t)]) continue;
-            const int k = n - t;
-            if (node.frame + k <= lib_.num_frames(node.take))
-              consider(u, t, PlayDistance(node.take, node.frame, k, start), -1, k);
-            for (int e : out_edges_[static_cast<size_t>(u)]) {
-              const int tr = edges_[static_cast<size_t>(e)].transition;
-              if (tr < 0) continue;
-              const GraphTransition& g = graph_.transitions[static_cast<size_t>(tr)];
-              const int rest = n - t - g.blend_frames();
-              if (rest < 0 || g.entry_frame() + rest > lib_.num_frames(g.to_take)) continue;
-              consider(u, t,
-                       (start ? 0.0 : lib_.Step(node.take, node.frame)) + g.blend_path_m +
-                           PlayDistance(g.to_take, g.entry_frame(), rest, false),
-                       tr, rest);
-            }
-          }
+        endings.push_back({e, std::abs(nb * bin_m_ + e.extra_m - distance_m), nb});
+        // A free end can end in millions of ways over a long plan: keep the best few.
+        if (endings.size() >= 4096) {
+          std::nth_element(
+              endings.begin(), endings.begin() + 64, endings.end(),
+              [](const BinnedEnding& a, const BinnedEnding& b) { return a.miss < b.miss; });
+          endings.resize(64);
         }
-      }
+      });
       if (!endings.empty()) {
         frames = n;
         break;
@@ -274,26 +359,27 @@ SynthesisResult GraphPlanner::Solve(double distance_m, double seconds) const {
     throw std::runtime_error("no path from the start point reaches " +
                              std::string(to_ ? "the end point" : "any frame") +
                              " within the prepared time and distance");
-  std::stable_sort(endings.begin(), endings.end(), [](const Ending& a, const Ending& b) {
-    return a.miss != b.miss ? a.miss < b.miss : a.transition < b.transition;
-  });
+  std::stable_sort(
+      endings.begin(), endings.end(), [](const BinnedEnding& a, const BinnedEnding& b) {
+        return a.miss != b.miss ? a.miss < b.miss : a.ending.transition < b.ending.transition;
+      });
 
   // Rebuild paths backwards from the best endings. The bits are exact sums of the edges'
   // binned distances, so every set bit leads back to the start: from (node, t, bin) any
   // edge whose source holds bin - its bins at t - its frames is a step of a real path.
-  // Among those steps, the one that keeps the exact distance closest to the binned one
-  // (the bins' rounding then cancels instead of adding up), staying in a take unless a
-  // transition is at least half a bin better.
+  // Among those steps, the one that keeps the exact distance closest to the target (the
+  // bins' rounding then cancels instead of adding up), staying in a take unless a
+  // transition is worth it.
   constexpr size_t kEndingsTried = 16;
   // What a transition is worth in distance: a path with one more must come this much
   // closer to the target (a blend is never as good as the take's own motion).
   constexpr double kTransitionWorthM = 0.01;
   // Rebuilds from (node, t, bin); returns the edges (end first) and the signed miss of the
   // whole path against the target.
-  auto rebuild = [&](const Ending& ending, long end_bin, std::vector<int>* chosen) {
-    int node = ending.node, t = ending.t;
+  auto rebuild = [&](const BinnedEnding& ending, long end_bin, std::vector<int>* chosen) {
+    int node = ending.ending.node, t = ending.ending.t;
     long bin = end_bin;
-    double miss = static_cast<double>(end_bin) * bin_m_ + ending.extra_m - distance_m;
+    double miss = static_cast<double>(end_bin) * bin_m_ + ending.ending.extra_m - distance_m;
     while (!(node == start_node_ && t == 0)) {
       int pick = -1;
       double pick_score = std::numeric_limits<double>::infinity(), pick_miss = 0.0;
@@ -322,10 +408,10 @@ SynthesisResult GraphPlanner::Solve(double distance_m, double seconds) const {
     return miss;
   };
   std::vector<int> best_edges;
-  const Ending* best_ending = nullptr;
+  const BinnedEnding* best_ending = nullptr;
   double best_score = std::numeric_limits<double>::infinity();
   for (size_t k = 0; k < endings.size() && k < kEndingsTried; ++k) {
-    const Ending& ending = endings[k];
+    const BinnedEnding& ending = endings[k];
     if (ending.miss > best_score + bin_m_) break;
     // A loop repeated many times repeats its rounding too, which no choice of steps can
     // cancel: aim the next try that much the other way, where such a path exists.
@@ -334,7 +420,7 @@ SynthesisResult GraphPlanner::Solve(double distance_m, double seconds) const {
       std::vector<int> chosen;
       const double miss = rebuild(ending, end_bin, &chosen);
       // Fewer transitions win over a closer distance, up to kTransitionWorthM each.
-      double score = std::abs(miss) + (ending.transition >= 0 ? kTransitionWorthM : 0.0);
+      double score = std::abs(miss) + (ending.ending.transition >= 0 ? kTransitionWorthM : 0.0);
       for (int e : chosen)
         if (edges_[static_cast<size_t>(e)].transition >= 0) score += kTransitionWorthM;
       if (score < best_score) {
@@ -344,59 +430,108 @@ SynthesisResult GraphPlanner::Solve(double distance_m, double seconds) const {
       }
       const long next = end_bin - std::lround(miss / bin_m_);
       if (std::abs(miss) <= 0.5 * bin_m_ || next == end_bin || next < 0 ||
-          NearestBin(ending.node, ending.t, next, 0) != next)
+          NearestBin(ending.ending.node, ending.ending.t, next, 0) != next)
         break;
       end_bin = next;
     }
   }
   if (!best_ending) throw std::runtime_error("planner: no path could be rebuilt");
-
-  // The path: edges from the start, then the ending.
-  GraphPath path;
-  auto play = [&](int take, int first, int count) {
-    if (count <= 0) return;
-    if (!path.empty() && path.back().transition < 0 && path.back().take == take &&
-        path.back().first + path.back().count == first) {
-      path.back().count += count;
-      return;
-    }
-    path.push_back({take, first, count, -1});
-  };
-  for (auto it = best_edges.rbegin(); it != best_edges.rend(); ++it) {
-    const Edge& edge = edges_[static_cast<size_t>(*it)];
-    const Node& a = nodes_[static_cast<size_t>(edge.from)];
-    const Node& b = nodes_[static_cast<size_t>(edge.to)];
-    if (edge.transition < 0) {
-      play(a.take, a.frame, b.frame - a.frame);
-    } else {
-      const GraphTransition& t = graph_.transitions[static_cast<size_t>(edge.transition)];
-      path.push_back({-1, 0, 0, edge.transition});
-      play(t.to_take, t.entry_frame(), b.frame - t.entry_frame());
-    }
-  }
-  const Node& last = nodes_[static_cast<size_t>(best_ending->node)];
-  if (best_ending->transition >= 0) {
-    const GraphTransition& t = graph_.transitions[static_cast<size_t>(best_ending->transition)];
-    path.push_back({-1, 0, 0, best_ending->transition});
-    play(t.to_take, t.entry_frame(), best_ending->play);
-  } else {
-    play(last.take, last.frame, best_ending->play);
-  }
-  SynthesisResult result;
-  result.path = path;
-  result.frames = PathFrames(graph_, path);
-  result.seconds = result.frames / lib_.rate_hz;
-  result.distance_m = PathDistance(lib_, graph_, path);
-  result.distance_miss_m = result.distance_m - distance_m;
-  result.time_miss_s = result.seconds - seconds;
-  result.exact_time = frames == target_frames;
+  SynthesisResult result = Finish(best_edges, best_ending->ending, distance_m, seconds, frames);
   result.best_possible_miss_m = endings.front().miss;
-  result.distance_bin_m = bin_m_;
-  for (const PathStep& s : path)
-    if (s.transition >= 0) {
-      ++result.transitions;
-      result.transition_cost_m += graph_.transitions[static_cast<size_t>(s.transition)].cost_m;
+  return result;
+}
+
+void GraphPlanner::PrepareExtremes(GraphPoint from, std::optional<GraphPoint> to,
+                                   double max_seconds) {
+  BuildGraph(from, to, max_seconds);
+  extremes_ = true;
+  bits_.clear();
+  word_lo_.clear();
+  word_hi_.clear();
+  const size_t cells = nodes_.size() * static_cast<size_t>(horizon_ + 1);
+  if (cells * 2 * (sizeof(float) + sizeof(int32_t)) > max_table_bytes_)
+    throw std::runtime_error("planner: " + std::to_string(static_cast<int>(max_seconds)) +
+                             " s is too long for this graph's " + std::to_string(nodes_.size()) +
+                             " branch points (the tables would exceed " +
+                             std::to_string(max_table_bytes_ >> 20) + " MB)");
+  const float inf = std::numeric_limits<float>::infinity();
+  min_m_.assign(cells, inf);
+  max_m_.assign(cells, -inf);
+  min_via_.assign(cells, -1);
+  max_via_.assign(cells, -1);
+  const size_t start = Cell(start_node_, 0);
+  min_m_[start] = max_m_[start] = 0.0f;
+  min_via_[start] = max_via_[start] = -2;
+  for (int t = 0; t <= horizon_; ++t)
+    for (int u = 0; u < static_cast<int>(nodes_.size()); ++u) {
+      const size_t cell = Cell(u, t);
+      if (!std::isfinite(min_m_[cell])) continue;
+      for (int e : out_edges_[static_cast<size_t>(u)]) {
+        const Edge& edge = edges_[static_cast<size_t>(e)];
+        const int t2 = t + edge.frames;
+        if (t2 > horizon_) continue;
+        const size_t to_cell = Cell(edge.to, t2);
+        const auto d = static_cast<float>(edge.distance_m);
+        if (min_m_[cell] + d < min_m_[to_cell]) {
+          min_m_[to_cell] = min_m_[cell] + d;
+          min_via_[to_cell] = e;
+        }
+        if (max_m_[cell] + d > max_m_[to_cell]) {
+          max_m_[to_cell] = max_m_[cell] + d;
+          max_via_[to_cell] = e;
+        }
+      }
     }
+}
+
+SynthesisResult GraphPlanner::SolveExtremes(double distance_m, double seconds, bool* inside) const {
+  if (nodes_.empty() || !extremes_)
+    throw std::runtime_error("planner: PrepareExtremes was not called");
+  const int target_frames = static_cast<int>(std::lround(seconds * lib_.rate_hz));
+  // The ending whose range of distances comes nearest the target, at the nearest time.
+  Ending best{};
+  double best_gap = std::numeric_limits<double>::infinity();
+  double best_nearer = std::numeric_limits<double>::infinity();
+  bool longest = false;
+  int frames = -1;
+  for (int off = 0; off <= horizon_ && frames < 0; ++off) {
+    for (int sign : {0, -1, 1}) {
+      if ((off == 0) != (sign == 0)) continue;
+      const int n = target_frames + sign * off;
+      if (n < 1 || n > horizon_) continue;
+      ForEachEnding(n, [&](const Ending& e) {
+        const size_t cell = Cell(e.node, e.t);
+        const double lo = min_m_[cell] + e.extra_m, hi = max_m_[cell] + e.extra_m;
+        const double gap =
+            distance_m < lo ? lo - distance_m : (distance_m > hi ? distance_m - hi : 0.0);
+        // Inside the range, the extreme nearer the target is what these tables can give.
+        const double nearer = std::min(std::abs(distance_m - lo), std::abs(distance_m - hi));
+        if (gap < best_gap || (gap == 0.0 && best_gap == 0.0 && nearer < best_nearer)) {
+          best_gap = gap;
+          best_nearer = nearer;
+          best = e;
+          longest = std::abs(distance_m - hi) < std::abs(distance_m - lo);
+          frames = n;
+        }
+      });
+      if (frames >= 0) break;
+    }
+  }
+  if (frames < 0)
+    throw std::runtime_error("no path from the start point reaches " +
+                             std::string(to_ ? "the end point" : "any frame") +
+                             " within the prepared time");
+  *inside = best_gap == 0.0;
+  std::vector<int> edges;
+  const std::vector<int32_t>& via = longest ? max_via_ : min_via_;
+  for (int node = best.node, t = best.t; via[Cell(node, t)] != -2;) {
+    const int e = via[Cell(node, t)];
+    edges.push_back(e);
+    node = edges_[static_cast<size_t>(e)].from;
+    t -= edges_[static_cast<size_t>(e)].frames;
+  }
+  SynthesisResult result = Finish(edges, best, distance_m, seconds, frames);
+  result.best_possible_miss_m = best_gap;
   return result;
 }
 
@@ -433,50 +568,68 @@ namespace mocapd {
 SynthesisResult Synthesize(const MotionLibrary& lib, const MotionGraph& graph, GraphPoint from,
                            std::optional<GraphPoint> to, double distance_m, double seconds,
                            double bin_m) {
-  try {
+  // Of two answers, the one that lasts the time, then the one nearer the distance.
+  const auto better = [](const SynthesisResult& a, const SynthesisResult& b) {
+    if (a.exact_time != b.exact_time) return a.exact_time;
+    if (std::abs(a.time_miss_s) != std::abs(b.time_miss_s))
+      return std::abs(a.time_miss_s) < std::abs(b.time_miss_s);
+    return std::abs(a.distance_miss_m) < std::abs(b.distance_miss_m);
+  };
+  std::optional<SynthesisResult> sets;
+  {
     GraphPlanner planner(lib, graph, bin_m);
-    // Only distances near the target matter here: what lies beyond is the second pass's.
+    // Only distances near the target matter here: what lies beyond is the extremes'.
     planner.Prepare(from, to, seconds + 1.0, distance_m + std::max(1.0, 0.1 * distance_m));
-    SynthesisResult r = planner.Solve(distance_m, seconds);
-    if (r.exact_time) return r;
-  } catch (const std::runtime_error&) {
+    try {
+      sets = planner.Solve(distance_m, seconds, /*other_times=*/false);
+      // A long plan's widened bins are coarse: the extremes may still do better.
+      if (std::abs(sets->distance_miss_m) <= std::max(0.05, sets->distance_bin_m)) return *sets;
+    } catch (const std::runtime_error&) {
+    }
   }
-  // Nothing lasts the time within that distance: look wider (the bins widen to keep the
-  // tables within their budget) for the nearest path.
-  double speed = 0.0;
-  for (int t = 0; t < lib.num_takes(); ++t)
-    speed = std::max(speed, lib.path_m[static_cast<size_t>(t)].back() * lib.rate_hz /
-                                std::max(1, lib.num_frames(t) - 1));
-  const double horizon = 1.5 * seconds + 5.0;
-  const double range = (1.5 * speed + 0.5) * horizon + distance_m + 2.0;
-  // Widened to fit a smaller budget: this pass is for the nearest path, not for centimetres.
-  GraphPlanner planner(lib, graph, bin_m, size_t{48} << 20);
-  planner.Prepare(from, to, horizon, range);
+  // No path lasts the time within that distance: the shortest or longest path that does
+  // (or, with an end point, the nearest time at which one arrives) is the nearest.
+  GraphPlanner extremes(lib, graph, bin_m);
+  const double horizon = to ? std::min(1.5 * seconds + 5.0, kMaxSeconds) : seconds + 1.0;
+  extremes.PrepareExtremes(from, to, horizon);
+  bool inside = false;
+  SynthesisResult r;
   try {
-    return planner.Solve(distance_m, seconds);
+    r = extremes.SolveExtremes(distance_m, seconds, &inside);
   } catch (const std::runtime_error&) {
     if (!to) throw;
+    // The end frame is never reached: say where the graph enters its take.
+    const std::string end =
+        lib.names[static_cast<size_t>(to->take)] + ":" + std::to_string(to->frame);
+    int earliest = -1;
+    for (const GraphTransition& t : graph.transitions)
+      if (t.to_take == to->take && (earliest < 0 || t.entry_frame() - 1 < earliest))
+        earliest = t.entry_frame() - 1;
+    if (from.take == to->take && from.frame <= to->frame) earliest = from.frame;
+    if (earliest < 0)
+      throw std::runtime_error("no path reaches " + end + ": no transition enters take '" +
+                               lib.names[static_cast<size_t>(to->take)] + "'");
+    if (earliest > to->frame)
+      throw std::runtime_error("no path reaches " + end + ": the graph enters take '" +
+                               lib.names[static_cast<size_t>(to->take)] + "' at frame " +
+                               std::to_string(earliest) +
+                               " at the earliest; choose a later --to frame");
+    throw std::runtime_error("no path from " + lib.names[static_cast<size_t>(from.take)] + ":" +
+                             std::to_string(from.frame) + " reaches " + end + " within " +
+                             std::to_string(static_cast<int>(std::ceil(horizon))) +
+                             " s (the start may not lead to that part of the graph)");
   }
-  // The end frame is never reached: say where the graph enters its take.
-  const std::string end =
-      lib.names[static_cast<size_t>(to->take)] + ":" + std::to_string(to->frame);
-  int earliest = -1;
-  for (const GraphTransition& t : graph.transitions)
-    if (t.to_take == to->take && (earliest < 0 || t.entry_frame() - 1 < earliest))
-      earliest = t.entry_frame() - 1;
-  if (from.take == to->take && from.frame <= to->frame) earliest = from.frame;
-  if (earliest < 0)
-    throw std::runtime_error("no path reaches " + end + ": no transition enters take '" +
-                             lib.names[static_cast<size_t>(to->take)] + "'");
-  if (earliest > to->frame)
-    throw std::runtime_error("no path reaches " + end + ": the graph enters take '" +
-                             lib.names[static_cast<size_t>(to->take)] + "' at frame " +
-                             std::to_string(earliest) +
-                             " at the earliest; choose a later --to frame");
-  throw std::runtime_error("no path from " + lib.names[static_cast<size_t>(from.take)] + ":" +
-                           std::to_string(from.frame) + " reaches " + end + " within " +
-                           std::to_string(static_cast<int>(std::ceil(horizon))) +
-                           " s (the start may not lead to that part of the graph)");
+  if (inside && !r.exact_time) {
+    // At the nearest time the graph can cover the distance: the sets find it there.
+    GraphPlanner planner(lib, graph, bin_m);
+    planner.Prepare(from, to, r.seconds + 1.0, distance_m + std::max(1.0, 0.1 * distance_m));
+    SynthesisResult at = planner.Solve(distance_m, r.seconds, /*other_times=*/false);
+    at.exact_time = false;
+    at.time_miss_s = at.seconds - seconds;
+    if (better(at, r)) r = at;
+  }
+  if (sets && better(*sets, r)) return *sets;
+  return r;
 }
 
 }  // namespace mocapd

@@ -43,7 +43,9 @@ struct SynthesisResult {
   /// The smallest distance miss any path of that duration can have, as the programme
   /// sees it (to its 2 cm bins): above the tolerance, the graph cannot meet the target.
   double best_possible_miss_m = 0.0;
-  double distance_bin_m = 0.0;  ///< The programme's bins (widened for long plans).
+  double distance_bin_m = 0.0;  ///< The programme's bins (widened for long plans; 0: none).
+  /// What the planner summed for the path (its edges' distances): equals distance_m.
+  double planned_distance_m = 0.0;
 };
 
 class GraphPlanner {
@@ -54,12 +56,22 @@ class GraphPlanner {
 
   /// Computes what can be reached from `from` (the first frame played) within max_seconds
   /// and max_distance_m, ending at `to` (the last frame played) if given. Throws
-  /// std::invalid_argument for a point outside its take or limits out of range.
+  /// std::invalid_argument for a point outside its take or limits out of range (4 h,
+  /// 100 km), std::runtime_error if the tables cannot fit the budget.
   void Prepare(GraphPoint from, std::optional<GraphPoint> to, double max_seconds,
                double max_distance_m);
-  /// The path closest to the target (time first, then distance) among the prepared ones.
-  /// Throws std::runtime_error if nothing is reachable at all.
-  SynthesisResult Solve(double distance_m, double seconds) const;
+  /// The path closest to the target among the prepared ones: at the target's time if any
+  /// path lasts it, else (other_times) the nearest time. Throws std::runtime_error if no
+  /// path ends at a time it may take.
+  SynthesisResult Solve(double distance_m, double seconds, bool other_times = true) const;
+
+  /// Instead of distance sets, only the shortest and longest path to each branch point
+  /// and frame: exact and small, for the nearest path when a target cannot be met.
+  void PrepareExtremes(GraphPoint from, std::optional<GraphPoint> to, double max_seconds);
+  /// The nearest path by the extremes: at the target's time if any path lasts it, else
+  /// the nearest time. *inside is set when some path's range of distances at that time
+  /// holds the target (the sets can then meet it: Prepare and Solve at that time).
+  SynthesisResult SolveExtremes(double distance_m, double seconds, bool* inside) const;
 
   int num_nodes() const { return static_cast<int>(nodes_.size()); }
   size_t memory_bytes() const { return bits_.size() * sizeof(uint64_t); }
@@ -85,6 +97,22 @@ class GraphPlanner {
                    static_cast<size_t>(t)) *
                   static_cast<size_t>(words_)];
   }
+  /// One way to end a path: after reaching (node, t), blend through `transition` (or
+  /// not: -1) and play `play` frames, covering extra_m.
+  struct Ending {
+    int node, t;
+    double extra_m;
+    int transition;
+    int play;
+  };
+  void BuildGraph(GraphPoint from, std::optional<GraphPoint> to, double max_seconds);
+  bool Reached(int node, int t) const;
+  /// Calls consider(Ending) for every way a path of n frames can end.
+  template <typename F>
+  void ForEachEnding(int n, F&& consider) const;
+  /// The result of the path made of edges (last first) and an ending.
+  SynthesisResult Finish(const std::vector<int>& edges_last_first, const Ending& ending,
+                         double distance_m, double seconds, int frames) const;
   /// The set bin nearest to `bin` at (node, t) within max_offset, or -1.
   int NearestBin(int node, int t, long bin, int max_offset) const;
   /// The distance of playing `count` frames of take from `frame` on (the step into the
@@ -111,13 +139,22 @@ class GraphPlanner {
   }
   /// Per (node, t): the first and last words holding set bits (lo > hi: none).
   std::vector<uint16_t> word_lo_, word_hi_;
+  /// Per node: every transition leaving at its frame (also those with no branch point
+  /// after their arrival, for endings).
+  std::vector<std::vector<int>> exits_;
+  /// PrepareExtremes: per (node, t) the shortest and longest distance (inf / -inf: not
+  /// reached) and the edge each came by (-2: the start).
+  bool extremes_ = false;
+  std::vector<float> min_m_, max_m_;
+  std::vector<int32_t> min_via_, max_via_;
 };
 
-/// Plans one synthesis: first within the target's time and its distance plus 10 % (at
-/// least 1 m); if nothing lasts the time there, again over 1.5 times the time and every
-/// distance the takes' speeds allow (in wider bins), for the nearest path. Throws
-/// std::invalid_argument for points outside their takes, std::runtime_error if the end
-/// point cannot be reached at all.
+/// Plans one synthesis: first the distance sets over the target's time and its distance
+/// plus 10 % (at least 1 m); if no path lasts the time there, the extremes (over 1.5 times
+/// the time with an end point) find the nearest path, or the time nearest the target at
+/// which the sets are run again. Throws std::invalid_argument for points outside their
+/// takes, std::runtime_error (saying where the graph enters the take) if the end point
+/// cannot be reached at all.
 SynthesisResult Synthesize(const MotionLibrary& library, const MotionGraph& graph, GraphPoint from,
                            std::optional<GraphPoint> to, double distance_m, double seconds,
                            double distance_bin_m = 0.01);

@@ -2,7 +2,6 @@
 #include "sim/graph_walker.hpp"
 
 #include <algorithm>
-#include <functional>
 #include <stdexcept>
 
 namespace mocapd {
@@ -37,47 +36,79 @@ GraphConnectivity AnalyseConnectivity(const MotionLibrary& lib, const MotionGrap
     const int to = at_or_after(t.to_take, t.entry_frame(), false);
     if (to >= 0) c.leave[static_cast<size_t>(from)].emplace_back(static_cast<int>(k), to);
   }
-  // Tarjan's strongly connected components (the graph is small: recursion depth <= nodes).
+  // Tarjan's strongly connected components, iteratively (a graph over long takes has
+  // branch points by the hundred thousand: too deep to recurse).
+  const auto successors = [&](int v) {
+    std::vector<int> next;
+    if (c.skip[static_cast<size_t>(v)] >= 0) next.push_back(c.skip[static_cast<size_t>(v)]);
+    for (const auto& [t, w] : c.leave[static_cast<size_t>(v)]) next.push_back(w);
+    return next;
+  };
   std::vector<int> index(static_cast<size_t>(c.nodes), -1), low(static_cast<size_t>(c.nodes), 0),
       component(static_cast<size_t>(c.nodes), -1);
-  std::vector<bool> on_stack(static_cast<size_t>(c.nodes), false);
+  std::vector<bool> on_stack(static_cast<size_t>(c.nodes), false),
+      self_loop(static_cast<size_t>(c.nodes), false);
   std::vector<int> stack;
   int counter = 0, components = 0;
-  std::function<void(int)> visit = [&](int v) {
-    const auto uv = static_cast<size_t>(v);
-    index[uv] = low[uv] = counter++;
-    stack.push_back(v);
-    on_stack[uv] = true;
+  struct Visit {
+    int v;
     std::vector<int> next;
-    if (c.skip[uv] >= 0) next.push_back(c.skip[uv]);
-    for (const auto& [t, w] : c.leave[uv]) next.push_back(w);
-    for (int w : next) {
-      const auto uw = static_cast<size_t>(w);
-      if (index[uw] < 0) {
-        visit(w);
-        low[uv] = std::min(low[uv], low[uw]);
-      } else if (on_stack[uw]) {
-        low[uv] = std::min(low[uv], index[uw]);
+    size_t at = 0;
+  };
+  for (int root = 0; root < c.nodes; ++root) {
+    if (index[static_cast<size_t>(root)] >= 0) continue;
+    std::vector<Visit> calls;
+    auto enter = [&](int v) {
+      const auto uv = static_cast<size_t>(v);
+      index[uv] = low[uv] = counter++;
+      stack.push_back(v);
+      on_stack[uv] = true;
+      calls.push_back({v, successors(v), 0});
+      for (int w : calls.back().next) self_loop[uv] = self_loop[uv] || w == v;
+    };
+    enter(root);
+    while (!calls.empty()) {
+      Visit& call = calls.back();
+      const auto uv = static_cast<size_t>(call.v);
+      if (call.at < call.next.size()) {
+        const int w = call.next[call.at++];
+        const auto uw = static_cast<size_t>(w);
+        if (index[uw] < 0) {
+          enter(w);  // invalidates `call`; the loop takes it up again
+        } else if (on_stack[uw]) {
+          low[uv] = std::min(low[uv], index[uw]);
+        }
+        continue;
+      }
+      if (low[uv] == index[uv]) {
+        int w;
+        do {
+          w = stack.back();
+          stack.pop_back();
+          on_stack[static_cast<size_t>(w)] = false;
+          component[static_cast<size_t>(w)] = components;
+        } while (w != call.v);
+        ++components;
+      }
+      const int v = call.v;
+      calls.pop_back();
+      if (!calls.empty()) {
+        const auto up = static_cast<size_t>(calls.back().v);
+        low[up] = std::min(low[up], low[static_cast<size_t>(v)]);
       }
     }
-    if (low[uv] == index[uv]) {
-      int w;
-      do {
-        w = stack.back();
-        stack.pop_back();
-        on_stack[static_cast<size_t>(w)] = false;
-        component[static_cast<size_t>(w)] = components;
-      } while (w != v);
-      ++components;
-    }
-  };
-  for (int v = 0; v < c.nodes; ++v)
-    if (index[static_cast<size_t>(v)] < 0) visit(v);
+  }
   std::vector<int> size(static_cast<size_t>(components), 0);
   for (int v = 0; v < c.nodes; ++v) ++size[static_cast<size_t>(component[static_cast<size_t>(v)])];
+  // A lone branch point loops only through a transition back to itself.
+  std::vector<bool> loops(static_cast<size_t>(components), false);
+  for (int v = 0; v < c.nodes; ++v)
+    if (size[static_cast<size_t>(component[static_cast<size_t>(v)])] > 1 ||
+        self_loop[static_cast<size_t>(v)])
+      loops[static_cast<size_t>(component[static_cast<size_t>(v)])] = true;
   int largest = -1;
   for (int k = 0; k < components; ++k)
-    if (size[static_cast<size_t>(k)] > 1 &&
+    if (loops[static_cast<size_t>(k)] &&
         (largest < 0 || size[static_cast<size_t>(k)] > size[static_cast<size_t>(largest)]))
       largest = k;
   c.node_in_walk.assign(static_cast<size_t>(c.nodes), false);

@@ -302,10 +302,13 @@ class GraphActor {
       }
       poses.push_back(std::move(p));
     }
-    // Frames the stream has passed are dropped, keeping the buffer to about a chunk.
+    // Frames the stream has passed are dropped, keeping the buffer to about a chunk: the
+    // next chunk starts at graph frame floor(x) of its first frame, and the last frame
+    // made is always kept (the walk goes on from it).
+    const auto next_first =
+        static_cast<int64_t>(std::floor(static_cast<double>(first + n) * lib.rate_hz / rate_hz_));
     const int64_t keep_from =
-        static_cast<int64_t>(std::floor(static_cast<double>(first + n) * lib.rate_hz / rate_hz_)) -
-        1;
+        std::min(next_first, graph_base_ + static_cast<int64_t>(graph_frames_.size()) - 1);
     if (keep_from > graph_base_) {
       graph_frames_.erase(graph_frames_.begin(), graph_frames_.begin() + (keep_from - graph_base_));
       graph_base_ = keep_from;

@@ -189,6 +189,8 @@ TEST_F(MotionGraphTest, SynthesisMeetsDistanceAndTimeOverAGridOfTargets) {
       if (d > 1.2 * t || d < 0.4 * t) continue;
       const SynthesisResult r = planner.Solve(d, t);
       ValidatePath(lib(), graph(), r.path);
+      // What the planner added up is what the rendered path covers.
+      EXPECT_NEAR(r.planned_distance_m, r.distance_m, 1e-6) << d << " m in " << t << " s";
       EXPECT_EQ(r.frames, static_cast<int>(RenderPath(lib(), graph(), r.path).size()));
       worst_distance = std::max(worst_distance, std::abs(r.distance_miss_m));
       EXPECT_LE(std::abs(r.distance_miss_m), 0.2)
@@ -219,7 +221,27 @@ TEST_F(MotionGraphTest, AnImpossibleTargetGivesTheNearestPathAndItsMiss) {
   const SynthesisResult r = Synthesize(lib(), graph(), from, std::nullopt, 60.0, 3.0);
   EXPECT_TRUE(r.exact_time);
   EXPECT_LT(r.distance_miss_m, -50.0);  // nobody walks 60 m in 3 s: the fastest path instead
-  EXPECT_NEAR(r.distance_m, PathDistance(lib(), graph(), r.path), 1e-9);
+  EXPECT_NEAR(r.planned_distance_m, r.distance_m, 1e-3);
+  // The other way: no path of 30 s stays within 1 m, so the shortest one, exactly.
+  const SynthesisResult slow = Synthesize(lib(), graph(), from, std::nullopt, 0.0, 30.0);
+  EXPECT_TRUE(slow.exact_time);
+  EXPECT_NEAR(slow.planned_distance_m, slow.distance_m, 1e-3);
+  GraphPlanner extremes(lib(), graph());
+  extremes.PrepareExtremes(from, std::nullopt, 31.0);
+  bool inside = true;
+  const SynthesisResult shortest = extremes.SolveExtremes(0.0, 30.0, &inside);
+  EXPECT_FALSE(inside);
+  EXPECT_NEAR(slow.distance_m, shortest.distance_m, 0.01);
+  // Limits are errors, not crashes: beyond the planner's 4 hours, and an end no path reaches.
+  GraphPlanner planner(lib(), graph());
+  EXPECT_THROW(planner.Prepare(from, std::nullopt, 5 * 3600.0, 10.0), std::invalid_argument);
+  const int reach = lib().TakeIndex("reach");
+  try {
+    Synthesize(lib(), graph(), from, GraphPoint{reach, 0}, 5.0, 10.0);
+    FAIL() << "reached a frame no transition enters";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("reach:0"), std::string::npos) << e.what();
+  }
   EXPECT_THROW(ParseGraphPoint(lib(), "walk:100000"), std::invalid_argument);
   EXPECT_THROW(ParseGraphPoint(lib(), "nosuch:1"), std::invalid_argument);
   EXPECT_THROW(ParseGraphPoint(lib(), "walk"), std::invalid_argument);
