@@ -9,10 +9,12 @@
 #include <optional>
 
 #include "formats/bvh.hpp"
+#include "formats/subject_file.hpp"
 #include "sim/graph_match.hpp"
 #include "sim/graph_planner.hpp"
 #include "sim/graph_walker.hpp"
 #include "sim/motion_graph.hpp"
+#include "sim/replay_sources.hpp"
 
 namespace mocapd {
 
@@ -35,6 +37,7 @@ struct GraphCommands::State {
   std::string path_out;
   std::string query;
   std::string query_units;
+  std::string subject_out;
 };
 
 GraphCommands::GraphCommands(CLI::App& app) : state_(std::make_unique<State>()) {
@@ -48,6 +51,9 @@ GraphCommands::GraphCommands(CLI::App& app) : state_(std::make_unique<State>()) 
   s.build->add_option("--rate", s.rate_hz, "Graph rate in Hz (default: the first take's)")
       ->check(CLI::Range(1.0, 1000.0));
   s.build->add_option("--units", s.units, "BVH length unit: mm, cm, m or in (default: guess)");
+  s.build->add_option("--subject-out", s.subject_out,
+                      "Also write the subject a daemon needs for `replay --graph` of this graph "
+                      "(the takes' skeleton with the default marker layout)");
   s.build
       ->add_option("--transitions-per-pair", s.options.transitions_per_pair,
                    "Best transitions kept per ordered pair of takes")
@@ -163,6 +169,16 @@ int GraphCommands::Run() {
           "and syntheses are as long as the takes; check --units, or allow looser "
           "transitions (--max-cost-m, --transitions-per-pair)\n");
     std::printf("wrote %s\n", s.out.c_str());
+    if (!s.subject_out.empty()) {
+      SubjectModel model;
+      model.name = "graph";
+      model.bvh_units = lib.layout.units;
+      model.skeleton = lib.skeleton;
+      model.markers = GraphMarkers(lib);
+      WriteSubjectModel(s.subject_out, model);
+      std::printf("wrote %s (the subject for `mocap-sim replay --graph %s`)\n",
+                  s.subject_out.c_str(), s.out.c_str());
+    }
     return 0;
   }
   const MotionGraph graph = ReadMotionGraph(s.graph_path);

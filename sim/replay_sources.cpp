@@ -49,6 +49,13 @@ ReplaySource BvhReplaySource(const std::string& path, double rate_hz, const std:
   return s;
 }
 
+std::shared_ptr<const MarkerSet> GraphMarkers(const MotionLibrary& library) {
+  const Skeleton& sk = *library.skeleton;
+  return std::make_shared<const MarkerSet>(
+      sk,
+      PlaceMarkers(sk, MatchHumanoidRoles(sk), DefaultMarkerLayout(), library.layout.end_sites));
+}
+
 GraphReplaySource GraphSource(const std::string& graph_path) {
   GraphReplaySource s;
   if (graph_path == "humanoid") {
@@ -71,9 +78,7 @@ GraphReplaySource GraphSource(const std::string& graph_path) {
   } else {
     auto graph = std::make_shared<const MotionGraph>(ReadMotionGraph(graph_path));
     auto library = std::make_shared<const MotionLibrary>(LoadGraphLibrary(*graph, graph_path));
-    s.markers = std::make_shared<const MarkerSet>(
-        *library->skeleton, PlaceMarkers(*library->skeleton, MatchHumanoidRoles(*library->skeleton),
-                                         DefaultMarkerLayout(), library->layout.end_sites));
+    s.markers = GraphMarkers(*library);
     s.graph = std::move(graph);
     s.library = std::move(library);
     s.description = "motion graph " + graph_path;

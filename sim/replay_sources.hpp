@@ -45,6 +45,10 @@ struct GraphReplaySource {
   std::shared_ptr<const MarkerSet> markers;
 };
 
+/// The markers a graph stream synthesizes on a library of takes: the default layout on
+/// its skeleton (what `graph build --subject-out` writes for the daemon).
+std::shared_ptr<const MarkerSet> GraphMarkers(const MotionLibrary& library);
+
 /// "humanoid": a graph over the built-in humanoid's walk, turn, reach and mixed motion
 /// (config/demo_subject.toml's skeleton and markers, so the demo daemon takes it); else a
 /// graph file (markers: the default layout on the takes' skeleton, as for a BVH replay).

@@ -32,8 +32,12 @@ def main(mocapd, mocap_sim, config_dir, work):
             "--out", os.path.join(work, f"{motion}.c3d"), "--truth-bvh", bvh)
         takes.append(bvh)
     graph = os.path.join(work, "graph.json")
-    out = sim(mocap_sim, "graph", "build", *takes, "--out", graph)
+    subject = os.path.join(work, "graph_subject.toml")
+    out = sim(mocap_sim, "graph", "build", *takes, "--out", graph, "--subject-out", subject)
     assert "endless part" in out and "transitions" in out, out
+    with open(subject) as f:
+        text = f.read()
+    assert text.count("[[joint]]") == 21 and text.count("[[marker]]") > 40, text[:400]
     with open(graph) as f:
         g = json.load(f)
     assert len(g["transitions"]) > 5 and [t["name"] for t in g["takes"]] == ["walk", "turn", "reach", "mixed"], g
