@@ -159,7 +159,12 @@ void GraphPlanner::Prepare(GraphPoint from, std::optional<GraphPoint> to, double
   words_ = (bins_ + 63) / 64;
   bins_ = words_ * 64;
   for (Edge& e : edges_) e.bins = std::lround(e.distance_m / bin_m_);
-  bits_.assign(cells * static_cast<size_t>(words_), 0);
+  bits_.reset();
+  bits_words_ = cells * static_cast<size_t>(words_);
+  bits_.reset(static_cast<uint64_t*>(std::calloc(bits_words_, sizeof(uint64_t))));
+  if (!bits_)
+    throw std::runtime_error("planner: cannot allocate " + std::to_string(bits_words_ >> 17) +
+                             " MB");
   // Per cell, the words that hold bits [lo, hi]: early on only short distances are
   // reachable, so most of each bitset stays empty and is skipped.
   word_lo_.assign(cells, std::numeric_limits<uint16_t>::max());
@@ -445,7 +450,8 @@ void GraphPlanner::PrepareExtremes(GraphPoint from, std::optional<GraphPoint> to
                                    double max_seconds) {
   BuildGraph(from, to, max_seconds);
   extremes_ = true;
-  bits_.clear();
+  bits_.reset();
+  bits_words_ = 0;
   word_lo_.clear();
   word_hi_.clear();
   const size_t cells = nodes_.size() * static_cast<size_t>(horizon_ + 1);

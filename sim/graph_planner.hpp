@@ -14,6 +14,8 @@
 #pragma once
 
 #include <cstdint>
+#include <cstdlib>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -74,7 +76,7 @@ class GraphPlanner {
   SynthesisResult SolveExtremes(double distance_m, double seconds, bool* inside) const;
 
   int num_nodes() const { return static_cast<int>(nodes_.size()); }
-  size_t memory_bytes() const { return bits_.size() * sizeof(uint64_t); }
+  size_t memory_bytes() const { return bits_words_ * sizeof(uint64_t); }
 
  private:
   struct Node {
@@ -133,7 +135,13 @@ class GraphPlanner {
   std::vector<Node> nodes_;
   std::vector<Edge> edges_;
   std::vector<std::vector<int>> in_edges_, out_edges_;
-  std::vector<uint64_t> bits_;
+  /// calloc'd: the system hands out zero pages that cost nothing until a bit lands on
+  /// them, and most never get one (a plan's early frames reach only short distances).
+  struct FreeBits {
+    void operator()(uint64_t* p) const { std::free(p); }
+  };
+  std::unique_ptr<uint64_t[], FreeBits> bits_;
+  size_t bits_words_ = 0;
   size_t Cell(int node, int t) const {
     return static_cast<size_t>(node) * static_cast<size_t>(horizon_ + 1) + static_cast<size_t>(t);
   }
