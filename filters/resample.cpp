@@ -7,8 +7,17 @@
 
 namespace mocapd {
 
-std::vector<Pose> ResampleMotion(const Skeleton& skeleton, const std::vector<Pose>& frames,
-                                 double src_rate_hz, double dst_rate_hz) {
+void InterpolatePose(const Pose& a, const Pose& b, double alpha, Pose* out) {
+  *out = a;
+  for (size_t j = 0; j < a.rotation.size(); ++j) {
+    out->rotation[j] = a.rotation[j].slerp(alpha, b.rotation[j]).normalized();
+    out->translation[j] = (1.0 - alpha) * a.translation[j] + alpha * b.translation[j];
+  }
+}
+
+std::vector<Pose> ResampleMotion(
+    const Skeleton& /*skeleton: the poses are interpolated joint by joint*/,
+    const std::vector<Pose>& frames, double src_rate_hz, double dst_rate_hz) {
   if (!(src_rate_hz > 0.0) || !(dst_rate_hz > 0.0))
     throw std::invalid_argument("resample: rates must be > 0");
   if (frames.empty()) throw std::invalid_argument("resample: no frames");
@@ -21,13 +30,8 @@ std::vector<Pose> ResampleMotion(const Skeleton& skeleton, const std::vector<Pos
     const auto i = std::min(static_cast<size_t>(std::floor(x)), frames.size() - 1);
     const size_t i1 = std::min(i + 1, frames.size() - 1);
     const double a = std::clamp(x - static_cast<double>(i), 0.0, 1.0);
-    Pose p = frames[i];
-    for (int j = 0; j < skeleton.num_joints(); ++j) {
-      const auto uj = static_cast<size_t>(j);
-      p.rotation[uj] = frames[i].rotation[uj].slerp(a, frames[i1].rotation[uj]).normalized();
-      p.translation[uj] = (1.0 - a) * frames[i].translation[uj] + a * frames[i1].translation[uj];
-    }
-    out.push_back(std::move(p));
+    out.emplace_back();
+    InterpolatePose(frames[i], frames[i1], a, &out.back());
   }
   return out;
 }

@@ -160,10 +160,10 @@ void GraphPlanner::Prepare(GraphPoint from, std::optional<GraphPoint> to, double
   bins_ = words_ * 64;
   for (Edge& e : edges_) e.bins = std::lround(e.distance_m / bin_m_);
   bits_.reset();
-  bits_words_ = cells * static_cast<size_t>(words_);
-  bits_.reset(static_cast<uint64_t*>(std::calloc(bits_words_, sizeof(uint64_t))));
+  const size_t bits_words = cells * static_cast<size_t>(words_);
+  bits_.reset(static_cast<uint64_t*>(std::calloc(bits_words, sizeof(uint64_t))));
   if (!bits_)
-    throw std::runtime_error("planner: cannot allocate " + std::to_string(bits_words_ >> 17) +
+    throw std::runtime_error("planner: cannot allocate " + std::to_string(bits_words >> 17) +
                              " MB");
   // Per cell, the words that hold bits [lo, hi]: early on only short distances are
   // reachable, so most of each bitset stays empty and is skipped.
@@ -451,7 +451,6 @@ void GraphPlanner::PrepareExtremes(GraphPoint from, std::optional<GraphPoint> to
   BuildGraph(from, to, max_seconds);
   extremes_ = true;
   bits_.reset();
-  bits_words_ = 0;
   word_lo_.clear();
   word_hi_.clear();
   const size_t cells = nodes_.size() * static_cast<size_t>(horizon_ + 1);

@@ -75,9 +75,6 @@ class GraphPlanner {
   /// holds the target (the sets can then meet it: Prepare and Solve at that time).
   SynthesisResult SolveExtremes(double distance_m, double seconds, bool* inside) const;
 
-  int num_nodes() const { return static_cast<int>(nodes_.size()); }
-  size_t memory_bytes() const { return bits_words_ * sizeof(uint64_t); }
-
  private:
   struct Node {
     int take, frame;  ///< frame: the next to play (the start node: its first frame).
@@ -141,7 +138,6 @@ class GraphPlanner {
     void operator()(uint64_t* p) const { std::free(p); }
   };
   std::unique_ptr<uint64_t[], FreeBits> bits_;
-  size_t bits_words_ = 0;
   size_t Cell(int node, int t) const {
     return static_cast<size_t>(node) * static_cast<size_t>(horizon_ + 1) + static_cast<size_t>(t);
   }

@@ -88,14 +88,6 @@ void ApplyPlanar(const MotionLibrary& library, const PlanarTransform& transform,
   pose->translation[b] = library.parent_rotation.transpose() * (p_new - library.parent_position);
 }
 
-void BlendInto(const Pose& a, const Pose& b, double alpha, Pose* out) {
-  *out = a;
-  for (size_t j = 0; j < a.rotation.size(); ++j) {
-    out->rotation[j] = a.rotation[j].slerp(alpha, b.rotation[j]).normalized();
-    out->translation[j] = (1.0 - alpha) * a.translation[j] + alpha * b.translation[j];
-  }
-}
-
 [[noreturn]] void FileError(const std::string& file, const std::string& field,
                             const std::string& what) {
   throw std::runtime_error(file + ": field '" + field + "': " + what);
@@ -840,7 +832,7 @@ void RenderStep(const MotionLibrary& lib, const MotionGraph& g, const PathStep& 
     out->emplace_back();
     {
       const double x = static_cast<double>(k) / (2.0 * L);
-      BlendInto(a, b, x * x * (3.0 - 2.0 * x), &out->back());
+      InterpolatePose(a, b, x * x * (3.0 - 2.0 * x), &out->back());
     }
   }
   KeepPlantedFeet(lib, t, &(*out)[out->size() - static_cast<size_t>(t.blend_frames())]);

@@ -139,7 +139,6 @@ struct GraphBuildReport {
   int candidates = 0;  ///< Local minima of the dissimilarity considered.
   int kept = 0;
   double seconds = 0.0;
-  int strongly_connected_takes = 0;  ///< Takes touched by the largest strongly connected part.
 };
 
 /// Builds the graph: per ordered pair of takes, the local minima of the dissimilarity,

@@ -12,6 +12,7 @@
 #include <stdexcept>
 #include <utility>
 
+#include "filters/resample.hpp"
 #include "formats/take_frames.hpp"
 #include "protocol/messages.hpp"
 #include "sim/corruption.hpp"
@@ -294,13 +295,8 @@ class GraphActor {
         walker_.NextFrames(&graph_frames_);
       const Pose& a = graph_frames_[static_cast<size_t>(i - graph_base_)];
       const Pose& b = graph_frames_[static_cast<size_t>(i + 1 - graph_base_)];
-      const double alpha = x - static_cast<double>(i);
-      Pose p = a;
-      for (size_t j = 0; j < p.rotation.size(); ++j) {
-        p.rotation[j] = a.rotation[j].slerp(alpha, b.rotation[j]).normalized();
-        p.translation[j] = (1.0 - alpha) * a.translation[j] + alpha * b.translation[j];
-      }
-      poses.push_back(std::move(p));
+      poses.emplace_back();
+      InterpolatePose(a, b, x - static_cast<double>(i), &poses.back());
     }
     // Frames the stream has passed are dropped, keeping the buffer to about a chunk: the
     // next chunk starts at graph frame floor(x) of its first frame, and the last frame
