@@ -57,7 +57,7 @@ class Daemon:
     calibrate = "live" (None: the demo subject's model)."""
 
     def __init__(self, mocapd, config_dir, work, lookahead=12, subjects=("actor1",), rate_hz=120.0, input=None,
-                 shard=None, workers=None, curve=False, http_token=None, live=None):
+                 shard=None, workers=None, curve=False, http_token=None, live=None, global_transforms=False):
         os.makedirs(work, exist_ok=True)
         security = ""
         # curve: fresh keys (`mocapd keygen`) for the daemon and for the replay, which is both
@@ -89,7 +89,8 @@ class Daemon:
             shard_line = f"shard = \"{shard}\"\n" if shard else ""
             if workers is not None:
                 shard_line += f"workers = {workers}\n"
-            f.write(f"format_version = 1\n[input]\nendpoint = \"{self.input}\"\n{shard_line}[output]\nendpoint = \"{self.output}\"\n"
+            globals_line = "global_transforms = true\n" if global_transforms else ""
+            f.write(f"format_version = 1\n[input]\nendpoint = \"{self.input}\"\n{shard_line}[output]\nendpoint = \"{self.output}\"\n{globals_line}"
                     f"[control]\nhttp_port = {self.http_port}\nstats_interval_s = 0.2\n{control}{security}[pipeline]\nlookahead = {lookahead}\n")
             for name in subjects:
                 # live: the lines of a subject calibrated from its stream, instead of a model.
