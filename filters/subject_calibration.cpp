@@ -255,7 +255,7 @@ SubjectCalibrationResult CalibrateSubject(const CalibrationTemplate& tmpl,
   std::vector<Landmark> landmarks;
   for (int m = 0; m < M; ++m) {
     const auto um = static_cast<size_t>(m);
-    if (unknown(um)) continue;
+    if (unknown(um) || (um < tmpl.offset_guessed.size() && tmpl.offset_guessed[um] != 0)) continue;
     const int on = tmpl.markers[um].attachments[0].joint;
     if (marker_prior[um].norm() < options.landmark_radius_m * scale)
       marker_sigma[um] = std::min(marker_sigma[um], options.landmark_sigma_m);

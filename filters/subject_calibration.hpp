@@ -64,6 +64,9 @@ struct CalibrationTemplate {
   /// the tracked poses, with no prior).
   std::vector<double> marker_prior_sigma_m;
   std::vector<uint8_t> offset_unknown;
+  /// Per marker (may be empty): the offset is a guess from the body's shape (a set nobody
+  /// described), good to start the tracking from but no landmark for a joint centre.
+  std::vector<uint8_t> offset_guessed;
   /// Per joint: its prior offset (default: the skeleton's) and that prior's standard
   /// deviation (<= 0: options.joint_prior_sigma_m).
   std::vector<Vec3> joint_prior;

@@ -1,6 +1,8 @@
 // Markers-only calibration: channels, marker set, template, priors, bundle adjustment.
 #include "formats/subject_from_markers.hpp"
 
+#include "formats/marker_clusters.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -55,20 +57,9 @@ Observations Gather(std::span<const C3dTake> takes, const std::vector<std::strin
   return o;
 }
 
-// The spread (standard deviation over frames) of the distance between two markers.
 double DistanceSpread(const Observations& o, int a, int b, int stride) {
-  double sum = 0.0, sum_sq = 0.0;
-  int n = 0;
-  for (int f = 0; f < o.frames; f += stride) {
-    if (!o.at(f, a).allFinite() || !o.at(f, b).allFinite()) continue;
-    const double d = (o.at(f, a) - o.at(f, b)).norm();
-    sum += d;
-    sum_sq += d * d;
-    ++n;
-  }
-  if (n < 10) return kNaN;
-  const double mean = sum / n;
-  return std::sqrt(std::max(0.0, sum_sq / n - mean * mean));
+  return mocapd::DistanceSpread(o.positions, static_cast<int>(o.labels.size()), o.frames, a, b,
+                                stride);
 }
 
 HumanoidRoles TemplateRolesOf(const Skeleton& skeleton) {
@@ -87,6 +78,27 @@ std::vector<BvhEndSite> TemplateEndSites(const Skeleton& skeleton, double height
   return sites;
 }
 
+// Every built-in set's markers placed on the template: where markers go on a body, for
+// placing a set nobody described. Landmarks within 1 cm of one already kept are dropped.
+std::vector<MarkerDefinition> AnatomicalLandmarks(const Skeleton& templ,
+                                                  const HumanoidRoles& roles) {
+  std::vector<MarkerDefinition> out;
+  for (const MarkerSetDefinition& set : BuiltInMarkerSets())
+    for (const MarkerDefinition& d :
+         PlaceMarkerSet(templ, roles, set, TemplateEndSites(templ, 1.75))) {
+      bool repeated = false;
+      for (const MarkerDefinition& kept : out)
+        repeated =
+            repeated || (kept.attachments[0].joint == d.attachments[0].joint &&
+                         (kept.attachments[0].offset - d.attachments[0].offset).norm() < 0.01);
+      if (!repeated) out.push_back(d);
+    }
+  return out;
+}
+
+// A clustered marker's first offset is the nearest landmark's: a guess, held loosely.
+constexpr double kClusteredOffsetSigmaM = 0.08;
+
 // One calibration over a chosen list of markers (labels with their template joint and
 // offset); fills what the caller reports.
 struct Candidate {
@@ -95,6 +107,7 @@ struct Candidate {
   Vec3 offset = Vec3::Zero();
   double prior_sigma = 0.0;  // <= 0: default
   bool unknown = false;      // a studio marker: offset from the data
+  bool guessed = false;      // placed by clustering, not on a known set's landmark
 };
 
 }  // namespace
@@ -151,17 +164,15 @@ MarkersOnlyCalibration CalibrateFromMarkers(std::span<const C3dTake> takes,
   if (options.marker_set == "auto") {
     match = RecognizeMarkerSet(BuiltInMarkerSets(), markers);
     if (match.set != nullptr) chosen = *match.set;
-  } else {
+  } else if (options.marker_set != "none") {
     chosen = FindMarkerSet(options.marker_set);
     match = MatchMarkerSet(chosen, markers);
     match.set = &chosen;
   }
-  if (match.set == nullptr)
-    throw std::runtime_error(
-        "calibrate: the " + std::to_string(markers.size()) +
-        " labels match no known marker set well enough (built in: see config/marker_sets/); "
-        "name one with --marker-set NAME or FILE.toml");
-  out.marker_set = chosen.name;
+  const bool clustered = match.set == nullptr;
+  if (clustered && options.marker_set != "auto" && options.marker_set != "none")
+    throw std::logic_error("a named marker set always matches");
+  out.marker_set = clustered ? std::string(kClusteredSetName) : chosen.name;
   {
     std::vector<uint8_t> found(chosen.markers.size(), 0);
     for (const std::string& label : markers)
@@ -206,14 +217,24 @@ MarkersOnlyCalibration CalibrateFromMarkers(std::span<const C3dTake> takes,
   const int stride = std::max(1, all.frames / 600);
 
   // Set markers ride their segment; a studio's own marker rides the segment it keeps its
-  // distances to.
+  // distances to. With no set, every marker is placed by clustering.
   std::vector<Candidate> candidates;
   std::vector<int> studio;
-  for (size_t i = 0; i < markers.size(); ++i) {
+  if (clustered) {
+    const ClusterPlacement placement =
+        PlaceByClustering(templ, roles, AnatomicalLandmarks(templ, roles), all.positions,
+                          static_cast<int>(markers.size()), all.frames);
+    out.clusters = {placement.up_axis, placement.height_m, placement.reference_frame,
+                    placement.landmark_rms_m, placement.moved_by_rigidity};
+    for (size_t i = 0; i < markers.size(); ++i)
+      candidates.push_back({markers[i], placement.joint[i], placement.offset[i],
+                            kClusteredOffsetSigmaM, false, placement.anatomical[i] == 0});
+  }
+  for (size_t i = 0; i < markers.size() && !clustered; ++i) {
     if (const auto m = chosen.Find(markers[i])) {
       const MarkerDefinition& d = placed[static_cast<size_t>(*m)];
       candidates.push_back(
-          {markers[i], d.attachments[0].joint, d.attachments[0].offset, 0.0, false});
+          {markers[i], d.attachments[0].joint, d.attachments[0].offset, 0.0, false, false});
     } else {
       studio.push_back(static_cast<int>(i));
     }
@@ -247,7 +268,7 @@ MarkersOnlyCalibration CalibrateFromMarkers(std::span<const C3dTake> takes,
       out.rejected.push_back({label, why});
       continue;
     }
-    candidates.push_back({label, best_joint, Vec3::Zero(), 0.0, true});
+    candidates.push_back({label, best_joint, Vec3::Zero(), 0.0, true, false});
     out.studio_markers.push_back(label);
   }
 
@@ -260,7 +281,7 @@ MarkersOnlyCalibration CalibrateFromMarkers(std::span<const C3dTake> takes,
     int front_l = -1, front_r = -1;
     std::vector<int> back;
     for (size_t c = 0; c < candidates.size(); ++c) {
-      if (candidates[c].unknown || candidates[c].joint != 0) continue;
+      if (clustered || candidates[c].unknown || candidates[c].joint != 0) continue;
       const auto m = chosen.Find(candidates[c].label);
       const Vec3& o = chosen.markers[static_cast<size_t>(*m)].offset_m;
       if (o.z() > 0.03 && o.x() > 0.05) front_l = static_cast<int>(c);
@@ -330,6 +351,7 @@ MarkersOnlyCalibration CalibrateFromMarkers(std::span<const C3dTake> takes,
       t.markers.push_back(d);
       t.marker_prior_sigma_m.push_back(c.prior_sigma);
       t.offset_unknown.push_back(c.unknown);
+      t.offset_guessed.push_back(c.guessed);
       used.push_back(c.label);
     }
     const Observations obs = Gather(takes, used);

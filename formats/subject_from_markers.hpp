@@ -19,7 +19,8 @@
 namespace mocapd {
 
 struct MarkersOnlyOptions {
-  /// "auto" (recognise from the labels), a built-in set's name, or a path to a set file.
+  /// "auto" (recognise from the labels, else place by clustering), "none" (clustering
+  /// alone), a built-in set's name, or a path to a set file.
   std::string marker_set = "auto";
   double min_valid_fraction = 0.5;  ///< Markers seen in fewer frames are skipped.
   /// A studio's marker joins the segment whose set markers keep their distances to it
@@ -36,6 +37,19 @@ struct ChannelNote {
   std::string reason;
 };
 
+/// The marker_set a calibration reports when the labels match no set and every marker
+/// was placed by clustering (formats/marker_clusters.hpp).
+inline constexpr const char* kClusteredSetName = "none (rigid clusters)";
+
+/// How a set nobody described was placed.
+struct ClusterSummary {
+  std::string up_axis;  ///< The capture's up, e.g. "+z".
+  double height_m = 0.0;
+  int reference_frame = -1;
+  double landmark_rms_m = 0.0;
+  int moved_by_rigidity = 0;
+};
+
 struct MarkersOnlyCalibration {
   SubjectModel model;
   SubjectCalibrationResult solve;
@@ -46,6 +60,7 @@ struct MarkersOnlyCalibration {
   std::vector<ChannelNote> rejected;        ///< Markers that could not be placed, and why.
   std::vector<std::string> studio_markers;  ///< Labels outside the set, placed by rigidity.
   bool hip_regression = false;              ///< The hip prior came from the pelvis markers.
+  std::optional<ClusterSummary> clusters;   ///< Set when no set matched (marker_set none).
   int frames_total = 0;
 };
 

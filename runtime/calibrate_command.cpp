@@ -53,6 +53,12 @@ int CalibrateFromMarkersOnly(const CalibrateCommandOptions& options, std::ostrea
     out << "  skipped " << n.label << ": " << n.reason << "\n";
   if (cal.hip_regression)
     out << "  hip centre prior: Harrington 2007 regression on the pelvis markers\n";
+  if (cal.clusters)
+    out << "  no known set: every marker placed by the body's shape (template fitted to frame "
+        << cal.clusters->reference_frame << ", up " << cal.clusters->up_axis << ", height "
+        << Fixed(cal.clusters->height_m, 2) << " m, markers "
+        << Fixed(cal.clusters->landmark_rms_m * 1e3, 0) << " mm RMS from its landmarks) and "
+        << "rigidity (" << cal.clusters->moved_by_rigidity << " moved by it); segments below\n";
   char line[256];
   std::snprintf(line, sizeof(line), "%-12s %-17s %26s %11s %9s %8s\n", "joint", "method",
                 "motion-only sigma (mm)", "uncert. mm", "bone mm", "L/R %");
@@ -110,6 +116,16 @@ int CalibrateFromMarkersOnly(const CalibrateCommandOptions& options, std::ostrea
       << Fixed(r.median_residual_m * 1e3, 1) << " mm, RMS " << Fixed(r.rms_m * 1e3, 1) << " mm\n";
   for (const ChannelNote& n : cal.rejected)
     out << "  REJECTED " << n.label << ": " << n.reason << "\n";
+  if (cal.clusters) {
+    // Nobody named these markers' segments: say where each went, so a wrong one shows.
+    for (int j = 0; j < sk.num_joints(); ++j) {
+      std::string members;
+      for (size_t m = 0; m < cal.markers.size(); ++m)
+        if (cal.model.markers->primary_joint(static_cast<int>(m)) == j)
+          members += " " + cal.markers[m];
+      if (!members.empty()) out << "  " << sk.joint(j).name << ":" << members << "\n";
+    }
+  }
 
   cal.model.calibration = CalibrationRecordOf(cal);
   WriteSubjectModel(options.out_subject, cal.model);
@@ -133,6 +149,12 @@ int CalibrateFromMarkersOnly(const CalibrateCommandOptions& options, std::ostrea
       skipped.push_back({{"label", n.label}, {"reason", n.reason}});
     for (const ChannelNote& n : cal.rejected)
       rejected.push_back({{"label", n.label}, {"reason", n.reason}});
+    if (cal.clusters)
+      report["placed_by_clustering"] = {{"reference_frame", cal.clusters->reference_frame},
+                                        {"up_axis", cal.clusters->up_axis},
+                                        {"height_m", cal.clusters->height_m},
+                                        {"landmark_rms_mm", cal.clusters->landmark_rms_m * 1e3},
+                                        {"moved_by_rigidity", cal.clusters->moved_by_rigidity}};
     report["skipped"] = skipped;
     report["rejected"] = rejected;
     std::ofstream file(options.report_json);

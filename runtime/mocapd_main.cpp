@@ -52,7 +52,8 @@ int main(int argc, char** argv) {
       ->check(CLI::ExistingFile);
   cal_cmd
       ->add_option("--marker-set", cal.marker_set,
-                   "auto (recognise from the labels), a built-in set (plug-in-gait-full, "
+                   "auto (recognise from the labels; labels of no set are placed by "
+                   "clustering), none (clustering alone), a built-in set (plug-in-gait-full, "
                    "plug-in-gait-lower, cmu-41, optitrack-baseline, qualisys-sports, "
                    "mocapd-default) or a set file")
       ->capture_default_str();

@@ -4,6 +4,8 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 
 #include <sstream>
 
@@ -110,6 +112,39 @@ TEST(CalibrateCommandTest, FailsWithoutWritingWhenMostMarkersDoNotFit) {
     EXPECT_NE(std::string(e.what()).find("No subject written"), std::string::npos) << e.what();
   }
   EXPECT_FALSE(std::filesystem::exists(dir + "/out.toml"));
+}
+
+// A capture whose labels belong to no set (here the default layout's markers renamed
+// P0, P1, ... and the world turned Z-up): the command places them by clustering, says so,
+// lists where each marker went, and writes a subject that fits them.
+TEST(CalibrateCommandTest, LabelsOfNoSetAreCalibratedByClusteringAlone) {
+  const auto f = testing::MakeHumanoidFixture("mixed", 12.0, 60.0, 0.001);
+  const std::string dir = testing::TempDir("calibrate_clustering");
+  C3dTake renamed = f.take;
+  const Mat3 z_up = Eigen::AngleAxisd(M_PI / 2, Vec3::UnitX()).toRotationMatrix();
+  for (int p = 0; p < renamed.num_points(); ++p) {
+    renamed.labels[static_cast<size_t>(p)] = "P" + std::to_string(p);
+    for (int fr = 0; fr < renamed.num_frames; ++fr) renamed.at(fr, p) = z_up * f.take.at(fr, p);
+  }
+  WriteC3d(dir + "/take.c3d", renamed);
+  CalibrateCommandOptions options;
+  options.markers_c3d = {dir + "/take.c3d"};
+  options.out_subject = dir + "/actor.toml";
+  options.report_json = dir + "/report.json";
+  std::ostringstream out;
+  const int accepted = RunCalibrateCommand(options, out);
+  EXPECT_GE(accepted * 10, f.markers->num_markers() * 9) << out.str();
+  EXPECT_NE(out.str().find("no known set"), std::string::npos) << out.str();
+  EXPECT_NE(out.str().find("up +z"), std::string::npos) << out.str();
+  EXPECT_NE(out.str().find("  thigh_l: "), std::string::npos) << out.str();
+  const SubjectModel model = ReadSubjectModel(dir + "/actor.toml");
+  ASSERT_TRUE(model.calibration.has_value());
+  EXPECT_EQ(model.calibration->marker_set, "none (rigid clusters)");
+  EXPECT_LT(model.calibration->median_residual_mm, 6.0) << out.str();
+  std::ifstream report(dir + "/report.json");
+  const std::string text((std::istreambuf_iterator<char>(report)),
+                         std::istreambuf_iterator<char>());
+  EXPECT_NE(text.find("placed_by_clustering"), std::string::npos);
 }
 
 }  // namespace
