@@ -275,6 +275,64 @@ ClusterPlacement PlaceByClustering(const Skeleton& templ, const HumanoidRoles& r
       }
     }
   }
+  // Which way the body faces. The template looks much the same from behind, so a fit
+  // can face backwards, its left and right swapped. People walk forwards: where the take
+  // travels, the direction its legs' sides give ((left - right) x up) must be the way it
+  // goes. A take that stays in place (a range of motion) says nothing, and the fit stands.
+  {
+    const PosedLandmarks& fitted = poses[static_cast<size_t>(best_pose)];
+    std::vector<int> leg_side(uM, 0);  // +1 left, -1 right
+    for (int m = 0; m < M; ++m) {
+      const Vec3& x = at(out.reference_frame, m);
+      if (!x.allFinite()) continue;
+      double d = 0.0;
+      const int k = Nearest(fitted, best.R.transpose() * (x - best.t) / best.s, &d);
+      const std::string& role = templ.joint(fitted.joint[static_cast<size_t>(k)]).name;
+      if (role.starts_with("thigh") || role.starts_with("shin") || role.starts_with("foot") ||
+          role.starts_with("toe"))
+        leg_side[static_cast<size_t>(m)] = role.ends_with("_l") ? 1 : -1;
+    }
+    const Vec3 up = best.R * Vec3::UnitY();
+    auto sides = [&](int f, Vec3* left, Vec3* middle) {
+      Vec3 sum[2] = {Vec3::Zero(), Vec3::Zero()};
+      int count[2] = {0, 0};
+      for (int m = 0; m < M; ++m) {
+        const int side = leg_side[static_cast<size_t>(m)];
+        if (side == 0 || !at(f, m).allFinite()) continue;
+        sum[side > 0 ? 0 : 1] += at(f, m);
+        ++count[side > 0 ? 0 : 1];
+      }
+      if (count[0] == 0 || count[1] == 0) return false;
+      *left = sum[0] / count[0] - sum[1] / count[1];
+      *left -= left->dot(up) * up;
+      *middle = 0.5 * (sum[0] / count[0] + sum[1] / count[1]);
+      return left->norm() > 0.05;
+    };
+    const int step = std::max(1, frames / 400);
+    double forward_travel = 0.0, travel = 0.0;
+    for (int f = 0; f + step < frames; f += step) {
+      Vec3 left_a, middle_a, left_b, middle_b;
+      if (!sides(f, &left_a, &middle_a) || !sides(f + step, &left_b, &middle_b)) continue;
+      Vec3 moved = middle_b - middle_a;
+      moved -= moved.dot(up) * up;
+      const Vec3 facing = (left_a + left_b).cross(up).normalized();
+      forward_travel += moved.dot(facing);
+      travel += moved.norm();
+    }
+    // Swaying in place adds up to metres of path but little along the facing; a walk
+    // adds most of its path one way.
+    constexpr double kWalkedM = 2.0, kMostlyOneWay = 0.5;
+    if (forward_travel < -kWalkedM && forward_travel < -kMostlyOneWay * travel) {
+      std::vector<Vec3> points;
+      for (int m = 0; m < M; ++m)
+        if (at(out.reference_frame, m).allFinite()) points.push_back(at(out.reference_frame, m));
+      Fit turned = best;
+      turned.R = best.R * Eigen::AngleAxisd(M_PI, Vec3::UnitY()).toRotationMatrix();
+      best = RunIcp(fitted, points, turned);
+      out.turned_round = true;
+    }
+  }
+
   // The limbs turned to the frame's own pose (articulated ICP: the template's IK onto
   // the markers, each tied to its nearest landmark), so that elbows, knees and a head
   // that are not as the template stands do not hand their markers to a neighbour.
@@ -366,9 +424,10 @@ ClusterPlacement PlaceByClustering(const Skeleton& templ, const HumanoidRoles& r
   out.joint.assign(uM, 0);
   for (int m = 0; m < M; ++m) out.joint[static_cast<size_t>(m)] = own_best(m);
 
-  // 3. The motion's word: a marker that keeps its distances to another segment's markers
-  // clearly better than to its own moves there.
-  constexpr double kClearlyM = 0.002;
+  // 3. The motion's word: a marker that does not keep its distances to its own segment's
+  // markers, but does to a neighbouring segment's, moves there. Only a contradiction
+  // moves it: where a joint hardly turned, both segments look rigid with it and the
+  // shape's choice stands.
   for (int sweep = 0; sweep < 2; ++sweep) {
     bool moved = false;
     for (int m = 0; m < M; ++m) {
@@ -404,8 +463,8 @@ ClusterPlacement PlaceByClustering(const Skeleton& templ, const HumanoidRoles& r
         }
       }
       // A marker alone on its segment has nothing to be rigid with: the shape stands.
-      if (target == current || !std::isfinite(here) || !(there <= options.rigid_std_m) ||
-          !(there < here - kClearlyM))
+      if (target == current || !std::isfinite(here) || !(here > options.rigid_std_m) ||
+          !(there <= options.rigid_std_m))
         continue;
       out.joint[static_cast<size_t>(m)] = target;
       ++out.moved_by_rigidity;

@@ -3,12 +3,14 @@
 //  1. the template fitted to a well-seen frame: a multi-start similarity ICP against
 //     anatomical landmarks (every built-in set's markers placed on the template), over
 //     the arm poses people stand in and every axis as "up" (exporters differ), then an
-//     articulated ICP (the template's IK) that turns its limbs to the frame's pose;
+//     articulated ICP (the template's IK) that turns its limbs to the frame's pose; the
+//     way the take walks says which way it faces (people walk forwards), since the
+//     body looks much the same from behind;
 //  2. each marker on the segment of its nearest landmark, generic points on each
 //     segment's surface included (a marker where no set puts one); its first offset is
 //     the nearest set landmark's on that segment, or the surface point's;
-//  3. a marker that keeps its distances to a neighbouring segment's markers clearly
-//     better than to its own segment's moves there (rigid clustering by the motion).
+//  3. a marker that does not keep its distances to its own segment's markers but does
+//     to a neighbouring segment's moves there (rigid clustering by the motion).
 // The bundle adjustment of filters/subject_calibration.hpp then refines everything.
 #pragma once
 
@@ -29,8 +31,8 @@ double DistanceSpread(std::span<const Vec3> positions, int num_markers, int fram
                       int stride);
 
 struct ClusterPlacementOptions {
-  /// A marker moves to a neighbouring segment whose markers keep their distances to it
-  /// within this (standard deviation over the take).
+  /// Markers keep their distances within this (standard deviation over the take) when
+  /// they ride one segment.
   double rigid_std_m = 0.012;
   int min_markers = 8;  ///< Fewer cannot show a body.
 };
@@ -46,6 +48,8 @@ struct ClusterPlacement {
   double height_m = 0.0;        ///< The fitted template's height.
   double landmark_rms_m = 0.0;  ///< Markers to their nearest landmarks in that fit.
   int moved_by_rigidity = 0;    ///< Markers whose segment the motion changed (step 3).
+  /// The best fit faced backwards (the take walks the other way) and was turned round.
+  bool turned_round = false;
 };
 
 /// Places every marker. templ: the 1.75 m template humanoid (MakeTemplateHumanoid) with

@@ -224,8 +224,9 @@ MarkersOnlyCalibration CalibrateFromMarkers(std::span<const C3dTake> takes,
     const ClusterPlacement placement =
         PlaceByClustering(templ, roles, AnatomicalLandmarks(templ, roles), all.positions,
                           static_cast<int>(markers.size()), all.frames);
-    out.clusters = {placement.up_axis, placement.height_m, placement.reference_frame,
-                    placement.landmark_rms_m, placement.moved_by_rigidity};
+    out.clusters = {placement.up_axis,           placement.height_m,
+                    placement.reference_frame,   placement.landmark_rms_m,
+                    placement.moved_by_rigidity, placement.turned_round};
     for (size_t i = 0; i < markers.size(); ++i)
       candidates.push_back({markers[i], placement.joint[i], placement.offset[i],
                             kClusteredOffsetSigmaM, false, placement.anatomical[i] == 0});
@@ -239,26 +240,33 @@ MarkersOnlyCalibration CalibrateFromMarkers(std::span<const C3dTake> takes,
       studio.push_back(static_cast<int>(i));
     }
   }
-  for (int u : studio) {
-    double best = kNaN;
+  // The segment whose placed markers (of known offset) keep their distances to marker u
+  // best: the mean spread of its nearest two; -1 when no segment has two.
+  auto rigid_segment = [&](int u, const std::vector<Candidate>& on_segments, double* best) {
+    *best = kNaN;
     int best_joint = -1;
     for (int j = 0; j < templ.num_joints(); ++j) {
       std::vector<double> spreads;
-      for (size_t c = 0; c < candidates.size(); ++c) {
-        if (candidates[c].joint != j || candidates[c].unknown) continue;
-        const int k = static_cast<int>(
-            std::find(markers.begin(), markers.end(), candidates[c].label) - markers.begin());
+      for (const Candidate& c : on_segments) {
+        if (c.joint != j || c.unknown) continue;
+        const int k =
+            static_cast<int>(std::find(markers.begin(), markers.end(), c.label) - markers.begin());
         const double s = DistanceSpread(all, u, k, stride);
         if (std::isfinite(s)) spreads.push_back(s);
       }
       if (spreads.size() < 2) continue;
       std::sort(spreads.begin(), spreads.end());
       const double score = 0.5 * (spreads[0] + spreads[1]);
-      if (!(score >= best)) {
-        best = score;
+      if (!(score >= *best)) {
+        *best = score;
         best_joint = j;
       }
     }
+    return best_joint;
+  };
+  for (int u : studio) {
+    double best = kNaN;
+    const int best_joint = rigid_segment(u, candidates, &best);
     const std::string& label = markers[static_cast<size_t>(u)];
     if (best_joint < 0 || !(best <= options.rigid_std_m)) {
       char why[160];
@@ -329,8 +337,11 @@ MarkersOnlyCalibration CalibrateFromMarkers(std::span<const C3dTake> takes,
     }
   }
 
-  // Calibrate; reject markers that do not fit and calibrate again without them.
-  for (int pass = 0; pass < 2; ++pass) {
+  // Calibrate; reject markers that do not fit and calibrate again without them. Markers
+  // that the body's shape placed (no set) and that do not fit get one more chance: the
+  // segment they ride rigidly, as a studio's own marker would.
+  const int passes = clustered ? 3 : 2;
+  for (int pass = 0; pass < passes; ++pass) {
     if (candidates.size() < 3)
       throw std::runtime_error("calibrate: fewer than 3 markers could be placed; nothing written");
     CalibrationTemplate t;
@@ -361,12 +372,27 @@ MarkersOnlyCalibration CalibrateFromMarkers(std::span<const C3dTake> takes,
       throw std::runtime_error(std::string("calibrate: ") + e.what());
     }
     std::vector<Candidate> kept;
+    bool changed = false;
     for (size_t m = 0; m < candidates.size(); ++m) {
       const double rms = out.solve.marker_rms_m[m];
       const int frames = out.solve.marker_frames[m];
       if (frames >= 10 && rms <= options.max_marker_rms_m) {
         kept.push_back(candidates[m]);
         continue;
+      }
+      changed = true;
+      if (clustered && pass == 0 && frames >= 10) {
+        double spread = kNaN;
+        const int u = static_cast<int>(
+            std::find(markers.begin(), markers.end(), candidates[m].label) - markers.begin());
+        std::vector<Candidate> others = candidates;
+        others.erase(others.begin() + static_cast<long>(m));
+        const int joint = rigid_segment(u, others, &spread);
+        if (joint >= 0 && spread <= options.rigid_std_m) {
+          kept.push_back({candidates[m].label, joint, Vec3::Zero(), 0.0, true, false});
+          ++out.clusters->placed_again_by_rigidity;
+          continue;
+        }
       }
       char why[160];
       if (frames < 10)
@@ -377,14 +403,14 @@ MarkersOnlyCalibration CalibrateFromMarkers(std::span<const C3dTake> takes,
                       rms * 1e3, options.max_marker_rms_m * 1e3);
       out.rejected.push_back({candidates[m].label, why});
     }
-    if (kept.size() == candidates.size()) break;
+    if (!changed) break;
     if (2 * kept.size() < markers.size() || kept.size() < 3)
       throw std::runtime_error(
           "calibrate: only " + std::to_string(kept.size()) + " of " +
           std::to_string(markers.size()) +
           " markers fit a skeleton; is the marker set right (--marker-set)? Nothing written");
     candidates = std::move(kept);
-    if (pass == 1)
+    if (pass == passes - 1)
       throw std::runtime_error("calibrate: markers still fail to fit after rejecting the worst");
   }
   if (2 * candidates.size() < markers.size())

@@ -48,6 +48,10 @@ struct ClusterSummary {
   int reference_frame = -1;
   double landmark_rms_m = 0.0;
   int moved_by_rigidity = 0;
+  bool turned_round = false;  ///< The fit faced backwards; the walk's direction turned it.
+  /// Markers the shape placed that did not fit there, placed again on the segment they
+  /// ride rigidly (offsets from the motion).
+  int placed_again_by_rigidity = 0;
 };
 
 struct MarkersOnlyCalibration {

@@ -58,7 +58,10 @@ int CalibrateFromMarkersOnly(const CalibrateCommandOptions& options, std::ostrea
         << cal.clusters->reference_frame << ", up " << cal.clusters->up_axis << ", height "
         << Fixed(cal.clusters->height_m, 2) << " m, markers "
         << Fixed(cal.clusters->landmark_rms_m * 1e3, 0) << " mm RMS from its landmarks) and "
-        << "rigidity (" << cal.clusters->moved_by_rigidity << " moved by it); segments below\n";
+        << "rigidity (" << cal.clusters->moved_by_rigidity << " moved by it, "
+        << cal.clusters->placed_again_by_rigidity << " placed again after not fitting)"
+        << (cal.clusters->turned_round ? "; turned round to face the way the take walks" : "")
+        << "; segments below\n";
   char line[256];
   std::snprintf(line, sizeof(line), "%-12s %-17s %26s %11s %9s %8s\n", "joint", "method",
                 "motion-only sigma (mm)", "uncert. mm", "bone mm", "L/R %");
@@ -150,11 +153,14 @@ int CalibrateFromMarkersOnly(const CalibrateCommandOptions& options, std::ostrea
     for (const ChannelNote& n : cal.rejected)
       rejected.push_back({{"label", n.label}, {"reason", n.reason}});
     if (cal.clusters)
-      report["placed_by_clustering"] = {{"reference_frame", cal.clusters->reference_frame},
-                                        {"up_axis", cal.clusters->up_axis},
-                                        {"height_m", cal.clusters->height_m},
-                                        {"landmark_rms_mm", cal.clusters->landmark_rms_m * 1e3},
-                                        {"moved_by_rigidity", cal.clusters->moved_by_rigidity}};
+      report["placed_by_clustering"] = {
+          {"reference_frame", cal.clusters->reference_frame},
+          {"up_axis", cal.clusters->up_axis},
+          {"height_m", cal.clusters->height_m},
+          {"landmark_rms_mm", cal.clusters->landmark_rms_m * 1e3},
+          {"moved_by_rigidity", cal.clusters->moved_by_rigidity},
+          {"placed_again_by_rigidity", cal.clusters->placed_again_by_rigidity},
+          {"turned_round", cal.clusters->turned_round}};
     report["skipped"] = skipped;
     report["rejected"] = rejected;
     std::ofstream file(options.report_json);

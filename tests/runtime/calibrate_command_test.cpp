@@ -11,6 +11,7 @@
 
 #include "formats/bvh.hpp"
 #include "formats/subject_file.hpp"
+#include "formats/subject_from_markers.hpp"
 #include "sim/humanoid.hpp"
 #include "sim/synthesis.hpp"
 #include "tests/support/test_takes.hpp"
@@ -140,6 +141,19 @@ TEST(CalibrateCommandTest, LabelsOfNoSetAreCalibratedByClusteringAlone) {
   const SubjectModel model = ReadSubjectModel(dir + "/actor.toml");
   ASSERT_TRUE(model.calibration.has_value());
   EXPECT_EQ(model.calibration->marker_set, "none (rigid clusters)");
+  // The body looks much the same from behind; the walk must still put every marker on
+  // its own side.
+  const HumanoidRoles roles = MatchHumanoidRoles(*f.skeleton);
+  for (int p = 0; p < f.markers->num_markers(); ++p) {
+    const auto placed = model.markers->FindMarker("P" + std::to_string(p));
+    if (!placed) continue;
+    std::string truth;
+    for (const auto& [role, joint] : roles.joint_of_role)
+      if (joint == f.markers->primary_joint(p)) truth = role;
+    const std::string got = model.skeleton->joint(model.markers->primary_joint(placed->value)).name;
+    EXPECT_FALSE(got != truth && MirrorRole(got) == truth)
+        << "P" << p << " " << truth << " " << got;
+  }
   EXPECT_LT(model.calibration->median_residual_mm, 6.0) << out.str();
   std::ifstream report(dir + "/report.json");
   const std::string text((std::istreambuf_iterator<char>(report)),
