@@ -7,7 +7,7 @@
 // the cleaned-marker RMSE on corrupted samples (mm), the jerk ratio against the truth and
 // the number of pops (a joint moving > 2 cm per frame beyond the truth's own motion).
 // Usage: cleanup_accuracy [--seeds N] [--severity light|medium|heavy]... [--rates 60,120,240]
-// [--lookahead K (ours only)] [--explain-pops] [--explain-worst] [--trace
+// [--lookahead K (ours only)] [--jitter-mm MIN,MAX] [--explain-pops] [--explain-worst] [--trace
 // TAKE:FROM:TO:MARKER,...] [--digest] [TAKE.bvh ...]
 // --explain-worst explains each run's worst frame (over 3 cm) the way --explain-pops does.
 // --digest prints, per row of ours, a hash of every published bit (markers, status,
@@ -367,7 +367,8 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
 
 int main(int argc, char** argv) {
   int seeds = 2;
-  int only_lookahead = -1;  // -1: the baselines and K = 0, 4, 12
+  int only_lookahead = -1;                          // -1: the baselines and K = 0, 4, 12
+  std::pair<double, double> jitter_mm{-1.0, -1.0};  // < 0: the corruption's default
   std::vector<double> rates;
   std::vector<std::string> severities, paths;
   for (int i = 1; i < argc; ++i) {
@@ -388,7 +389,16 @@ int main(int argc, char** argv) {
       g_explain_pops = true;  // the trace reads what --explain-pops keeps
     } else if (std::strcmp(argv[i], "--lookahead") == 0 && i + 1 < argc)
       only_lookahead = std::atoi(argv[++i]);
-    else if (std::strcmp(argv[i], "--severity") == 0 && i + 1 < argc)
+    else if (std::strcmp(argv[i], "--jitter-mm") == 0 && i + 1 < argc) {
+      // MIN,MAX: each marker's Gaussian jitter sigma is drawn in [MIN, MAX] mm.
+      std::stringstream list(argv[++i]);
+      std::string lo, hi;
+      if (!std::getline(list, lo, ',') || !std::getline(list, hi)) {
+        std::fprintf(stderr, "--jitter-mm expects MIN,MAX (mm), got '%s'\n", argv[i]);
+        return 1;
+      }
+      jitter_mm = {std::atof(lo.c_str()), std::atof(hi.c_str())};
+    } else if (std::strcmp(argv[i], "--severity") == 0 && i + 1 < argc)
       severities.emplace_back(argv[++i]);
     else if (std::strcmp(argv[i], "--rates") == 0 && i + 1 < argc) {
       std::stringstream list(argv[++i]);
@@ -416,6 +426,10 @@ int main(int argc, char** argv) {
           CorruptionOptions co;
           co.severity = ParseCorruptionSeverity(severity_name);
           co.seed = static_cast<uint64_t>(seed);
+          if (jitter_mm.first >= 0.0) {
+            co.jitter_min_m = jitter_mm.first * 1e-3;
+            co.jitter_max_m = jitter_mm.second * 1e-3;
+          }
           const CorruptedTake bad = CorruptTake(clean, take.markers.get(), co);
           if (only_lookahead >= 0) {
             results["mocapd K=" + std::to_string(only_lookahead)].push_back(

@@ -4,8 +4,10 @@
 
 #include "filters/ik_solver.hpp"
 
+#include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -89,7 +91,12 @@ std::vector<MarkerDefinition> SurfaceLandmarks(const Skeleton& templ) {
     u1 = (u1 - u1.dot(along_bone) * along_bone).normalized();
     const Vec3 u2 = along_bone.cross(u1);
     const auto uj = static_cast<size_t>(j);
-    for (double along : {0.125, 0.375, 0.625, 0.875})
+    // Away from the joints: a marker on a joint (a wrist bar, an epicondyle) rides the
+    // proximal segment by every set's convention, and the sets' landmarks say so.
+    const bool end_segment = mirror_free == "hand" || mirror_free == "toe" || mirror_free == "head";
+    const std::array<double, 3> alongs =
+        end_segment ? std::array<double, 3>{0.45, 0.7, 0.95} : std::array<double, 3>{0.3, 0.5, 0.7};
+    for (double along : alongs)
       for (int k = 0; k < 8; ++k) {
         const double angle = k * M_PI / 4.0;
         const Vec3 p = rest.p_WJ[uj] + along * bone + section->across * std::cos(angle) * u1 +
@@ -233,21 +240,40 @@ ClusterPlacement PlaceByClustering(const Skeleton& templ, const HumanoidRoles& r
     }
     template_extent = hi - lo;
   }
-  // Which way is up is the exporter's choice: each axis, each sign, 8 headings about it.
-  std::vector<Mat3> orientations;
+  // Which way is up is the exporter's choice: each axis, each sign, 8 headings about it...
+  // ...and, since a capture's floor may be tilted or the actor leaning, the frame's own
+  // long axis (its markers' first principal direction: a body is tall and narrow).
+  std::vector<Vec3> ups;
   for (int axis = 0; axis < 3; ++axis)
-    for (double sign : {1.0, -1.0}) {
-      const Vec3 up = sign * Vec3::Unit(axis);
+    for (double sign : {1.0, -1.0}) ups.push_back(sign * Vec3::Unit(axis));
+  auto orientations_about = [](const std::vector<Vec3>& up_candidates) {
+    std::vector<Mat3> out_orientations;
+    for (const Vec3& up : up_candidates) {
       const Mat3 tilt = Quat::FromTwoVectors(Vec3::UnitY(), up).toRotationMatrix();
       for (int h = 0; h < 8; ++h)
-        orientations.push_back(tilt * Eigen::AngleAxisd(h * M_PI / 4.0, Vec3::UnitY()));
+        out_orientations.push_back(tilt * Eigen::AngleAxisd(h * M_PI / 4.0, Vec3::UnitY()));
     }
+    return out_orientations;
+  };
   Fit best;
   int best_pose = 0;
   for (int f : starts) {
     std::vector<Vec3> points;
     for (int m = 0; m < M; ++m)
       if (at(f, m).allFinite()) points.push_back(at(f, m));
+    std::vector<Vec3> frame_ups = ups;
+    {
+      Vec3 mean = Vec3::Zero();
+      for (const Vec3& x : points) mean += x;
+      mean /= static_cast<double>(points.size());
+      Mat3 scatter = Mat3::Zero();
+      for (const Vec3& x : points) scatter += (x - mean) * (x - mean).transpose();
+      const Eigen::SelfAdjointEigenSolver<Mat3> eigen(scatter);
+      const Vec3 long_axis = eigen.eigenvectors().col(2);
+      frame_ups.push_back(long_axis);
+      frame_ups.push_back(-long_axis);
+    }
+    const std::vector<Mat3> orientations = orientations_about(frame_ups);
     for (size_t p = 0; p < poses.size(); ++p) {
       Vec3 template_centre = Vec3::Zero();
       for (const Vec3& q : poses[p].position) template_centre += q;
@@ -380,6 +406,7 @@ ClusterPlacement PlaceByClustering(const Skeleton& templ, const HumanoidRoles& r
     int axis = 0;
     up.cwiseAbs().maxCoeff(&axis);
     out.up_axis = std::string(up[axis] >= 0 ? "+" : "-") + "xyz"[axis];
+    out.tilt_deg = std::acos(std::clamp(std::abs(up[axis]), 0.0, 1.0)) * 180.0 / M_PI;
   }
 
   // 2. Segments by nearest landmark (set or surface); the offset is the nearest set

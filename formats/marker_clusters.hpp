@@ -44,7 +44,8 @@ struct ClusterPlacement {
   /// offset is that landmark's (else a point of the segment's surface, no landmark).
   std::vector<uint8_t> anatomical;
   int reference_frame = -1;     ///< The frame the template was fitted to.
-  std::string up_axis;          ///< The capture's up, e.g. "+z" (the nearest axis).
+  std::string up_axis;          ///< The capture's up, e.g. "+z" (the nearest axis)...
+  double tilt_deg = 0.0;        ///< ...and how far the fitted body's up is from it.
   double height_m = 0.0;        ///< The fitted template's height.
   double landmark_rms_m = 0.0;  ///< Markers to their nearest landmarks in that fit.
   int moved_by_rigidity = 0;    ///< Markers whose segment the motion changed (step 3).

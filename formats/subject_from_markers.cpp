@@ -98,6 +98,24 @@ std::vector<MarkerDefinition> AnatomicalLandmarks(const Skeleton& templ,
 
 // A clustered marker's first offset is the nearest landmark's: a guess, held loosely.
 constexpr double kClusteredOffsetSigmaM = 0.08;
+// Clustering alone places a full-body set: fewer markers (a lower-body or sparse set)
+// fitted the template upside down or put pelvis markers on an arm when tried.
+constexpr size_t kClusteringMinMarkers = 20;
+// A placement where more than this share of the markers do not fit their segment has
+// not found the body (a capture tilted 37 degrees put head markers on a shin when tried).
+constexpr double kClusteringMaxMisfitShare = 0.2;
+
+// The part of the body a template role belongs to, for the coverage check.
+std::string BodyRegion(const std::string& role) {
+  const std::string side = role.ends_with("_l") ? "left " : role.ends_with("_r") ? "right " : "";
+  if (role == "head" || role == "neck") return "head";
+  if (role.starts_with("upper_arm") || role.starts_with("forearm") || role.starts_with("hand"))
+    return side + "arm";
+  if (role.starts_with("thigh") || role.starts_with("shin") || role.starts_with("foot") ||
+      role.starts_with("toe"))
+    return side + "leg";
+  return "trunk";  // pelvis, spine, chest, clavicles
+}
 
 // One calibration over a chosen list of markers (labels with their template joint and
 // offset); fills what the caller reports.
@@ -221,15 +239,60 @@ MarkersOnlyCalibration CalibrateFromMarkers(std::span<const C3dTake> takes,
   std::vector<Candidate> candidates;
   std::vector<int> studio;
   if (clustered) {
+    // Why clustering: forced, or the labels' nearest set is too far from them.
+    std::string why = "--marker-set none";
+    if (options.marker_set == "auto") {
+      why = "the labels match no known marker set";
+      double best_share = -1.0;
+      for (const MarkerSetDefinition& set : BuiltInMarkerSets()) {
+        const MarkerSetMatch m = MatchMarkerSet(set, markers);
+        const double share =
+            m.required > 0 ? static_cast<double>(m.required_found) / m.required : 0;
+        if (m.required_found > 0 && share > best_share) {
+          best_share = share;
+          why = "the labels match no known marker set (nearest: " + set.name + ", " +
+                std::to_string(m.required_found) + " of its " + std::to_string(m.required) +
+                " markers; 60 % needed)";
+        }
+      }
+    }
+    out.clustered_because = why;
+    // The body's shape places markers only when they show a whole body.
+    if (markers.size() < kClusteringMinMarkers)
+      throw std::runtime_error(
+          "calibrate: " + why +
+          ", and clustering alone needs a full-body set (markers on the "
+          "head, trunk, both arms and both legs; " +
+          std::to_string(kClusteringMinMarkers) + " at least): " + std::to_string(markers.size()) +
+          " markers are too few to place by clustering. Name the set with --marker-set NAME or "
+          "FILE.toml. Nothing written");
     const ClusterPlacement placement =
         PlaceByClustering(templ, roles, AnatomicalLandmarks(templ, roles), all.positions,
                           static_cast<int>(markers.size()), all.frames);
-    out.clusters = {placement.up_axis,           placement.height_m,
-                    placement.reference_frame,   placement.landmark_rms_m,
-                    placement.moved_by_rigidity, placement.turned_round};
+    out.clusters = ClusterSummary{.up_axis = placement.up_axis,
+                                  .tilt_deg = placement.tilt_deg,
+                                  .height_m = placement.height_m,
+                                  .reference_frame = placement.reference_frame,
+                                  .landmark_rms_m = placement.landmark_rms_m,
+                                  .moved_by_rigidity = placement.moved_by_rigidity,
+                                  .turned_round = placement.turned_round};
     for (size_t i = 0; i < markers.size(); ++i)
       candidates.push_back({markers[i], placement.joint[i], placement.offset[i],
                             kClusteredOffsetSigmaM, false, placement.anatomical[i] == 0});
+    // A fit that leaves a limb, the head or the trunk without a marker has not found the
+    // body (a lower-body set fitted upside down, a sparse set): refused, not written.
+    std::string uncovered;
+    for (const char* region : {"head", "trunk", "left arm", "right arm", "left leg", "right leg"}) {
+      bool covered = false;
+      for (size_t i = 0; i < markers.size(); ++i)
+        covered = covered || BodyRegion(templ.joint(placement.joint[i]).name) == region;
+      if (!covered) uncovered += std::string(uncovered.empty() ? "" : ", ") + region;
+    }
+    if (!uncovered.empty())
+      throw std::runtime_error(
+          "calibrate: " + why + ", and clustering placed no marker on the " + uncovered +
+          ": it needs a full-body set (a lower-body or sparse set cannot be placed by the "
+          "body's shape). Name the set with --marker-set NAME or FILE.toml. Nothing written");
   }
   for (size_t i = 0; i < markers.size() && !clustered; ++i) {
     if (const auto m = chosen.Find(markers[i])) {
@@ -408,10 +471,24 @@ MarkersOnlyCalibration CalibrateFromMarkers(std::span<const C3dTake> takes,
       throw std::runtime_error(
           "calibrate: only " + std::to_string(kept.size()) + " of " +
           std::to_string(markers.size()) +
-          " markers fit a skeleton; is the marker set right (--marker-set)? Nothing written");
+          (clustered ? " markers fit a skeleton as clustering placed them; name the set with "
+                       "--marker-set NAME or FILE.toml. Nothing written"
+                     : " markers fit a skeleton; is the marker set right (--marker-set)? Nothing "
+                       "written"));
     candidates = std::move(kept);
     if (pass == passes - 1)
       throw std::runtime_error("calibrate: markers still fail to fit after rejecting the worst");
+  }
+  if (clustered) {
+    const size_t misfits =
+        out.rejected.size() + static_cast<size_t>(out.clusters->placed_again_by_rigidity);
+    if (static_cast<double>(misfits) >
+        kClusteringMaxMisfitShare * static_cast<double>(markers.size()))
+      throw std::runtime_error(
+          "calibrate: " + out.clustered_because + ", and clustering found no body they fit: " +
+          std::to_string(misfits) + " of " + std::to_string(markers.size()) +
+          " markers did not fit the segment the body's shape gave them. Name the set with "
+          "--marker-set NAME or FILE.toml. Nothing written");
   }
   if (2 * candidates.size() < markers.size())
     throw std::runtime_error("calibrate: only " + std::to_string(candidates.size()) + " of " +

@@ -43,7 +43,8 @@ inline constexpr const char* kClusteredSetName = "none (rigid clusters)";
 
 /// How a set nobody described was placed.
 struct ClusterSummary {
-  std::string up_axis;  ///< The capture's up, e.g. "+z".
+  std::string up_axis;    ///< The capture's up, e.g. "+z"...
+  double tilt_deg = 0.0;  ///< ...and how far the fitted body's up is from it.
   double height_m = 0.0;
   int reference_frame = -1;
   double landmark_rms_m = 0.0;
@@ -65,6 +66,7 @@ struct MarkersOnlyCalibration {
   std::vector<std::string> studio_markers;  ///< Labels outside the set, placed by rigidity.
   bool hip_regression = false;              ///< The hip prior came from the pelvis markers.
   std::optional<ClusterSummary> clusters;   ///< Set when no set matched (marker_set none).
+  std::string clustered_because;            ///< Why clustering placed the markers.
   int frames_total = 0;
 };
 

@@ -54,10 +54,12 @@ int CalibrateFromMarkersOnly(const CalibrateCommandOptions& options, std::ostrea
   if (cal.hip_regression)
     out << "  hip centre prior: Harrington 2007 regression on the pelvis markers\n";
   if (cal.clusters)
-    out << "  no known set: every marker placed by the body's shape (template fitted to frame "
-        << cal.clusters->reference_frame << ", up " << cal.clusters->up_axis << ", height "
-        << Fixed(cal.clusters->height_m, 2) << " m, markers "
-        << Fixed(cal.clusters->landmark_rms_m * 1e3, 0) << " mm RMS from its landmarks) and "
+    out << "  " << cal.clustered_because
+        << ": every marker placed by the body's shape (template fitted to frame "
+        << cal.clusters->reference_frame << ", up " << cal.clusters->up_axis << " within "
+        << Fixed(cal.clusters->tilt_deg, 0) << " deg, height " << Fixed(cal.clusters->height_m, 2)
+        << " m, markers " << Fixed(cal.clusters->landmark_rms_m * 1e3, 0)
+        << " mm RMS from its landmarks) and "
         << "rigidity (" << cal.clusters->moved_by_rigidity << " moved by it, "
         << cal.clusters->placed_again_by_rigidity << " placed again after not fitting)"
         << (cal.clusters->turned_round ? "; turned round to face the way the take walks" : "")
@@ -155,7 +157,9 @@ int CalibrateFromMarkersOnly(const CalibrateCommandOptions& options, std::ostrea
     if (cal.clusters)
       report["placed_by_clustering"] = {
           {"reference_frame", cal.clusters->reference_frame},
+          {"because", cal.clustered_because},
           {"up_axis", cal.clusters->up_axis},
+          {"tilt_deg", cal.clusters->tilt_deg},
           {"height_m", cal.clusters->height_m},
           {"landmark_rms_mm", cal.clusters->landmark_rms_m * 1e3},
           {"moved_by_rigidity", cal.clusters->moved_by_rigidity},
