@@ -12,6 +12,7 @@
 #include "filters/pose_error.hpp"
 #include "formats/bvh.hpp"
 #include "formats/c3d.hpp"
+#include "formats/marker_layout.hpp"
 #include "formats/retarget_map.hpp"
 #include "formats/subject_file.hpp"
 #include "formats/svg_plot.hpp"
@@ -117,9 +118,29 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
     for (int j = 0; j < subject.skeleton->num_joints(); ++j)
       if (const auto t = truth->skeleton.FindJoint(subject.skeleton->joint(j).name))
         truth_joints.emplace_back(j, static_cast<int>(*t));
+    // A subject calibrated from markers names its joints by role (thigh_l...): it meets
+    // a truth of other names on the limb joints, whose centres (hip, knee, ankle,
+    // shoulder, elbow, wrist) every convention shares; the trunk's joints are placed
+    // differently by each.
+    if (truth_joints.empty()) {
+      try {
+        const HumanoidRoles roles = MatchHumanoidRoles(truth->skeleton);
+        for (const char* role :
+             {"thigh_l", "thigh_r", "shin_l", "shin_r", "foot_l", "foot_r", "upper_arm_l",
+              "upper_arm_r", "forearm_l", "forearm_r", "hand_l", "hand_r"}) {
+          const auto solved = subject.skeleton->FindJoint(role);
+          const auto found = roles.joint_of_role.find(role);
+          if (solved && found != roles.joint_of_role.end())
+            truth_joints.emplace_back(static_cast<int>(*solved), found->second);
+        }
+      } catch (const std::invalid_argument&) {
+        // Not a humanoid: nothing to match by role.
+      }
+    }
     if (truth_joints.empty())
       throw std::runtime_error(options.truth_bvh +
-                               ": no joint named like the subject's: not its truth");
+                               ": no joint named like the subject's, nor a humanoid whose limb "
+                               "joints match the subject's roles: not its truth");
   }
   PlotData plot;
   const bool plotting = !options.plot_dir.empty();
