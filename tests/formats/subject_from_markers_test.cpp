@@ -195,7 +195,7 @@ TEST_F(SubjectFromMarkersTest, AnUnknownSetIsPlacedByClusteringOnTheSegmentsItRi
 }
 
 // What clustering cannot place is refused with the reason, never written: a lower-body
-// set, a body with a limb unmarked.
+// set, a body with a limb unmarked, a set a third of whose markers ride nothing.
 TEST_F(SubjectFromMarkersTest, AnUnknownSetThatShowsNoWholeBodyIsRefused) {
   auto unlabelled = [&](const std::function<bool(const std::string&)>& keep, const Mat3& world) {
     C3dTake out;
@@ -239,6 +239,15 @@ TEST_F(SubjectFromMarkersTest, AnUnknownSetThatShowsNoWholeBodyIsRefused) {
       },
       Mat3::Identity()));
   EXPECT_NE(one_armed.find("no marker on the left arm"), std::string::npos) << one_armed;
+  // Every third marker drifting on its own (riding no segment): a third of the set cannot
+  // be placed, which is no body clustering found.
+  C3dTake drifting = unlabelled([](const std::string&) { return true; }, Mat3::Identity());
+  for (int p = 0; p < drifting.num_points(); p += 3)
+    for (int f = 0; f < drifting.num_frames; ++f)
+      drifting.at(f, p) += Vec3(0.15 * std::sin(0.05 * f + p), 0.1 * std::cos(0.031 * f),
+                                0.15 * std::sin(0.023 * f + 2 * p));
+  const std::string misfits = error_of(drifting);
+  EXPECT_NE(misfits.find("found no body they fit"), std::string::npos) << misfits;
 }
 
 TEST_F(SubjectFromMarkersTest, TheSameInputGivesTheSameSubjectByteForByte) {
