@@ -143,6 +143,7 @@ Fit RunIcp(const PosedLandmarks& lm, const std::vector<Vec3>& points, Fit fit) {
       const Vec3 y = fit.R.transpose() * (x - fit.t) / fit.s;
       double d = 0.0;
       const int k = Nearest(lm, y, &d);
+      if (k < 0) continue;
       const double world = d * fit.s;
       cost += std::min(world, kCap) * std::min(world, kCap);
       if (world > kCap) continue;
@@ -169,21 +170,25 @@ Fit RunIcp(const PosedLandmarks& lm, const std::vector<Vec3>& points, Fit fit) {
 
 double DistanceSpread(std::span<const Vec3> positions, int num_markers, int frames, int a, int b,
                       int stride) {
-  double sum = 0.0, sum_sq = 0.0;
-  int n = 0;
+  // Robust: 1.4826 x the median absolute deviation (a Gaussian's standard deviation), so
+  // the frames a swap or a pop corrupts do not make a rigid pair look loose.
+  std::vector<double> d;
+  stride = std::max(1, stride);
   const auto M = static_cast<size_t>(num_markers);
   for (int f = 0; f < frames; f += stride) {
     const Vec3& pa = positions[static_cast<size_t>(f) * M + static_cast<size_t>(a)];
     const Vec3& pb = positions[static_cast<size_t>(f) * M + static_cast<size_t>(b)];
-    if (!pa.allFinite() || !pb.allFinite()) continue;
-    const double d = (pa - pb).norm();
-    sum += d;
-    sum_sq += d * d;
-    ++n;
+    if (pa.allFinite() && pb.allFinite()) d.push_back((pa - pb).norm());
   }
-  if (n < 10) return kNaN;
-  const double mean = sum / n;
-  return std::sqrt(std::max(0.0, sum_sq / n - mean * mean));
+  if (d.size() < 10) return kNaN;
+  auto median = [](std::vector<double>& v) {
+    const auto mid = v.begin() + static_cast<long>(v.size() / 2);
+    std::nth_element(v.begin(), mid, v.end());
+    return *mid;
+  };
+  const double centre = median(d);
+  for (double& x : d) x = std::abs(x - centre);
+  return 1.4826 * median(d);
 }
 
 ClusterPlacement PlaceByClustering(const Skeleton& templ, const HumanoidRoles& roles,
@@ -198,6 +203,9 @@ ClusterPlacement PlaceByClustering(const Skeleton& templ, const HumanoidRoles& r
                              " markers are too few to place by clustering (at least " +
                              std::to_string(options.min_markers) +
                              " needed); name a set with --marker-set NAME or FILE.toml");
+  if (landmarks.empty()) throw std::invalid_argument("PlaceByClustering: no landmarks");
+  if (frames < 1 || positions.size() != static_cast<size_t>(frames) * uM)
+    throw std::invalid_argument("PlaceByClustering: positions do not match frames x markers");
   auto at = [&](int f, int m) -> const Vec3& {
     return positions[static_cast<size_t>(f) * uM + static_cast<size_t>(m)];
   };
@@ -221,6 +229,16 @@ ClusterPlacement PlaceByClustering(const Skeleton& templ, const HumanoidRoles& r
     most = std::max(most, seen[static_cast<size_t>(f)]);
   }
   if (2 * most < M) throw std::runtime_error("calibrate: no frame sees half of the markers");
+  // Takes are joined with an all-missing frame between them: two frames are of one take
+  // when no such frame lies between them.
+  std::vector<int> take_of(static_cast<size_t>(frames), 0);
+  for (int f = 1; f < frames; ++f)
+    take_of[static_cast<size_t>(f)] =
+        take_of[static_cast<size_t>(f - 1)] + (seen[static_cast<size_t>(f)] == 0 ? 1 : 0);
+  auto same_take = [&](int a, int b) {
+    return take_of[static_cast<size_t>(a)] == take_of[static_cast<size_t>(b)] &&
+           seen[static_cast<size_t>(a)] > 0 && seen[static_cast<size_t>(b)] > 0;
+  };
   std::vector<int> well_seen;
   for (int f = 0; f < frames; ++f)
     if (seen[static_cast<size_t>(f)] * 10 >= most * 9) well_seen.push_back(f);
@@ -313,6 +331,7 @@ ClusterPlacement PlaceByClustering(const Skeleton& templ, const HumanoidRoles& r
       if (!x.allFinite()) continue;
       double d = 0.0;
       const int k = Nearest(fitted, best.R.transpose() * (x - best.t) / best.s, &d);
+      if (k < 0) continue;
       const std::string& role = templ.joint(fitted.joint[static_cast<size_t>(k)]).name;
       if (role.starts_with("thigh") || role.starts_with("shin") || role.starts_with("foot") ||
           role.starts_with("toe"))
@@ -338,7 +357,9 @@ ClusterPlacement PlaceByClustering(const Skeleton& templ, const HumanoidRoles& r
     double forward_travel = 0.0, travel = 0.0;
     for (int f = 0; f + step < frames; f += step) {
       Vec3 left_a, middle_a, left_b, middle_b;
-      if (!sides(f, &left_a, &middle_a) || !sides(f + step, &left_b, &middle_b)) continue;
+      if (!same_take(f, f + step) || !sides(f, &left_a, &middle_a) ||
+          !sides(f + step, &left_b, &middle_b))
+        continue;
       Vec3 moved = middle_b - middle_a;
       moved -= moved.dot(up) * up;
       const Vec3 facing = (left_a + left_b).cross(up).normalized();
@@ -383,7 +404,7 @@ ClusterPlacement PlaceByClustering(const Skeleton& templ, const HumanoidRoles& r
       std::vector<MarkerDefinition> tied;
       for (size_t i = 0; i < targets.size(); ++i) {
         double d = 0.0;
-        const int k = Nearest(lm, targets[i], &d);
+        const int k = std::max(0, Nearest(lm, targets[i], &d));
         tied.push_back(everywhere[static_cast<size_t>(k)]);
         tied.back().name = std::to_string(i);  // two markers may tie to one landmark
         weights[i] = d < 0.12 ? 1.0 : 0.0;
@@ -421,12 +442,32 @@ ClusterPlacement PlaceByClustering(const Skeleton& templ, const HumanoidRoles& r
   std::vector<double> set_cost(uM * static_cast<size_t>(J), kInf);
   std::vector<int> set_nearest(uM * static_cast<size_t>(J), -1);
   for (int m = 0; m < M; ++m) {
+    // A marker the reference frame does not see is taken from the nearest frame of the
+    // same take that does, carried into the reference frame by the rigid motion of the
+    // markers both frames see (the body moved in between).
+    const int ref = out.reference_frame;
     int f = -1;
     for (int step = 0; step < frames && f < 0; ++step)
-      for (int g : {out.reference_frame + step, out.reference_frame - step})
-        if (f < 0 && g >= 0 && g < frames && at(g, m).allFinite()) f = g;
+      for (int g : {ref + step, ref - step})
+        if (f < 0 && g >= 0 && g < frames && same_take(g, ref) && at(g, m).allFinite()) f = g;
     if (f < 0) continue;
-    const Vec3 y = best.R.transpose() * (at(f, m) - best.t) / best.s;
+    Vec3 x = at(f, m);
+    if (f != ref) {
+      std::vector<Vec3> from, to;
+      for (int k = 0; k < M; ++k)
+        if (at(f, k).allFinite() && at(ref, k).allFinite()) {
+          from.push_back(at(f, k));
+          to.push_back(at(ref, k));
+        }
+      if (from.size() < 3) continue;
+      const Eigen::Matrix3Xd a =
+          Eigen::Map<const Eigen::Matrix3Xd>(from[0].data(), 3, static_cast<long>(from.size()));
+      const Eigen::Matrix3Xd b =
+          Eigen::Map<const Eigen::Matrix3Xd>(to[0].data(), 3, static_cast<long>(to.size()));
+      const Eigen::Matrix4d T = Eigen::umeyama(a, b, false);
+      x = T.topLeftCorner<3, 3>() * x + T.topRightCorner<3, 1>();
+    }
+    const Vec3 y = best.R.transpose() * (x - best.t) / best.s;
     for (size_t k = 0; k < lm.position.size(); ++k) {
       const size_t cell =
           static_cast<size_t>(m) * static_cast<size_t>(J) + static_cast<size_t>(lm.joint[k]);
@@ -455,49 +496,47 @@ ClusterPlacement PlaceByClustering(const Skeleton& templ, const HumanoidRoles& r
   // markers, but does to a neighbouring segment's, moves there. Only a contradiction
   // moves it: where a joint hardly turned, both segments look rigid with it and the
   // shape's choice stands.
-  for (int sweep = 0; sweep < 2; ++sweep) {
-    bool moved = false;
-    for (int m = 0; m < M; ++m) {
-      auto score = [&](int j) {
-        double first = kInf, second = kInf;
-        for (int k = 0; k < M; ++k) {
-          if (k == m || out.joint[static_cast<size_t>(k)] != j) continue;
-          const double s = spread[static_cast<size_t>(m) * uM + static_cast<size_t>(k)];
-          if (!std::isfinite(s)) continue;
-          if (s < first) {
-            second = first;
-            first = s;
-          } else if (s < second) {
-            second = s;
-          }
-        }
-        // A segment may hold only one other marker: its nearest two when it has them.
-        return std::isfinite(second) ? 0.5 * (first + second) : first;
-      };
-      const int current = out.joint[static_cast<size_t>(m)];
-      const double here = score(current);
-      int target = current;
-      double there = here;
-      // Only to a neighbouring segment: the body's shape put the marker near this one,
-      // and markers across the chest or pelvis keep their distances too.
-      for (int j = 0; j < J; ++j) {
-        if (templ.joint(j).parent.value != current && templ.joint(current).parent.value != j)
-          continue;
-        const double s = score(j);
-        if (s < there) {
-          there = s;
-          target = j;
+  // Every marker is judged against the shape's placement, then the moves are made, so
+  // the result does not depend on the order of the labels.
+  std::vector<int> placed_by_shape = out.joint;
+  for (int m = 0; m < M; ++m) {
+    auto score = [&](int j) {
+      double first = kInf, second = kInf;
+      for (int k = 0; k < M; ++k) {
+        if (k == m || placed_by_shape[static_cast<size_t>(k)] != j) continue;
+        const double s = spread[static_cast<size_t>(m) * uM + static_cast<size_t>(k)];
+        if (!std::isfinite(s)) continue;
+        if (s < first) {
+          second = first;
+          first = s;
+        } else if (s < second) {
+          second = s;
         }
       }
-      // A marker alone on its segment has nothing to be rigid with: the shape stands.
-      if (target == current || !std::isfinite(here) || !(here > options.rigid_std_m) ||
-          !(there <= options.rigid_std_m))
+      // A segment may hold only one other marker: its nearest two when it has them.
+      return std::isfinite(second) ? 0.5 * (first + second) : first;
+    };
+    const int current = placed_by_shape[static_cast<size_t>(m)];
+    const double here = score(current);
+    int target = current;
+    double there = here;
+    // Only to a neighbouring segment: the body's shape put the marker near this one,
+    // and markers across the chest or pelvis keep their distances too.
+    for (int j = 0; j < J; ++j) {
+      if (templ.joint(j).parent.value != current && templ.joint(current).parent.value != j)
         continue;
-      out.joint[static_cast<size_t>(m)] = target;
-      ++out.moved_by_rigidity;
-      moved = true;
+      const double s = score(j);
+      if (s < there) {
+        there = s;
+        target = j;
+      }
     }
-    if (!moved) break;
+    // A marker alone on its segment has nothing to be rigid with: the shape stands.
+    if (target == current || !std::isfinite(here) || !(here > options.rigid_std_m) ||
+        !(there <= options.rigid_std_m))
+      continue;
+    out.joint[static_cast<size_t>(m)] = target;
+    ++out.moved_by_rigidity;
   }
   out.offset.assign(uM, Vec3::Zero());
   out.anatomical.assign(uM, 0);

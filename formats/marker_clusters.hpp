@@ -24,9 +24,10 @@
 
 namespace mocapd {
 
-/// The spread (standard deviation over frames, every `stride`-th) of the distance between
-/// markers a and b of frame-major positions with `num_markers` per frame; NaN when they
-/// are seen together in fewer than 10 of those frames.
+/// The spread (over frames, every `stride`-th: 1.4826 x the median absolute deviation, a
+/// standard deviation that swapped or popped frames do not inflate) of the distance
+/// between markers a and b of frame-major positions with `num_markers` per frame; NaN when
+/// they are seen together in fewer than 10 of those frames.
 double DistanceSpread(std::span<const Vec3> positions, int num_markers, int frames, int a, int b,
                       int stride);
 
@@ -56,7 +57,9 @@ struct ClusterPlacement {
 /// Places every marker. templ: the 1.75 m template humanoid (MakeTemplateHumanoid) with
 /// its roles; landmarks: markers placed on it (one joint each, offsets in its frames).
 /// positions: frame-major, metres, NaN missing. Throws std::runtime_error when fewer than
-/// options.min_markers markers are given or no frame sees most of them.
+/// options.min_markers markers are given or no frame sees half of them;
+/// std::invalid_argument when positions do not hold frames x num_markers or there are no
+/// landmarks.
 ClusterPlacement PlaceByClustering(const Skeleton& templ, const HumanoidRoles& roles,
                                    std::span<const MarkerDefinition> landmarks,
                                    std::span<const Vec3> positions, int num_markers, int frames,

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <map>
+#include <set>
 #include <stdexcept>
 
 namespace mocapd {
@@ -127,6 +128,26 @@ struct Candidate {
   bool unknown = false;      // a studio marker: offset from the data
   bool guessed = false;      // placed by clustering, not on a known set's landmark
 };
+
+// The segments a full body needs markers on that none of the candidates rides: whole
+// regions (the head, the trunk, a limb), and each limb's long bones.
+std::string Uncovered(const Skeleton& templ, const std::vector<Candidate>& candidates) {
+  std::string uncovered;
+  auto add = [&](const std::string& what) { uncovered += (uncovered.empty() ? "" : ", ") + what; };
+  for (const char* region : {"head", "trunk", "left arm", "right arm", "left leg", "right leg"}) {
+    bool covered = false;
+    for (const Candidate& c : candidates)
+      covered = covered || BodyRegion(templ.joint(c.joint).name) == region;
+    if (!covered) add(region);
+  }
+  for (const char* role : {"thigh_l", "thigh_r", "shin_l", "shin_r", "upper_arm_l", "upper_arm_r",
+                           "forearm_l", "forearm_r"}) {
+    bool covered = false;
+    for (const Candidate& c : candidates) covered = covered || templ.joint(c.joint).name == role;
+    if (!covered && uncovered.find(BodyRegion(role)) == std::string::npos) add(role);
+  }
+  return uncovered;
+}
 
 }  // namespace
 
@@ -272,22 +293,27 @@ MarkersOnlyCalibration CalibrateFromMarkers(std::span<const C3dTake> takes,
     out.clusters = ClusterSummary{.up_axis = placement.up_axis,
                                   .tilt_deg = placement.tilt_deg,
                                   .height_m = placement.height_m,
-                                  .reference_frame = placement.reference_frame,
+
                                   .landmark_rms_m = placement.landmark_rms_m,
                                   .moved_by_rigidity = placement.moved_by_rigidity,
                                   .turned_round = placement.turned_round};
+    // The joined frames back to a take and a frame of it (one separator between takes).
+    for (int f = placement.reference_frame;
+         out.clusters->reference_take < static_cast<int>(takes.size());
+         ++out.clusters->reference_take) {
+      const int n = takes[static_cast<size_t>(out.clusters->reference_take)].num_frames;
+      if (f < n) {
+        out.clusters->reference_take_frame = f;
+        break;
+      }
+      f -= n + 1;
+    }
     for (size_t i = 0; i < markers.size(); ++i)
       candidates.push_back({markers[i], placement.joint[i], placement.offset[i],
                             kClusteredOffsetSigmaM, false, placement.anatomical[i] == 0});
     // A fit that leaves a limb, the head or the trunk without a marker has not found the
     // body (a lower-body set fitted upside down, a sparse set): refused, not written.
-    std::string uncovered;
-    for (const char* region : {"head", "trunk", "left arm", "right arm", "left leg", "right leg"}) {
-      bool covered = false;
-      for (size_t i = 0; i < markers.size(); ++i)
-        covered = covered || BodyRegion(templ.joint(placement.joint[i]).name) == region;
-      if (!covered) uncovered += std::string(uncovered.empty() ? "" : ", ") + region;
-    }
+    const std::string uncovered = Uncovered(templ, candidates);
     if (!uncovered.empty())
       throw std::runtime_error(
           "calibrate: " + why + ", and clustering placed no marker on the " + uncovered +
@@ -305,10 +331,16 @@ MarkersOnlyCalibration CalibrateFromMarkers(std::span<const C3dTake> takes,
   }
   // The segment whose placed markers (of known offset) keep their distances to marker u
   // best: the mean spread of its nearest two; -1 when no segment has two.
-  auto rigid_segment = [&](int u, const std::vector<Candidate>& on_segments, double* best) {
+  auto rigid_segment = [&](int u, const std::vector<Candidate>& on_segments, double* best,
+                           int near = -1) {
     *best = kNaN;
     int best_joint = -1;
     for (int j = 0; j < templ.num_joints(); ++j) {
+      // near >= 0: only that segment or a neighbour of it (a knee marker keeps its
+      // distances to the foot's too, from the hinge's axis).
+      if (near >= 0 && j != near && templ.joint(j).parent.value != near &&
+          templ.joint(near).parent.value != j)
+        continue;
       std::vector<double> spreads;
       for (const Candidate& c : on_segments) {
         if (c.joint != j || c.unknown) continue;
@@ -404,6 +436,7 @@ MarkersOnlyCalibration CalibrateFromMarkers(std::span<const C3dTake> takes,
   // that the body's shape placed (no set) and that do not fit get one more chance: the
   // segment they ride rigidly, as a studio's own marker would.
   const int passes = clustered ? 3 : 2;
+  std::set<std::string> misfit_labels;  // clustering's markers that did not fit, once each
   for (int pass = 0; pass < passes; ++pass) {
     if (candidates.size() < 3)
       throw std::runtime_error("calibrate: fewer than 3 markers could be placed; nothing written");
@@ -450,13 +483,15 @@ MarkersOnlyCalibration CalibrateFromMarkers(std::span<const C3dTake> takes,
             std::find(markers.begin(), markers.end(), candidates[m].label) - markers.begin());
         std::vector<Candidate> others = candidates;
         others.erase(others.begin() + static_cast<long>(m));
-        const int joint = rigid_segment(u, others, &spread);
+        const int joint = rigid_segment(u, others, &spread, candidates[m].joint);
+        misfit_labels.insert(candidates[m].label);
         if (joint >= 0 && spread <= options.rigid_std_m) {
           kept.push_back({candidates[m].label, joint, Vec3::Zero(), 0.0, true, false});
           ++out.clusters->placed_again_by_rigidity;
           continue;
         }
       }
+      if (clustered && frames >= 10) misfit_labels.insert(candidates[m].label);
       char why[160];
       if (frames < 10)
         std::snprintf(why, sizeof(why), "seen in %d of the calibration's poses (10 needed)",
@@ -477,18 +512,28 @@ MarkersOnlyCalibration CalibrateFromMarkers(std::span<const C3dTake> takes,
                        "written"));
     candidates = std::move(kept);
     if (pass == passes - 1)
-      throw std::runtime_error("calibrate: markers still fail to fit after rejecting the worst");
+      throw std::runtime_error(
+          "calibrate: markers still fail to fit after rejecting the worst (a take this corrupt, "
+          "or a wrong set: --marker-set NAME or FILE.toml). Nothing written");
   }
   if (clustered) {
-    const size_t misfits =
-        out.rejected.size() + static_cast<size_t>(out.clusters->placed_again_by_rigidity);
-    if (static_cast<double>(misfits) >
+    const size_t misfits = misfit_labels.size();
+    if (static_cast<double>(misfits) >=
         kClusteringMaxMisfitShare * static_cast<double>(markers.size()))
       throw std::runtime_error(
           "calibrate: " + out.clustered_because + ", and clustering found no body they fit: " +
           std::to_string(misfits) + " of " + std::to_string(markers.size()) +
-          " markers did not fit the segment the body's shape gave them. Name the set with "
-          "--marker-set NAME or FILE.toml. Nothing written");
+          " markers did not fit the segment the body's shape gave them (or the data is too "
+          "corrupt to tell). Name the set with --marker-set NAME or FILE.toml. Nothing written");
+    // Re-placed and rejected markers may have left a limb bare.
+    const std::string uncovered = Uncovered(templ, candidates);
+    if (!uncovered.empty())
+      throw std::runtime_error("calibrate: " + out.clustered_because +
+                               ", and after placing the markers that did not fit, no marker is "
+                               "left on the " +
+                               uncovered +
+                               ". Name the set with --marker-set NAME or FILE.toml. Nothing "
+                               "written");
   }
   if (2 * candidates.size() < markers.size())
     throw std::runtime_error("calibrate: only " + std::to_string(candidates.size()) + " of " +

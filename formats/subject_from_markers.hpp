@@ -46,7 +46,8 @@ struct ClusterSummary {
   std::string up_axis;    ///< The capture's up, e.g. "+z"...
   double tilt_deg = 0.0;  ///< ...and how far the fitted body's up is from it.
   double height_m = 0.0;
-  int reference_frame = -1;
+  int reference_take = 0;        ///< The fitted frame: its take (0-based)...
+  int reference_take_frame = 0;  ///< ...and its frame in that take.
   double landmark_rms_m = 0.0;
   int moved_by_rigidity = 0;
   bool turned_round = false;  ///< The fit faced backwards; the walk's direction turned it.

@@ -55,11 +55,11 @@ int CalibrateFromMarkersOnly(const CalibrateCommandOptions& options, std::ostrea
     out << "  hip centre prior: Harrington 2007 regression on the pelvis markers\n";
   if (cal.clusters)
     out << "  " << cal.clustered_because
-        << ": every marker placed by the body's shape (template fitted to frame "
-        << cal.clusters->reference_frame << ", up " << cal.clusters->up_axis << " within "
-        << Fixed(cal.clusters->tilt_deg, 0) << " deg, height " << Fixed(cal.clusters->height_m, 2)
-        << " m, markers " << Fixed(cal.clusters->landmark_rms_m * 1e3, 0)
-        << " mm RMS from its landmarks) and "
+        << ": every marker placed by the body's shape (template fitted to take "
+        << cal.clusters->reference_take + 1 << " frame " << cal.clusters->reference_take_frame
+        << ", up nearest " << cal.clusters->up_axis << " (" << Fixed(cal.clusters->tilt_deg, 0)
+        << " deg off it), height " << Fixed(cal.clusters->height_m, 2) << " m, markers "
+        << Fixed(cal.clusters->landmark_rms_m * 1e3, 0) << " mm RMS from its landmarks) and "
         << "rigidity (" << cal.clusters->moved_by_rigidity << " moved by it, "
         << cal.clusters->placed_again_by_rigidity << " placed again after not fitting)"
         << (cal.clusters->turned_round ? "; turned round to face the way the take walks" : "")
@@ -156,7 +156,8 @@ int CalibrateFromMarkersOnly(const CalibrateCommandOptions& options, std::ostrea
       rejected.push_back({{"label", n.label}, {"reason", n.reason}});
     if (cal.clusters)
       report["placed_by_clustering"] = {
-          {"reference_frame", cal.clusters->reference_frame},
+          {"reference_take", cal.clusters->reference_take + 1},
+          {"reference_frame", cal.clusters->reference_take_frame},
           {"because", cal.clustered_because},
           {"up_axis", cal.clusters->up_axis},
           {"tilt_deg", cal.clusters->tilt_deg},

@@ -54,8 +54,8 @@ int main(int argc, char** argv) {
       ->add_option("--marker-set", cal.marker_set,
                    "auto (recognise from the labels; labels of no set are placed by "
                    "clustering), none (clustering alone), a built-in set (plug-in-gait-full, "
-                   "plug-in-gait-lower, cmu-41, optitrack-baseline, qualisys-sports, "
-                   "mocapd-default) or a set file")
+                   "plug-in-gait-lower, cmu-41, optitrack-baseline, qualisys-sports) or a set "
+                   "file")
       ->capture_default_str();
   cal_cmd->add_option("--report", cal.report_json,
                       "Markers alone: write the calibration report (JSON)");

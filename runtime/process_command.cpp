@@ -108,6 +108,7 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
   // The truth, frame for frame, and which of its joints each solved joint is.
   std::optional<BvhTake> truth;
   std::vector<std::pair<int, int>> truth_joints;  // (solved, truth)
+  std::string truth_matched_by;
   if (!options.truth_bvh.empty()) {
     truth = ReadBvh(options.truth_bvh);
     // Paired frame by frame: a truth of another length is another take (or rate).
@@ -115,14 +116,12 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
       throw std::runtime_error(options.truth_bvh + ": " + std::to_string(truth->num_frames()) +
                                " frames, the take has " + std::to_string(take.num_frames) +
                                ": not the truth of this take");
-    for (int j = 0; j < subject.skeleton->num_joints(); ++j)
-      if (const auto t = truth->skeleton.FindJoint(subject.skeleton->joint(j).name))
-        truth_joints.emplace_back(j, static_cast<int>(*t));
-    // A subject calibrated from markers names its joints by role (thigh_l...): it meets
-    // a truth of other names on the limb joints, whose centres (hip, knee, ankle,
-    // shoulder, elbow, wrist) every convention shares; the trunk's joints are placed
-    // differently by each.
-    if (truth_joints.empty()) {
+    // A subject calibrated from markers names its joints by role (thigh_l...): it is
+    // scored on the limb joints, whose centres (hip, knee, ankle, shoulder, elbow, wrist)
+    // every convention shares, matched by humanoid role whatever the truth calls them;
+    // the trunk's joints are placed differently by each convention, even where a truth
+    // shares their names. Any other subject is matched by joint name.
+    if (subject.skeleton->FindJoint("thigh_l") && subject.skeleton->FindJoint("thigh_r")) {
       try {
         const HumanoidRoles roles = MatchHumanoidRoles(truth->skeleton);
         for (const char* role :
@@ -133,9 +132,16 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
           if (solved && found != roles.joint_of_role.end())
             truth_joints.emplace_back(static_cast<int>(*solved), found->second);
         }
+        truth_matched_by = "by humanoid role, limb joints";
       } catch (const std::invalid_argument&) {
-        // Not a humanoid: nothing to match by role.
+        // Not a humanoid: matched by name below.
       }
+    }
+    if (truth_joints.empty()) {
+      for (int j = 0; j < subject.skeleton->num_joints(); ++j)
+        if (const auto t = truth->skeleton.FindJoint(subject.skeleton->joint(j).name))
+          truth_joints.emplace_back(j, static_cast<int>(*t));
+      truth_matched_by = "by name";
     }
     if (truth_joints.empty())
       throw std::runtime_error(options.truth_bvh +
@@ -335,9 +341,10 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
   out << line;
   if (summary.has_truth) {
     std::snprintf(line, sizeof(line),
-                  "against the truth (%zu joints matched by name): mean %.2f cm, worst frame's "
+                  "against the truth (%zu joints matched %s): mean %.2f cm, worst frame's "
                   "worst joint %.2f cm\n",
-                  truth_joints.size(), summary.truth_mean_cm, summary.truth_worst_cm);
+                  truth_joints.size(), truth_matched_by.c_str(), summary.truth_mean_cm,
+                  summary.truth_worst_cm);
     out << line;
   }
   if (plotting) WritePlots(options, plot, markers, take.rate_hz, out);

@@ -136,7 +136,7 @@ TEST(CalibrateCommandTest, LabelsOfNoSetAreCalibratedByClusteringAlone) {
   const int accepted = RunCalibrateCommand(options, out);
   EXPECT_GE(accepted * 10, f.markers->num_markers() * 9) << out.str();
   EXPECT_NE(out.str().find("the labels match no known marker set"), std::string::npos) << out.str();
-  EXPECT_NE(out.str().find("up +z"), std::string::npos) << out.str();
+  EXPECT_NE(out.str().find("up nearest +z"), std::string::npos) << out.str();
   EXPECT_NE(out.str().find("  thigh_l: "), std::string::npos) << out.str();
   const SubjectModel model = ReadSubjectModel(dir + "/actor.toml");
   ASSERT_TRUE(model.calibration.has_value());

@@ -163,7 +163,7 @@ TEST(ProcessCommandTest, ATruthWithOtherJointNamesIsMatchedByRoleOnTheLimbs) {
   calibrate.markers_c3d = {dir + "/take.c3d"};
   calibrate.out_subject = dir + "/actor.toml";
   std::ostringstream calibrate_out;
-  (void)RunCalibrateCommand(calibrate, calibrate_out);
+  ASSERT_GT(RunCalibrateCommand(calibrate, calibrate_out), 0) << calibrate_out.str();
 
   ProcessCommandOptions options;
   options.subject = dir + "/actor.toml";
@@ -176,6 +176,7 @@ TEST(ProcessCommandTest, ATruthWithOtherJointNamesIsMatchedByRoleOnTheLimbs) {
   // Calibrated from 9 s of walking and reaching with the project's layout (measured:
   // 4.1 cm mean over the limb joints): centimetres, not the metres of unmatched joints.
   EXPECT_LT(summary.truth_mean_cm, 8.0) << out.str();
+  EXPECT_NE(out.str().find("12 joints matched by humanoid role"), std::string::npos) << out.str();
 }
 
 }  // namespace
