@@ -273,12 +273,22 @@ ClusterPlacement PlaceByClustering(const Skeleton& templ, const HumanoidRoles& r
     }
     return out_orientations;
   };
-  Fit best;
-  int best_pose = 0;
-  for (int f : starts) {
+  auto seen_in = [&](int f) {
     std::vector<Vec3> points;
     for (int m = 0; m < M; ++m)
       if (at(f, m).allFinite()) points.push_back(at(f, m));
+    return points;
+  };
+  std::vector<Vec3> template_centres;
+  for (const PosedLandmarks& posed : poses) {
+    Vec3 centre = Vec3::Zero();
+    for (const Vec3& q : posed.position) centre += q;
+    template_centres.push_back(centre / static_cast<double>(posed.position.size()));
+  }
+  Fit best;
+  int best_pose = 0;
+  for (int f : starts) {
+    const std::vector<Vec3> points = seen_in(f);
     std::vector<Vec3> frame_ups = ups;
     {
       Vec3 mean = Vec3::Zero();
@@ -293,9 +303,7 @@ ClusterPlacement PlaceByClustering(const Skeleton& templ, const HumanoidRoles& r
     }
     const std::vector<Mat3> orientations = orientations_about(frame_ups);
     for (size_t p = 0; p < poses.size(); ++p) {
-      Vec3 template_centre = Vec3::Zero();
-      for (const Vec3& q : poses[p].position) template_centre += q;
-      template_centre /= static_cast<double>(poses[p].position.size());
+      const Vec3& template_centre = template_centres[p];
       for (const Mat3& R : orientations) {
         const Vec3 up = R * Vec3::UnitY();
         double lo = kInf, hi = -kInf;
@@ -370,12 +378,9 @@ ClusterPlacement PlaceByClustering(const Skeleton& templ, const HumanoidRoles& r
     // adds most of its path one way.
     constexpr double kWalkedM = 2.0, kMostlyOneWay = 0.5;
     if (forward_travel < -kWalkedM && forward_travel < -kMostlyOneWay * travel) {
-      std::vector<Vec3> points;
-      for (int m = 0; m < M; ++m)
-        if (at(out.reference_frame, m).allFinite()) points.push_back(at(out.reference_frame, m));
       Fit turned = best;
       turned.R = best.R * Eigen::AngleAxisd(M_PI, Vec3::UnitY()).toRotationMatrix();
-      best = RunIcp(fitted, points, turned);
+      best = RunIcp(fitted, seen_in(out.reference_frame), turned);
       out.turned_round = true;
     }
   }

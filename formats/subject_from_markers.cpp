@@ -253,6 +253,9 @@ MarkersOnlyCalibration CalibrateFromMarkers(std::span<const C3dTake> takes,
   const std::vector<MarkerDefinition> placed =
       PlaceMarkerSet(templ, roles, chosen, TemplateEndSites(templ, 1.75));
   const Observations all = Gather(takes, markers);
+  auto marker_index = [&](const std::string& label) {
+    return static_cast<int>(std::find(markers.begin(), markers.end(), label) - markers.begin());
+  };
   const int stride = std::max(1, all.frames / 600);
 
   // Set markers ride their segment; a studio's own marker rides the segment it keeps its
@@ -344,9 +347,7 @@ MarkersOnlyCalibration CalibrateFromMarkers(std::span<const C3dTake> takes,
       std::vector<double> spreads;
       for (const Candidate& c : on_segments) {
         if (c.joint != j || c.unknown) continue;
-        const int k =
-            static_cast<int>(std::find(markers.begin(), markers.end(), c.label) - markers.begin());
-        const double s = DistanceSpread(all, u, k, stride);
+        const double s = DistanceSpread(all, u, marker_index(c.label), stride);
         if (std::isfinite(s)) spreads.push_back(s);
       }
       if (spreads.size() < 2) continue;
@@ -391,11 +392,7 @@ MarkersOnlyCalibration CalibrateFromMarkers(std::span<const C3dTake> takes,
       if (o.z() > 0.03 && o.x() < -0.05) front_r = static_cast<int>(c);
       if (o.z() < -0.03) back.push_back(static_cast<int>(c));
     }
-    auto index = [&](int c) {
-      return static_cast<int>(
-          std::find(markers.begin(), markers.end(), candidates[static_cast<size_t>(c)].label) -
-          markers.begin());
-    };
+    auto index = [&](int c) { return marker_index(candidates[static_cast<size_t>(c)].label); };
     if (front_l >= 0 && front_r >= 0 && !back.empty()) {
       std::vector<double> widths, depths;
       for (int f = 0; f < all.frames; f += stride) {
@@ -479,8 +476,7 @@ MarkersOnlyCalibration CalibrateFromMarkers(std::span<const C3dTake> takes,
       changed = true;
       if (clustered && pass == 0 && frames >= 10) {
         double spread = kNaN;
-        const int u = static_cast<int>(
-            std::find(markers.begin(), markers.end(), candidates[m].label) - markers.begin());
+        const int u = marker_index(candidates[m].label);
         std::vector<Candidate> others = candidates;
         others.erase(others.begin() + static_cast<long>(m));
         const int joint = rigid_segment(u, others, &spread, candidates[m].joint);
