@@ -48,6 +48,7 @@ const std::array kFields = {
     F{"stray_s", kDetectors, "stray_ms", kMs, 1, 1e7, &O::stray_s},
     F{"fallen_s", kDetectors, "fallen_ms", kMs, 1, 1e7, &O::fallen_s},
     F{"fallen_residual_m", kDetectors, "fallen_residual_mm", kMm, 1, 1e5, &O::fallen_residual_m},
+    F{"off_joint_m", kDetectors, "off_joint_mm", kMm, 0, 1e5, &O::off_joint_m},
     F{"small_gap_s", kDetectors, "small_gap_ms", kMs, 0, 1e5, &O::small_gap_s},
     F{"small_track_s", kDetectors, "small_track_ms", kMs, 0, 1e5, &O::small_track_s},
     F{"trim_slope_mps", nullptr, "trim_slope_mps", kNone, 1e-3, 1e3, &O::trim_slope_mps},

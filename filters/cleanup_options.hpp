@@ -53,6 +53,12 @@ struct CleanupOptions {
   double stray_s = 0.1;
   double fallen_s = 0.5;            ///< Residual outliers this long in a row...
   double fallen_residual_m = 0.10;  ///< ...and this far off: fallen off (excluded from Y^).
+  /// A marker rigidly on a segment stays at its offset's distance from the segment's joint,
+  /// however the segment turns; the joint is where the parent segment ends. While the
+  /// parent's own samples fit, a sample this much nearer or farther from that joint is not
+  /// on the segment (a swap into another segment's trajectory): it leaves the robust solve
+  /// until it fits again. 0 disables.
+  double off_joint_m = 0.05;
   // Mask clean-up, bounded by the lookahead.
   double small_gap_s = 0.042;    ///< Gaps up to this long between observed samples: plain Hermite.
   double small_track_s = 0.083;  ///< Observed runs up to this long between gaps are dropped.

@@ -5,6 +5,16 @@
 #include <cmath>
 
 namespace mocapd {
+namespace {
+
+void ExchangeSamples(WindowFrame& s, size_t i, size_t j) {
+  std::swap(s.raw[i], s.raw[j]);
+  std::swap(s.valid[i], s.valid[j]);
+  std::swap(s.mask[i], s.mask[j]);
+  s.relabelled[i] = s.relabelled[j] = 1;
+}
+
+}  // namespace
 
 OutlierDetector::OutlierDetector(const Skeleton& skeleton, const MarkerSet& markers,
                                  const CleanupOptions& options)
@@ -16,6 +26,7 @@ OutlierDetector::OutlierDetector(const Skeleton& skeleton, const MarkerSet& mark
       robust_(skeleton, markers) {
   const auto m = static_cast<size_t>(markers_.num_markers());
   tracks_.assign(m, FreshTrack());
+  swap_partner_.assign(m, -1);
   markers_of_joint_.assign(static_cast<size_t>(skeleton_.num_joints()), {});
   for (int i = 0; i < markers_.num_markers(); ++i) {
     const MarkerDefinition& d = markers_.marker(i);
@@ -52,6 +63,7 @@ OutlierDetector::Track OutlierDetector::FreshTrack() const {
 
 void OutlierDetector::Reset() {
   std::fill(tracks_.begin(), tracks_.end(), FreshTrack());
+  std::fill(swap_partner_.begin(), swap_partner_.end(), -1);
   naive_.Reset();
   naive_fresh_ = false;
   robust_.Reset();
@@ -59,6 +71,7 @@ void OutlierDetector::Reset() {
 
 void OutlierDetector::Process(CleanupWindow& window, int64_t t, int64_t first_unpublished,
                               CleanupCounters* counters) {
+  ApplyPersistentSwaps(window, t);
   RelabelSwaps(window, t, counters);
   SolveReferences(window.at(t), counters);
   Detect(window, t, first_unpublished, counters);
@@ -72,8 +85,7 @@ void OutlierDetector::SolveReferences(WindowFrame& s, CleanupCounters* counters)
   // in (the Huber loss bounds their pull): excluding them would let the reference drift
   // away and keep them out.
   for (size_t m = 0; m < m_count; ++m)
-    weights_[m] =
-        s.valid[m] && !tracks_[m].frozen && !tracks_[m].fallen && !tracks_[m].stray ? 1.0 : 0.0;
+    weights_[m] = s.valid[m] && !excluded(static_cast<int>(m)) ? 1.0 : 0.0;
   ReadmitConsistentSegments(s);
   counters->CountSolve(SolveIk(skeleton_, markers_, options_.robust_ik, s.raw, weights_, &robust_));
   const auto predicted = robust_.predicted_markers();
@@ -136,9 +148,7 @@ void OutlierDetector::ReadmitConsistentSegments(const WindowFrame& s) {
                j = static_cast<size_t>(rigid_pairs_[k].second);
     const auto joint = static_cast<size_t>(markers_.primary_joint(rigid_pairs_[k].first));
     if (trusted_on_joint_[joint] != 1 || !s.valid[i] || !s.valid[j]) continue;
-    const auto trusted = [&](size_t m) {
-      return !tracks_[m].frozen && !tracks_[m].fallen && !tracks_[m].stray;
-    };
+    const auto trusted = [&](size_t m) { return !excluded(static_cast<int>(m)); };
     const bool i_trusted = trusted(i), j_trusted = trusted(j);
     if (i_trusted == j_trusted) continue;
     const size_t excluded = i_trusted ? j : i;
@@ -147,6 +157,69 @@ void OutlierDetector::ReadmitConsistentSegments(const WindowFrame& s) {
       continue;
     if (std::abs((s.raw[i] - s.raw[j]).norm() - rigid_distance_[k]) <= options_.rigid_tolerance_m)
       weights_[excluded] = 1.0;
+  }
+}
+
+// Exchanges the samples of markers i and j in frame s. A capture that swapped two labels
+// keeps them swapped until it re-identifies them; relabelled for one frame only, the
+// swapped sample came back into the next frame's reference (a forearm marker carrying a
+// clavicle's trajectory dragged the forearm to the chest). So a relabelling by the
+// reference test (each sample fits the other's reference: strong evidence) is
+// remembered, and relabelling a remembered pair again forgets it. The layout-distance
+// and continuity tests judge nearby markers from one frame's motion; remembered, their
+// mistakes outlived them (worse on every severity), so they decide frame by frame.
+void OutlierDetector::Relabel(WindowFrame& s, size_t i, size_t j, CleanupCounters* counters,
+                              bool remember) {
+  ExchangeSamples(s, i, j);
+  ++counters->swaps_relabelled;
+  if (!remember) return;
+  int& partner_i = swap_partner_[i];
+  int& partner_j = swap_partner_[j];
+  if (partner_i == static_cast<int>(j)) {
+    partner_i = partner_j = -1;
+  } else if (partner_i < 0 && partner_j < 0) {
+    partner_i = static_cast<int>(j);
+    partner_j = static_cast<int>(i);
+  }
+}
+
+// Carries the remembered swaps into frame t, each unless the labels as captured now fit
+// the markers' motion clearly better than exchanged (the capture re-identified them). A
+// pair with neither sample present is forgotten: what returns is judged afresh.
+void OutlierDetector::ApplyPersistentSwaps(CleanupWindow& window, int64_t t) {
+  WindowFrame& s = window.at(t);
+  const bool has_previous = t > 0 && window.at(t - 1).frame == t - 1;
+  const bool has_two_before = has_previous && t > 1 && window.at(t - 2).frame == t - 2;
+  const WindowFrame& prev = window.at(t - 1 >= 0 ? t - 1 : 0);
+  const WindowFrame& prev2 = window.at(t - 2 >= 0 ? t - 2 : 0);
+  auto predicted = [&](size_t m) -> Vec3 {
+    if (prev.valid[m] && has_two_before && prev2.valid[m]) return 2.0 * prev.raw[m] - prev2.raw[m];
+    if (prev.valid[m]) return prev.raw[m];
+    return prev.reference[m];
+  };
+  for (size_t i = 0; i < swap_partner_.size(); ++i) {
+    const int partner = swap_partner_[i];
+    if (partner < static_cast<int>(i)) continue;  // none, or seen from its partner
+    const auto j = static_cast<size_t>(partner);
+    if (!has_previous || (!s.valid[i] && !s.valid[j])) {
+      swap_partner_[i] = swap_partner_[j] = -1;
+      continue;
+    }
+    const Vec3 predicted_i = predicted(i), predicted_j = predicted(j);
+    double as_captured = 0.0, exchanged = 0.0;
+    if (s.valid[i]) {
+      as_captured += (s.raw[i] - predicted_i).norm();
+      exchanged += (s.raw[i] - predicted_j).norm();
+    }
+    if (s.valid[j]) {
+      as_captured += (s.raw[j] - predicted_j).norm();
+      exchanged += (s.raw[j] - predicted_i).norm();
+    }
+    if (as_captured + options_.swap_margin_m < exchanged) {
+      swap_partner_[i] = swap_partner_[j] = -1;
+      continue;
+    }
+    ExchangeSamples(s, i, j);
   }
 }
 
@@ -183,9 +256,7 @@ void OutlierDetector::RelabelSwaps(CleanupWindow& window, int64_t t, CleanupCoun
       ++witnesses;
     }
     if (witnesses == 0 || crossed + options_.swap_margin_m * witnesses >= straight) continue;
-    std::swap(s.raw[i], s.raw[j]);
-    s.relabelled[i] = s.relabelled[j] = 1;
-    ++counters->swaps_relabelled;
+    Relabel(s, i, j, counters);
   }
   // Across segments, trajectory
   // continuity decides most of them: each marker's sample is compared with its own
@@ -224,9 +295,7 @@ void OutlierDetector::RelabelSwaps(CleanupWindow& window, int64_t t, CleanupCoun
         if ((s.raw[j] - prev.reference[i]).norm() + (s.raw[i] - prev.reference[j]).norm() >
             (s.raw[i] - prev.reference[i]).norm() + (s.raw[j] - prev.reference[j]).norm())
           continue;
-        std::swap(s.raw[i], s.raw[j]);
-        s.relabelled[i] = s.relabelled[j] = 1;
-        ++counters->swaps_relabelled;
+        Relabel(s, i, j, counters);
         break;
       }
     }
@@ -261,11 +330,9 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
       if (crossed_i + crossed_j + options_.swap_margin_m >= residual[i].norm() + residual[j].norm())
         continue;
       if (options_.relabel_swaps) {
-        std::swap(s.raw[i], s.raw[j]);
-        s.relabelled[i] = s.relabelled[j] = 1;
+        Relabel(s, i, j, counters, true);
         residual[i] = s.raw[i] - s.reference[i];
         residual[j] = s.raw[j] - s.reference[j];
-        ++counters->swaps_relabelled;
       } else {
         s.mask[i] = s.mask[j] = MaskReason::kSwap;
       }
@@ -315,12 +382,11 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
     }
     return false;
   };
-  auto off_its_joint = [&](size_t m) {
+  auto off_its_joint = [&](size_t m, double tolerance) {
     const MarkerDefinition& d = markers_.marker(static_cast<int>(m));
     if (d.num_attachments != 1) return false;
     const Vec3& origin = pose.p_WJ[static_cast<size_t>(d.attachments[0].joint)];
-    return std::abs((s.raw[m] - origin).norm() - d.attachments[0].offset.norm()) >
-               options_.frozen_reference_motion_m &&
+    return std::abs((s.raw[m] - origin).norm() - d.attachments[0].offset.norm()) > tolerance &&
            parent_fits(m);
   };
   auto has_fitting_neighbour = [&](size_t m) {
@@ -341,6 +407,14 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
     }
     const double r = residual[m].norm();
     const double thr = threshold(m);
+    // Off its joint (see CleanupOptions::off_joint_m): no rotation of the segment can
+    // explain the sample, so it stays out of Y^ until it fits again. Huber-bounded, it
+    // still pulled a forearm whose hand was occluded to the chest, and its clean markers
+    // with it.
+    if (r <= thr)
+      track.off_joint = false;
+    else if (options_.off_joint_m > 0.0 && off_its_joint(m, options_.off_joint_m))
+      track.off_joint = true;
     if (r > thr) {
       ++track.residual_run;
       if (s.mask[m] == MaskReason::kNone || s.mask[m] == MaskReason::kDisagreement)
@@ -371,7 +445,7 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
                (((s.reference[m] - track.still_reference).norm() >
                      options_.frozen_reference_motion_m &&
                  has_fitting_neighbour(m)) ||
-                off_its_joint(m))) {
+                off_its_joint(m, options_.frozen_reference_motion_m))) {
       track.frozen = true;
     }
     if (track.frozen) {

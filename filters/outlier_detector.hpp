@@ -1,11 +1,13 @@
 // Outlier detection, the first stage of the cleanup (Perepichka 2020, ch. 3, streamed):
 // for the newest frame of the window it
 //  - relabels swapped pairs (rigid-segment distances, trajectory continuity, and a pair
-//    that each fit the other's reference position);
+//    that each fit the other's reference position, remembered until the capture
+//    re-identifies them);
 //  - solves the robust reference Y^ (Huber IRLS, temporal prior, frozen / fallen-off /
-//    stray markers excluded, unless they are all a segment has and keep its rigid
-//    distances: then they are the segment, and taken back) and writes X^ = LBS(Y^) into the window,
-//    and the naive Y (plain IK on the markers as they are) on frames where some sample is off X^;
+//    stray markers and samples off their joint's distance excluded, unless they are all a segment
+//    has and keep its rigid distances: then they are the segment, and taken back) and writes X^ =
+//    LBS(Y^) into the window, and the naive Y (plain IK on the markers as they are) on frames where
+//    some sample is off X^;
 //  - marks bad samples with a reason: missing, kinematic disagreement of Y and Y^ per
 //    joint mapped to markers through skin weights, residual against X^ beyond an adaptive
 //    threshold, velocity spikes against the reference, rigid-segment distance violations,
@@ -44,7 +46,7 @@ class OutlierDetector {
   /// True if marker m is kept out of Y^ (frozen, fallen off or stray).
   bool excluded(int m) const {
     const Track& t = tracks_[static_cast<size_t>(m)];
-    return t.frozen || t.fallen || t.stray;
+    return t.frozen || t.fallen || t.stray || t.off_joint;
   }
 
  private:
@@ -57,9 +59,13 @@ class OutlierDetector {
     bool frozen = false;                  // excluded from Y^ while it stays put
     bool fallen = false;                  // excluded from Y^ until it fits again
     bool stray = false;                   // far off for a while: excluded until it fits again
+    bool off_joint = false;               // off its joint's distance: excluded until it fits
   };
 
+  void ApplyPersistentSwaps(CleanupWindow& window, int64_t t);
   void RelabelSwaps(CleanupWindow& window, int64_t t, CleanupCounters* counters);
+  void Relabel(WindowFrame& s, size_t i, size_t j, CleanupCounters* counters,
+               bool remember = false);
   void SolveReferences(WindowFrame& s, CleanupCounters* counters);
   void ReadmitConsistentSegments(const WindowFrame& s);
   void Detect(CleanupWindow& window, int64_t t, int64_t first_unpublished,
@@ -75,6 +81,7 @@ class OutlierDetector {
   bool naive_solved_ = false;  // Y was solved for the newest frame
   bool naive_fresh_ = false;   // Y's warm start is the previous frame's solution
   std::vector<Track> tracks_;
+  std::vector<int> swap_partner_;  // per marker: the label its samples are carried under, or -1
   std::vector<std::pair<int, int>> rigid_pairs_;  // markers rigidly on one joint...
   std::vector<double> rigid_distance_;            // ...and their distance in the model
   std::vector<std::vector<int>> markers_of_joint_;

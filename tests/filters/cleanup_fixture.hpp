@@ -65,6 +65,20 @@ class CleanupFixture : public ::testing::Test {
     }
     return worst;
   }
+  // How far a joint of the published skeleton was from the fixture's motion, at worst
+  // over frames [from, to), metres.
+  double WorstJointError(const std::vector<CleanFrame>& out, const char* joint_name, int from,
+                         int to) const {
+    const auto joint = static_cast<size_t>(fixture_.skeleton->FindJoint(joint_name)->value);
+    KinematicsWorkspace solved(*fixture_.skeleton), truth(*fixture_.skeleton);
+    double worst = 0.0;
+    for (int f = from; f < to; ++f) {
+      ForwardKinematics(*fixture_.skeleton, out[static_cast<size_t>(f)].pose, &solved);
+      ForwardKinematics(*fixture_.skeleton, fixture_.motion[static_cast<size_t>(f)], &truth);
+      worst = std::max(worst, (solved.p_WJ[joint] - truth.p_WJ[joint]).norm());
+    }
+    return worst;
+  }
   static constexpr const char* kLeftForearm[] = {"LFRM1", "LFRM2", "LHND1", "LHND2", "LHND3"};
   // From frame 300 the left elbow bends a further 90 degrees over 100 frames while the
   // forearm and hand markers are occluded; they come back at frame 420 on the bent arm.
