@@ -13,6 +13,7 @@ namespace {
 constexpr size_t kMarkerBytes = 13;         // x, y, z (f32) + flags (u8)
 constexpr size_t kJointBytes = 16;          // quaternion w, x, y, z (f32)
 constexpr size_t kGlobalJointBytes = 28;    // quaternion (4 x f32) + position (3 x f32)
+constexpr uint8_t kMaxSolveStatus = 3;      // IkStatus::kNumericalFailure
 constexpr size_t kCleanedMarkerBytes = 14;  // x, y, z (f32) + status (u8) + reason (u8)
 constexpr uint16_t kFlagGlobalTransforms = 1;
 constexpr uint8_t kMaxMaskReason = 10;  // MaskReason::kTrimmed
@@ -345,7 +346,8 @@ DecodeStatus DecodeSkeletonFrame(std::span<const uint8_t> bytes, SkeletonFrameMe
       !r.ReadU64(&m->capture_time_ns) || !r.ReadU64(&m->publish_time_ns) || !r.ReadU8(&m->status) ||
       !r.ReadU8(&state) || !r.ReadU16(&flags) || !r.ReadU16(&count) || !r.ReadU16(&reserved))
     return DecodeStatus::kTooShort;
-  if (state > static_cast<uint8_t>(SubjectState::kWaiting) || (flags & ~kFlagGlobalTransforms) != 0)
+  if (m->status > kMaxSolveStatus || state > static_cast<uint8_t>(SubjectState::kWaiting) ||
+      (flags & ~kFlagGlobalTransforms) != 0)
     return DecodeStatus::kBadField;
   m->subject_state = static_cast<SubjectState>(state);
   if (count > kMaxJoints) return DecodeStatus::kTooManyItems;

@@ -146,7 +146,7 @@ def decode_skeleton_frame(data):
     r, version = _check_type(data, SKELETON_FRAME)
     subject = r.subject()
     model_hash, frame, capture_ns, publish_ns, status, state, flags, count, _reserved = r.take("<QQQQBBHHH")
-    if state >= len(SUBJECT_STATES) or flags & ~1:
+    if status > 3 or state >= len(SUBJECT_STATES) or flags & ~1:
         raise ValueError("bad_field")
     if count > MAX_JOINTS:
         raise ValueError("too_many_items")

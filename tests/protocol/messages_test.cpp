@@ -146,13 +146,16 @@ TEST(MessagesTest, SkeletonFrameCarriesOptionalGlobalTransformsAndSubjectState) 
   EXPECT_THROW(EncodeSkeletonFrame(m, &bytes), std::invalid_argument);
 }
 
-TEST(MessagesTest, SkeletonFrameRejectsUnknownFlagsAndStates) {
+TEST(MessagesTest, SkeletonFrameRejectsUnknownFlagsStatesAndSolveStatuses) {
   std::vector<uint8_t> good;
   EncodeSkeletonFrame(SampleSkeleton(), &good);
   const size_t state_offset = kHeaderBytes + 1 + 6 + 32 + 1;
   SkeletonFrameMessage dut;
   std::vector<uint8_t> b = good;
   b[state_offset] = 9;
+  EXPECT_EQ(DecodeSkeletonFrame(b, &dut), DecodeStatus::kBadField);
+  b = good;
+  b[state_offset - 1] = 4;  // a final solve status IkStatus does not have
   EXPECT_EQ(DecodeSkeletonFrame(b, &dut), DecodeStatus::kBadField);
   b = good;
   b[state_offset + 1] = 0x02;  // an undefined flag bit

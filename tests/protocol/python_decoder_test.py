@@ -37,6 +37,9 @@ def main(directory):
     assert s["subject_state"] == "repairing" and s["global_transforms"] is None
     assert s["stream"]["rate"] == (120000, 1001) and s["stream"]["session_id"] == 42
     assert mocapd_protocol.format_timecode(s["stream"]["timecode"]) == "23:59:59;29.3"
+    bad_solve = bytearray(read(directory, "skeleton_frame.bin"))
+    bad_solve[mocapd_protocol.HEADER.size + 1 + len("actor1") + 32] = 4  # no such final solve status
+    expect_error(bytes(bad_solve), "bad_field")
     kind, g = mocapd_protocol.decode(read(directory, "skeleton_frame_globals.bin"))
     assert g["global_transforms"][1] == ((0.5, -0.5, 0.5, -0.5), (0.5, 1.0, -3.0))
     kind, d = mocapd_protocol.decode(read(directory, "subject_description.bin"))
