@@ -56,8 +56,8 @@ struct CleanupOptions {
   /// A marker rigidly on a segment stays at its offset's distance from the segment's joint,
   /// however the segment turns; the joint is where the parent segment ends. While the
   /// parent's own samples fit, a sample this much nearer or farther from that joint is not
-  /// on the segment (a swap into another segment's trajectory): it leaves the robust solve
-  /// until it fits again. 0 disables.
+  /// on the segment (a ghost or another segment's trajectory under its label): it is kept
+  /// out of the next frame's robust solve, judged again every frame. 0 disables.
   double off_joint_m = 0.05;
   // Mask clean-up, bounded by the lookahead.
   double small_gap_s = 0.042;    ///< Gaps up to this long between observed samples: plain Hermite.

@@ -59,7 +59,7 @@ class OutlierDetector {
     bool frozen = false;                  // excluded from Y^ while it stays put
     bool fallen = false;                  // excluded from Y^ until it fits again
     bool stray = false;                   // far off for a while: excluded until it fits again
-    bool off_joint = false;               // off its joint's distance: excluded until it fits
+    bool off_joint = false;               // off its joint's distance: out of the next Y^
   };
 
   void ApplyPersistentSwaps(CleanupWindow& window, int64_t t);
