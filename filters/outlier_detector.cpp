@@ -71,7 +71,7 @@ void OutlierDetector::Reset() {
 
 void OutlierDetector::Process(CleanupWindow& window, int64_t t, int64_t first_unpublished,
                               CleanupCounters* counters) {
-  ApplyPersistentSwaps(window, t);
+  ApplyPersistentSwaps(window, t, counters);
   RelabelSwaps(window, t, counters);
   SolveReferences(window.at(t), counters);
   Detect(window, t, first_unpublished, counters);
@@ -81,9 +81,9 @@ void OutlierDetector::Process(CleanupWindow& window, int64_t t, int64_t first_un
 void OutlierDetector::SolveReferences(WindowFrame& s, CleanupCounters* counters) {
   const auto m_count = static_cast<size_t>(markers_.num_markers());
   // Y^: robust, without markers that are standing still while the body moves, have come
-  // off, or have strayed far for a while. Markers flagged only by a modest residual stay
-  // in (the Huber loss bounds their pull): excluding them would let the reference drift
-  // away and keep them out.
+  // off, have strayed far for a while, or were off their joint's distance last frame.
+  // Markers flagged only by a modest residual stay in (the Huber loss bounds their pull):
+  // excluding them would let the reference drift away and keep them out.
   for (size_t m = 0; m < m_count; ++m)
     weights_[m] = s.valid[m] && !excluded(static_cast<int>(m)) ? 1.0 : 0.0;
   ReadmitConsistentSegments(s);
@@ -173,16 +173,24 @@ void OutlierDetector::ReadmitConsistentSegments(const WindowFrame& s) {
 // decide frame by frame.
 void OutlierDetector::Relabel(WindowFrame& s, size_t i, size_t j, CleanupCounters* counters,
                               bool remember) {
-  ExchangeSamples(s, i, j);
-  ++counters->swaps_relabelled;
-  if (!remember ||
-      markers_.primary_joint(static_cast<int>(i)) == markers_.primary_joint(static_cast<int>(j)))
-    return;
   int& partner_i = swap_partner_[i];
   int& partner_j = swap_partner_[j];
-  if (partner_i == static_cast<int>(j)) {
+  if (remember && partner_i == static_cast<int>(j)) {
+    // The pair carried into this frame was wrong: exchanged back, the samples are as
+    // captured again, not a relabelling.
+    ExchangeSamples(s, i, j);
+    s.relabelled[i] = s.relabelled[j] = 0;
+    --counters->swaps_relabelled;
     partner_i = partner_j = -1;
-  } else if (partner_i < 0 && partner_j < 0) {
+    return;
+  }
+  // A pair another test already relabelled this frame is exchanged back to its labels
+  // as captured: nothing to carry on.
+  const bool undoes = s.relabelled[i] || s.relabelled[j];
+  ExchangeSamples(s, i, j);
+  ++counters->swaps_relabelled;
+  if (remember && !undoes && partner_i < 0 && partner_j < 0 &&
+      markers_.primary_joint(static_cast<int>(i)) != markers_.primary_joint(static_cast<int>(j))) {
     partner_i = static_cast<int>(j);
     partner_j = static_cast<int>(i);
   }
@@ -193,7 +201,8 @@ void OutlierDetector::Relabel(WindowFrame& s, size_t i, size_t j, CleanupCounter
 // re-identified them; or the relabelling was wrong, which continuity alone would never
 // show, as the relabelled trajectories are the continuous ones). A pair with neither
 // sample present is forgotten: what returns is judged afresh.
-void OutlierDetector::ApplyPersistentSwaps(CleanupWindow& window, int64_t t) {
+void OutlierDetector::ApplyPersistentSwaps(CleanupWindow& window, int64_t t,
+                                           CleanupCounters* counters) {
   WindowFrame& s = window.at(t);
   const bool has_previous = t > 0 && window.at(t - 1).frame == t - 1;
   const bool has_two_before = has_previous && t > 1 && window.at(t - 2).frame == t - 2;
@@ -234,6 +243,7 @@ void OutlierDetector::ApplyPersistentSwaps(CleanupWindow& window, int64_t t) {
       continue;
     }
     ExchangeSamples(s, i, j);
+    ++counters->swaps_relabelled;
   }
 }
 

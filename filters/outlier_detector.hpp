@@ -1,8 +1,8 @@
 // Outlier detection, the first stage of the cleanup (Perepichka 2020, ch. 3, streamed):
 // for the newest frame of the window it
 //  - relabels swapped pairs (rigid-segment distances, trajectory continuity, and a pair
-//    that each fit the other's reference position, remembered until the capture
-//    re-identifies them);
+//    that each fit the other's reference position; a pair of that last kind on two
+//    segments is remembered until the labels as captured fit again or both vanish);
 //  - solves the robust reference Y^ (Huber IRLS, temporal prior, frozen / fallen-off /
 //    stray markers and samples off their joint's distance excluded, unless they are all a segment
 //    has and keep its rigid distances: then they are the segment, and taken back) and writes X^ =
@@ -43,7 +43,7 @@ class OutlierDetector {
 
   /// Y^ after the last Process.
   const IkState& reference() const { return robust_; }
-  /// True if marker m is kept out of Y^ (frozen, fallen off or stray).
+  /// True if marker m is kept out of Y^ (frozen, fallen off, stray or off its joint).
   bool excluded(int m) const {
     const Track& t = tracks_[static_cast<size_t>(m)];
     return t.frozen || t.fallen || t.stray || t.off_joint;
@@ -62,7 +62,7 @@ class OutlierDetector {
     bool off_joint = false;               // off its joint's distance: out of the next Y^
   };
 
-  void ApplyPersistentSwaps(CleanupWindow& window, int64_t t);
+  void ApplyPersistentSwaps(CleanupWindow& window, int64_t t, CleanupCounters* counters);
   void RelabelSwaps(CleanupWindow& window, int64_t t, CleanupCounters* counters);
   void Relabel(WindowFrame& s, size_t i, size_t j, CleanupCounters* counters,
                bool remember = false);

@@ -137,22 +137,37 @@ TEST_F(OutlierDetectorTest, ASwapIntoAnotherSegmentStaysRelabelledWhileTheCaptur
   // A forearm marker and a clavicle marker exchange labels for 1.5 s while the hand is
   // occluded (a punch from the chest, bench/README.md): relabelled on one frame only, the
   // clavicle's trajectory came back under the forearm's label on the next and dragged the
-  // forearm, with its clean markers, towards the chest.
+  // forearm, with its clean markers, towards the chest. For 20 frames of it the clavicle
+  // label's sample (the forearm's) is missing too: the pair is still exchanged.
   const int a = Marker("LFRM2"), b = Marker("LCLV1");
   const int hand[] = {Marker("LHND1"), Marker("LHND2"), Marker("LHND3")};
-  const int from = 300, to = 480;
+  const int from = 300, to = 480, one_from = 380, one_to = 400;
   for (int f = from; f < to; ++f) {
     std::swap(Sample(f, a), Sample(f, b));
+    if (f >= one_from && f < one_to) Sample(f, b) = Vec3::Constant(kNaN);
     for (int h : hand) Sample(f, h) = Vec3::Constant(kNaN);
   }
   const auto out = Run(CleanupOptions{});
-  int relabelled_right = 0;
+  auto relabelled_right = [&](int f, int m) {
+    const auto uf = static_cast<size_t>(f), um = static_cast<size_t>(m);
+    return out[uf].status[um] == MarkerStatus::kRepaired &&
+           out[uf].reason[um] == MaskReason::kSwap &&
+           (out[uf].markers[um] - Truth(f, m)).norm() < 0.01;
+  };
+  int both_right = 0, clavicle_right = 0, forearm_observed = 0;
   for (int f = from; f < to; ++f) {
-    const CleanFrame& frame = out[static_cast<size_t>(f)];
-    relabelled_right += (frame.markers[static_cast<size_t>(a)] - Truth(f, a)).norm() < 0.01 &&
-                        (frame.markers[static_cast<size_t>(b)] - Truth(f, b)).norm() < 0.01;
+    if (f >= one_from && f < one_to) {
+      clavicle_right += relabelled_right(f, b);
+      forearm_observed +=
+          out[static_cast<size_t>(f)].status[static_cast<size_t>(a)] == MarkerStatus::kObserved;
+    } else {
+      both_right += relabelled_right(f, a) && relabelled_right(f, b);
+    }
   }
-  EXPECT_GE(relabelled_right, (to - from) * 9 / 10);  // 1 of 180 relabelled for a frame only
+  const int two_sided = to - from - (one_to - one_from);
+  EXPECT_GE(both_right, two_sided * 9 / 10);  // 1 of 180 relabelled for a frame only
+  EXPECT_GE(clavicle_right, (one_to - one_from) * 9 / 10);
+  EXPECT_EQ(forearm_observed, 0);  // its label's sample is the clavicle's: filled instead
   EXPECT_LT(WorstJointError(out, "LeftHand", from, to), 0.05);  // 11.8 cm then
   // The capture re-identifies them: the labels as captured are taken again.
   int observed_right = 0;
@@ -176,13 +191,30 @@ TEST_F(OutlierDetectorTest, ASampleOffItsJointLeavesTheReferenceAndSparesItsSegm
     Sample(f, ghost) = Truth(f, chest) + Vec3(0.0, 0.0, 0.05);
     for (int h : hand) Sample(f, h) = Vec3::Constant(kNaN);
   }
-  const auto out = Run(CleanupOptions{});
-  int clean_observed = 0;
-  for (int f = from; f < to; ++f)
-    clean_observed +=
-        out[static_cast<size_t>(f)].status[static_cast<size_t>(clean)] == MarkerStatus::kObserved;
-  EXPECT_GE(clean_observed, (to - from) * 9 / 10);              // 121 of 180 without the rule
-  EXPECT_LT(WorstJointError(out, "LeftHand", from, to), 0.03);  // 11.5 cm without it
+  struct Outcome {
+    int clean_observed = 0, ghost_observed = 0;
+    double worst_hand = 0.0;
+  };
+  auto run = [&](double off_joint_m) {
+    CleanupOptions options;
+    options.off_joint_m = off_joint_m;
+    const auto out = Run(options);
+    Outcome o;
+    for (int f = from; f < to; ++f) {
+      const CleanFrame& frame = out[static_cast<size_t>(f)];
+      o.clean_observed += frame.status[static_cast<size_t>(clean)] == MarkerStatus::kObserved;
+      o.ghost_observed += frame.status[static_cast<size_t>(ghost)] == MarkerStatus::kObserved;
+    }
+    o.worst_hand = WorstJointError(out, "LeftHand", from, to);
+    return o;
+  };
+  const Outcome with_rule = run(CleanupOptions{}.off_joint_m), without = run(0.0);
+  EXPECT_GE(with_rule.clean_observed, (to - from) * 9 / 10);
+  EXPECT_LE(with_rule.ghost_observed, (to - from) / 10);
+  EXPECT_LT(with_rule.worst_hand, 0.03);
+  // The same take without the rule: the ghost drags the forearm and its clean marker out.
+  EXPECT_LT(without.clean_observed, with_rule.clean_observed);
+  EXPECT_GT(without.worst_hand, 2.0 * with_rule.worst_hand);
 }
 
 TEST_F(OutlierDetectorTest, AStuckMarkerIsFrozenWhenItsParentShowsTheSegmentMoved) {
