@@ -40,7 +40,7 @@ struct CleanupOptions {
   double rigid_tolerance_m = 0.03;  ///< Distance change between two markers on one rigid segment.
   double swap_margin_m = 0.01;      ///< A swap must explain the data better by at least this.
   double swap_search_m = 0.15;      ///< Only markers this close in the previous frame can swap.
-  bool relabel_swaps = true;        ///< Swap the labels back instead of filling both.
+  bool relabel_swaps = true;  ///< Swap the labels back (every swap test) instead of filling both.
   /// Frozen: a marker staying within this distance of where it came to rest (wide enough
   /// for capture jitter, which a per-frame motion test mistakes for motion)...
   double frozen_radius_m = 0.015;

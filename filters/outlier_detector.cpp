@@ -173,6 +173,10 @@ void OutlierDetector::ReadmitConsistentSegments(const WindowFrame& s) {
 // decide frame by frame.
 void OutlierDetector::Relabel(WindowFrame& s, size_t i, size_t j, CleanupCounters* counters,
                               bool remember) {
+  if (!options_.relabel_swaps) {  // both are filled instead
+    s.mask[i] = s.mask[j] = MaskReason::kSwap;
+    return;
+  }
   int& partner_i = swap_partner_[i];
   int& partner_j = swap_partner_[j];
   if (remember && partner_i == static_cast<int>(j)) {
@@ -353,13 +357,9 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
       if (crossed_i > threshold(j) || crossed_j > threshold(i)) continue;
       if (crossed_i + crossed_j + options_.swap_margin_m >= residual[i].norm() + residual[j].norm())
         continue;
-      if (options_.relabel_swaps) {
-        Relabel(s, i, j, counters, true);
-        residual[i] = s.raw[i] - s.reference[i];
-        residual[j] = s.raw[j] - s.reference[j];
-      } else {
-        s.mask[i] = s.mask[j] = MaskReason::kSwap;
-      }
+      Relabel(s, i, j, counters, true);
+      residual[i] = s.raw[i] - s.reference[i];
+      residual[j] = s.raw[j] - s.reference[j];
       break;
     }
   }

@@ -87,6 +87,26 @@ TEST_F(OutlierDetectorTest, SwapOnOneSegmentIsRelabelledExactly) {
   EXPECT_EQ(out[360].status[static_cast<size_t>(a)], MarkerStatus::kObserved);
 }
 
+TEST_F(OutlierDetectorTest, WithRelabellingOffASwapIsFilledNotExchanged) {
+  // relabel_swaps = false asks for both samples of a swap to be filled; the layout test,
+  // which relabelled regardless, now marks them instead.
+  const int a = Marker("LHND1"), b = Marker("LHND2");
+  for (int f = 300; f < 360; ++f) std::swap(Sample(f, a), Sample(f, b));
+  CleanupOptions options;
+  options.relabel_swaps = false;
+  const auto out = Run(options);
+  int filled = 0;
+  for (int f = 300; f < 360; ++f)
+    for (int m : {a, b}) {
+      const CleanFrame& frame = out[static_cast<size_t>(f)];
+      EXPECT_NE(frame.markers[static_cast<size_t>(m)], Sample(f, m)) << f;  // never published
+      filled += frame.status[static_cast<size_t>(m)] == MarkerStatus::kRepaired &&
+                frame.reason[static_cast<size_t>(m)] == MaskReason::kSwap;
+    }
+  EXPECT_GE(filled, 2 * 60 * 9 / 10);
+  EXPECT_EQ(counters_.swaps_relabelled, 0);
+}
+
 TEST_F(OutlierDetectorTest, SwapAcrossSegmentsIsCaughtByContinuity) {
   // Two markers on different segments, swapped from a frame where they pass close.
   const int a = Marker("LELB"), b = Marker("LUPA3");
