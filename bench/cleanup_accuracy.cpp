@@ -7,8 +7,8 @@
 // the cleaned-marker RMSE on corrupted samples (mm), the jerk ratio against the truth and
 // the number of pops (a joint moving > 2 cm per frame beyond the truth's own motion).
 // Usage: cleanup_accuracy [--seeds N] [--severity light|medium|heavy]... [--rates 60,120,240]
-// [--lookahead K (ours only)] [--jitter-mm MIN,MAX] [--explain-pops] [--explain-worst] [--trace
-// TAKE:FROM:TO:MARKER,...] [--digest] [TAKE.bvh ...]
+// [--lookahead K (ours only, any K)] [--jitter-mm MIN,MAX] [--explain-pops] [--explain-worst]
+// [--trace TAKE:FROM:TO:MARKER,...] [--digest] [TAKE.bvh ...]
 // --explain-worst explains each run's worst frame (over 3 cm) the way --explain-pops does.
 // --digest prints, per row of ours, a hash of every published bit (markers, status,
 // reasons, weights, poses): a change meant to alter no arithmetic must keep it.
@@ -365,7 +365,13 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
 
 }  // namespace
 
-int main(int argc, char** argv) {
+constexpr const char* kUsage =
+    "Usage: cleanup_accuracy [--seeds N] [--severity light|medium|heavy]... [--rates 60,120,240]\n"
+    "  [--lookahead K (ours only, any K >= 0)] [--jitter-mm MIN,MAX] [--explain-pops]\n"
+    "  [--explain-worst] [--trace TAKE:FROM:TO:MARKER,...] [--digest] [TAKE.bvh ...]\n"
+    "Without takes: the ../shared Bandai takes when present, else the built-in humanoid.\n";
+
+int Run(int argc, char** argv) {
   int seeds = 2;
   int only_lookahead = -1;                          // -1: the baselines and K = 0, 4, 12
   std::pair<double, double> jitter_mm{-1.0, -1.0};  // < 0: the corruption's default
@@ -403,8 +409,16 @@ int main(int argc, char** argv) {
     else if (std::strcmp(argv[i], "--rates") == 0 && i + 1 < argc) {
       std::stringstream list(argv[++i]);
       for (std::string r; std::getline(list, r, ',');) rates.push_back(std::atof(r.c_str()));
-    } else
+    } else if (std::strcmp(argv[i], "--help") == 0 || std::strcmp(argv[i], "-h") == 0) {
+      std::fputs(kUsage, stdout);
+      return 0;
+    } else if (argv[i][0] == '-') {
+      std::fprintf(stderr, "cleanup_accuracy: unknown option or missing value '%s'\n%s", argv[i],
+                   kUsage);
+      return 2;
+    } else {
       paths.emplace_back(argv[i]);
+    }
   }
   if (severities.empty()) severities = {"light", "medium", "heavy"};
   if (rates.empty()) rates = {120.0};
@@ -446,9 +460,13 @@ int main(int argc, char** argv) {
                 RunPipeline(take, bad, clean, k, rate));
         }
       }
-      for (const char* method : {"raw IK", "linear fill + IK", "cubic fill + IK", "mocapd K=0",
-                                 "mocapd K=4", "mocapd K=12"}) {
-        const auto& v = results[method];
+      std::vector<std::string> methods = {"raw IK",     "linear fill + IK", "cubic fill + IK",
+                                          "mocapd K=0", "mocapd K=4",       "mocapd K=12"};
+      if (only_lookahead >= 0 && only_lookahead != 0 && only_lookahead != 4 && only_lookahead != 12)
+        methods.push_back("mocapd K=" + std::to_string(only_lookahead));
+      for (const std::string& method_name : methods) {
+        const char* method = method_name.c_str();
+        const auto& v = results[method_name];
         if (v.empty()) continue;
         Scores mean;
         uint64_t digest = 14695981039346656037ull;
@@ -485,4 +503,13 @@ int main(int argc, char** argv) {
       "p99.9 and p99 are the worst run's (a frame's error: its worst joint's).\n",
       paths.size(), seeds);
   return 0;
+}
+
+int main(int argc, char** argv) {
+  try {
+    return Run(argc, argv);
+  } catch (const std::exception& e) {  // a take that cannot be read, a bad trace marker...
+    std::fprintf(stderr, "cleanup_accuracy: %s\n", e.what());
+    return 1;
+  }
 }
