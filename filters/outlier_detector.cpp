@@ -151,12 +151,12 @@ void OutlierDetector::ReadmitConsistentSegments(const WindowFrame& s) {
     const auto trusted = [&](size_t m) { return !excluded(static_cast<int>(m)); };
     const bool i_trusted = trusted(i), j_trusted = trusted(j);
     if (i_trusted == j_trusted) continue;
-    const size_t excluded = i_trusted ? j : i;
-    if (tracks_[excluded].frozen ||
-        markers_.marker(static_cast<int>(excluded)).num_attachments != 1)
+    const size_t left_out = i_trusted ? j : i;
+    if (tracks_[left_out].frozen ||
+        markers_.marker(static_cast<int>(left_out)).num_attachments != 1)
       continue;
     if (std::abs((s.raw[i] - s.raw[j]).norm() - rigid_distance_[k]) <= options_.rigid_tolerance_m)
-      weights_[excluded] = 1.0;
+      weights_[left_out] = 1.0;
   }
 }
 
