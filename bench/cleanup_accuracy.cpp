@@ -280,8 +280,9 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
     s.pop_frames.push_back({s.worst_frame, s.worst_joint, s.worst_frame_cm / 100});
   }
   if (g_trace.take.empty() ? false : take.name.find(g_trace.take) != std::string::npos) {
-    // Frame by frame: each traced marker's published status (as in --explain-pops) with
-    // the injected truth, its error against the clean take (cm) and final-solve weight.
+    // Frame by frame: each traced marker's published status (as in --explain-pops), the
+    // reason it was masked for (which an unrecoverable 'x' hides), the injected truth, its
+    // error against the clean take (cm) and final-solve weight.
     for (int g = g_trace.from; g <= g_trace.to && g < static_cast<int>(published.size()); ++g) {
       std::printf("trace %d", g);
       for (const std::string& name : g_trace.markers) {
@@ -293,7 +294,7 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
         const char c = st == MarkerStatus::kObserved        ? 'o'
                        : st == MarkerStatus::kUnrecoverable ? 'x'
                                                             : ReasonLetter(reasons[ug][um]);
-        std::printf(" %s %c%c e%.1f w%.2f", name.c_str(), c,
+        std::printf(" %s %c%c%c e%.1f w%.2f", name.c_str(), c, ReasonLetter(reasons[ug][um]),
                     ".gspzf"[static_cast<int>(bad.at(g, m))],
                     (published[ug][um] - clean.at(g, m)).norm() * 100, weights[ug][um]);
       }

@@ -674,7 +674,6 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
   double cost = MarkerCost(markers, options, observed, weights, s.ws_, s.predicted_) +
                 PriorCost(at, ar, s.prior_mask_, s.rest_error_, s.step_total_);
   summary.initial_cost = cost;
-  double damping = options.initial_damping;
   // A cold start is far from the answer: the warm-start tolerance would stop it early,
   // in the basin of whatever local minimum it is crossing.
   const double function_tolerance =
@@ -686,51 +685,67 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
   const double cost_floor = summary.cold_start ? 0.0
                                                : 0.5 * weight_sum * options.residual_tolerance_m *
                                                      options.residual_tolerance_m;
-  summary.status = IkStatus::kMaxIterations;
-  for (int iteration = 0; iteration < max_iterations; ++iteration) {
-    summary.iterations = iteration + 1;
-    // Elimination adds children into their parents' blocks in place, so every attempt,
-    // including a retry after a rejected step, starts from freshly accumulated blocks.
-    ClearBlocks(&s.blocks_);
-    AccumulateMarkers(markers, options, observed, weights, s.predicted_, s.ws_, &s.blocks_);
-    s.prior_g_ =
-        -(at * s.step_total_ + ar * (s.rest_error_ + s.step_total_)).cwiseProduct(s.prior_mask_);
-    if (!ComputeStep(skeleton, damping, s.prior_h_, s.prior_g_, s.ws_, &s.blocks_, &s.dq_)) {
-      summary.status = IkStatus::kNumericalFailure;
-      break;
-    }
-    s.trial_ = s.pose_;
-    s.local_step_ = s.dq_;
-    WorldStepToLocal(skeleton, s.ws_, &s.local_step_);
-    IntegratePose(skeleton, s.local_step_, &s.trial_);
-    if (options.apply_joint_limits) ApplyJointLimits(skeleton, &s.trial_);
-    ForwardKinematics(skeleton, s.trial_, &s.trial_ws_);
-    s.trial_total_ = s.step_total_ + s.dq_;
-    const double trial_cost =
-        MarkerCost(markers, options, observed, weights, s.trial_ws_, s.trial_predicted_) +
-        PriorCost(at, ar, s.prior_mask_, s.rest_error_, s.trial_total_);
-    const double step_size = s.dq_.cwiseAbs().maxCoeff();
-    if (std::isfinite(trial_cost) && trial_cost <= cost) {
-      std::swap(s.pose_, s.trial_);
-      std::swap(s.ws_, s.trial_ws_);
-      std::swap(s.predicted_, s.trial_predicted_);
-      std::swap(s.step_total_, s.trial_total_);
-      const double decrease = cost - trial_cost;
-      cost = trial_cost;
-      damping = std::max(damping * 0.3, 1e-9);
-      if (decrease <= function_tolerance * (cost + decrease) ||
-          step_size <= options.step_tolerance || cost <= cost_floor) {
-        summary.status = IkStatus::kConverged;
+  // A cold start begins at the aligned rest pose, maybe far from the answer, where a robust
+  // loss takes the clean markers of a badly started limb for outliers and settles in a
+  // minimum that ignores them (a clavicle and upper arm left 5-11 cm off three clean
+  // markers, which the detectors then rejected for 1.4 s). Least squares first brings
+  // every limb to its markers; the robust loss then refines from there, where only true
+  // outliers are far.
+  const bool least_squares_first = summary.cold_start && options.huber_delta_m > 0.0;
+  IkOptions loss = options;
+  for (int phase = least_squares_first ? 0 : 1; phase < 2; ++phase) {
+    loss.huber_delta_m = phase == 0 ? 0.0 : options.huber_delta_m;
+    if (least_squares_first)  // the cost under this phase's loss
+      cost = MarkerCost(markers, loss, observed, weights, s.ws_, s.predicted_) +
+             PriorCost(at, ar, s.prior_mask_, s.rest_error_, s.step_total_);
+    double damping = options.initial_damping;
+    summary.status = IkStatus::kMaxIterations;
+    for (int iteration = 0; iteration < max_iterations; ++iteration) {
+      ++summary.iterations;
+      // Elimination adds children into their parents' blocks in place, so every attempt,
+      // including a retry after a rejected step, starts from freshly accumulated blocks.
+      ClearBlocks(&s.blocks_);
+      AccumulateMarkers(markers, loss, observed, weights, s.predicted_, s.ws_, &s.blocks_);
+      s.prior_g_ =
+          -(at * s.step_total_ + ar * (s.rest_error_ + s.step_total_)).cwiseProduct(s.prior_mask_);
+      if (!ComputeStep(skeleton, damping, s.prior_h_, s.prior_g_, s.ws_, &s.blocks_, &s.dq_)) {
+        summary.status = IkStatus::kNumericalFailure;
         break;
       }
-    } else {
-      damping = std::max(damping * 10.0, 1e-6);
-      if (damping > 1e8 || step_size <= options.step_tolerance) {
-        // No descent direction left: the current pose is a minimum to working precision.
-        summary.status = IkStatus::kConverged;
-        break;
+      s.trial_ = s.pose_;
+      s.local_step_ = s.dq_;
+      WorldStepToLocal(skeleton, s.ws_, &s.local_step_);
+      IntegratePose(skeleton, s.local_step_, &s.trial_);
+      if (options.apply_joint_limits) ApplyJointLimits(skeleton, &s.trial_);
+      ForwardKinematics(skeleton, s.trial_, &s.trial_ws_);
+      s.trial_total_ = s.step_total_ + s.dq_;
+      const double trial_cost =
+          MarkerCost(markers, loss, observed, weights, s.trial_ws_, s.trial_predicted_) +
+          PriorCost(at, ar, s.prior_mask_, s.rest_error_, s.trial_total_);
+      const double step_size = s.dq_.cwiseAbs().maxCoeff();
+      if (std::isfinite(trial_cost) && trial_cost <= cost) {
+        std::swap(s.pose_, s.trial_);
+        std::swap(s.ws_, s.trial_ws_);
+        std::swap(s.predicted_, s.trial_predicted_);
+        std::swap(s.step_total_, s.trial_total_);
+        const double decrease = cost - trial_cost;
+        cost = trial_cost;
+        damping = std::max(damping * 0.3, 1e-9);
+        if (decrease <= function_tolerance * (cost + decrease) ||
+            step_size <= options.step_tolerance || cost <= cost_floor) {
+          summary.status = IkStatus::kConverged;
+          break;
+        }
+      } else {
+        damping = std::max(damping * 10.0, 1e-6);
+        if (damping > 1e8 || step_size <= options.step_tolerance) {
+          // No descent direction left: the current pose is a minimum to working precision.
+          summary.status = IkStatus::kConverged;
+          break;
+        }
       }
     }
+    if (summary.status == IkStatus::kNumericalFailure) break;
   }
   if (summary.status == IkStatus::kNumericalFailure || !std::isfinite(cost)) {
     summary.status = IkStatus::kNumericalFailure;
