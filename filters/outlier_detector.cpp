@@ -277,6 +277,10 @@ void OutlierDetector::RelabelSwaps(CleanupWindow& window, int64_t t, CleanupCoun
          markers_of_joint_[static_cast<size_t>(markers_.primary_joint(static_cast<int>(i)))]) {
       const auto o = static_cast<size_t>(other);
       if (o == i || o == j || !s.valid[o] || markers_.marker(other).num_attachments != 1) continue;
+      // A stuck sample is no witness: the segment moves away from it, so distances to it
+      // cannot tell the segment's markers apart. (Markers judged stray or fallen off stay
+      // witnesses: dropping them too cost the synthesized humanoid 1.16 -> 1.30 degrees.)
+      if (tracks_[o].frozen) continue;
       const double di = (s.raw[i] - s.raw[o]).norm(), dj = (s.raw[j] - s.raw[o]).norm();
       const double mi = RigidDistance(i, o), mj = RigidDistance(j, o);
       straight += std::abs(di - mi) + std::abs(dj - mj);
