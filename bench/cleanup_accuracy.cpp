@@ -8,7 +8,7 @@
 // the number of pops (a joint moving > 2 cm per frame beyond the truth's own motion).
 // Usage: cleanup_accuracy [--seeds N] [--severity light|medium|heavy]... [--rates 60,120,240]
 // [--lookahead K (ours only, any K)] [--jitter-mm MIN,MAX] [--explain-pops] [--explain-worst]
-// [--trace TAKE:FROM:TO:MARKER,...] [--digest] [TAKE.bvh ...]
+// [--explain-rejections] [--trace TAKE:FROM:TO:MARKER,...] [--digest] [TAKE.bvh ...]
 // --explain-worst explains each run's worst frame (over 3 cm) the way --explain-pops does.
 // --digest prints, per row of ours, a hash of every published bit (markers, status,
 // reasons, weights, poses): a change meant to alter no arithmetic must keep it.
@@ -151,6 +151,7 @@ Scores SolveBaseline(const bench::BenchTake& take, const C3dTake& markers) {
 bool g_explain_pops = false;
 bool g_digest = false;
 bool g_explain_worst = false;
+bool g_explain_rejections = false;
 
 // FNV-1a over raw bytes: a refactoring that claims to change no arithmetic must leave
 // every published bit, and so this digest, as it was.
@@ -279,12 +280,58 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
                 s.worst_frame_cm);
     s.pop_frames.push_back({s.worst_frame, s.worst_joint, s.worst_frame_cm / 100});
   }
+  if (g_explain_rejections) {
+    // Clean samples (nothing injected) the pipeline did not publish as observed, in runs
+    // of at least 0.1 s: a detector convicting good data, which no lookahead excuses.
+    struct Run {
+      int marker, first, last;
+    };
+    std::vector<Run> runs;
+    for (int m = 0; m < take.markers->num_markers(); ++m) {
+      int start = -1;
+      for (int g = 0; g <= static_cast<int>(statuses.size()); ++g) {
+        const bool rejected =
+            g < static_cast<int>(statuses.size()) && bad.at(g, m) == CorruptionKind::kNone &&
+            statuses[static_cast<size_t>(g)][static_cast<size_t>(m)] != MarkerStatus::kObserved;
+        if (rejected && start < 0) start = g;
+        if (!rejected && start >= 0) {
+          if (g - start >= 0.1 * rate_hz) runs.push_back({m, start, g - 1});
+          start = -1;
+        }
+      }
+    }
+    std::sort(runs.begin(), runs.end(),
+              [](const Run& a, const Run& b) { return a.last - a.first > b.last - b.first; });
+    for (size_t k = 0; k < std::min<size_t>(runs.size(), 5); ++k) {
+      const Run& r = runs[k];
+      std::printf("rejected clean %s %.0f Hz: %s frames %d-%d (%.2f s):", take.name.c_str(),
+                  rate_hz, take.markers->marker(r.marker).name.c_str(), r.first, r.last,
+                  (r.last - r.first + 1) / rate_hz);
+      for (int g = r.first; g <= r.last && g < r.first + 40; ++g)
+        std::printf("%c",
+                    ReasonLetter(reasons[static_cast<size_t>(g)][static_cast<size_t>(r.marker)]));
+      std::printf("\n");
+    }
+  }
   if (g_trace.take.empty() ? false : take.name.find(g_trace.take) != std::string::npos) {
     // Frame by frame: each traced marker's published status (as in --explain-pops), the
     // reason it was masked for (which an unrecoverable 'x' hides), the injected truth, its
     // error against the clean take (cm) and final-solve weight.
     for (int g = g_trace.from; g <= g_trace.to && g < static_cast<int>(published.size()); ++g) {
-      std::printf("trace %d", g);
+      // The frame's worst joint first: its error against the truth (cm).
+      int worst_joint = 0;
+      double worst_error = 0.0;
+      const auto ug0 = static_cast<size_t>(g);
+      if (ug0 < s.estimated_joints.size())
+        for (size_t j = 0; j < s.estimated_joints[ug0].size(); ++j) {
+          const double error = (s.estimated_joints[ug0][j] - s.true_joints[ug0][j]).norm();
+          if (error > worst_error) {
+            worst_error = error;
+            worst_joint = static_cast<int>(j);
+          }
+        }
+      std::printf("trace %d %s %.1f", g, skeleton->joint(worst_joint).name.c_str(),
+                  worst_error * 100);
       for (const std::string& name : g_trace.markers) {
         const auto found = take.markers->FindMarker(name);
         if (!found) continue;
@@ -369,7 +416,8 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
 constexpr const char* kUsage =
     "Usage: cleanup_accuracy [--seeds N] [--severity light|medium|heavy]... [--rates 60,120,240]\n"
     "  [--lookahead K (ours only, any K >= 0)] [--jitter-mm MIN,MAX] [--explain-pops]\n"
-    "  [--explain-worst] [--trace TAKE:FROM:TO:MARKER,...] [--digest] [TAKE.bvh ...]\n"
+    "  [--explain-worst] [--explain-rejections] [--trace TAKE:FROM:TO:MARKER,...] [--digest]\n"
+    "  [TAKE.bvh ...]\n"
     "Without takes: the ../shared Bandai takes when present, else the built-in humanoid.\n";
 
 int Run(int argc, char** argv) {
@@ -385,6 +433,8 @@ int Run(int argc, char** argv) {
       g_explain_pops = true;
     else if (std::strcmp(argv[i], "--explain-worst") == 0)
       g_explain_pops = g_explain_worst = true;
+    else if (std::strcmp(argv[i], "--explain-rejections") == 0)
+      g_explain_pops = g_explain_rejections = true;
     else if (std::strcmp(argv[i], "--digest") == 0)
       g_digest = true;
     else if (std::strcmp(argv[i], "--trace") == 0 && i + 1 < argc) {
