@@ -46,6 +46,12 @@ OutlierDetector::OutlierDetector(const Skeleton& skeleton, const MarkerSet& mark
       rigid_distance_.push_back((a.attachments[0].offset - b.attachments[0].offset).norm());
     }
   }
+  pairs_of_marker_.assign(m, {});
+  for (size_t k = 0; k < rigid_pairs_.size(); ++k) {
+    pairs_of_marker_[static_cast<size_t>(rigid_pairs_[k].first)].push_back(static_cast<int>(k));
+    pairs_of_marker_[static_cast<size_t>(rigid_pairs_[k].second)].push_back(static_cast<int>(k));
+  }
+  distance_at_rest_.assign(rigid_pairs_.size(), {kNaN, kNaN});
   weights_.assign(m, 0.0);
   trusted_on_joint_.assign(static_cast<size_t>(skeleton_.num_joints()), 0);
   readmit_on_joint_.assign(static_cast<size_t>(skeleton_.num_joints()), 0);
@@ -64,6 +70,7 @@ OutlierDetector::Track OutlierDetector::FreshTrack() const {
 void OutlierDetector::Reset() {
   std::fill(tracks_.begin(), tracks_.end(), FreshTrack());
   std::fill(swap_partner_.begin(), swap_partner_.end(), -1);
+  std::fill(distance_at_rest_.begin(), distance_at_rest_.end(), std::array<double, 2>{kNaN, kNaN});
   naive_.Reset();
   naive_fresh_ = false;
   robust_.Reset();
@@ -417,6 +424,29 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
     return std::abs((s.raw[m] - origin).norm() - d.attachments[0].offset.norm()) > tolerance &&
            parent_fits(m);
   };
+  // A still marker that a moving marker rigidly on its segment has left (their distance
+  // changed, since it came to rest, by what a frozen marker's reference must move): the
+  // segment moved and it did not (a toe marker frozen on a planted foot as the foot lifts,
+  // its clean partner rising away from it). The reference cannot show it when no other
+  // marker of the segment or its parent is seen: it has followed the still one. The
+  // distance at rest, not the model's, is the yardstick: a scaled template's distances
+  // are off by centimetres from the start.
+  auto left_by_a_moving_partner = [&](size_t m) {
+    for (int k : pairs_of_marker_[m]) {
+      const auto uk = static_cast<size_t>(k);
+      const bool first = static_cast<size_t>(rigid_pairs_[uk].first) == m;
+      const auto o = static_cast<size_t>(first ? rigid_pairs_[uk].second : rigid_pairs_[uk].first);
+      const Track& other = tracks_[o];
+      if (!s.valid[o] || other.frozen ||
+          (other.still_since >= 0 && t - other.still_since + 1 >= rules_.frozen_frames))
+        continue;
+      double& at_rest = distance_at_rest_[uk][first ? 0 : 1];
+      const double distance = (s.raw[m] - s.raw[o]).norm();
+      if (std::isnan(at_rest)) at_rest = distance;
+      if (std::abs(distance - at_rest) > options_.frozen_reference_motion_m) return true;
+    }
+    return false;
+  };
   auto has_fitting_neighbour = [&](size_t m) {
     for (int other :
          markers_of_joint_[static_cast<size_t>(markers_.primary_joint(static_cast<int>(m)))]) {
@@ -468,6 +498,10 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
     if (track.still_since < 0 ||
         (s.raw[m] - track.still_anchor).norm() > options_.frozen_radius_m) {
       track.still_since = t;
+      for (int k : pairs_of_marker_[m])
+        distance_at_rest_[static_cast<size_t>(
+            k)][static_cast<size_t>(rigid_pairs_[static_cast<size_t>(k)].first) == m ? 0 : 1] =
+            kNaN;
       track.still_anchor = s.raw[m];
       track.still_reference = s.reference[m];
       track.frozen = false;
@@ -475,7 +509,8 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
                (((s.reference[m] - track.still_reference).norm() >
                      options_.frozen_reference_motion_m &&
                  has_fitting_neighbour(m)) ||
-                off_its_joint(m, options_.frozen_reference_motion_m))) {
+                off_its_joint(m, options_.frozen_reference_motion_m) ||
+                left_by_a_moving_partner(m))) {
       track.frozen = true;
     }
     if (track.frozen) {

@@ -17,6 +17,7 @@
 // Per-marker state is sized at construction; Process never allocates.
 #pragma once
 
+#include <array>
 #include <memory>
 #include <utility>
 #include <vector>
@@ -82,8 +83,12 @@ class OutlierDetector {
   bool naive_fresh_ = false;   // Y's warm start is the previous frame's solution
   std::vector<Track> tracks_;
   std::vector<int> swap_partner_;  // per marker: the label its samples are carried under, or -1
-  std::vector<std::pair<int, int>> rigid_pairs_;  // markers rigidly on one joint...
-  std::vector<double> rigid_distance_;            // ...and their distance in the model
+  std::vector<std::pair<int, int>> rigid_pairs_;   // markers rigidly on one joint...
+  std::vector<double> rigid_distance_;             // ...and their distance in the model
+  std::vector<std::vector<int>> pairs_of_marker_;  // indices into rigid_pairs_
+  // Per rigid pair, the pair's distance when each of its markers (first, second) came to
+  // rest, taken at the first frame of that still run where both were seen (NaN: not yet).
+  std::vector<std::array<double, 2>> distance_at_rest_;
   std::vector<std::vector<int>> markers_of_joint_;
   std::vector<double> weights_;
   std::vector<int> trusted_on_joint_;  // ReadmitConsistentSegments scratch: trusted samples...

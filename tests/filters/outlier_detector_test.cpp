@@ -276,6 +276,34 @@ TEST_F(OutlierDetectorTest, AFootFrozenTogetherUnderAMovingShinIsFrozenNotItsToe
   EXPECT_GT(toes_kept, 2 * 120 * 9 / 10);
 }
 
+TEST_F(OutlierDetectorTest, AToeMarkerStuckWhereTheFootWasPlantedIsFrozenWhenTheFootLifts) {
+  // The foot's own markers are occluded and one toe marker sticks where the foot was
+  // planted while the leg walks on. Only the toe's other marker, clean, shows the toe
+  // moved; the reference, with no foot data, follows the stuck one. The stuck sample must
+  // go, and the clean one stay (a Bandai punch published the stuck one as observed and
+  // rejected the clean one for 0.2 s: a 13 cm worst frame).
+  const int stuck = Marker("RTOE2"), clean = Marker("RTOE1");
+  const int from = 400, to = from + 120;
+  for (int f = from; f < to; ++f) {
+    Sample(f, stuck) = Truth(from - 1, stuck);
+    for (const char* name : {"RFOT1", "RFOT2", "RFOT3"})
+      Sample(f, Marker(name)) = Vec3::Constant(kNaN);
+  }
+  const auto out = Run(CleanupOptions{});
+  int stuck_published = 0, clean_kept = 0;
+  for (int f = from; f < to; ++f) {
+    const auto uf = static_cast<size_t>(f);
+    stuck_published += out[uf].status[static_cast<size_t>(stuck)] == MarkerStatus::kObserved &&
+                       (Truth(f, stuck) - Truth(from - 1, stuck)).norm() > 0.03;
+    clean_kept += out[uf].status[static_cast<size_t>(clean)] == MarkerStatus::kObserved;
+  }
+  // Before: the stuck sample published off the toe in 7 frames, the clean one kept in 1
+  // of 120, the toe 22 cm off.
+  EXPECT_LE(stuck_published, 2);
+  EXPECT_GT(clean_kept, 120 * 9 / 10);
+  EXPECT_LT(WorstJointError(out, "RightToeBase", from, to), 0.05);
+}
+
 TEST_F(OutlierDetectorTest, AToeMarkerThatFrozeIsTakenBackOnceItMovesWithTheToeAgain) {
   // One of the toe's two markers sticks for half a second, then moves with the toe again.
   // While it was out, the toe's one other marker could not hold the toe's rotation, so
