@@ -272,7 +272,8 @@ TEST_F(OutlierDetectorTest, AFootFrozenTogetherUnderAMovingShinIsFrozenNotItsToe
       toes_kept += out[static_cast<size_t>(f)].status[static_cast<size_t>(Marker(toe))] ==
                    MarkerStatus::kObserved;
   }
-  EXPECT_GT(found_frozen, 3 * 120 / 2);
+  // Half the frames: the stuck samples must first fall behind the walking leg.
+  EXPECT_GE(found_frozen, 3 * 120 / 2);
   EXPECT_GT(toes_kept, 2 * 120 * 9 / 10);
 }
 
