@@ -84,6 +84,7 @@ std::string Str(double v) {
 
 CleanupOptions::CleanupOptions() {
   robust_ik.huber_delta_m = 0.004;
+  robust_ik.cold_start_least_squares_first = true;
   // A segment moves up to 7 cm in a 60 Hz frame, and from a warm start that far off the
   // Huber loss converges slowly: with 3 iterations the reference lagged a lifting foot,
   // rejected its clean markers and the final solve chased them (Bandai medium 60 Hz

@@ -556,6 +556,7 @@ IkState::IkState(const Skeleton& skeleton, const MarkerSet& markers)
       previous_(pose_),
       trial_(pose_),
       rest_(pose_),
+      cold_best_(pose_),
       ws_(skeleton),
       trial_ws_(skeleton),
       predicted_(static_cast<size_t>(markers.num_markers()), Vec3::Zero()),
@@ -659,20 +660,25 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
     s.previous_ = s.pose_;
   }
 
-  ForwardKinematics(skeleton, s.pose_, &s.ws_);
-
-  // Priors in the tangent space of the warm start (see PriorCost), in the world axes
-  // the steps are taken about.
-  PoseDifference(skeleton, s.rest_, s.pose_, s.rest_error_);
-  s.rest_error_.array() *= s.prior_mask_.array();
-  LocalTangentToWorld(skeleton, s.ws_, &s.rest_error_);
-  s.step_total_.setZero();
+  // Priors in the tangent space of the start pose (see PriorCost), in the world axes the
+  // steps are taken about.
+  auto begin_at_start = [&]() {
+    ForwardKinematics(skeleton, s.pose_, &s.ws_);
+    PoseDifference(skeleton, s.rest_, s.pose_, s.rest_error_);
+    s.rest_error_.array() *= s.prior_mask_.array();
+    LocalTangentToWorld(skeleton, s.ws_, &s.rest_error_);
+    s.step_total_.setZero();
+  };
+  begin_at_start();
   // The warm start of a cold solve is only the aligned rest pose: nothing to stay near.
   const double at = summary.cold_start ? 0.0 : options.temporal_weight, ar = options.rest_weight;
   s.prior_h_ = (at + ar) * s.prior_mask_;
+  auto cost_under = [&](const IkOptions& loss) {
+    return MarkerCost(markers, loss, observed, weights, s.ws_, s.predicted_) +
+           PriorCost(at, ar, s.prior_mask_, s.rest_error_, s.step_total_);
+  };
 
-  double cost = MarkerCost(markers, options, observed, weights, s.ws_, s.predicted_) +
-                PriorCost(at, ar, s.prior_mask_, s.rest_error_, s.step_total_);
+  double cost = cost_under(options);
   summary.initial_cost = cost;
   // A cold start is far from the answer: the warm-start tolerance would stop it early,
   // in the basin of whatever local minimum it is crossing.
@@ -685,19 +691,10 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
   const double cost_floor = summary.cold_start ? 0.0
                                                : 0.5 * weight_sum * options.residual_tolerance_m *
                                                      options.residual_tolerance_m;
-  // A cold start begins at the aligned rest pose, maybe far from the answer, where a robust
-  // loss takes the clean markers of a badly started limb for outliers and settles in a
-  // minimum that ignores them (a clavicle and upper arm left 5-11 cm off three clean
-  // markers, which the detectors then rejected for 1.4 s). Least squares first brings
-  // every limb to its markers; the robust loss then refines from there, where only true
-  // outliers are far.
-  const bool least_squares_first = summary.cold_start && options.huber_delta_m > 0.0;
+  // Levenberg-Marquardt from the current pose under `loss`, at most max_iterations steps;
+  // `cost` must hold the current pose's cost under that loss.
   IkOptions loss = options;
-  for (int phase = least_squares_first ? 0 : 1; phase < 2; ++phase) {
-    loss.huber_delta_m = phase == 0 ? 0.0 : options.huber_delta_m;
-    if (least_squares_first)  // the cost under this phase's loss
-      cost = MarkerCost(markers, loss, observed, weights, s.ws_, s.predicted_) +
-             PriorCost(at, ar, s.prior_mask_, s.rest_error_, s.step_total_);
+  auto descend = [&]() {
     double damping = options.initial_damping;
     summary.status = IkStatus::kMaxIterations;
     for (int iteration = 0; iteration < max_iterations; ++iteration) {
@@ -710,7 +707,7 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
           -(at * s.step_total_ + ar * (s.rest_error_ + s.step_total_)).cwiseProduct(s.prior_mask_);
       if (!ComputeStep(skeleton, damping, s.prior_h_, s.prior_g_, s.ws_, &s.blocks_, &s.dq_)) {
         summary.status = IkStatus::kNumericalFailure;
-        break;
+        return;
       }
       s.trial_ = s.pose_;
       s.local_step_ = s.dq_;
@@ -734,18 +731,47 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
         if (decrease <= function_tolerance * (cost + decrease) ||
             step_size <= options.step_tolerance || cost <= cost_floor) {
           summary.status = IkStatus::kConverged;
-          break;
+          return;
         }
       } else {
         damping = std::max(damping * 10.0, 1e-6);
         if (damping > 1e8 || step_size <= options.step_tolerance) {
           // No descent direction left: the current pose is a minimum to working precision.
           summary.status = IkStatus::kConverged;
-          break;
+          return;
         }
       }
     }
-    if (summary.status == IkStatus::kNumericalFailure) break;
+  };
+  descend();
+  // A cold start begins at the aligned rest pose, maybe far from the answer, where a robust
+  // loss can take the clean markers of a badly started limb for outliers and settle in a
+  // minimum that ignores them (a Bandai clavicle and upper arm 5-11 cm off three clean
+  // markers, which the detectors then rejected for 1.4 s). Least squares brings every limb
+  // to its markers, and the robust loss refines from there; but least squares also
+  // follows whatever is wrong in the data (CMU 01_01's gap fill, started that way alone:
+  // 17.2 -> 22.6 mm). So both are tried, and the lower robust cost is kept.
+  if (summary.cold_start && options.huber_delta_m > 0.0 && options.cold_start_least_squares_first &&
+      summary.status != IkStatus::kNumericalFailure && std::isfinite(cost)) {
+    const double robust_only = cost;
+    const IkStatus robust_only_status = summary.status;
+    s.cold_best_ = s.pose_;
+    s.pose_ = s.previous_;  // the aligned rest pose again
+    begin_at_start();
+    loss.huber_delta_m = 0.0;
+    cost = cost_under(loss);
+    descend();
+    loss.huber_delta_m = options.huber_delta_m;
+    cost = cost_under(loss);
+    if (summary.status != IkStatus::kNumericalFailure) descend();
+    if (summary.status == IkStatus::kNumericalFailure || !std::isfinite(cost) ||
+        cost >= robust_only) {
+      s.pose_ = s.cold_best_;
+      ForwardKinematics(skeleton, s.pose_, &s.ws_);
+      EvaluateMarkers(markers, s.ws_, s.predicted_);
+      cost = robust_only;
+      summary.status = robust_only_status;
+    }
   }
   if (summary.status == IkStatus::kNumericalFailure || !std::isfinite(cost)) {
     summary.status = IkStatus::kNumericalFailure;

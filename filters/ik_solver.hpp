@@ -34,6 +34,11 @@ struct IkOptions {
   /// refining a fit far inside the capture's own precision buys nothing.
   double residual_tolerance_m = 5e-5;
   double huber_delta_m = 0.0;  ///< Huber threshold in metres; 0 disables the robust loss.
+  /// With the Huber loss, a cold start is solved twice from the aligned rest pose, under
+  /// the robust loss alone and under least squares first, and keeps the lower robust cost
+  /// (see SolveIk). Off, only the first: a template still being fitted (subject
+  /// calibration) is tracked robustly throughout.
+  bool cold_start_least_squares_first = false;
   bool predict_constant_velocity = true;
   /// Fraction of the last frame-to-frame motion carried into the prediction (0..1). Below
   /// 1 the velocity decays, so a joint whose markers have all vanished comes to rest
@@ -100,7 +105,7 @@ class IkState {
   friend bool ComputeIkStep(const Skeleton&, const MarkerSet&, const IkOptions&,
                             std::span<const Vec3>, std::span<const double>, const Pose&, double,
                             IkState*, Eigen::VectorXd*);
-  Pose pose_, previous_, trial_, rest_;
+  Pose pose_, previous_, trial_, rest_, cold_best_;
   int history_ = 0;
   KinematicsWorkspace ws_, trial_ws_;
   std::vector<Vec3> predicted_, trial_predicted_, rest_markers_;

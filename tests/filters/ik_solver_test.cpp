@@ -279,6 +279,7 @@ TEST(IkOptionsTest, ValidateNamesTheBadField) {
 TEST_F(IkSolverTest, RobustColdStartFitsLimbsThatStartFarFromTheirMarkers) {
   IkOptions robust;
   robust.huber_delta_m = 0.004;
+  robust.cold_start_least_squares_first = true;
   std::mt19937_64 rng(11);
   std::uniform_real_distribution<double> u(-1.5, 1.5);
   Observe(0);
@@ -301,6 +302,34 @@ TEST_F(IkSolverTest, RobustColdStartFitsLimbsThatStartFarFromTheirMarkers) {
     }
   }
   EXPECT_EQ(stuck, 0);
+}
+
+// The second start must never cost the first: where least squares follows a wild marker
+// to a worse minimum, the robust start's solution is kept. Every pose as above, with one
+// marker 40 cm off: the cold start with both starts ends at most at the robust-only cost.
+TEST_F(IkSolverTest, RobustColdStartKeepsTheBetterOfItsTwoStarts) {
+  IkOptions robust_only;
+  robust_only.huber_delta_m = 0.004;
+  IkOptions both = robust_only;
+  both.cold_start_least_squares_first = true;
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> u(-1.5, 1.5);
+  Observe(0);
+  KinematicsWorkspace ws(skeleton());
+  for (int trial = 0; trial < 100; ++trial) {
+    Pose pose = fixture_.motion[0];
+    for (size_t j = 1; j < pose.rotation.size(); ++j)
+      pose.rotation[j] = pose.rotation[j] * ExpRotation(Vec3(u(rng), u(rng), u(rng)));
+    ForwardKinematics(skeleton(), pose, &ws);
+    for (int m = 0; m < markers().num_markers(); ++m)
+      observed_[static_cast<size_t>(m)] = EvaluateMarker(markers().marker(m), ws);
+    observed_[static_cast<size_t>(trial) % observed_.size()] += Vec3(0.0, 0.4, 0.0);
+    IkState a(skeleton(), markers()), b(skeleton(), markers());
+    const IkSummary first = SolveIk(skeleton(), markers(), robust_only, observed_, weights_, &a);
+    const IkSummary best = SolveIk(skeleton(), markers(), both, observed_, weights_, &b);
+    EXPECT_LE(best.final_cost, first.final_cost * (1.0 + 1e-12)) << "trial " << trial;
+    EXPECT_GE(best.iterations, first.iterations);
+  }
 }
 
 }  // namespace
