@@ -51,6 +51,18 @@ class IkSolverTest : public ::testing::Test {
                      Eigen::VectorXd::Constant(skeleton().num_dofs(), 1e-12);
     *g = J.transpose() * w.asDiagonal() * r - options.rest_weight * mask.cwiseProduct(rest_error);
   }
+  // Observations of frame 0 with every joint below the root turned by up to 1.5 rad per
+  // axis: a pose far from the rest pose a cold start begins at.
+  void ObserveTurnedPose(std::mt19937_64& rng) {
+    std::uniform_real_distribution<double> u(-1.5, 1.5);
+    Pose pose = fixture_.motion[0];
+    for (size_t j = 1; j < pose.rotation.size(); ++j)
+      pose.rotation[j] = pose.rotation[j] * ExpRotation(Vec3(u(rng), u(rng), u(rng)));
+    KinematicsWorkspace ws(skeleton());
+    ForwardKinematics(skeleton(), pose, &ws);
+    for (int m = 0; m < markers().num_markers(); ++m)
+      observed_[static_cast<size_t>(m)] = EvaluateMarker(markers().marker(m), ws);
+  }
   const Skeleton& skeleton() const { return *fixture_.skeleton; }
   const MarkerSet& markers() const { return *fixture_.markers; }
 
@@ -281,17 +293,10 @@ TEST_F(IkSolverTest, RobustColdStartFitsLimbsThatStartFarFromTheirMarkers) {
   robust.huber_delta_m = 0.004;
   robust.cold_start_least_squares_first = true;
   std::mt19937_64 rng(11);
-  std::uniform_real_distribution<double> u(-1.5, 1.5);
   Observe(0);
-  KinematicsWorkspace ws(skeleton());
   int stuck = 0;
   for (int trial = 0; trial < 200; ++trial) {
-    Pose pose = fixture_.motion[0];
-    for (size_t j = 1; j < pose.rotation.size(); ++j)
-      pose.rotation[j] = pose.rotation[j] * ExpRotation(Vec3(u(rng), u(rng), u(rng)));
-    ForwardKinematics(skeleton(), pose, &ws);
-    for (int m = 0; m < markers().num_markers(); ++m)
-      observed_[static_cast<size_t>(m)] = EvaluateMarker(markers().marker(m), ws);
+    ObserveTurnedPose(rng);
     IkState state(skeleton(), markers());
     const IkSummary summary = SolveIk(skeleton(), markers(), robust, observed_, weights_, &state);
     ASSERT_TRUE(summary.cold_start);
@@ -313,16 +318,9 @@ TEST_F(IkSolverTest, RobustColdStartKeepsTheBetterOfItsTwoStarts) {
   IkOptions both = robust_only;
   both.cold_start_least_squares_first = true;
   std::mt19937_64 rng(11);
-  std::uniform_real_distribution<double> u(-1.5, 1.5);
   Observe(0);
-  KinematicsWorkspace ws(skeleton());
   for (int trial = 0; trial < 100; ++trial) {
-    Pose pose = fixture_.motion[0];
-    for (size_t j = 1; j < pose.rotation.size(); ++j)
-      pose.rotation[j] = pose.rotation[j] * ExpRotation(Vec3(u(rng), u(rng), u(rng)));
-    ForwardKinematics(skeleton(), pose, &ws);
-    for (int m = 0; m < markers().num_markers(); ++m)
-      observed_[static_cast<size_t>(m)] = EvaluateMarker(markers().marker(m), ws);
+    ObserveTurnedPose(rng);
     observed_[static_cast<size_t>(trial) % observed_.size()] += Vec3(0.0, 0.4, 0.0);
     IkState a(skeleton(), markers()), b(skeleton(), markers());
     const IkSummary first = SolveIk(skeleton(), markers(), robust_only, observed_, weights_, &a);
