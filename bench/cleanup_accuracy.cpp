@@ -14,6 +14,7 @@
 // reasons, weights, poses): a change meant to alter no arithmetic must keep it.
 // MOCAPD_EXPLAIN_BACK=N shows N frames before each pop (default 4); MOCAPD_EXP_<FIELD>
 // variables override a few options for experiments (see RunPipeline).
+#include <algorithm>
 #include <cctype>
 #include <chrono>
 #include <cmath>
@@ -247,7 +248,7 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
       DigestVector(&digest, o.pose.rotation);
       DigestVector(&digest, o.pose.translation);
     }
-    if (g_explain_pops) {
+    if (g_explain_pops || g_explain_rejections) {
       reasons.push_back(o.reason);
       statuses.push_back(o.status);
       published.push_back(o.markers);
@@ -434,7 +435,7 @@ int Run(int argc, char** argv) {
     else if (std::strcmp(argv[i], "--explain-worst") == 0)
       g_explain_pops = g_explain_worst = true;
     else if (std::strcmp(argv[i], "--explain-rejections") == 0)
-      g_explain_pops = g_explain_rejections = true;
+      g_explain_rejections = true;
     else if (std::strcmp(argv[i], "--digest") == 0)
       g_digest = true;
     else if (std::strcmp(argv[i], "--trace") == 0 && i + 1 < argc) {

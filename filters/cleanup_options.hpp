@@ -44,8 +44,10 @@ struct CleanupOptions {
   /// Frozen: a marker staying within this distance of where it came to rest (wide enough
   /// for capture jitter, which a per-frame motion test mistakes for motion)...
   double frozen_radius_m = 0.015;
-  double frozen_reference_motion_m = 0.04;  ///< ...while its reference moves on this far...
-  double frozen_s = 0.05;                   ///< ...and for at least this long.
+  /// ...while its reference moves on this far (or a moving marker on its segment changes
+  /// its distance to it this much)...
+  double frozen_reference_motion_m = 0.04;
+  double frozen_s = 0.05;  ///< ...and for at least this long.
   /// A residual outlier this far off for stray_s in a row leaves the robust solve
   /// until it fits again: a swapped or stray sample on a segment whose neighbours are
   /// occluded would otherwise drag the reference, and the segment's good markers, along.

@@ -285,8 +285,9 @@ void OutlierDetector::RelabelSwaps(CleanupWindow& window, int64_t t, CleanupCoun
       const auto o = static_cast<size_t>(other);
       if (o == i || o == j || !s.valid[o] || markers_.marker(other).num_attachments != 1) continue;
       // A stuck sample is no witness: the segment moves away from it, so distances to it
-      // cannot tell the segment's markers apart. (Markers judged stray or fallen off stay
-      // witnesses: dropping them too cost the synthesized humanoid 1.16 -> 1.30 degrees.)
+      // cannot tell the segment's markers apart. (Markers judged stray, fallen off or off
+      // their joint stay witnesses: dropping them too cost the synthesized humanoid's
+      // medium 120 Hz take 1.16 -> 1.30-1.31 degrees.)
       if (tracks_[o].frozen) continue;
       const double di = (s.raw[i] - s.raw[o]).norm(), dj = (s.raw[j] - s.raw[o]).norm();
       const double mi = RigidDistance(i, o), mj = RigidDistance(j, o);
@@ -425,19 +426,24 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
            parent_fits(m);
   };
   // A still marker that a moving marker rigidly on its segment has left (their distance
-  // changed, since it came to rest, by what a frozen marker's reference must move): the
-  // segment moved and it did not (a toe marker frozen on a planted foot as the foot lifts,
-  // its clean partner rising away from it). The reference cannot show it when no other
-  // marker of the segment or its parent is seen: it has followed the still one. The
-  // distance at rest, not the model's, is the yardstick: a scaled template's distances
-  // are off by centimetres from the start.
+  // changed, while the still one stayed put, by what a frozen marker's reference must
+  // move): the segment moved and it did not (a toe marker frozen on a planted foot as the
+  // foot lifts, its clean partner rising away from it). The reference cannot show it when
+  // no other marker of the segment or its parent is seen: it has followed the still one.
+  // The yardstick is the pair's distance the first time this rule looks at it in the
+  // still run (once the marker has been still for frozen_s, with the partner moving), not
+  // the model's: a scaled template's distances are off by centimetres from the start.
+  // (Taken at the start of the still run instead, it cost the synthesized humanoid's
+  // heavy 120 Hz take 2.15 -> 2.30 degrees.) A partner already judged off (stray, fallen
+  // off, off its joint) or caught jumping this frame is no evidence.
   auto left_by_a_moving_partner = [&](size_t m) {
     for (int k : pairs_of_marker_[m]) {
       const auto uk = static_cast<size_t>(k);
       const bool first = static_cast<size_t>(rigid_pairs_[uk].first) == m;
       const auto o = static_cast<size_t>(first ? rigid_pairs_[uk].second : rigid_pairs_[uk].first);
       const Track& other = tracks_[o];
-      if (!s.valid[o] || other.frozen ||
+      if (!s.valid[o] || other.frozen || other.stray || other.fallen || other.off_joint ||
+          s.mask[o] == MaskReason::kSpike || s.mask[o] == MaskReason::kSwap ||
           (other.still_since >= 0 && t - other.still_since + 1 >= rules_.frozen_frames))
         continue;
       double& at_rest = distance_at_rest_[uk][first ? 0 : 1];
@@ -498,10 +504,10 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
     if (track.still_since < 0 ||
         (s.raw[m] - track.still_anchor).norm() > options_.frozen_radius_m) {
       track.still_since = t;
-      for (int k : pairs_of_marker_[m])
-        distance_at_rest_[static_cast<size_t>(
-            k)][static_cast<size_t>(rigid_pairs_[static_cast<size_t>(k)].first) == m ? 0 : 1] =
-            kNaN;
+      for (int k : pairs_of_marker_[m]) {
+        const auto uk = static_cast<size_t>(k);
+        distance_at_rest_[uk][static_cast<size_t>(rigid_pairs_[uk].first) == m ? 0 : 1] = kNaN;
+      }
       track.still_anchor = s.raw[m];
       track.still_reference = s.reference[m];
       track.frozen = false;

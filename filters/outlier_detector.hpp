@@ -86,8 +86,8 @@ class OutlierDetector {
   std::vector<std::pair<int, int>> rigid_pairs_;   // markers rigidly on one joint...
   std::vector<double> rigid_distance_;             // ...and their distance in the model
   std::vector<std::vector<int>> pairs_of_marker_;  // indices into rigid_pairs_
-  // Per rigid pair, the pair's distance when each of its markers (first, second) came to
-  // rest, taken at the first frame of that still run where both were seen (NaN: not yet).
+  // Per rigid pair, the pair's distance during each of its markers' (first, second) still
+  // run, taken when the frozen rule first looks at the pair in that run (NaN: not yet).
   std::vector<std::array<double, 2>> distance_at_rest_;
   std::vector<std::vector<int>> markers_of_joint_;
   std::vector<double> weights_;

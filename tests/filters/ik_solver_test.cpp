@@ -246,7 +246,8 @@ TEST_F(IkSolverTest, ResetMakesTheNextSolveCold) {
 TEST_F(IkSolverTest, SolveAllocatesNothingAfterWarmUp) {
   IkState dut(skeleton(), markers());
   IkOptions options;
-  options.huber_delta_m = 0.02;  // exercise the robust path too
+  options.huber_delta_m = 0.02;                   // exercise the robust path too
+  options.cold_start_least_squares_first = true;  // and the cold start's second start
   for (int f = 0; f < 5; ++f) {
     Observe(f);
     SolveIk(skeleton(), markers(), options, observed_, weights_, &dut);
@@ -310,8 +311,9 @@ TEST_F(IkSolverTest, RobustColdStartFitsLimbsThatStartFarFromTheirMarkers) {
 }
 
 // The second start must never cost the first: where least squares follows a wild marker
-// to a worse minimum, the robust start's solution is kept. Every pose as above, with one
-// marker 40 cm off: the cold start with both starts ends at most at the robust-only cost.
+// to a worse minimum, the robust start's solution is kept, exactly; where it finds a
+// better one (a limb the robust start left beside its markers), that one is kept. Every
+// pose as above, with one marker 40 cm off.
 TEST_F(IkSolverTest, RobustColdStartKeepsTheBetterOfItsTwoStarts) {
   IkOptions robust_only;
   robust_only.huber_delta_m = 0.004;
@@ -319,15 +321,25 @@ TEST_F(IkSolverTest, RobustColdStartKeepsTheBetterOfItsTwoStarts) {
   both.cold_start_least_squares_first = true;
   std::mt19937_64 rng(11);
   Observe(0);
+  int improved = 0;
   for (int trial = 0; trial < 100; ++trial) {
     ObserveTurnedPose(rng);
     observed_[static_cast<size_t>(trial) % observed_.size()] += Vec3(0.0, 0.4, 0.0);
     IkState a(skeleton(), markers()), b(skeleton(), markers());
     const IkSummary first = SolveIk(skeleton(), markers(), robust_only, observed_, weights_, &a);
     const IkSummary best = SolveIk(skeleton(), markers(), both, observed_, weights_, &b);
-    EXPECT_LE(best.final_cost, first.final_cost * (1.0 + 1e-12)) << "trial " << trial;
-    EXPECT_GE(best.iterations, first.iterations);
+    ASSERT_LE(best.final_cost, first.final_cost) << "trial " << trial;
+    if (best.final_cost < first.final_cost) {
+      ++improved;
+    } else {
+      // The first start's solution, its fitted markers included.
+      for (size_t j = 0; j < a.pose().rotation.size(); ++j)
+        EXPECT_TRUE(a.pose().rotation[j].coeffs() == b.pose().rotation[j].coeffs()) << trial;
+      for (size_t m = 0; m < observed_.size(); ++m)
+        EXPECT_EQ(a.predicted_markers()[m], b.predicted_markers()[m]) << trial;
+    }
   }
+  EXPECT_GT(improved, 0);
 }
 
 }  // namespace
