@@ -62,8 +62,8 @@ struct CleanupCounters {
   int64_t samples_out = 0;
   std::array<int64_t, kMaskReasonCount> repaired_by{};  ///< Published repaired samples, per reason.
   int64_t unrecoverable = 0;
-  int64_t swaps_relabelled =
-      0;  ///< Pairs relabelled, once per frame each (a remembered pair every frame).
+  /// Pairs relabelled, once per frame each (a remembered pair every frame).
+  int64_t swaps_relabelled = 0;
   int64_t samples_out_of_volume = 0;  ///< Samples beyond the capture volume: taken as missing.
   int64_t glitch_frames = 0;          ///< Whole frames taken as missing (a jump no body makes).
   int64_t resyncs = 0;                ///< Jumps that persisted: taken, the solves started afresh.

@@ -439,14 +439,15 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
   auto left_by_a_moving_partner = [&](size_t m) {
     for (int k : pairs_of_marker_[m]) {
       const auto uk = static_cast<size_t>(k);
-      const bool first = static_cast<size_t>(rigid_pairs_[uk].first) == m;
-      const auto o = static_cast<size_t>(first ? rigid_pairs_[uk].second : rigid_pairs_[uk].first);
+      const auto o = static_cast<size_t>(static_cast<size_t>(rigid_pairs_[uk].first) == m
+                                             ? rigid_pairs_[uk].second
+                                             : rigid_pairs_[uk].first);
       const Track& other = tracks_[o];
       if (!s.valid[o] || other.frozen || other.stray || other.fallen || other.off_joint ||
           s.mask[o] == MaskReason::kSpike || s.mask[o] == MaskReason::kSwap ||
           (other.still_since >= 0 && t - other.still_since + 1 >= rules_.frozen_frames))
         continue;
-      double& at_rest = distance_at_rest_[uk][first ? 0 : 1];
+      double& at_rest = DistanceAtRest(uk, m);
       const double distance = (s.raw[m] - s.raw[o]).norm();
       if (std::isnan(at_rest)) at_rest = distance;
       if (std::abs(distance - at_rest) > options_.frozen_reference_motion_m) return true;
@@ -504,10 +505,7 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
     if (track.still_since < 0 ||
         (s.raw[m] - track.still_anchor).norm() > options_.frozen_radius_m) {
       track.still_since = t;
-      for (int k : pairs_of_marker_[m]) {
-        const auto uk = static_cast<size_t>(k);
-        distance_at_rest_[uk][static_cast<size_t>(rigid_pairs_[uk].first) == m ? 0 : 1] = kNaN;
-      }
+      for (int k : pairs_of_marker_[m]) DistanceAtRest(static_cast<size_t>(k), m) = kNaN;
       track.still_anchor = s.raw[m];
       track.still_reference = s.reference[m];
       track.frozen = false;

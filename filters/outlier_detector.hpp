@@ -73,6 +73,10 @@ class OutlierDetector {
               CleanupCounters* counters);
   void CleanMask(CleanupWindow& window, int64_t t, int64_t first_unpublished);
   Track FreshTrack() const;
+  /// Rigid pair k's distance_at_rest_ slot for its marker m's still run.
+  double& DistanceAtRest(size_t k, size_t m) {
+    return distance_at_rest_[k][static_cast<size_t>(rigid_pairs_[k].first) == m ? 0 : 1];
+  }
 
   const Skeleton& skeleton_;
   const MarkerSet& markers_;
