@@ -72,6 +72,10 @@ const std::array kFields = {
       &O::fill_anchor_radius_m},
     F{"anchor_holds_unseen_limbs", nullptr, "anchor_holds_unseen_limbs", kNone, 0, 1,
       &O::anchor_holds_unseen_limbs},
+    F{"unseen_knee_tolerance_rad", kDetectors, "unseen_knee_tolerance_deg", kDeg, 0, 180,
+      &O::unseen_knee_tolerance_rad},
+    F{"unseen_knee_turn_radps", nullptr, "unseen_knee_turn_dps", kDeg, 0, 1e6,
+      &O::unseen_knee_turn_radps},
 };
 
 std::string Str(double v) {
@@ -154,6 +158,12 @@ CleanupFrameRules FrameRules(const CleanupOptions& o) {
   r.data_catchup_m = o.data_catchup_mps / rate;
   r.data_motion_acceleration_m = o.data_motion_acceleration_mps2 / (rate * rate);
   return r;
+}
+
+IkOptions WithUnseenKneeRule(IkOptions ik, const CleanupOptions& options) {
+  ik.unseen_knee_tolerance_rad = options.unseen_knee_tolerance_rad;
+  ik.unseen_knee_max_turn_rad = options.unseen_knee_turn_radps / options.rate_hz;
+  return ik;
 }
 
 }  // namespace mocapd

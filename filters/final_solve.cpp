@@ -10,6 +10,7 @@ FinalSolve::FinalSolve(const Skeleton& skeleton, const MarkerSet& markers,
       markers_(markers),
       options_(options),
       rules_(FrameRules(options)),
+      final_ik_(WithUnseenKneeRule(options.final_ik, options)),
       final_(skeleton, markers),
       anchor_(skeleton, markers),
       held_kinematics_(skeleton) {
@@ -77,8 +78,7 @@ void FinalSolve::Solve(CleanFrame* frame, CleanupCounters* counters) {
     frame->weight[m] = weight;
   }
   if (options_.fill_anchor_radius_m > 0.0 && final_.has_solution()) AnchorRepairs(*frame, counters);
-  frame->final_solve =
-      SolveIk(skeleton_, markers_, options_.final_ik, solve_targets_, weights_, &final_);
+  frame->final_solve = SolveIk(skeleton_, markers_, final_ik_, solve_targets_, weights_, &final_);
   counters->CountSolve(frame->final_solve);
   frame->pose = final_.pose();
 }

@@ -47,6 +47,7 @@ class FinalSolve {
   const MarkerSet& markers_;
   const CleanupOptions options_;
   const CleanupFrameRules rules_;
+  const IkOptions final_ik_;  // options_.final_ik with the unseen-knee rule
   IkState final_, anchor_;
   std::vector<Track> tracks_;
   std::vector<double> weights_, anchor_weights_;

@@ -539,6 +539,10 @@ void IkOptions::Validate() const {
   require(min_markers >= 1, "min_markers", ">= 1");
   require(prediction_velocity_gain >= 0.0 && prediction_velocity_gain <= 1.0,
           "prediction_velocity_gain", "0..1");
+  require(unseen_knee_tolerance_rad >= 0.0 && unseen_knee_tolerance_rad <= 3.14159265358979323846,
+          "unseen_knee_tolerance_rad", "0..pi");
+  require(unseen_knee_max_turn_rad >= 0.0 && std::isfinite(unseen_knee_max_turn_rad),
+          "unseen_knee_max_turn_rad", "a finite value >= 0");
 }
 
 const char* to_string(IkStatus status) {
@@ -570,7 +574,8 @@ IkState::IkState(const Skeleton& skeleton, const MarkerSet& markers)
       prior_mask_(dq_),
       prior_h_(dq_),
       prior_g_(dq_),
-      local_step_(dq_) {
+      local_step_(dq_),
+      knee_swivel_(skeleton, markers) {
   // Priors act on rotations only: translations are always well observed.
   for (int j = 0; j < skeleton.num_joints(); ++j) {
     const int k = skeleton.dof_offset(j);
@@ -781,6 +786,10 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
     s.history_ = 0;
     return summary;
   }
+  summary.knees_turned =
+      s.knee_swivel_.Update(skeleton, observed, weights, options.unseen_knee_tolerance_rad,
+                            options.unseen_knee_max_turn_rad, &s.pose_, &s.ws_, &s.previous_);
+  if (summary.knees_turned > 0) EvaluateMarkers(markers, s.ws_, s.predicted_);
   summary.final_cost = cost;
   double sum_sq = 0.0;
   for (int m = 0; m < markers.num_markers(); ++m) {

@@ -19,6 +19,7 @@
 #include <span>
 #include <vector>
 
+#include "filters/knee_swivel.hpp"
 #include "filters/marker_model.hpp"
 #include "filters/skeleton.hpp"
 
@@ -48,6 +49,11 @@ struct IkOptions {
   double rest_weight = 1e-7;      ///< a_r, m^2 per rad^2, toward the rest pose.
   int min_markers = 3;            ///< Fewer usable markers than this: no solve.
   bool apply_joint_limits = true;
+  /// A leg with no marker seen on its thigh or shin but two on its foot has its knee turned
+  /// about the hip-ankle line until its bend axis is within this of the axis the leg has
+  /// shown in its foot's frame (see KneeSwivel); 0 leaves it where the solve put it.
+  double unseen_knee_tolerance_rad = 0.0;
+  double unseen_knee_max_turn_rad = 0.0;  ///< ...by at most this per solve; 0: no limit.
   /// Throws std::invalid_argument naming the field if an option is out of range.
   void Validate() const;
 };
@@ -63,6 +69,7 @@ struct IkSummary {
   double rms_residual_m = 0.0;  ///< Over the markers used, unweighted.
   int markers_used = 0;
   bool cold_start = false;
+  int knees_turned = 0;  ///< Unseen knees turned back toward their axis (KneeSwivel).
 };
 
 /// Everything one subject's solve keeps between frames. Sized once at construction;
@@ -113,6 +120,7 @@ class IkState {
   Eigen::VectorXd dq_, step_total_, trial_total_, rest_error_, prior_mask_, prior_h_, prior_g_,
       local_step_;
   int first_free_joint_ = -1;
+  KneeSwivel knee_swivel_;
 };
 
 /// Solves one frame. observed holds p_WM per marker (metres); weights per marker, 0 for

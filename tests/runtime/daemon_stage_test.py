@@ -125,8 +125,16 @@ def health_answers_during_a_burst(mocapd, mocap_sim, config_dir, work):
                 reload_s = reload_latency(d)
             time.sleep(0.05)
         out, _ = feed.communicate(timeout=120)
-        time.sleep(1.0)
-        rss_after = rss_mb(d.process.pid)
+        # The control thread hands the memory back when it next sees the backlog gone (its
+        # log tick); give it a few seconds, which a stage's monitoring would not notice.
+        bound = rss[0] + 0.5 * (max(rss) - rss[0]) + 2.0
+        waited = time.monotonic()
+        while True:
+            time.sleep(0.25)
+            rss_after = rss_mb(d.process.pid)
+            if rss_after <= bound or time.monotonic() - waited > 5.0:
+                break
+        waited = time.monotonic() - waited
     finally:
         done.set()
         prober.join()
@@ -135,10 +143,10 @@ def health_answers_during_a_burst(mocapd, mocap_sim, config_dir, work):
         statuses = sorted(set(s for _, s in samples))
         print(f"burst: {len(samples)} /health requests, slowest {worst * 1e3:.1f} ms, statuses {statuses}; "
               f"SIGHUP to reload applied {reload_s * 1e3:.1f} ms; resident memory {rss[0]:.1f} MB before, "
-              f"{max(rss):.1f} MB at the peak, {rss_after:.1f} MB 1 s after")
+              f"{max(rss):.1f} MB at the peak, {rss_after:.1f} MB {waited:.2f} s after")
         assert reload_s is not None and reload_s <= 0.5, f"the reload took {reload_s} s during the burst"
         # The backlog's memory is handed back once it has been read (most of what it grew by).
-        assert rss_after <= rss[0] + 0.5 * (max(rss) - rss[0]) + 2.0, (rss[0], max(rss), rss_after)
+        assert rss_after <= bound, (rss[0], max(rss), rss_after)
         assert feed.returncode == 0, out
         assert all(not s.startswith("no answer") and s != "down" for _, s in samples), statuses
         assert worst <= 0.1, f"/health took {worst * 1e3:.1f} ms during the burst (at most 100 ms)"
