@@ -109,11 +109,15 @@ class Corruptor {
   }
   bool Valid(int f, int p) const { return out_.take.valid(f, p); }
 
-  // 1 frame to 2 s, log-uniform: most occlusions are short, a few are long.
+  // 1/120 s to 2 s, log-uniform: most occlusions are short, a few are long. In seconds,
+  // not frames: an occlusion is the body's, so the same take captured at 60 and 240 Hz
+  // loses the same stretches of time (counted in frames, a 60 Hz take's gaps averaged
+  // 28 % longer than a 240 Hz take's). At least one frame.
   int GapLength() {
-    const double max_frames = std::max(1.0, 2.0 * clean_.rate_hz);
-    return std::max(1,
-                    static_cast<int>(std::round(std::exp(UniformReal(0.0, std::log(max_frames))))));
+    const double shortest_frames = clean_.rate_hz / 120.0, longest_frames = 2.0 * clean_.rate_hz;
+    const double frames =
+        std::exp(UniformReal(std::log(shortest_frames), std::log(std::max(1.0, longest_frames))));
+    return std::max(1, static_cast<int>(std::round(frames)));
   }
 
   void Gap(bool open_end) {
@@ -141,7 +145,9 @@ class Corruptor {
   void Pop() {
     const int p = Uniform(0, points_ - 1);
     const int first = Uniform(0, frames_ - 1);
-    const int last = std::min(frames_ - 1, first + Uniform(0, 2));
+    // 1 to 3 frames at 120 Hz, as many frames as that is at the take's rate (at least one).
+    const int last = std::min(
+        frames_ - 1, first + Uniform(0, static_cast<int>(std::lround(clean_.rate_hz / 60.0))));
     Vec3 dir(UniformReal(-1, 1), UniformReal(-1, 1), UniformReal(-1, 1));
     if (dir.norm() < 1e-6) dir = Vec3::UnitX();
     const Vec3 offset = dir.normalized() * UniformReal(0.05, 0.5);
