@@ -76,6 +76,7 @@ const std::array kFields = {
       &O::unseen_knee_tolerance_rad},
     F{"unseen_knee_turn_radps", nullptr, "unseen_knee_turn_dps", kDeg, 0, 1e6,
       &O::unseen_knee_turn_radps},
+    F{"solve_smoothing_s", kPipeline, "solve_smoothing_ms", kMs, 0, 1000, &O::solve_smoothing_s},
 };
 
 std::string Str(double v) {
@@ -157,6 +158,7 @@ CleanupFrameRules FrameRules(const CleanupOptions& o) {
       o.fill_weight_growth_per_s > 0.0 ? std::exp(o.fill_weight_growth_per_s * dt) : 1.0;
   r.data_catchup_m = o.data_catchup_mps / rate;
   r.data_motion_acceleration_m = o.data_motion_acceleration_mps2 / (rate * rate);
+  r.solve_smoothing_frames = frames(o.solve_smoothing_s, 0);
   return r;
 }
 

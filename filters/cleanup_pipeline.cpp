@@ -19,9 +19,10 @@ CleanupPipeline::CleanupPipeline(std::shared_ptr<const Skeleton> skeleton,
     : skeleton_(std::move(skeleton)),
       markers_(std::move(markers)),
       options_(Validated(options)),
+      smoothing_frames_(std::min(FrameRules(options_).solve_smoothing_frames, options_.lookahead)),
       // The frame being published (t - K), the lookahead up to t, and two frames before
-      // for slopes and trajectory continuity.
-      window_(markers_->num_markers(), options_.lookahead + 3),
+      // for slopes and trajectory continuity, or as many as the smoothing reaches back.
+      window_(markers_->num_markers(), options_.lookahead + 1 + std::max(2, smoothing_frames_)),
       detector_(*skeleton_, *markers_, options_),
       repair_(markers_->num_markers(), options_),
       final_(*skeleton_, *markers_, options_) {
@@ -35,6 +36,19 @@ CleanupPipeline::CleanupPipeline(std::shared_ptr<const Skeleton> skeleton,
   last_taken_.assign(m, Vec3::Zero());
   has_last_taken_.assign(m, 0);
   displacement_.assign(m, 0.0);
+  solve_samples_.assign(m, Vec3::Zero());
+  // Centre weights of a least-squares cubic (equally, quadratic) through 2n + 1
+  // equally spaced samples: 3 (3n^2 + 3n - 1 - 5j^2) / ((2n - 1)(2n + 1)(2n + 3)).
+  const int n_max = smoothing_frames_;
+  smoothing_weights_.assign(static_cast<size_t>((n_max + 1) * (n_max + 1)), 0.0);
+  for (int n = 0; n <= n_max; ++n)
+    for (int j = 0; j <= n; ++j) {
+      const double nn = n;
+      smoothing_weights_[static_cast<size_t>(n * (n_max + 1) + j)] =
+          n == 0 ? 1.0
+                 : 3.0 * (3.0 * nn * nn + 3.0 * nn - 1.0 - 5.0 * j * j) /
+                       ((2.0 * nn - 1.0) * (2.0 * nn + 1.0) * (2.0 * nn + 3.0));
+    }
 }
 
 void CleanupPipeline::Reset() {
@@ -116,6 +130,36 @@ void CleanupPipeline::GateGlitch(WindowFrame& s) {
   last_taken_frame_ = s.frame;
 }
 
+// A captured sample's smoothed position: the centre of a cubic fitted through it and the
+// same number of clean captured samples either side (centred, so a steady motion leaves
+// it where it is), reaching as far as the window and the take hold clean samples on both
+// sides. Anything else is fitted as published.
+void CleanupPipeline::SmoothCapturedSamples(int64_t tau, int64_t newest) {
+  const size_t m_count = solve_samples_.size();
+  const int reach = static_cast<int>(std::min<int64_t>(smoothing_frames_, newest - tau));
+  const size_t row = static_cast<size_t>(smoothing_frames_ + 1);
+  for (size_t m = 0; m < m_count; ++m) {
+    solve_samples_[m] = out_.markers[m];
+    if (reach <= 0 || out_.source[m] != SampleSource::kCaptured) continue;
+    auto clean = [&](int64_t f) {
+      if (!window_.Holds(f)) return false;
+      const WindowFrame& w = window_.at(f);
+      return w.valid[m] && w.mask[m] == MaskReason::kNone;
+    };
+    int n = 0;
+    // The window's older frame may be a resync's start: nothing before it belongs.
+    while (n < reach && clean(tau - n - 1) && clean(tau + n + 1) && !window_.at(tau - n).resync &&
+           !window_.at(tau + n + 1).resync)
+      ++n;
+    if (n < 2) continue;  // a cubic through 3 samples is the samples
+    const double* weight = &smoothing_weights_[static_cast<size_t>(n) * row];
+    Vec3 sum = weight[0] * out_.markers[m];
+    for (int j = 1; j <= n; ++j)
+      sum += weight[j] * (window_.at(tau - j).raw[m] + window_.at(tau + j).raw[m]);
+    solve_samples_[m] = sum;
+  }
+}
+
 bool CleanupPipeline::Flush() {
   if (next_out_ >= next_in_) return false;
   Publish(next_out_, next_in_ - 1);
@@ -129,7 +173,8 @@ void CleanupPipeline::Publish(int64_t tau, int64_t newest) {
     final_.Reset();
   }
   repair_.Repair(window_, tau, newest, &out_, &counters_);
-  final_.Solve(&out_, &counters_);
+  SmoothCapturedSamples(tau, newest);
+  final_.Solve(&out_, &counters_, solve_samples_);
   ++counters_.frames_out;
   next_out_ = tau + 1;
 }

@@ -12,9 +12,10 @@
 //    sample filled by a cubic Hermite offset onto the reference path;
 //  - FinalSolve (filters/final_solve.hpp): the skeleton Y- on the repaired markers,
 //    warm-started and pop-free.
-// Samples that were fine are published exactly as they came in. Memory is fixed at
-// construction (a ring of K + 3 frames and per-marker state in each stage); Push and
-// Flush never allocate.
+// Samples that were fine are published exactly as they came in; the final solve fits
+// them smoothed over the frames around them (solve_smoothing_s). Memory is fixed at
+// construction (a ring of K + 3 frames plus the smoothing's reach back, and per-marker
+// state in each stage); Push and Flush never allocate.
 #pragma once
 
 #include <memory>
@@ -55,10 +56,12 @@ class CleanupPipeline {
  private:
   void Publish(int64_t tau, int64_t newest);
   void GateGlitch(WindowFrame& s);
+  void SmoothCapturedSamples(int64_t tau, int64_t newest);
 
   std::shared_ptr<const Skeleton> skeleton_;
   std::shared_ptr<const MarkerSet> markers_;
   CleanupOptions options_;
+  int smoothing_frames_;  ///< Half-width of the final solve's smoothing (FrameRules).
   CleanupWindow window_;
   OutlierDetector detector_;
   GapRepair repair_;
@@ -69,6 +72,10 @@ class CleanupPipeline {
       last_taken_;  ///< Per marker, its last sample in a frame taken (the glitch gate).
   std::vector<uint8_t> has_last_taken_;
   std::vector<double> displacement_;  ///< GateGlitch's scratch.
+  /// Savitzky-Golay (cubic) centre weights: row n (a half-width of n frames) holds the
+  /// weights of offsets 0..n.
+  std::vector<double> smoothing_weights_;
+  std::vector<Vec3> solve_samples_;  ///< What the final solve fits for captured samples.
   int64_t last_taken_frame_ = -1;
   int64_t glitch_since_ = -1;
   int64_t next_in_ = 0;   ///< Frame number of the next Push.

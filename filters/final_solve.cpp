@@ -29,14 +29,15 @@ void FinalSolve::Reset() {
   final_.Reset();
 }
 
-void FinalSolve::Solve(CleanFrame* frame, CleanupCounters* counters) {
+void FinalSolve::Solve(CleanFrame* frame, CleanupCounters* counters,
+                       std::span<const Vec3> captured_fit) {
   const int64_t tau = frame->frame;
   const double catchup = rules_.data_catchup_m;
   for (size_t m = 0; m < tracks_.size(); ++m) {
     Track& track = tracks_[m];
-    const Vec3& x = frame->markers[m];
     const MarkerStatus status = frame->status[m];
     const bool data = frame->source[m] == SampleSource::kCaptured;
+    const Vec3& x = data && !captured_fit.empty() ? captured_fit[m] : frame->markers[m];
     // The final solve never takes a captured sample at one bound: it fits a target that
     // starts where the skeleton had the marker last frame, moves with the sample's own
     // motion (changing by at most data_motion_acceleration_m per frame, so a swap or pop

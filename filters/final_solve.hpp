@@ -12,6 +12,7 @@
 // Per-marker state is sized at construction; Solve never allocates.
 #pragma once
 
+#include <span>
 #include <vector>
 
 #include "filters/cleanup_options.hpp"
@@ -26,8 +27,10 @@ class FinalSolve {
   FinalSolve(const Skeleton& skeleton, const MarkerSet& markers, const CleanupOptions& options);
 
   /// Solves the frame whose markers, status and source the repair filled (frames in
-  /// order); writes its weight, pose and final_solve. Never allocates or throws.
-  void Solve(CleanFrame* frame, CleanupCounters* counters);
+  /// order); writes its weight, pose and final_solve. captured_fit, if given (one per
+  /// marker), is what to fit for captured samples instead of frame->markers (their
+  /// smoothed positions). Never allocates or throws.
+  void Solve(CleanFrame* frame, CleanupCounters* counters, std::span<const Vec3> captured_fit = {});
   /// Forgets all state (a capture restart).
   void Reset();
 
