@@ -539,7 +539,7 @@ void IkOptions::Validate() const {
   require(min_markers >= 1, "min_markers", ">= 1");
   require(prediction_velocity_gain >= 0.0 && prediction_velocity_gain <= 1.0,
           "prediction_velocity_gain", "0..1");
-  require(unseen_knee_tolerance_rad >= 0.0 && unseen_knee_tolerance_rad <= 3.14159265358979323846,
+  require(unseen_knee_tolerance_rad >= 0.0 && unseen_knee_tolerance_rad <= M_PI,
           "unseen_knee_tolerance_rad", "0..pi");
   require(unseen_knee_max_turn_rad >= 0.0 && std::isfinite(unseen_knee_max_turn_rad),
           "unseen_knee_max_turn_rad", "a finite value >= 0");

@@ -8,8 +8,8 @@ namespace mocapd {
 namespace {
 
 // Below this knee bend the hip-knee-ankle plane, and so the axis, is not defined well.
-constexpr double kMinBendRad = 20.0 * 3.14159265358979323846 / 180.0;
-constexpr double kMinTurnBendRad = 5.0 * 3.14159265358979323846 / 180.0;
+constexpr double kMinBendRad = 20.0 * M_PI / 180.0;
+constexpr double kMinTurnBendRad = 5.0 * M_PI / 180.0;
 // A guess (a one-sided fill weighs a hundredth of data in the final solve) shows nothing
 // of where the knee is.
 constexpr double kSeenWeight = 0.5;
