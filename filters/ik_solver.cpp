@@ -786,9 +786,12 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
     s.history_ = 0;
     return summary;
   }
-  summary.knees_turned =
-      s.knee_swivel_.Update(skeleton, observed, weights, options.unseen_knee_tolerance_rad,
-                            options.unseen_knee_max_turn_rad, &s.pose_, &s.ws_, &s.previous_);
+  // Only a solve that turns knees needs to learn their axes (the final solve; not the
+  // references, the anchor or calibration's tracking).
+  if (options.unseen_knee_tolerance_rad > 0.0)
+    summary.knees_turned =
+        s.knee_swivel_.Update(skeleton, observed, weights, options.unseen_knee_tolerance_rad,
+                              options.unseen_knee_max_turn_rad, &s.pose_, &s.ws_, &s.previous_);
   if (summary.knees_turned > 0) EvaluateMarkers(markers, s.ws_, s.predicted_);
   summary.final_cost = cost;
   double sum_sq = 0.0;
