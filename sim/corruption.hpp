@@ -1,7 +1,8 @@
 // Seeded corruption of clean marker takes, the way real optical captures go wrong:
 // cluster-correlated occlusion gaps (1/120 s to 2 s, some open at the start or end),
-// label swaps between markers that pass within ~10 cm, pops (1/120 to about 1/40 s,
-// 5-50 cm); every duration in seconds, so a take corrupts alike at any capture rate,
+// label swaps between markers that pass within ~10 cm, pops (1-3 frames at 120 Hz, as
+// long in time at other rates, at least one frame; 5-50 cm); every duration in seconds,
+// so a take corrupts alike at any capture rate,
 // frozen markers that pop back, markers falling off, and Gaussian jitter. Records what
 // it did as a ground-truth mask, so cleanup can be scored. Shared by `mocap-sim synth
 // --corrupt` and the replay simulator.

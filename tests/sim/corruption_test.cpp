@@ -29,6 +29,30 @@ TEST_F(CorruptionTest, ReachesEachSeveritysTargetFraction) {
   }
 }
 
+// An occlusion is the body's, not the camera's: the same motion captured at 60 and at
+// 240 Hz loses stretches of the same length in seconds. (Counted in frames, a 60 Hz
+// take's gaps averaged 28 % longer in time than a 240 Hz take's.)
+TEST(CorruptionRateTest, GapsLastAsLongInSecondsAtAnyCaptureRate) {
+  auto mean_gap_seconds = [](double rate_hz) {
+    const testing::HumanoidFixture take = testing::MakeHumanoidFixture("mixed", 20.0, rate_hz);
+    double seconds = 0.0;
+    int gaps = 0;
+    for (uint64_t seed = 1; seed <= 8; ++seed) {
+      CorruptionOptions options;
+      options.seed = seed;
+      for (const CorruptionEvent& e : CorruptTake(take.take, take.markers.get(), options).events)
+        if (e.kind == CorruptionKind::kGap && e.first_frame > 0 &&
+            e.last_frame < take.take.num_frames - 1) {  // not cut short by the take's ends
+          seconds += (e.last_frame - e.first_frame + 1) / rate_hz;
+          ++gaps;
+        }
+    }
+    return seconds / gaps;
+  };
+  const double at_60 = mean_gap_seconds(60.0), at_240 = mean_gap_seconds(240.0);
+  EXPECT_NEAR(at_60 / at_240, 1.0, 0.1) << at_60 << " s at 60 Hz, " << at_240 << " s at 240 Hz";
+}
+
 TEST_F(CorruptionTest, ProducesEveryKindAndATruthThatMatchesTheData) {
   CorruptionOptions options;
   options.jitter_min_m = options.jitter_max_m = 0.0;  // so untouched samples are exact
