@@ -48,6 +48,7 @@ struct Scores {
   };
   std::vector<Pop> pop_frames;                                   ///< each pop's worst joint
   std::vector<std::vector<Vec3>> estimated_joints, true_joints;  ///< per frame (for --explain-pops)
+  std::vector<Pose> estimated_poses;  ///< per frame (for --trace: the solved markers' residuals)
   double p50_us = 0, p99_us = 0;
   /// The per-frame joint error (the worst joint's in each frame): its maximum over the
   /// take, the frame and joint where it is, and its 99.9th percentile.
@@ -71,6 +72,7 @@ class Scorer {
       ForwardKinematics(sk_, pose, &e);
       errors_.Add(t, e);
       est_p.push_back(e.p_WJ);
+      s.estimated_poses.push_back(pose);
       tru_p.push_back(t.p_WJ);
     }
     s.pos_cm = errors_.mean_position_error_m() * 100;
@@ -333,6 +335,13 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
         }
       std::printf("trace %d %s %.1f", g, skeleton->joint(worst_joint).name.c_str(),
                   worst_error * 100);
+      // The solved skeleton's own markers (its model of each sample) against the truth.
+      std::vector<Vec3> solved(static_cast<size_t>(take.markers->num_markers()));
+      if (static_cast<size_t>(g) < s.estimated_poses.size()) {
+        KinematicsWorkspace ws(*skeleton);
+        ForwardKinematics(*skeleton, s.estimated_poses[static_cast<size_t>(g)], &ws);
+        EvaluateMarkers(*take.markers, ws, solved);
+      }
       for (const std::string& name : g_trace.markers) {
         const auto found = take.markers->FindMarker(name);
         if (!found) continue;
@@ -342,9 +351,10 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
         const char c = st == MarkerStatus::kObserved        ? 'o'
                        : st == MarkerStatus::kUnrecoverable ? 'x'
                                                             : ReasonLetter(reasons[ug][um]);
-        std::printf(" %s %c%c%c e%.1f w%.2f", name.c_str(), c, ReasonLetter(reasons[ug][um]),
+        std::printf(" %s %c%c%c e%.1f s%.1f w%.2f", name.c_str(), c, ReasonLetter(reasons[ug][um]),
                     ".gspzf"[static_cast<int>(bad.at(g, m))],
-                    (published[ug][um] - clean.at(g, m)).norm() * 100, weights[ug][um]);
+                    (published[ug][um] - clean.at(g, m)).norm() * 100,
+                    (solved[um] - clean.at(g, m)).norm() * 100, weights[ug][um]);
       }
       std::printf("\n");
     }
