@@ -68,8 +68,8 @@ const std::array kFields = {
     F{"data_catchup_mps", nullptr, "data_catchup_mps", kNone, 0, 1e3, &O::data_catchup_mps},
     F{"data_motion_acceleration_mps2", nullptr, "data_motion_acceleration_mps2", kNone, 1e-3, 1e7,
       &O::data_motion_acceleration_mps2},
-    F{"fill_anchor_radius_m", nullptr, "fill_anchor_radius_mm", kMm, 0, 1000,
-      &O::fill_anchor_radius_m},
+    F{"fill_anchor_speed_mps", nullptr, "fill_anchor_speed_mps", kNone, 0, 1e3,
+      &O::fill_anchor_speed_mps},
     F{"anchor_holds_unseen_limbs", nullptr, "anchor_holds_unseen_limbs", kNone, 0, 1,
       &O::anchor_holds_unseen_limbs},
     F{"unseen_knee_tolerance_rad", kDetectors, "unseen_knee_tolerance_deg", kDeg, 0, 180,
@@ -158,6 +158,7 @@ CleanupFrameRules FrameRules(const CleanupOptions& o) {
       o.fill_weight_growth_per_s > 0.0 ? std::exp(o.fill_weight_growth_per_s * dt) : 1.0;
   r.data_catchup_m = o.data_catchup_mps / rate;
   r.data_motion_acceleration_m = o.data_motion_acceleration_mps2 / (rate * rate);
+  r.fill_anchor_radius_m = o.fill_anchor_speed_mps / rate;
   r.solve_smoothing_frames = frames(o.solve_smoothing_s, 0);
   return r;
 }

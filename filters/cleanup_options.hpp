@@ -100,9 +100,12 @@ struct CleanupOptions {
   /// The sample's motion that the catch-up target follows accelerates at most this much
   /// (216 m/s^2 is past a punch): a swap or pop the detectors missed is a jump, not motion.
   double data_motion_acceleration_mps2 = 216.0;
-  /// A repaired sample pulls the skeleton at most this far (m) from the anchor, the pose
-  /// the trusted samples alone give: a fill is a guess, and a guess can jump. 0: no anchor.
-  double fill_anchor_radius_m = 0.002;
+  /// A repaired sample pulls the skeleton at most this speed times one frame's time away
+  /// from the anchor, the pose the trusted samples alone give: a fill is a guess, and a
+  /// guess can jump. A speed, not a distance, because the anchor restarts from the last
+  /// frame's skeleton each frame: a fixed radius let a guess drag a limb four times as
+  /// fast at 240 Hz as at 60 Hz. 0.24 m/s is 2 mm a frame at 120 Hz. 0: no anchor.
+  double fill_anchor_speed_mps = 0.24;
   /// In the anchor, a limb with no trusted sample on it or below keeps its world
   /// orientation (its parent carries it along without swinging it).
   bool anchor_holds_unseen_limbs = true;
@@ -131,7 +134,7 @@ struct CleanupOptions {
   IkOptions robust_ik;  ///< Y^: Huber (4 mm), weak velocity prediction.
   IkOptions final_ik;   ///< Y-: decaying velocity prediction, so joints without data come to rest.
   IkOptions
-      anchor_ik;  ///< The anchor (see fill_anchor_radius_m): one iteration from last frame's Y-.
+      anchor_ik;  ///< The anchor (see fill_anchor_speed_mps): one iteration from last frame's Y-.
   CleanupOptions();
   /// Throws std::invalid_argument naming the field, its bounds and the value if an
   /// option is out of range (the bounds of CleanupOptionFields()).
@@ -169,6 +172,7 @@ struct CleanupFrameRules {
   double fill_weight_ramp;            ///< Factor per frame (<= 1: no limit).
   double data_catchup_m;              ///< Per frame.
   double data_motion_acceleration_m;  ///< Change of the per-frame motion, per frame.
+  double fill_anchor_radius_m;        ///< Per frame.
   int solve_smoothing_frames;         ///< Half-width of the final solve's smoothing.
 };
 /// The rules for options.rate_hz. The options must be valid.

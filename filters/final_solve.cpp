@@ -78,7 +78,7 @@ void FinalSolve::Solve(CleanFrame* frame, CleanupCounters* counters,
     weights_[m] = weight;
     frame->weight[m] = weight;
   }
-  if (options_.fill_anchor_radius_m > 0.0 && final_.has_solution()) AnchorRepairs(*frame, counters);
+  if (rules_.fill_anchor_radius_m > 0.0 && final_.has_solution()) AnchorRepairs(*frame, counters);
   frame->final_solve = SolveIk(skeleton_, markers_, final_ik_, solve_targets_, weights_, &final_);
   counters->CountSolve(frame->final_solve);
   frame->pose = final_.pose();
@@ -86,8 +86,8 @@ void FinalSolve::Solve(CleanFrame* frame, CleanupCounters* counters,
 
 // Where the skeleton goes on the samples it can trust alone (captured, fitted, full
 // weight): the anchor. A repaired sample may pull the skeleton at most
-// fill_anchor_radius_m from it. A fill is a guess, and a guess may jump (its reference
-// re-acquiring a segment, an interpolation bending onto a returning track); the anchor
+// fill_anchor_speed_mps times a frame's time from it. A fill is a guess, and a guess may jump (its
+// reference re-acquiring a segment, an interpolation bending onto a returning track); the anchor
 // moves only with real data, so how far a guess can take the skeleton in one frame is
 // bounded.
 void FinalSolve::AnchorRepairs(const CleanFrame& frame, CleanupCounters* counters) {
@@ -111,7 +111,7 @@ void FinalSolve::AnchorRepairs(const CleanFrame& frame, CleanupCounters* counter
   for (size_t m = 0; m < m_count; ++m) {
     if (anchor_weights_[m] > 0.0 || weights_[m] <= 0.0 || tracks_[m].catching_up) continue;
     solve_targets_[m] =
-        anchor[m] + ClampNorm(Vec3(solve_targets_[m] - anchor[m]), options_.fill_anchor_radius_m);
+        anchor[m] + ClampNorm(Vec3(solve_targets_[m] - anchor[m]), rules_.fill_anchor_radius_m);
   }
 }
 

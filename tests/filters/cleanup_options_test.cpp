@@ -62,5 +62,31 @@ TEST(CleanupOptionsTest, EveryOptionIsInTheTableOnceWithItsDefaultInBounds) {
   EXPECT_EQ(names.size(), 43u);  // a new option must be added to the table (and this count)
 }
 
+TEST(CleanupOptionsTest, EveryPerFrameRuleMeansTheSameSpeedOrTimeAtEveryRate) {
+  // The cleanup works per frame, but its rules are physical: a speed, an acceleration or
+  // a time. Converted at 60 and at 240 Hz they must bound the same motion per second.
+  CleanupOptions slow, fast;
+  slow.rate_hz = 60.0;
+  fast.rate_hz = 240.0;
+  const CleanupFrameRules s = FrameRules(slow), f = FrameRules(fast);
+  auto per_second = [](double per_frame, double rate) { return per_frame * rate; };
+  EXPECT_NEAR(per_second(s.fill_anchor_radius_m, 60), per_second(f.fill_anchor_radius_m, 240),
+              1e-12);
+  EXPECT_NEAR(per_second(s.fill_anchor_radius_m, 60), slow.fill_anchor_speed_mps, 1e-12);
+  EXPECT_NEAR(per_second(s.data_catchup_m, 60), per_second(f.data_catchup_m, 240), 1e-12);
+  EXPECT_NEAR(per_second(s.trim_slope_m, 60), per_second(f.trim_slope_m, 240), 1e-12);
+  EXPECT_NEAR(per_second(s.max_offset_velocity_m, 60), per_second(f.max_offset_velocity_m, 240),
+              1e-12);
+  EXPECT_NEAR(s.data_motion_acceleration_m * 60 * 60, f.data_motion_acceleration_m * 240 * 240,
+              1e-9);
+  // Durations in whole frames: the same time to within half a frame at each rate.
+  EXPECT_NEAR(s.frozen_frames / 60.0, slow.frozen_s, 0.5 / 60);
+  EXPECT_NEAR(f.frozen_frames / 240.0, fast.frozen_s, 0.5 / 240);
+  EXPECT_NEAR(s.fallen_frames / 60.0, slow.fallen_s, 0.5 / 60);
+  EXPECT_NEAR(f.fallen_frames / 240.0, fast.fallen_s, 0.5 / 240);
+  // The weight ramp grows by the same factor per second.
+  EXPECT_NEAR(60 * std::log(s.fill_weight_ramp), 240 * std::log(f.fill_weight_ramp), 1e-9);
+}
+
 }  // namespace
 }  // namespace mocapd

@@ -117,12 +117,12 @@ TEST_F(FinalSolveTest, GuessesPullTheSkeletonNoFurtherThanTheAnchorAllows) {
   // the arm moves. The skeleton may follow those guesses only within the anchor's
   // radius of the pose the trusted samples give.
   const std::vector<Pose> bent = BendElbowWhileForearmIsOccluded();
-  auto worst_extra_hand_step = [&](double radius) {
+  auto worst_extra_hand_step = [&](double speed) {
     CleanupOptions options;
-    options.fill_anchor_radius_m = radius;
+    options.fill_anchor_speed_mps = speed;
     return WorstExtraJointStep(Run(options), bent, "LeftHand", 380, 520);
   };
-  const double anchored = worst_extra_hand_step(CleanupOptions{}.fill_anchor_radius_m),
+  const double anchored = worst_extra_hand_step(CleanupOptions{}.fill_anchor_speed_mps),
                free = worst_extra_hand_step(0.0);
   EXPECT_LT(anchored, 0.02) << free;  // measured 1.1 cm
   EXPECT_GT(free, 0.03) << anchored;  // measured 5.6 cm
