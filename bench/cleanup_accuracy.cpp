@@ -319,7 +319,8 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
   if (g_trace.take.empty() ? false : take.name.find(g_trace.take) != std::string::npos) {
     // Frame by frame: each traced marker's published status (as in --explain-pops), the
     // reason it was masked for (which an unrecoverable 'x' hides), the injected truth, its
-    // error against the clean take (cm) and final-solve weight.
+    // error against the clean take (e, cm), the solved skeleton's marker against the clean
+    // take (s, cm) and final-solve weight (w).
     for (int g = g_trace.from; g <= g_trace.to && g < static_cast<int>(published.size()); ++g) {
       // The frame's worst joint first: its error against the truth (cm).
       int worst_joint = 0;

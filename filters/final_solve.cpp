@@ -86,10 +86,10 @@ void FinalSolve::Solve(CleanFrame* frame, CleanupCounters* counters,
 
 // Where the skeleton goes on the samples it can trust alone (captured, fitted, full
 // weight): the anchor. A repaired sample may pull the skeleton at most
-// fill_anchor_speed_mps times a frame's time from it. A fill is a guess, and a guess may jump (its
-// reference re-acquiring a segment, an interpolation bending onto a returning track); the anchor
-// moves only with real data, so how far a guess can take the skeleton in one frame is
-// bounded.
+// fill_anchor_speed_mps times a frame's time from it. A fill is a guess, and a guess may
+// jump (its reference re-acquiring a segment, an interpolation bending onto a returning
+// track); the anchor moves only with real data, so how fast a guess can take the skeleton
+// is bounded.
 void FinalSolve::AnchorRepairs(const CleanFrame& frame, CleanupCounters* counters) {
   const size_t m_count = tracks_.size();
   for (size_t m = 0; m < m_count; ++m)
