@@ -106,9 +106,16 @@ struct CleanupOptions {
   /// frame's skeleton each frame: a fixed radius let a guess drag a limb four times as
   /// fast at 240 Hz as at 60 Hz. 0.24 m/s is 2 mm a frame at 120 Hz. 0: no anchor.
   double fill_anchor_speed_mps = 0.24;
-  /// In the anchor, a limb with no trusted sample on it or below keeps its world
-  /// orientation (its parent carries it along without swinging it).
+  /// In the anchor, a limb with no trusted sample on it or below is held: its parent
+  /// carries it along but turns it in the world at most unseen_limb_turn_radps. A thigh
+  /// swinging over an occluded, planted lower leg does not swing the guessed foot; a
+  /// parent that turns slowly takes its unseen limb with it, so a limb hidden for long
+  /// goes where its parent goes rather than staying where it was last seen.
   bool anchor_holds_unseen_limbs = true;
+  /// 1 rad/s moves the end of a 0.25-0.5 m limb at 0.25-0.5 m/s, about the speed a guess
+  /// may drag the skeleton (fill_anchor_speed_mps). 0: the limb keeps its world
+  /// orientation for as long as it is unseen.
+  double unseen_limb_turn_radps = 1.0;
   /// In the final solve, a leg with nothing seen on its thigh or shin but its foot seen
   /// has its knee turned about the hip-ankle line until the knee's bend axis is within
   /// this (rad) of the axis the leg has shown in its foot's frame (KneeSwivel). The two
@@ -173,6 +180,7 @@ struct CleanupFrameRules {
   double data_catchup_m;              ///< Per frame.
   double data_motion_acceleration_m;  ///< Change of the per-frame motion, per frame.
   double fill_anchor_radius_m;        ///< Per frame.
+  double unseen_limb_turn_rad;        ///< Per frame.
   int solve_smoothing_frames;         ///< Half-width of the final solve's smoothing.
 };
 /// The rules for options.rate_hz. The options must be valid.

@@ -116,11 +116,13 @@ void FinalSolve::AnchorRepairs(const CleanFrame& frame, CleanupCounters* counter
 }
 
 // A limb with no trusted sample on it or below it (a lower leg and foot, a forearm and
-// hand) keeps in the anchor the world orientation it had last frame: its parent carries
-// its root along but does not swing it. A limb held relative to its parent turns with
-// it, and a trusted thigh turning over an occluded, planted lower leg then swung the
-// guessed foot 2-3 cm a frame faster than the real one (bench/README.md). Returns false
-// when every limb is seen (the anchor stands as solved).
+// hand) is held in the anchor: its parent carries its root along, but turns it in the
+// world at most unseen_limb_turn_radps. Held relative to its parent, a trusted thigh
+// turning over an occluded, planted lower leg swung the guessed foot 2-3 cm a frame
+// faster than the real one (bench/README.md); held in the world for as long as it was
+// unseen, a foot under a shin that kept walking drifted 12 cm from the truth while its
+// fills were 2-7 cm off. Returns false when every limb is seen (the anchor stands as
+// solved).
 bool FinalSolve::HoldUnseenLimbs() {
   const int joints = skeleton_.num_joints();
   std::fill(limb_seen_.begin(), limb_seen_.end(), 0);
@@ -142,8 +144,15 @@ bool FinalSolve::HoldUnseenLimbs() {
         skeleton_.joint(j).type != JointType::kBall)
       continue;
     if (!held) held_pose_ = anchor_.pose();
-    held_pose_.rotation[uj] =
-        Quat(now.R_WJ[static_cast<size_t>(parent)].transpose() * before.R_WJ[uj]);
+    // Between keeping its world orientation and turning with its parent (the anchor's
+    // own solution, warm-started from last frame), at most unseen_limb_turn_rad from the
+    // first.
+    const Quat in_world(now.R_WJ[static_cast<size_t>(parent)].transpose() * before.R_WJ[uj]);
+    const Quat& with_parent = anchor_.pose().rotation[uj];
+    const double turn = in_world.angularDistance(with_parent);
+    held_pose_.rotation[uj] = turn <= rules_.unseen_limb_turn_rad
+                                  ? with_parent
+                                  : in_world.slerp(rules_.unseen_limb_turn_rad / turn, with_parent);
     held = true;
   }
   if (!held) return false;

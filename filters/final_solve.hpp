@@ -8,7 +8,7 @@
 //  - a repaired sample weighs by where it came from (interpolated between known ends:
 //    much; extrapolated from one side: little), its weight grows gradually, and it may
 //    pull the skeleton only a few mm from the anchor: the pose the trusted samples alone
-//    give, with every limb that has no trusted sample keeping its world orientation.
+//    give, with every limb that has no trusted sample turned by its parent only slowly.
 // Per-marker state is sized at construction; Solve never allocates.
 #pragma once
 

@@ -69,13 +69,18 @@ class CleanupFixture : public ::testing::Test {
   // over frames [from, to), metres.
   double WorstJointError(const std::vector<CleanFrame>& out, const char* joint_name, int from,
                          int to) const {
+    return WorstJointError(out, fixture_.motion, joint_name, from, to);
+  }
+  // ...from `truth`.
+  double WorstJointError(const std::vector<CleanFrame>& out, const std::vector<Pose>& truth,
+                         const char* joint_name, int from, int to) const {
     const auto joint = static_cast<size_t>(fixture_.skeleton->FindJoint(joint_name)->value);
-    KinematicsWorkspace solved(*fixture_.skeleton), truth(*fixture_.skeleton);
+    KinematicsWorkspace solved(*fixture_.skeleton), truth_now(*fixture_.skeleton);
     double worst = 0.0;
     for (int f = from; f < to; ++f) {
       ForwardKinematics(*fixture_.skeleton, out[static_cast<size_t>(f)].pose, &solved);
-      ForwardKinematics(*fixture_.skeleton, fixture_.motion[static_cast<size_t>(f)], &truth);
-      worst = std::max(worst, (solved.p_WJ[joint] - truth.p_WJ[joint]).norm());
+      ForwardKinematics(*fixture_.skeleton, truth[static_cast<size_t>(f)], &truth_now);
+      worst = std::max(worst, (solved.p_WJ[joint] - truth_now.p_WJ[joint]).norm());
     }
     return worst;
   }

@@ -10,7 +10,20 @@
 namespace mocapd {
 namespace {
 
-class FinalSolveTest : public CleanupFixture {};
+class FinalSolveTest : public CleanupFixture {
+ protected:
+  // The take becomes `motion`'s markers, with the left shin and foot occluded over
+  // frames [from, to).
+  void CaptureWithLeftLowerLegOccluded(const std::vector<Pose>& motion, int from, int to) {
+    const C3dTake moved = SynthesizeMarkers(*fixture_.skeleton, *fixture_.markers, motion, 120.0);
+    for (int f = 0; f < static_cast<int>(frames_.size()); ++f)
+      for (int m = 0; m < fixture_.markers->num_markers(); ++m) Sample(f, m) = moved.at(f, m);
+    for (int f = from; f < to; ++f)
+      for (const char* name :
+           {"LKNE", "LSHN1", "LSHN2", "LFOT1", "LFOT2", "LFOT3", "LTOE1", "LTOE2"})
+        Sample(f, Marker(name)) = Vec3::Constant(kNaN);
+  }
+};
 
 TEST_F(FinalSolveTest, AFillGainsFinalSolveWeightGradually) {
   // A long gap: first one-sided fills (weak), then, once the return is in the lookahead,
@@ -142,12 +155,7 @@ TEST_F(FinalSolveTest, UnseenLowerLegIsNotSwungByItsTurningThigh) {
     turned[f].rotation[hip] = turned[f].rotation[hip] * turn;
     turned[f].rotation[knee] = turn.inverse() * turned[f].rotation[knee];
   }
-  const C3dTake moved = SynthesizeMarkers(*fixture_.skeleton, *fixture_.markers, turned, 120.0);
-  for (int f = 0; f < static_cast<int>(frames_.size()); ++f)
-    for (int m = 0; m < fixture_.markers->num_markers(); ++m) Sample(f, m) = moved.at(f, m);
-  for (int f = 280; f < 420; ++f)
-    for (const char* name : {"LKNE", "LSHN1", "LSHN2", "LFOT1", "LFOT2", "LFOT3", "LTOE1", "LTOE2"})
-      Sample(f, Marker(name)) = Vec3::Constant(kNaN);
+  CaptureWithLeftLowerLegOccluded(turned, 280, 420);
   auto worst_extra_ankle_step = [&](bool hold) {
     CleanupOptions options;
     options.lookahead = 0;
@@ -157,6 +165,36 @@ TEST_F(FinalSolveTest, UnseenLowerLegIsNotSwungByItsTurningThigh) {
   const double held = worst_extra_ankle_step(true), swung = worst_extra_ankle_step(false);
   EXPECT_LT(held, 0.01) << swung;  // measured 0.4 cm
   EXPECT_GT(swung, 0.02) << held;  // measured 3.4 cm
+}
+
+TEST_F(FinalSolveTest, LongUnseenLowerLegGoesWhereItsSlowlyTurningThighTakesIt) {
+  // From frame 280 the left hip, knee, ankle and toe keep their angles, except that from
+  // frame 300 the thigh turns 45 degrees over one second (slower than
+  // unseen_limb_turn_radps): the whole leg swings, its shin and foot markers occluded for
+  // 1.5 s. Held in the world for as long as it is unseen, the guessed lower leg would
+  // stay behind.
+  std::vector<Pose> swung = fixture_.motion;
+  const auto hip = static_cast<size_t>(fixture_.skeleton->FindJoint("LeftUpLeg")->value);
+  for (const char* joint : {"LeftUpLeg", "LeftLeg", "LeftFoot", "LeftToeBase"}) {
+    const auto j = static_cast<size_t>(fixture_.skeleton->FindJoint(joint)->value);
+    for (size_t f = 280; f < swung.size(); ++f) swung[f].rotation[j] = swung[279].rotation[j];
+  }
+  for (size_t f = 300; f < swung.size(); ++f) {
+    const Quat turn(Eigen::AngleAxisd(
+        M_PI / 4 * std::min(1.0, static_cast<double>(f - 300) / 120.0), Vec3::UnitX()));
+    swung[f].rotation[hip] = swung[f].rotation[hip] * turn;
+  }
+  CaptureWithLeftLowerLegOccluded(swung, 280, 460);
+  auto worst_ankle_error = [&](double turn_radps) {
+    CleanupOptions options;
+    options.lookahead = 0;
+    options.unseen_limb_turn_radps = turn_radps;
+    return WorstJointError(Run(options), swung, "LeftFoot", 290, 460);
+  };
+  const double carried = worst_ankle_error(CleanupOptions{}.unseen_limb_turn_radps),
+               kept = worst_ankle_error(0.0);
+  EXPECT_LT(carried, 0.02) << kept;  // measured 0.4 cm
+  EXPECT_GT(kept, 0.05) << carried;  // measured 9.5 cm
 }
 
 // The final solve alone, on frames whose every sample the repair marked captured.
