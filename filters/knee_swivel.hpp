@@ -6,8 +6,9 @@
 // frame (within 15 degrees in most bent frames of the twelve Bandai takes, 70 at worst
 // in a dance; bench/README.md). Each leg learns that axis wherever its thigh or shin is seen and
 // bent; before it has, a rest pose whose toes point away from the leg gives it (the knee bends
-// toward the toes). An unseen knee whose axis strays further than a tolerance is turned
-// about the hip-ankle line back to the tolerance, its foot keeping its world orientation.
+// toward the toes), or failing that, the other leg's, taken in the pelvis (both knees bend
+// about the body's left-right axis). An unseen knee whose axis strays further than a tolerance is
+// turned about the hip-ankle line back to the tolerance, its foot keeping its world orientation.
 #pragma once
 
 #include <span>
@@ -49,17 +50,22 @@ class KneeSwivel {
   const LegChain& leg(int i) const { return legs_[static_cast<size_t>(i)]; }
   /// The leg's knee bend axis in its foot's (ankle joint's) frame, unit; zero if unknown.
   Vec3 AxisInFoot(int leg) const;
+  /// For a leg with no axis of its own: another leg's learned axis in the frame of the
+  /// joint both hang from (the pelvis), unit; zero if no leg sharing it has learned one.
+  Vec3 BorrowedAxisInPelvis(int leg) const;
 
  private:
   struct LegState {
-    Vec3 learned_sum = Vec3::Zero();  // sum of unit axes seen, foot frame
-    Vec3 rest_axis = Vec3::Zero();    // from the rest pose, unit, or zero
+    Vec3 learned_sum = Vec3::Zero();            // sum of unit axes seen, foot frame...
+    Vec3 learned_in_pelvis_sum = Vec3::Zero();  // ...and in the hip's parent's frame
+    Vec3 rest_axis = Vec3::Zero();              // from the rest pose, unit, or zero
   };
   std::vector<LegChain> legs_;
   std::vector<LegState> state_;
   std::vector<int> marker_leg_;   // per marker: the leg it is on, or -1
   std::vector<uint8_t> on_foot_;  // per marker: on the ankle or toe (else thigh or shin)
   std::vector<int> seen_limb_, seen_foot_;
+  std::vector<int> pelvis_;  // per leg: its hip's parent joint
 };
 
 }  // namespace mocapd

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <memory>
 
 #include "tests/support/test_takes.hpp"
 
@@ -15,7 +16,7 @@ class KneeSwivelTest : public ::testing::Test {
  protected:
   KneeSwivelTest() : fixture_(testing::MakeHumanoidFixture("walk", 4.0, 60.0)) {}
 
-  const Skeleton& skeleton() const { return *fixture_.skeleton; }
+  const Skeleton& skeleton() const { return straight_toes_ ? *straight_toes_ : *fixture_.skeleton; }
   const MarkerSet& markers() const { return *fixture_.markers; }
 
   // Model markers of a pose: what a perfect capture sees.
@@ -80,7 +81,24 @@ class KneeSwivelTest : public ::testing::Test {
     }
   }
 
+  // From here on the skeleton is the humanoid with each toe bone along its leg at rest
+  // (as in some BVH exports): a rest pose that says nothing of which way the knees bend.
+  void StraightenTheToes() {
+    std::vector<Joint> joints(fixture_.skeleton->joints().begin(),
+                              fixture_.skeleton->joints().end());
+    KinematicsWorkspace rest(*fixture_.skeleton);
+    ForwardKinematics(*fixture_.skeleton, RestPose(*fixture_.skeleton), &rest);
+    for (const LegChain& leg : FindLegChains(*fixture_.skeleton)) {
+      const auto at = [](int j) { return static_cast<size_t>(j); };
+      const Vec3 down = (rest.p_WJ[at(leg.ankle)] - rest.p_WJ[at(leg.hip)]).normalized();
+      Joint& toe = joints[at(leg.toe)];
+      toe.offset = rest.R_WJ[at(leg.ankle)].transpose() * down * toe.offset.norm();
+    }
+    straight_toes_ = std::make_unique<Skeleton>(std::move(joints));
+  }
+
   testing::HumanoidFixture fixture_;
+  std::unique_ptr<Skeleton> straight_toes_;
 };
 
 TEST_F(KneeSwivelTest, FindsTheTwoLegsAndNotTheArms) {
@@ -118,6 +136,38 @@ TEST_F(KneeSwivelTest, AKneeSwungBehindItsUnseenLegIsTurnedBackWithTheFootKept) 
     EXPECT_LT((ws.R_WJ[at(leg.ankle)] - truth_ws.R_WJ[at(leg.ankle)]).norm(), 1e-9);
     EXPECT_LT((ws.p_WJ[at(leg.toe)] - truth_ws.p_WJ[at(leg.toe)]).norm(), 1e-9);
   }
+}
+
+TEST_F(KneeSwivelTest, ALegThatNeverShowedItsKneeBorrowsTheOtherLegsAxisInThePelvis) {
+  // Toes along the leg at rest, and one leg's thigh and shin never seen: that leg has no
+  // axis of its own, but the other leg's, taken in the pelvis, says which way it bends.
+  StraightenTheToes();
+  KneeSwivel swivel(skeleton(), markers());
+  ASSERT_EQ(swivel.num_legs(), 2);
+  const LegChain& unseen = swivel.leg(0);
+  for (int i = 0; i < swivel.num_legs(); ++i) EXPECT_EQ(swivel.AxisInFoot(i).norm(), 0.0);
+  KinematicsWorkspace ws(skeleton());
+  for (const Pose& truth : fixture_.motion) {
+    Pose pose = truth;
+    ForwardKinematics(skeleton(), pose, &ws);
+    swivel.Update(skeleton(), MarkersOf(truth), ThighAndShinUnseen(unseen), 0.0, 0.0, &pose, &ws);
+  }
+  EXPECT_EQ(swivel.AxisInFoot(0).norm(), 0.0);
+  EXPECT_GT(swivel.AxisInFoot(1).norm(), 0.99);
+  ASSERT_GT(swivel.BorrowedAxisInPelvis(0).norm(), 0.99);
+
+  const Pose& truth = fixture_.motion[static_cast<size_t>(MostBentFrame(unseen))];
+  Pose pose = Swung(truth, unseen, 2.6);  // the knee behind the leg
+  KinematicsWorkspace truth_ws(skeleton());
+  ForwardKinematics(skeleton(), pose, &ws);
+  ForwardKinematics(skeleton(), truth, &truth_ws);
+  const auto knee = static_cast<size_t>(unseen.knee);
+  const double knee_off_before = (ws.p_WJ[knee] - truth_ws.p_WJ[knee]).norm();
+  ASSERT_GT(knee_off_before, 0.2);
+  EXPECT_EQ(swivel.Update(skeleton(), MarkersOf(truth), ThighAndShinUnseen(unseen), 0.785, 0.0,
+                          &pose, &ws),
+            1);
+  EXPECT_LT((ws.p_WJ[knee] - truth_ws.p_WJ[knee]).norm(), 0.5 * knee_off_before);
 }
 
 TEST_F(KneeSwivelTest, ATurnIsBoundedPerSolveAndASeenOrStraightKneeIsLeftAlone) {
