@@ -118,7 +118,8 @@ struct CleanupOptions {
   double unseen_limb_turn_radps = 1.0;
   /// In the final solve, a leg with nothing seen on its thigh or shin but its foot seen
   /// has its knee turned about the hip-ankle line until the knee's bend axis is within
-  /// this (rad) of the axis the leg has shown in its foot's frame (KneeSwivel). The two
+  /// this (rad) of the axis the leg has shown in its foot's frame (KneeSwivel; a leg that
+  /// has shown none takes the other leg's, in the pelvis's frame). The two
   /// axes stay within 15 degrees in most bent frames of real takes and reach 70 in a
   /// dance; beyond this the knee is where no knee goes. 0: off. (In the reference too, it
   /// cost the humanoid's heavy fills 22.7 -> 23.9 mm; in the anchor it changed nothing.)

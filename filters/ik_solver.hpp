@@ -51,7 +51,8 @@ struct IkOptions {
   bool apply_joint_limits = true;
   /// A leg with no marker seen on its thigh or shin but two on its foot has its knee turned
   /// about the hip-ankle line until its bend axis is within this of the axis the leg has
-  /// shown in its foot's frame (see KneeSwivel); 0 leaves it where the solve put it, and
+  /// shown in its foot's frame, or failing that the other leg's in the pelvis's frame (see
+  /// KneeSwivel); 0 leaves it where the solve put it, and
   /// the solve learns no axes.
   double unseen_knee_tolerance_rad = 0.0;
   double unseen_knee_max_turn_rad = 0.0;  ///< ...by at most this per solve; 0: no limit.

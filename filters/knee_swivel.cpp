@@ -40,7 +40,7 @@ std::vector<LegChain> FindLegChains(const Skeleton& skeleton) {
       chain.push_back(skeleton.children(chain.back())[0]);
     if (!skeleton.children(chain.back()).empty() || chain.size() < 4) continue;
     const size_t n = chain.size();
-    const LegChain leg{chain[n - 4], chain[n - 3], chain[n - 2], chain[n - 1]};
+    const LegChain leg{chain[n - 4], chain[n - 3], chain[n - 2], chain[n - 1], pelvis};
     if (IsBall(skeleton, leg.hip) && IsBall(skeleton, leg.knee) && IsBall(skeleton, leg.ankle))
       legs.push_back(leg);
   }
@@ -50,7 +50,6 @@ std::vector<LegChain> FindLegChains(const Skeleton& skeleton) {
 KneeSwivel::KneeSwivel(const Skeleton& skeleton, const MarkerSet& markers)
     : legs_(FindLegChains(skeleton)) {
   state_.assign(legs_.size(), LegState{});
-  for (const LegChain& leg : legs_) pelvis_.push_back(skeleton.joint(leg.hip).parent.value);
   marker_leg_.assign(static_cast<size_t>(markers.num_markers()), -1);
   on_foot_.assign(marker_leg_.size(), 0);
   seen_limb_.assign(legs_.size(), 0);
@@ -89,9 +88,9 @@ Vec3 KneeSwivel::AxisInFoot(int leg) const {
 }
 
 Vec3 KneeSwivel::BorrowedAxisInPelvis(int leg) const {
-  const int pelvis = pelvis_[static_cast<size_t>(leg)];
+  const int pelvis = legs_[static_cast<size_t>(leg)].pelvis;
   for (size_t i = 0; i < legs_.size(); ++i)
-    if (static_cast<int>(i) != leg && pelvis_[i] == pelvis &&
+    if (static_cast<int>(i) != leg && legs_[i].pelvis == pelvis &&
         state_[i].learned_in_pelvis_sum.norm() > 0.0)
       return state_[i].learned_in_pelvis_sum.normalized();
   return Vec3::Zero();
@@ -114,12 +113,11 @@ int KneeSwivel::Update(const Skeleton& skeleton, std::span<const Vec3> observed,
     // A nearly straight unseen knee is still kept to its side: it bends from there.
     const Vec3 axis = BendAxis(*ws, leg, seen_limb_[i] >= 2 ? kMinBendRad : kMinTurnBendRad);
     const Mat3& R_WA = ws->R_WJ[static_cast<size_t>(leg.ankle)];
-    const int pelvis = pelvis_[i];
-    const Mat3 R_WP = pelvis >= 0 ? ws->R_WJ[static_cast<size_t>(pelvis)] : Mat3::Identity();
+    const Mat3& R_W_pelvis = ws->R_WJ[static_cast<size_t>(leg.pelvis)];
     if (seen_limb_[i] >= 2) {
       if (axis.norm() > 0.0) {
         state_[i].learned_sum += R_WA.transpose() * axis;
-        state_[i].learned_in_pelvis_sum += R_WP.transpose() * axis;
+        state_[i].learned_in_pelvis_sum += R_W_pelvis.transpose() * axis;
       }
       continue;
     }
@@ -128,7 +126,7 @@ int KneeSwivel::Update(const Skeleton& skeleton, std::span<const Vec3> observed,
     const Vec3 own = AxisInFoot(static_cast<int>(i));
     const Vec3 wanted_world = own.norm() > 0.0
                                   ? Vec3(R_WA * own)
-                                  : Vec3(R_WP * BorrowedAxisInPelvis(static_cast<int>(i)));
+                                  : Vec3(R_W_pelvis * BorrowedAxisInPelvis(static_cast<int>(i)));
     if (wanted_world.norm() == 0.0) continue;
     const Vec3 hip = ws->p_WJ[static_cast<size_t>(leg.hip)];
     const Vec3 line = (ws->p_WJ[static_cast<size_t>(leg.ankle)] - hip).normalized();
@@ -144,6 +142,8 @@ int KneeSwivel::Update(const Skeleton& skeleton, std::span<const Vec3> observed,
     // Turn the thigh about the hip-ankle line; the ankle stays put, and the foot is given
     // back the world orientation it had.
     const Mat3 R_turn = Eigen::AngleAxisd(turn, line).toRotationMatrix();
+    const int parent = skeleton.joint(leg.hip).parent.value;
+    const Mat3 R_WP = parent >= 0 ? ws->R_WJ[static_cast<size_t>(parent)] : Mat3::Identity();
     const Mat3 R_WH = R_turn * ws->R_WJ[static_cast<size_t>(leg.hip)];
     const Mat3 R_WK = R_WH * pose->rotation[static_cast<size_t>(leg.knee)].toRotationMatrix();
     const Quat hip_before = pose->rotation[static_cast<size_t>(leg.hip)];

@@ -19,9 +19,12 @@
 
 namespace mocapd {
 
-/// A leg: hip, knee, ankle and toe joints, each the only child of the one before.
+/// A leg: hip, knee, ankle and toe joints, each the only child of the one before, and the
+/// joint the leg's chain branches from (the pelvis, shared by both legs even where a hip
+/// hangs from a joint of its own, as in CMU's LHipJoint).
 struct LegChain {
   int hip = -1, knee = -1, ankle = -1, toe = -1;
+  int pelvis = -1;
 };
 
 /// The skeleton's legs: the unbranched chains, ending in a leaf, that hang from the
@@ -37,7 +40,8 @@ class KneeSwivel {
 
   /// After a solve: learns each leg whose thigh or shin has at least two usable markers
   /// seen (weight >= 0.5: a one-sided fill's weight is a guess's) and whose knee is bent;
-  /// turns each leg with none there, two seen foot markers and a known axis, if its axis
+  /// turns each leg with none there, two seen foot markers and a known axis (its own, or
+  /// failing that another leg's in the pelvis: BorrowedAxisInPelvis), if its axis
   /// is more than tolerance_rad off (tolerance <= 0: only learns), toward the tolerance by
   /// at most max_turn_rad (0: all the way). Updates pose and ws, and turns `previous` (the
   /// solve's last pose, which its velocity prediction uses) alike: a turn is no motion to
@@ -51,7 +55,8 @@ class KneeSwivel {
   /// The leg's knee bend axis in its foot's (ankle joint's) frame, unit; zero if unknown.
   Vec3 AxisInFoot(int leg) const;
   /// For a leg with no axis of its own: another leg's learned axis in the frame of the
-  /// joint both hang from (the pelvis), unit; zero if no leg sharing it has learned one.
+  /// joint both branch from (LegChain::pelvis), unit; zero if no leg sharing it has
+  /// learned one.
   Vec3 BorrowedAxisInPelvis(int leg) const;
 
  private:
@@ -65,7 +70,6 @@ class KneeSwivel {
   std::vector<int> marker_leg_;   // per marker: the leg it is on, or -1
   std::vector<uint8_t> on_foot_;  // per marker: on the ankle or toe (else thigh or shin)
   std::vector<int> seen_limb_, seen_foot_;
-  std::vector<int> pelvis_;  // per leg: its hip's parent joint
 };
 
 }  // namespace mocapd

@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <memory>
+#include <string>
 
 #include "tests/support/test_takes.hpp"
 
@@ -107,6 +108,34 @@ TEST_F(KneeSwivelTest, FindsTheTwoLegsAndNotTheArms) {
   for (const LegChain& leg : legs) {
     EXPECT_NE(skeleton().joint(leg.hip).name.find("UpLeg"), std::string::npos);
     EXPECT_TRUE(skeleton().children(leg.toe).empty());
+  }
+}
+
+TEST(KneeSwivelLegsTest, LegsWhoseHipsHangFromJointsOfTheirOwnShareThePelvis) {
+  // CMU-style: Hips -> LHipJoint -> LeftUpLeg -> LeftLeg -> LeftFoot -> LeftToeBase. Each
+  // leg's hip has a parent of its own, but both chains branch from Hips, which is the
+  // frame a leg that never showed its knee borrows the other's axis in.
+  std::vector<Joint> joints;
+  auto add = [&](const char* name, int parent, Vec3 offset) {
+    Joint j;
+    j.name = name;
+    if (parent >= 0) j.parent = JointIndex(parent);
+    j.offset = offset;
+    joints.push_back(j);
+    return static_cast<int>(joints.size()) - 1;
+  };
+  const int hips = add("Hips", -1, Vec3::Zero());
+  add("Spine", hips, Vec3(0, 0, 0.1));
+  for (const double side : {1.0, -1.0}) {
+    int j = add(side > 0 ? "LHipJoint" : "RHipJoint", hips, Vec3(0.1 * side, 0, 0));
+    for (const char* part : {"UpLeg", "Leg", "Foot", "ToeBase"})
+      j = add((std::string(side > 0 ? "Left" : "Right") + part).c_str(), j, Vec3(0, 0, -0.4));
+  }
+  const std::vector<LegChain> legs = FindLegChains(Skeleton(joints));
+  ASSERT_EQ(legs.size(), 2u);
+  for (const LegChain& leg : legs) {
+    EXPECT_EQ(leg.pelvis, hips);
+    EXPECT_NE(joints[static_cast<size_t>(leg.hip)].parent.value, hips);
   }
 }
 
