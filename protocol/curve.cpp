@@ -15,6 +15,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <zmq.hpp>
+#include <zmq_addon.hpp>
 
 namespace mocapd::curve {
 namespace {
@@ -206,5 +207,18 @@ std::optional<ClientKeys> ReadClientKeys(const std::string& own_key_file,
 }
 
 std::string ShortKey(const std::string& key) { return key.substr(0, 8) + "…"; }
+
+std::optional<MonitorEvent> ReadMonitorEvent(zmq::socket_t& monitor) {
+  std::vector<zmq::message_t> frames;
+  if (!zmq::recv_multipart(monitor, std::back_inserter(frames), zmq::recv_flags::dontwait))
+    return std::nullopt;
+  MonitorEvent e;
+  if (frames.empty() || frames[0].size() < sizeof e.event + sizeof e.value) return std::nullopt;
+  std::memcpy(&e.event, frames[0].data(), sizeof e.event);
+  std::memcpy(&e.value, static_cast<const uint8_t*>(frames[0].data()) + sizeof e.event,
+              sizeof e.value);
+  if (frames.size() > 1) e.endpoint = frames[1].to_string();
+  return e;
+}
 
 }  // namespace mocapd::curve

@@ -5,6 +5,7 @@
 // the 40-character Z85 text form throughout.
 #pragma once
 
+#include <cstdint>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -71,5 +72,16 @@ std::optional<ClientKeys> ReadClientKeys(const std::string& own_key_file,
 
 /// The first characters of a key, enough to tell keys apart in a log line.
 std::string ShortKey(const std::string& key);
+
+/// One event from a socket monitor (zmq_socket_monitor): the event, its value (a protocol
+/// error code, an errno or, for a refusal, the ZAP status) and the peer's endpoint.
+struct MonitorEvent {
+  uint16_t event = 0;
+  uint32_t value = 0;
+  std::string endpoint;
+};
+/// Reads one event from the PAIR socket connected to a monitor, without waiting; nothing
+/// when none is queued or its first frame is too short to be one.
+std::optional<MonitorEvent> ReadMonitorEvent(zmq::socket_t& monitor);
 
 }  // namespace mocapd::curve

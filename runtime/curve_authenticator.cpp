@@ -114,29 +114,21 @@ struct CurveAuthenticator::Impl {
   }
 
   void ReadEvent(Watched& w) {
-    std::vector<zmq::message_t> event;
-    if (!zmq::recv_multipart(w.events, std::back_inserter(event), zmq::recv_flags::dontwait))
-      return;
-    if (event.empty() || event[0].size() < 6) return;
-    // First frame: the event (u16) and its value (u32: a protocol error code, an errno or,
-    // for a refusal, the ZAP status); second: the endpoint.
-    uint16_t id = 0;
-    uint32_t value = 0;
-    std::memcpy(&id, event[0].data(), sizeof id);
-    std::memcpy(&value, static_cast<const uint8_t*>(event[0].data()) + sizeof id, sizeof value);
+    const std::optional<curve::MonitorEvent> event = curve::ReadMonitorEvent(w.events);
+    if (!event) return;
     handshake_failures[static_cast<size_t>(w.which)].fetch_add(1, std::memory_order_relaxed);
     const int64_t now = SteadyNowNs();
     if (last_failure_log_ns < 0 || now - last_failure_log_ns >= log_interval_ns) {
-      const std::string peer = event.size() > 1 ? event[1].to_string() : "?";
-      if (id == ZMQ_EVENT_HANDSHAKE_FAILED_AUTH)
+      const std::string peer = event->endpoint.empty() ? "?" : event->endpoint;
+      if (event->event == ZMQ_EVENT_HANDSHAKE_FAILED_AUTH)
         spdlog::warn(
             "CURVE: {} refused this daemon (ZAP status {}): is its key in that peer's allow-list?",
-            peer, value);
+            peer, event->value);
       else
         spdlog::warn(
             "CURVE: a handshake on the {} ({}) failed (code {:#x}): a peer without CURVE or with "
             "other keys",
-            CurveSocketName(w.which), peer, value);
+            CurveSocketName(w.which), peer, event->value);
       last_failure_log_ns = now;
     }
   }

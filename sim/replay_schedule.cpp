@@ -21,12 +21,15 @@ namespace {
 using Clock = std::chrono::steady_clock;
 
 // The output socket (PUB-bind, or PUSH-connect) and, when the daemon's output is
-// measured, the SUB socket on it.
+// measured, the SUB socket on it; a CURVE PUSH's handshakes are watched.
 struct Sockets {
   zmq::context_t context;
   zmq::socket_t out;
   std::optional<zmq::socket_t> in;
+  std::optional<zmq::socket_t> push_handshakes;
 };
+
+constexpr char kPushHandshakeMonitor[] = "inproc://replay-push-handshakes";
 
 void OpenSockets(const ReplayOptions& o, Sockets* s) {
   const std::optional<curve::ClientKeys> keys =
@@ -37,6 +40,21 @@ void OpenSockets(const ReplayOptions& o, Sockets* s) {
   // A PUB feed serves its key to every subscriber (a simulator has no allow-list).
   if (keys && o.push) curve::MakeClient(s->out, keys->own, keys->server_public_key);
   if (keys && !o.push) curve::MakeServer(s->out, keys->own, "");
+  if (o.push) {
+    // A PUSH the daemon refused can be left with no pipe, and a send would then wait for
+    // ever: past the connect timeout a send is an error (SendAll).
+    s->out.set(zmq::sockopt::sndtimeo, static_cast<int>(o.connect_timeout_s * 1e3));
+  }
+  if (keys && o.push) {
+    if (zmq_socket_monitor(s->out.handle(), kPushHandshakeMonitor,
+                           ZMQ_EVENT_HANDSHAKE_SUCCEEDED | ZMQ_EVENT_HANDSHAKE_FAILED_AUTH |
+                               ZMQ_EVENT_HANDSHAKE_FAILED_PROTOCOL |
+                               ZMQ_EVENT_HANDSHAKE_FAILED_NO_DETAIL) != 0)
+      throw std::runtime_error(std::string("replay: cannot watch the CURVE handshake: ") +
+                               zmq_strerror(zmq_errno()));
+    s->push_handshakes.emplace(s->context, zmq::socket_type::pair);
+    s->push_handshakes->connect(kPushHandshakeMonitor);
+  }
   try {
     if (o.push)
       s->out.connect(o.to);
@@ -53,6 +71,36 @@ void OpenSockets(const ReplayOptions& o, Sockets* s) {
   s->in->set(zmq::sockopt::subscribe, "subject/");
   if (keys) curve::MakeClient(*s->in, keys->own, keys->server_public_key);
   s->in->connect(o.from);
+}
+
+// A CURVE PUSH into the daemon's PULL: a refused key is otherwise silence (frames queued
+// for a peer that never takes them), so wait for the handshake and say why it failed.
+void WaitForPushHandshake(Sockets& s, const ReplayOptions& o) {
+  const int64_t deadline = SteadyNs() + static_cast<int64_t>(o.connect_timeout_s * 1e9);
+  zmq::pollitem_t item = {s.push_handshakes->handle(), 0, ZMQ_POLLIN, 0};
+  while (SteadyNs() < deadline) {
+    zmq::poll(&item, 1, std::chrono::milliseconds(20));
+    while (const std::optional<curve::MonitorEvent> e =
+               curve::ReadMonitorEvent(*s.push_handshakes)) {
+      if (e->event == ZMQ_EVENT_HANDSHAKE_SUCCEEDED) return;
+      char code[16];
+      std::snprintf(code, sizeof(code), "%#x", e->value);
+      if (e->event == ZMQ_EVENT_HANDSHAKE_FAILED_AUTH)
+        throw std::runtime_error("replay: the daemon at " + o.to +
+                                 " refused this replay's CURVE key (ZAP status " +
+                                 std::to_string(e->value) + "): is the public half of " +
+                                 o.curve_key_file + " in the daemon's authorized_keys?");
+      throw std::runtime_error("replay: the CURVE handshake with " + o.to + " failed (code " +
+                               code + "): is the daemon's input CURVE, and " +
+                               o.curve_server_key_file + " the daemon's public key?");
+    }
+  }
+  char seconds[32];
+  std::snprintf(seconds, sizeof(seconds), "%g s", o.connect_timeout_s);
+  throw std::runtime_error(
+      "replay: no CURVE handshake with " + o.to + " within " + seconds +
+      " (is the daemon running, with a PULL input there, and the public half of " +
+      o.curve_key_file + " in its authorized_keys?)");
 }
 
 // Waits until the daemon subscribed to every subject's topic (PUB) and described every
@@ -268,7 +316,13 @@ uint64_t SendAll(zmq::socket_t& out, std::vector<SubjectLog>& logs, const FrameP
     SubjectLog& log = logs[next.subject];
     const int64_t now = SteadyNs();
     log.sent.push_back({next.frame_number, now, next.end_of_stream});
-    out.send(zmq::buffer(log.topic), zmq::send_flags::sndmore);
+    if (!out.send(zmq::buffer(log.topic), zmq::send_flags::sndmore)) {
+      char seconds[32];
+      std::snprintf(seconds, sizeof(seconds), "%g s", o.connect_timeout_s);
+      throw std::runtime_error("replay: " + o.to + " took no frame for " + seconds + " (sent " +
+                               std::to_string(sent) +
+                               "): has the daemon gone, or refused this replay?");
+    }
     out.send(zmq::buffer(bytes), zmq::send_flags::none);
     if (!next.end_of_stream) ++sent;
     if (o.on_status && now >= next_status) {
@@ -343,6 +397,7 @@ ReplayReport RunSchedule(std::vector<SubjectLog>& logs, const FrameProducer& pro
                          const ScheduleSetup& setup, const ReplayOptions& o) {
   Sockets sockets;
   OpenSockets(o, &sockets);
+  if (sockets.push_handshakes) WaitForPushHandshake(sockets, o);
   ReplayReport report;
   report.subjects = static_cast<int>(logs.size());
   report.lookahead = WaitForDaemon(sockets, logs, setup, o);

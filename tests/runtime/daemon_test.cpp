@@ -34,6 +34,7 @@
 #include "protocol/curve.hpp"
 #include "sim/corruption.hpp"
 #include "sim/humanoid_subject.hpp"
+#include "sim/replay.hpp"
 #include "tests/support/test_takes.hpp"
 
 namespace mocapd {
@@ -909,6 +910,39 @@ TEST(DaemonTest, CurveAdmitsOnlyAuthorizedKeysAndCountsEveryoneElse) {
   }
   EXPECT_NE(FormatPrometheusMetrics(s).find("mocapd_curve_clients_refused_total{socket=\"input\"}"),
             std::string::npos);
+}
+
+// A replay pushing into a CURVE daemon's PULL input with a key the daemon does not allow
+// stops with an error naming the allow-list, where its frames used to queue for a peer that
+// never took them (and a send could wait for ever); with an allowed key every frame is solved.
+TEST(DaemonTest, AReplayPushingWithARefusedKeyStopsAndNamesTheAllowList) {
+  const CurveTestKeys keys("daemon_curve_replay");
+  curve::WriteCertificates(keys.dir + "/stranger", keys.stranger.own);
+  curve::WriteCertificates(keys.dir + "/daemon", keys.daemon);
+  const std::string in = "tcp://127.0.0.1:27351", out = "tcp://127.0.0.1:27352";
+  zmq::context_t context;
+  RunningDaemon daemon(context, keys.Apply(TestConfig(in, out, 4)));
+  ReplayOptions options;
+  options.to = in;
+  options.push = true;
+  options.from = "";
+  options.rate_hz = -1.0;
+  options.connect_timeout_s = 5.0;
+  options.curve_server_key_file = keys.dir + "/daemon.key";
+  options.curve_key_file = keys.dir + "/stranger.key_secret";
+  const ReplaySource source = HumanoidReplaySource("walk", 0.5, 120.0, 0.0, 1);
+  try {
+    (void)RunReplay(source, options);
+    ADD_FAILURE() << "a replay with a refused key ran";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("authorized_keys"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(daemon->Stats().messages_in, 0u);
+  options.curve_key_file = keys.dir + "/authorized/trusted.key_secret";
+  const ReplayReport report = RunReplay(source, options);
+  EXPECT_EQ(report.frames_sent, static_cast<uint64_t>(source.take.num_frames));
+  EXPECT_TRUE(WaitForStats(
+      *daemon, [&](const DaemonStats& s) { return s.published_total() == report.frames_sent; }));
 }
 
 // A subscribing daemon is the capture publisher's CURVE client: a publisher without the
