@@ -117,6 +117,7 @@ class Scorer {
     std::vector<double> frame_errors, clean_frame_errors;
     for (size_t f = 0; f < est_p.size(); ++f) {
       double worst = 0.0, clean_worst = 0.0;
+      bool any_clean = false;
       int joint = -1;
       const auto clean_frame = static_cast<size_t>(frames[f]);
       for (size_t j = 0; j < est_p[f].size(); ++j) {
@@ -125,8 +126,9 @@ class Scorer {
           worst = error;
           joint = static_cast<int>(j);
         }
-        if (clean_frame < clean_segments_.size() && clean_segments_[clean_frame][j] &&
-            error > clean_worst) {
+        const bool clean = clean_frame < clean_segments_.size() && clean_segments_[clean_frame][j];
+        any_clean = any_clean || clean;
+        if (clean && error > clean_worst) {
           clean_worst = error;
           if (error * 100 > s.clean_worst_frame_cm) {
             s.clean_worst_frame_cm = error * 100;
@@ -136,7 +138,8 @@ class Scorer {
         }
       }
       frame_errors.push_back(worst * 100);
-      clean_frame_errors.push_back(clean_worst * 100);
+      // A frame with no clean segment says nothing of them: left out, not counted as 0.
+      if (any_clean) clean_frame_errors.push_back(clean_worst * 100);
       if (worst * 100 > s.worst_frame_cm) {
         s.worst_frame_cm = worst * 100;
         s.worst_frame = static_cast<int>(f);
@@ -146,7 +149,8 @@ class Scorer {
     s.p999_frame_cm = Quantile(frame_errors, 0.999);
     if (!clean_segments_.empty()) {
       s.clean_worst_frame_cm = std::max(s.clean_worst_frame_cm, 0.0);
-      s.clean_p999_frame_cm = Quantile(clean_frame_errors, 0.999);
+      s.clean_p999_frame_cm =
+          clean_frame_errors.empty() ? 0.0 : Quantile(clean_frame_errors, 0.999);
     }
     s.estimated_joints = std::move(est_p);
     s.true_joints = std::move(tru_p);

@@ -387,11 +387,13 @@ int main(int argc, char** argv) {
   replay_cmd
       ->add_option("--connect-timeout", replay.options.connect_timeout_s,
                    "Seconds to wait for the daemon")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1e6));
   replay_cmd
       ->add_option("--drain-timeout", replay.options.drain_timeout_s,
                    "Seconds to wait for the last skeletons")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1e6));
 
   replay_cmd
       ->add_option("--latency-interval", replay.options.latency_interval_s,

@@ -53,7 +53,8 @@ struct ReplayOptions {
 
 /// Replays source through the daemon and measures. Throws std::runtime_error naming the
 /// endpoint if nothing subscribes to the frames or the daemon never describes a subject
-/// within connect_timeout_s.
+/// within connect_timeout_s, if a CURVE --push is refused or gets no handshake within it,
+/// or if a --push cannot queue a frame for that long.
 ReplayReport RunReplay(const ReplaySource& source, const ReplayOptions& options);
 
 /// Replays endless motion from a motion graph: each actor walks the graph on its own

@@ -6,6 +6,8 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
+#include <limits>
 #include <optional>
 #include <stdexcept>
 #include <thread>
@@ -31,6 +33,9 @@ struct Sockets {
 
 constexpr char kPushHandshakeMonitor[] = "inproc://replay-push-handshakes";
 
+// Seconds to nanoseconds, capped at 1e9 s so a huge timeout means "for ever", not overflow.
+int64_t TimeoutNs(double seconds) { return static_cast<int64_t>(std::min(seconds, 1e9) * 1e9); }
+
 void OpenSockets(const ReplayOptions& o, Sockets* s) {
   const std::optional<curve::ClientKeys> keys =
       curve::ReadClientKeys(o.curve_key_file, o.curve_server_key_file, "replay");
@@ -43,7 +48,9 @@ void OpenSockets(const ReplayOptions& o, Sockets* s) {
   if (o.push) {
     // A PUSH the daemon refused can be left with no pipe, and a send would then wait for
     // ever: past the connect timeout a send is an error (SendAll).
-    s->out.set(zmq::sockopt::sndtimeo, static_cast<int>(o.connect_timeout_s * 1e3));
+    const double ms = o.connect_timeout_s * 1e3;
+    s->out.set(zmq::sockopt::sndtimeo,
+               ms >= std::numeric_limits<int>::max() ? -1 : static_cast<int>(std::lround(ms)));
   }
   if (keys && o.push) {
     if (zmq_socket_monitor(s->out.handle(), kPushHandshakeMonitor,
@@ -76,13 +83,19 @@ void OpenSockets(const ReplayOptions& o, Sockets* s) {
 // A CURVE PUSH into the daemon's PULL: a refused key is otherwise silence (frames queued
 // for a peer that never takes them), so wait for the handshake and say why it failed.
 void WaitForPushHandshake(Sockets& s, const ReplayOptions& o) {
-  const int64_t deadline = SteadyNs() + static_cast<int64_t>(o.connect_timeout_s * 1e9);
+  const int64_t deadline = SteadyNs() + TimeoutNs(o.connect_timeout_s);
   zmq::pollitem_t item = {s.push_handshakes->handle(), 0, ZMQ_POLLIN, 0};
+  std::string dropped;  // the last connection lost mid-handshake (libzmq retries those)
   while (SteadyNs() < deadline) {
     zmq::poll(&item, 1, std::chrono::milliseconds(20));
     while (const std::optional<curve::MonitorEvent> e =
                curve::ReadMonitorEvent(*s.push_handshakes)) {
       if (e->event == ZMQ_EVENT_HANDSHAKE_SUCCEEDED) return;
+      if (e->event == ZMQ_EVENT_HANDSHAKE_FAILED_NO_DETAIL) {
+        dropped =
+            std::string("; the last attempt ended: ") + std::strerror(static_cast<int>(e->value));
+        continue;
+      }
       char code[16];
       std::snprintf(code, sizeof(code), "%#x", e->value);
       if (e->event == ZMQ_EVENT_HANDSHAKE_FAILED_AUTH)
@@ -97,10 +110,11 @@ void WaitForPushHandshake(Sockets& s, const ReplayOptions& o) {
   }
   char seconds[32];
   std::snprintf(seconds, sizeof(seconds), "%g s", o.connect_timeout_s);
-  throw std::runtime_error(
-      "replay: no CURVE handshake with " + o.to + " within " + seconds +
-      " (is the daemon running, with a PULL input there, and the public half of " +
-      o.curve_key_file + " in its authorized_keys?)");
+  throw std::runtime_error("replay: no CURVE handshake with " + o.to + " within " + seconds +
+                           " (is the daemon running, with a PULL input there, the public half "
+                           "of " +
+                           o.curve_key_file + " in its authorized_keys, and " +
+                           o.curve_server_key_file + " its public key?" + dropped + ")");
 }
 
 // Waits until the daemon subscribed to every subject's topic (PUB) and described every
@@ -108,7 +122,7 @@ void WaitForPushHandshake(Sockets& s, const ReplayOptions& o) {
 int WaitForDaemon(Sockets& s, const std::vector<SubjectLog>& logs, const ScheduleSetup& setup,
                   const ReplayOptions& o) {
   int lookahead = 0;
-  const int64_t deadline = SteadyNs() + static_cast<int64_t>(o.connect_timeout_s * 1e9);
+  const int64_t deadline = SteadyNs() + TimeoutNs(o.connect_timeout_s);
   std::vector<bool> subscribed(logs.size(), o.push), described(logs.size(), !s.in.has_value());
   auto all = [](const std::vector<bool>& v) {
     return std::all_of(v.begin(), v.end(), [](bool b) { return b; });
@@ -319,9 +333,10 @@ uint64_t SendAll(zmq::socket_t& out, std::vector<SubjectLog>& logs, const FrameP
     if (!out.send(zmq::buffer(log.topic), zmq::send_flags::sndmore)) {
       char seconds[32];
       std::snprintf(seconds, sizeof(seconds), "%g s", o.connect_timeout_s);
-      throw std::runtime_error("replay: " + o.to + " took no frame for " + seconds + " (sent " +
-                               std::to_string(sent) +
-                               "): has the daemon gone, or refused this replay?");
+      throw std::runtime_error("replay: could not queue a frame for " + o.to + " for " + seconds +
+                               " after " + std::to_string(sent) +
+                               " (the connection was dropped, as after a refused handshake: "
+                               "with CURVE, are this replay's keys the daemon's?)");
     }
     out.send(zmq::buffer(bytes), zmq::send_flags::none);
     if (!next.end_of_stream) ++sent;
@@ -395,6 +410,8 @@ int64_t SteadyNs() {
 
 ReplayReport RunSchedule(std::vector<SubjectLog>& logs, const FrameProducer& produce,
                          const ScheduleSetup& setup, const ReplayOptions& o) {
+  if (!(o.connect_timeout_s >= 0.0) || !(o.drain_timeout_s >= 0.0))
+    throw std::runtime_error("replay: the connect and drain timeouts must be 0 s or more");
   Sockets sockets;
   OpenSockets(o, &sockets);
   if (sockets.push_handshakes) WaitForPushHandshake(sockets, o);
@@ -411,7 +428,7 @@ ReplayReport RunSchedule(std::vector<SubjectLog>& logs, const FrameProducer& pro
   report.send_seconds = static_cast<double>(SteadyNs() - start) * 1e-9;
   if (!receiver) return report;
   report.listened = true;
-  const int64_t drain_deadline = SteadyNs() + static_cast<int64_t>(o.drain_timeout_s * 1e9);
+  const int64_t drain_deadline = SteadyNs() + TimeoutNs(o.drain_timeout_s);
   while (receiver->received() < sent && SteadyNs() < drain_deadline)
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
   receiver->Stop();

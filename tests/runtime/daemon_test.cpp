@@ -935,6 +935,8 @@ TEST(DaemonTest, AReplayPushingWithARefusedKeyStopsAndNamesTheAllowList) {
     (void)RunReplay(source, options);
     ADD_FAILURE() << "a replay with a refused key ran";
   } catch (const std::runtime_error& e) {
+    // The refusal names the allow-list; so does the timeout, which is what a slow machine
+    // may see instead (the daemon can close before its ERROR reaches the replay).
     EXPECT_NE(std::string(e.what()).find("authorized_keys"), std::string::npos) << e.what();
   }
   EXPECT_EQ(daemon->Stats().messages_in, 0u);
