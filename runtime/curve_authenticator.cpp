@@ -6,7 +6,6 @@
 #include <algorithm>
 #include <array>
 #include <chrono>
-#include <cstring>
 #include <stdexcept>
 #include <zmq.hpp>
 #include <zmq_addon.hpp>

@@ -36,6 +36,13 @@ constexpr char kPushHandshakeMonitor[] = "inproc://replay-push-handshakes";
 // Seconds to nanoseconds, capped at 1e9 s so a huge timeout means "for ever", not overflow.
 int64_t TimeoutNs(double seconds) { return static_cast<int64_t>(std::min(seconds, 1e9) * 1e9); }
 
+// The connect timeout as the error messages give it ("10 s", "0.5 s").
+std::string ConnectTimeoutText(const ReplayOptions& o) {
+  char text[32];
+  std::snprintf(text, sizeof(text), "%g s", o.connect_timeout_s);
+  return text;
+}
+
 void OpenSockets(const ReplayOptions& o, Sockets* s) {
   const std::optional<curve::ClientKeys> keys =
       curve::ReadClientKeys(o.curve_key_file, o.curve_server_key_file, "replay");
@@ -108,8 +115,7 @@ void WaitForPushHandshake(Sockets& s, const ReplayOptions& o) {
                                o.curve_server_key_file + " the daemon's public key?");
     }
   }
-  char seconds[32];
-  std::snprintf(seconds, sizeof(seconds), "%g s", o.connect_timeout_s);
+  const std::string seconds = ConnectTimeoutText(o);
   throw std::runtime_error("replay: no CURVE handshake with " + o.to + " within " + seconds +
                            " (is the daemon running, with a PULL input there, the public half "
                            "of " +
@@ -129,8 +135,7 @@ int WaitForDaemon(Sockets& s, const std::vector<SubjectLog>& logs, const Schedul
   };
   while (!(all(subscribed) && all(described))) {
     if (SteadyNs() > deadline) {
-      char seconds[32];
-      std::snprintf(seconds, sizeof(seconds), "%g s", o.connect_timeout_s);
+      const std::string seconds = ConnectTimeoutText(o);
       // Under CURVE a refused handshake looks like silence: name the keys to check.
       const std::string curve_send =
           o.curve_key_file.empty()
@@ -331,8 +336,7 @@ uint64_t SendAll(zmq::socket_t& out, std::vector<SubjectLog>& logs, const FrameP
     const int64_t now = SteadyNs();
     log.sent.push_back({next.frame_number, now, next.end_of_stream});
     if (!out.send(zmq::buffer(log.topic), zmq::send_flags::sndmore)) {
-      char seconds[32];
-      std::snprintf(seconds, sizeof(seconds), "%g s", o.connect_timeout_s);
+      const std::string seconds = ConnectTimeoutText(o);
       throw std::runtime_error("replay: could not queue a frame for " + o.to + " for " + seconds +
                                " after " + std::to_string(sent) +
                                " (the connection was dropped, as after a refused handshake: "
