@@ -105,14 +105,31 @@ void FinalSolve::AnchorRepairs(const CleanFrame& frame, CleanupCounters* counter
   std::span<const Vec3> anchor = summary.status == IkStatus::kTooFewMarkers
                                      ? final_.predicted_markers()
                                      : anchor_.predicted_markers();
-  if (summary.status != IkStatus::kTooFewMarkers && options_.anchor_holds_unseen_limbs &&
-      HoldUnseenLimbs())
-    anchor = held_markers_;
+  const bool solved = summary.status != IkStatus::kTooFewMarkers;
+  if (solved) MarkSeenLimbs();
+  if (solved && options_.anchor_holds_unseen_limbs && HoldUnseenLimbs()) anchor = held_markers_;
   for (size_t m = 0; m < m_count; ++m) {
     if (anchor_weights_[m] > 0.0 || weights_[m] <= 0.0 || tracks_[m].catching_up) continue;
-    solve_targets_[m] =
-        anchor[m] + ClampNorm(Vec3(solve_targets_[m] - anchor[m]), rules_.fill_anchor_radius_m);
+    // An interpolation on a limb the anchor can only guess leads it to where its markers
+    // come back; elsewhere the anchor is data, and a fill only nudges it.
+    const bool leads_unseen_limb =
+        solved && frame.source[m] == SampleSource::kInterpolated &&
+        !limb_seen_[static_cast<size_t>(markers_.primary_joint(static_cast<int>(m)))];
+    const double radius =
+        leads_unseen_limb ? rules_.unseen_limb_interpolation_radius_m : rules_.fill_anchor_radius_m;
+    solve_targets_[m] = anchor[m] + ClampNorm(Vec3(solve_targets_[m] - anchor[m]), radius);
   }
+}
+
+// limb_seen_[j]: a trusted sample (anchor_weights_) on joint j or below it.
+void FinalSolve::MarkSeenLimbs() {
+  std::fill(limb_seen_.begin(), limb_seen_.end(), 0);
+  for (int m = 0; m < markers_.num_markers(); ++m)
+    if (anchor_weights_[static_cast<size_t>(m)] > 0.0)
+      limb_seen_[static_cast<size_t>(markers_.primary_joint(m))] = 1;
+  for (int j = skeleton_.num_joints() - 1; j > 0; --j)  // parents come first: children fold in
+    if (limb_seen_[static_cast<size_t>(j)])
+      limb_seen_[static_cast<size_t>(skeleton_.joint(j).parent.value)] = 1;
 }
 
 // A limb with no trusted sample on it or below it (a lower leg and foot, a forearm and
@@ -121,17 +138,10 @@ void FinalSolve::AnchorRepairs(const CleanFrame& frame, CleanupCounters* counter
 // turning over an occluded, planted lower leg swung the guessed foot 2-3 cm a frame
 // faster than the real one (bench/README.md); held in the world for as long as it was
 // unseen, a foot under a shin that kept walking drifted 12 cm from the truth while its
-// fills were 2-7 cm off. Returns false when every limb is seen (the anchor stands as
-// solved).
+// fills were 2-7 cm off. Needs limb_seen_ (MarkSeenLimbs). Returns false when every
+// limb is seen (the anchor stands as solved).
 bool FinalSolve::HoldUnseenLimbs() {
   const int joints = skeleton_.num_joints();
-  std::fill(limb_seen_.begin(), limb_seen_.end(), 0);
-  for (int m = 0; m < markers_.num_markers(); ++m)
-    if (anchor_weights_[static_cast<size_t>(m)] > 0.0)
-      limb_seen_[static_cast<size_t>(markers_.primary_joint(m))] = 1;
-  for (int j = joints - 1; j > 0; --j)  // parents come first: children fold into them
-    if (limb_seen_[static_cast<size_t>(j)])
-      limb_seen_[static_cast<size_t>(skeleton_.joint(j).parent.value)] = 1;
   const KinematicsWorkspace& now = anchor_.kinematics();
   const KinematicsWorkspace& before = final_.kinematics();
   bool held = false;

@@ -8,7 +8,9 @@
 //  - a repaired sample weighs by where it came from (interpolated between known ends:
 //    much; extrapolated from one side: little), its weight grows gradually, and it may
 //    pull the skeleton only a few mm from the anchor: the pose the trusted samples alone
-//    give, with every limb that has no trusted sample turned by its parent only slowly.
+//    give, with every limb that has no trusted sample turned by its parent only slowly;
+//    an interpolated sample on such a limb may pull it faster, toward where its markers
+//    come back.
 // Per-marker state is sized at construction; Solve never allocates.
 #pragma once
 
@@ -44,6 +46,7 @@ class FinalSolve {
   };
 
   void AnchorRepairs(const CleanFrame& frame, CleanupCounters* counters);
+  void MarkSeenLimbs();
   bool HoldUnseenLimbs();
 
   const Skeleton& skeleton_;

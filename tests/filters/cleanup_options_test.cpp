@@ -59,7 +59,7 @@ TEST(CleanupOptionsTest, EveryOptionIsInTheTableOnceWithItsDefaultInBounds) {
     EXPECT_GE(value, f.min * f.to_si) << f.name;
     EXPECT_LE(value, f.max * f.to_si) << f.name;
   }
-  EXPECT_EQ(names.size(), 44u);  // a new option must be added to the table (and this count)
+  EXPECT_EQ(names.size(), 45u);  // a new option must be added to the table (and this count)
 }
 
 TEST(CleanupOptionsTest, EveryPerFrameRuleMeansTheSameSpeedOrTimeAtEveryRate) {
@@ -77,6 +77,10 @@ TEST(CleanupOptionsTest, EveryPerFrameRuleMeansTheSameSpeedOrTimeAtEveryRate) {
   EXPECT_NEAR(per_second(s.unseen_limb_turn_rad, 60), per_second(f.unseen_limb_turn_rad, 240),
               1e-12);
   EXPECT_NEAR(per_second(s.unseen_limb_turn_rad, 60), slow.unseen_limb_turn_radps, 1e-12);
+  EXPECT_NEAR(per_second(s.unseen_limb_interpolation_radius_m, 60),
+              per_second(f.unseen_limb_interpolation_radius_m, 240), 1e-12);
+  EXPECT_NEAR(per_second(s.unseen_limb_interpolation_radius_m, 60),
+              slow.unseen_limb_interpolation_speed_mps, 1e-12);
   EXPECT_NEAR(per_second(s.trim_slope_m, 60), per_second(f.trim_slope_m, 240), 1e-12);
   EXPECT_NEAR(per_second(s.max_offset_velocity_m, 60), per_second(f.max_offset_velocity_m, 240),
               1e-12);
