@@ -124,7 +124,9 @@ struct CleanupOptions {
   /// clean markers and took 0.7 s to close on them. 1 m/s is 1.7 cm a frame at 60 Hz,
   /// under what reads as a pop. A limb with a trusted sample keeps the slower speed: its
   /// anchor is data (applied to every interpolated sample, the humanoid's 60 Hz heavy
-  /// mean rose 2.21 -> 2.30 deg).
+  /// mean rose 2.21 -> 2.30 deg); so does every fill in a frame whose trusted samples are
+  /// too few to solve. Equal to fill_anchor_speed_mps: off; no effect without an anchor
+  /// (fill_anchor_speed_mps 0).
   double unseen_limb_interpolation_speed_mps = 1.0;
   /// In the final solve, a leg with nothing seen on its thigh or shin but its foot seen
   /// has its knee turned about the hip-ankle line until the knee's bend axis is within

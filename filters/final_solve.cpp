@@ -86,7 +86,8 @@ void FinalSolve::Solve(CleanFrame* frame, CleanupCounters* counters,
 
 // Where the skeleton goes on the samples it can trust alone (captured, fitted, full
 // weight): the anchor. A repaired sample may pull the skeleton at most
-// fill_anchor_speed_mps times a frame's time from it. A fill is a guess, and a guess may
+// fill_anchor_speed_mps times a frame's time from it (an interpolation on a limb nothing
+// trusted sees: unseen_limb_interpolation_speed_mps). A fill is a guess, and a guess may
 // jump (its reference re-acquiring a segment, an interpolation bending onto a returning
 // track); the anchor moves only with real data, so how fast a guess can take the skeleton
 // is bounded.
