@@ -103,10 +103,8 @@ void FinalSolve::AnchorRepairs(const CleanFrame& frame, CleanupCounters* counter
       SolveIk(skeleton_, markers_, options_.anchor_ik, solve_targets_, anchor_weights_, &anchor_);
   counters->CountSolve(summary);
   // Too few trusted samples to solve: the anchor is last frame's skeleton.
-  std::span<const Vec3> anchor = summary.status == IkStatus::kTooFewMarkers
-                                     ? final_.predicted_markers()
-                                     : anchor_.predicted_markers();
   const bool solved = summary.status != IkStatus::kTooFewMarkers;
+  std::span<const Vec3> anchor = solved ? anchor_.predicted_markers() : final_.predicted_markers();
   if (solved) MarkSeenLimbs();
   if (solved && options_.anchor_holds_unseen_limbs && HoldUnseenLimbs()) anchor = held_markers_;
   for (size_t m = 0; m < m_count; ++m) {

@@ -117,8 +117,7 @@ void WaitForPushHandshake(Sockets& s, const ReplayOptions& o) {
   }
   const std::string seconds = ConnectTimeoutText(o);
   throw std::runtime_error("replay: no CURVE handshake with " + o.to + " within " + seconds +
-                           " (is the daemon running, with a PULL input there, the public half "
-                           "of " +
+                           " (is the daemon running, with a PULL input there, the public half of " +
                            o.curve_key_file + " in its authorized_keys, and " +
                            o.curve_server_key_file + " its public key?" + dropped + ")");
 }

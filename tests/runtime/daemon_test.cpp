@@ -912,6 +912,25 @@ TEST(DaemonTest, CurveAdmitsOnlyAuthorizedKeysAndCountsEveryoneElse) {
             std::string::npos);
 }
 
+// A negative timeout is a caller's mistake, refused before any socket opens (the CLI
+// range-checks its flags; a library caller gets this).
+TEST(DaemonTest, AReplayRefusesANegativeTimeout) {
+  const ReplaySource source = HumanoidReplaySource("walk", 0.5, 120.0, 0.0, 1);
+  for (const bool connect : {true, false}) {
+    ReplayOptions options;
+    options.to = "tcp://127.0.0.1:1";
+    options.push = true;
+    options.from = "";
+    (connect ? options.connect_timeout_s : options.drain_timeout_s) = -1.0;
+    try {
+      (void)RunReplay(source, options);
+      ADD_FAILURE() << "a negative timeout was taken (connect: " << connect << ")";
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find("must be 0 s or more"), std::string::npos) << e.what();
+    }
+  }
+}
+
 // A replay pushing into a CURVE daemon's PULL input with a key the daemon does not allow
 // stops with an error naming the allow-list, where its frames used to queue for a peer that
 // never took them (and a send could wait for ever); with an allowed key every frame is solved.
