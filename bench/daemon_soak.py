@@ -176,6 +176,10 @@ def run(args, subjects, seconds, work):
         print(f"  joint error: mean {a['mean_joint_position_error_cm']:.3f} cm / {a['mean_joint_rotation_error_deg']:.2f} deg, "
               f"frame p99.9 {a.get('p999_frame_position_error_cm', 0):.2f} cm, worst frame {a['max_joint_position_error_cm']:.2f} cm "
               f"({w.get('subject', '?')} frame {w.get('frame_number', '?')}, {w.get('joint', '?')})", flush=True)
+        tail = a.get("p999_tail", [])
+        if tail:
+            print("  frames over p99.9 by joint: " + ", ".join(
+                f"{t['joint']} {t['frames']} ({t['episodes']} episode{'' if t['episodes'] == 1 else 's'}, worst {t['worst_cm']:.1f} cm)" for t in tail[:6]), flush=True)
     if args.viewers or args.stalled_viewers or args.readers:
         lv = result["live_view"]
         rates = ", ".join("%.1f fps" % p["fps"] for p in views if p)

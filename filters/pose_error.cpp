@@ -97,4 +97,17 @@ int PoseErrorAccumulator::worst_frame(int* worst_joint) const {
   return frame;
 }
 
+std::vector<PoseErrorAccumulator::FrameError> PoseErrorAccumulator::frames_at_least(
+    double threshold_m) const {
+  std::vector<FrameError> out;
+  for (int f = 0; f < frames_; ++f) {
+    FrameError worst{f, -1, -1.0};
+    for (size_t i = 0; i < position_.size(); ++i)
+      if (position_[i][static_cast<size_t>(f)] > worst.error_m)
+        worst = {f, joints_[i], position_[i][static_cast<size_t>(f)]};
+    if (worst.joint >= 0 && worst.error_m >= threshold_m) out.push_back(worst);
+  }
+  return out;
+}
+
 }  // namespace mocapd

@@ -31,6 +31,15 @@ class PoseErrorAccumulator {
   /// The frame (in the order added) with the largest position error, and its joint; -1
   /// when no frame was added.
   int worst_frame(int* worst_joint = nullptr) const;
+  /// A frame's error and the joint it comes from.
+  struct FrameError {
+    int frame;  ///< In the order added.
+    int joint;
+    double error_m;
+  };
+  /// Every frame whose position error is at least threshold_m, in the order added: what
+  /// makes up a tail (the frames at or above a quantile) and which joints it comes from.
+  std::vector<FrameError> frames_at_least(double threshold_m) const;
 
  private:
   std::vector<int> joints_;

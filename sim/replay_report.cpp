@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <map>
 #include <sstream>
 
 #include "filters/pose_error.hpp"
@@ -11,6 +12,16 @@
 
 namespace mocapd {
 namespace {
+
+nlohmann::json TailJson(const std::vector<ReplayReport::TailJoint>& tail) {
+  nlohmann::json out = nlohmann::json::array();
+  for (const auto& t : tail)
+    out.push_back({{"joint", t.joint},
+                   {"frames", t.frames},
+                   {"episodes", t.episodes},
+                   {"worst_cm", t.worst_cm}});
+  return out;
+}
 
 nlohmann::json SummaryJson(const LatencySummary& s) {
   return {{"count", s.count},    {"p50_ms", s.p50_ms},    {"p90_ms", s.p90_ms},
@@ -69,6 +80,7 @@ nlohmann::json ReplayReport::ToJson() const {
                       {{"subject", worst_frame_subject},
                        {"frame_number", worst_frame_number},
                        {"joint", worst_frame_joint}}},
+                     {"p999_tail", TailJson(p999_tail)},
                      {"mean_joint_rotation_error_deg", mean_rotation_error_deg}};
   if (frames_unscored > 0)
     j["accuracy_unscored"] = {{"frames", frames_unscored}, {"reason", unscored_reason}};
@@ -131,6 +143,18 @@ std::string ReplayReport::FormatTable() const {
     row("worst frame (cm)", num(max_position_error_cm, 3) + "  (" + worst_frame_subject +
                                 " frame " + std::to_string(worst_frame_number) + ", " +
                                 worst_frame_joint + ")");
+    if (!p999_tail.empty()) {
+      std::string tail;
+      for (size_t i = 0; i < p999_tail.size() && i < 4; ++i) {
+        const auto& t = p999_tail[i];
+        tail += (i > 0 ? ", " : "") + t.joint + " " + std::to_string(t.frames) + " (" +
+                std::to_string(t.episodes) + (t.episodes == 1 ? " episode" : " episodes") +
+                ", worst " + num(t.worst_cm, 1) + ")";
+      }
+      if (p999_tail.size() > 4)
+        tail += ", " + std::to_string(p999_tail.size() - 4) + " more joints";
+      row("frames over p99.9 by joint", tail);
+    }
     row("joint rotation error mean (deg)", num(mean_rotation_error_deg, 3));
   }
   if (frames_unscored > 0)
@@ -141,6 +165,32 @@ std::string ReplayReport::FormatTable() const {
 std::string LatencyHistogramSvg(const std::vector<double>& latencies_ms, const std::string& title) {
   return svg::LogHistogram(title, "processing latency (ms, log scale)", latencies_ms, 0.01, 100.0,
                            {0.5, 0.99, 0.999}, "ms");
+}
+
+std::vector<ReplayReport::TailJoint> SummarizeTail(
+    std::span<const PoseErrorAccumulator::FrameError> tail,
+    std::span<const std::pair<size_t, uint64_t>> scored, const Skeleton& skeleton,
+    uint64_t episode_gap_frames) {
+  std::map<int, ReplayReport::TailJoint> by_joint;
+  std::map<std::pair<int, size_t>, uint64_t> last_frame;  // (joint, subject) -> frame number
+  for (const auto& f : tail) {
+    const auto& [subject, frame_number] = scored[static_cast<size_t>(f.frame)];
+    ReplayReport::TailJoint& t = by_joint[f.joint];
+    t.joint = skeleton.joint(f.joint).name;
+    ++t.frames;
+    t.worst_cm = std::max(t.worst_cm, f.error_m * 100.0);
+    // Frames of different subjects interleave: the frame numbers of one subject say
+    // whether this continues an episode.
+    auto [it, first] = last_frame.try_emplace({f.joint, subject}, frame_number);
+    if (first || frame_number > it->second + episode_gap_frames || frame_number < it->second)
+      ++t.episodes;
+    it->second = frame_number;
+  }
+  std::vector<ReplayReport::TailJoint> out;
+  for (auto& [joint, t] : by_joint) out.push_back(std::move(t));
+  std::stable_sort(out.begin(), out.end(),
+                   [](const auto& a, const auto& b) { return a.frames > b.frames; });
+  return out;
 }
 
 }  // namespace mocapd

@@ -5,8 +5,12 @@
 
 #include <cstdint>
 #include <nlohmann/json.hpp>
+#include <span>
 #include <string>
+#include <utility>
 #include <vector>
+
+#include "filters/pose_error.hpp"
 
 namespace mocapd {
 
@@ -51,12 +55,30 @@ struct ReplayReport {
   std::string worst_frame_subject;     ///< Where the worst frame was.
   uint64_t worst_frame_number = 0;
   std::string worst_frame_joint;
+  /// The frames at or above the p99.9 by the joint that made each worst: how many frames,
+  /// in how many episodes (a subject's tail frames of that joint less than a second apart
+  /// are one), and the worst; most frames first. What to fix to bring the tail down.
+  struct TailJoint {
+    std::string joint;
+    uint64_t frames = 0;
+    uint64_t episodes = 0;
+    double worst_cm = 0.0;
+  };
+  std::vector<TailJoint> p999_tail;
   /// Frames with a ground truth the replay could not score, and the first reason why.
   uint64_t frames_unscored = 0;
   std::string unscored_reason;
   nlohmann::json ToJson() const;
   std::string FormatTable() const;
 };
+
+/// Groups tail frames (PoseErrorAccumulator::frames_at_least) by their worst joint
+/// (ReplayReport::p999_tail). scored[f]: frame f's subject and frame number; frames of
+/// one subject and joint at most episode_gap_frames apart make one episode.
+std::vector<ReplayReport::TailJoint> SummarizeTail(
+    std::span<const PoseErrorAccumulator::FrameError> tail,
+    std::span<const std::pair<size_t, uint64_t>> scored, const Skeleton& skeleton,
+    uint64_t episode_gap_frames);
 
 /// Percentiles, mean and max of latencies in milliseconds (all zero when empty).
 LatencySummary SummariseLatencies(std::vector<double> ms);

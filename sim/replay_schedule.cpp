@@ -461,6 +461,10 @@ ReplayReport RunSchedule(std::vector<SubjectLog>& logs, const FrameProducer& pro
       report.worst_frame_subject = logs[subject].name;
       report.worst_frame_number = frame_number;
       report.worst_frame_joint = setup.skeleton->joint(joint).name;
+      const auto tail = accuracy->frames_at_least(report.p999_frame_error_cm / 100.0);
+      report.p999_tail = SummarizeTail(
+          tail, receiver->scored(), *setup.skeleton,
+          static_cast<uint64_t>(std::ceil(1.0 / std::max(setup.frame_period_s, 1e-6))));
     }
   }
   return report;

@@ -33,5 +33,28 @@ TEST(PoseErrorTest, AFramesErrorIsItsWorstJointAndTheWorstFrameIsFound) {
   EXPECT_NEAR(errors.frame_position_error_quantile_m(0.999), 0.001, 1e-12);
 }
 
+TEST(PoseErrorTest, TheFramesAtOrAboveAnErrorAreListedWithTheirWorstJoint) {
+  const Skeleton skeleton = MakeHumanoidSkeleton();
+  KinematicsWorkspace truth(skeleton), estimate(skeleton);
+  ForwardKinematics(skeleton, RestPose(skeleton), &truth);
+  PoseErrorAccumulator errors(skeleton);
+  const int last = skeleton.num_joints() - 1;
+  for (int f = 0; f < 10; ++f) {
+    estimate = truth;
+    estimate.p_WJ[1] += Vec3(0.001 * f, 0, 0);  // joint 1: f mm off
+    if (f == 3) estimate.p_WJ[static_cast<size_t>(last)] += Vec3(0, 0, 0.02);
+    errors.Add(truth, estimate);
+  }
+  const auto tail = errors.frames_at_least(0.008);
+  ASSERT_EQ(tail.size(), 3u);  // frames 3 (2 cm, the last joint), 8 and 9
+  EXPECT_EQ(tail[0].frame, 3);
+  EXPECT_EQ(tail[0].joint, last);
+  EXPECT_NEAR(tail[0].error_m, 0.02, 1e-12);
+  EXPECT_EQ(tail[1].frame, 8);
+  EXPECT_EQ(tail[1].joint, 1);
+  EXPECT_NEAR(tail[2].error_m, 0.009, 1e-12);
+  EXPECT_TRUE(errors.frames_at_least(0.05).empty());
+}
+
 }  // namespace
 }  // namespace mocapd

@@ -1,0 +1,64 @@
+// Tests for the replay report's accuracy tail: the frames over the p99.9 grouped by the
+// joint that made them worst, with separate episodes told apart per subject.
+#include "sim/replay_report.hpp"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+
+#include "sim/humanoid.hpp"
+
+namespace mocapd {
+namespace {
+
+TEST(ReplayReportTest, TailFramesAreGroupedByJointAndEpisodesAreSplitByGapAndSubject) {
+  const Skeleton skeleton = MakeHumanoidSkeleton();
+  const int toe = skeleton.FindJoint("RightToeBase")->value;
+  const int hand = skeleton.FindJoint("LeftHand")->value;
+  // Two subjects' frames interleave as received: subject 0 frames 100.., subject 1 frames
+  // 100.. too (the same frame numbers: another subject is another episode).
+  std::vector<std::pair<size_t, uint64_t>> scored;
+  for (uint64_t n = 100; n < 1000; ++n) {
+    scored.push_back({0, n});
+    scored.push_back({1, n});
+  }
+  auto index = [](size_t subject, uint64_t frame_number) {
+    return static_cast<int>(2 * (frame_number - 100) + subject);
+  };
+  std::vector<PoseErrorAccumulator::FrameError> tail;
+  // Toe: subject 0 frames 200-204 and 206 (one episode: within the 10-frame gap), then
+  // frame 400 (a second); subject 1 frame 202 (a third). Hand: subject 1 frame 300.
+  for (uint64_t n : {200, 201, 202, 203, 204, 206, 400})
+    tail.push_back({index(0, n), toe, 0.05 + 0.001 * static_cast<double>(n % 10)});
+  tail.push_back({index(1, 202), toe, 0.2});
+  tail.push_back({index(1, 300), hand, 0.3});
+  std::sort(tail.begin(), tail.end(),
+            [](const auto& a, const auto& b) { return a.frame < b.frame; });
+  const auto summary = SummarizeTail(tail, scored, skeleton, 10);
+  ASSERT_EQ(summary.size(), 2u);
+  EXPECT_EQ(summary[0].joint, "RightToeBase");  // most frames first
+  EXPECT_EQ(summary[0].frames, 8u);
+  EXPECT_EQ(summary[0].episodes, 3u);
+  EXPECT_NEAR(summary[0].worst_cm, 20.0, 1e-9);
+  EXPECT_EQ(summary[1].joint, "LeftHand");
+  EXPECT_EQ(summary[1].frames, 1u);
+  EXPECT_EQ(summary[1].episodes, 1u);
+  EXPECT_NEAR(summary[1].worst_cm, 30.0, 1e-9);
+}
+
+TEST(ReplayReportTest, TheTailIsInTheJsonAndTheTable) {
+  ReplayReport report;
+  report.listened = true;  // the table shows accuracy only for a measured output
+  report.has_truth = true;
+  report.p999_tail = {{"RightToeBase", 12, 2, 18.8}, {"LeftLeg", 3, 1, 9.5}};
+  const nlohmann::json j = report.ToJson();
+  ASSERT_EQ(j["accuracy"]["p999_tail"].size(), 2u);
+  EXPECT_EQ(j["accuracy"]["p999_tail"][0]["joint"], "RightToeBase");
+  EXPECT_EQ(j["accuracy"]["p999_tail"][0]["episodes"], 2);
+  const std::string table = report.FormatTable();
+  EXPECT_NE(table.find("RightToeBase 12 (2 episodes, worst 18.8)"), std::string::npos) << table;
+  EXPECT_NE(table.find("LeftLeg 3 (1 episode, worst 9.5)"), std::string::npos) << table;
+}
+
+}  // namespace
+}  // namespace mocapd
