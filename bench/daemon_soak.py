@@ -179,7 +179,7 @@ def run(args, subjects, seconds, work):
         tail = a.get("p999_tail", [])
         if tail:
             print("  frames over p99.9 by joint: " + ", ".join(
-                f"{t['joint']} {t['frames']} ({t['episodes']} episode{'' if t['episodes'] == 1 else 's'}, worst {t['worst_cm']:.1f} cm)" for t in tail[:6]), flush=True)
+                f"{t['joint']} {t['frames']} ({t['episodes']} episode{'' if t['episodes'] == 1 else 's'}, worst {t['worst_cm']:.1f} cm at {t.get('worst_subject', '?')} frame {t.get('worst_frame_number', '?')})" for t in tail[:6]), flush=True)
     if args.viewers or args.stalled_viewers or args.readers:
         lv = result["live_view"]
         rates = ", ".join("%.1f fps" % p["fps"] for p in views if p)

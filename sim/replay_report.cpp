@@ -19,7 +19,9 @@ nlohmann::json TailJson(const std::vector<ReplayReport::TailJoint>& tail) {
     out.push_back({{"joint", t.joint},
                    {"frames", t.frames},
                    {"episodes", t.episodes},
-                   {"worst_cm", t.worst_cm}});
+                   {"worst_cm", t.worst_cm},
+                   {"worst_subject", t.worst_subject},
+                   {"worst_frame_number", t.worst_frame_number}});
   return out;
 }
 
@@ -149,7 +151,8 @@ std::string ReplayReport::FormatTable() const {
         const auto& t = p999_tail[i];
         tail += (i > 0 ? ", " : "") + t.joint + " " + std::to_string(t.frames) + " (" +
                 std::to_string(t.episodes) + (t.episodes == 1 ? " episode" : " episodes") +
-                ", worst " + num(t.worst_cm, 1) + ")";
+                ", worst " + num(t.worst_cm, 1) + " at " + t.worst_subject + " frame " +
+                std::to_string(t.worst_frame_number) + ")";
       }
       if (p999_tail.size() > 4)
         tail += ", " + std::to_string(p999_tail.size() - 4) + " more joints";
@@ -169,8 +172,8 @@ std::string LatencyHistogramSvg(const std::vector<double>& latencies_ms, const s
 
 std::vector<ReplayReport::TailJoint> SummarizeTail(
     std::span<const PoseErrorAccumulator::FrameError> tail,
-    std::span<const std::pair<size_t, uint64_t>> scored, const Skeleton& skeleton,
-    uint64_t episode_gap_frames) {
+    std::span<const std::pair<size_t, uint64_t>> scored, std::span<const std::string> subject_names,
+    const Skeleton& skeleton, uint64_t episode_gap_frames) {
   std::map<int, ReplayReport::TailJoint> by_joint;
   std::map<std::pair<int, size_t>, uint64_t> last_frame;  // (joint, subject) -> frame number
   for (const auto& f : tail) {
@@ -178,7 +181,11 @@ std::vector<ReplayReport::TailJoint> SummarizeTail(
     ReplayReport::TailJoint& t = by_joint[f.joint];
     t.joint = skeleton.joint(f.joint).name;
     ++t.frames;
-    t.worst_cm = std::max(t.worst_cm, f.error_m * 100.0);
+    if (f.error_m * 100.0 > t.worst_cm) {
+      t.worst_cm = f.error_m * 100.0;
+      t.worst_subject = subject < subject_names.size() ? subject_names[subject] : "?";
+      t.worst_frame_number = frame_number;
+    }
     // Frames of different subjects interleave: the frame numbers of one subject say
     // whether this continues an episode.
     auto [it, first] = last_frame.try_emplace({f.joint, subject}, frame_number);

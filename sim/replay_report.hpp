@@ -57,12 +57,15 @@ struct ReplayReport {
   std::string worst_frame_joint;
   /// The frames at or above the p99.9 by the joint that made each worst: how many frames,
   /// in how many episodes (a subject's tail frames of that joint less than a second apart
-  /// are one), and the worst; most frames first. What to fix to bring the tail down.
+  /// are one), and the worst with where it was; most frames first. What to fix to bring
+  /// the tail down, and where to look.
   struct TailJoint {
     std::string joint;
     uint64_t frames = 0;
     uint64_t episodes = 0;
     double worst_cm = 0.0;
+    std::string worst_subject;
+    uint64_t worst_frame_number = 0;
   };
   std::vector<TailJoint> p999_tail;
   /// Frames with a ground truth the replay could not score, and the first reason why.
@@ -73,12 +76,13 @@ struct ReplayReport {
 };
 
 /// Groups tail frames (PoseErrorAccumulator::frames_at_least) by their worst joint
-/// (ReplayReport::p999_tail). scored[f]: frame f's subject and frame number; frames of
-/// one subject and joint at most episode_gap_frames apart make one episode.
+/// (ReplayReport::p999_tail). scored[f]: frame f's subject (an index into subject_names)
+/// and frame number; frames of one subject and joint at most episode_gap_frames apart
+/// make one episode.
 std::vector<ReplayReport::TailJoint> SummarizeTail(
     std::span<const PoseErrorAccumulator::FrameError> tail,
-    std::span<const std::pair<size_t, uint64_t>> scored, const Skeleton& skeleton,
-    uint64_t episode_gap_frames);
+    std::span<const std::pair<size_t, uint64_t>> scored, std::span<const std::string> subject_names,
+    const Skeleton& skeleton, uint64_t episode_gap_frames);
 
 /// Percentiles, mean and max of latencies in milliseconds (all zero when empty).
 LatencySummary SummariseLatencies(std::vector<double> ms);

@@ -462,8 +462,10 @@ ReplayReport RunSchedule(std::vector<SubjectLog>& logs, const FrameProducer& pro
       report.worst_frame_number = frame_number;
       report.worst_frame_joint = setup.skeleton->joint(joint).name;
       const auto tail = accuracy->frames_at_least(report.p999_frame_error_cm / 100.0);
+      std::vector<std::string> names;
+      for (const auto& log : logs) names.push_back(log.name);
       report.p999_tail = SummarizeTail(
-          tail, receiver->scored(), *setup.skeleton,
+          tail, receiver->scored(), names, *setup.skeleton,
           static_cast<uint64_t>(std::ceil(1.0 / std::max(setup.frame_period_s, 1e-6))));
     }
   }

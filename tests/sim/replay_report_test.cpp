@@ -34,30 +34,41 @@ TEST(ReplayReportTest, TailFramesAreGroupedByJointAndEpisodesAreSplitByGapAndSub
   tail.push_back({index(1, 300), hand, 0.3});
   std::sort(tail.begin(), tail.end(),
             [](const auto& a, const auto& b) { return a.frame < b.frame; });
-  const auto summary = SummarizeTail(tail, scored, skeleton, 10);
+  const std::vector<std::string> names = {"actor1", "actor2"};
+  const auto summary = SummarizeTail(tail, scored, names, skeleton, 10);
   ASSERT_EQ(summary.size(), 2u);
   EXPECT_EQ(summary[0].joint, "RightToeBase");  // most frames first
   EXPECT_EQ(summary[0].frames, 8u);
   EXPECT_EQ(summary[0].episodes, 3u);
   EXPECT_NEAR(summary[0].worst_cm, 20.0, 1e-9);
+  EXPECT_EQ(summary[0].worst_subject, "actor2");
+  EXPECT_EQ(summary[0].worst_frame_number, 202u);
   EXPECT_EQ(summary[1].joint, "LeftHand");
   EXPECT_EQ(summary[1].frames, 1u);
   EXPECT_EQ(summary[1].episodes, 1u);
   EXPECT_NEAR(summary[1].worst_cm, 30.0, 1e-9);
+  EXPECT_EQ(summary[1].worst_subject, "actor2");
+  EXPECT_EQ(summary[1].worst_frame_number, 300u);
 }
 
 TEST(ReplayReportTest, TheTailIsInTheJsonAndTheTable) {
   ReplayReport report;
   report.listened = true;  // the table shows accuracy only for a measured output
   report.has_truth = true;
-  report.p999_tail = {{"RightToeBase", 12, 2, 18.8}, {"LeftLeg", 3, 1, 9.5}};
+  report.p999_tail = {{"RightToeBase", 12, 2, 18.8, "actor3", 35501},
+                      {"LeftLeg", 3, 1, 9.5, "actor1", 7}};
   const nlohmann::json j = report.ToJson();
   ASSERT_EQ(j["accuracy"]["p999_tail"].size(), 2u);
   EXPECT_EQ(j["accuracy"]["p999_tail"][0]["joint"], "RightToeBase");
   EXPECT_EQ(j["accuracy"]["p999_tail"][0]["episodes"], 2);
+  EXPECT_EQ(j["accuracy"]["p999_tail"][0]["worst_subject"], "actor3");
+  EXPECT_EQ(j["accuracy"]["p999_tail"][0]["worst_frame_number"], 35501);
   const std::string table = report.FormatTable();
-  EXPECT_NE(table.find("RightToeBase 12 (2 episodes, worst 18.8)"), std::string::npos) << table;
-  EXPECT_NE(table.find("LeftLeg 3 (1 episode, worst 9.5)"), std::string::npos) << table;
+  EXPECT_NE(table.find("RightToeBase 12 (2 episodes, worst 18.8 at actor3 frame 35501)"),
+            std::string::npos)
+      << table;
+  EXPECT_NE(table.find("LeftLeg 3 (1 episode, worst 9.5 at actor1 frame 7)"), std::string::npos)
+      << table;
 }
 
 }  // namespace
