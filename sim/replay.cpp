@@ -214,6 +214,7 @@ ReplayReport RunReplay(const ReplaySource& source, const ReplayOptions& o) {
   setup.check_hash = true;
   setup.skeleton = source.skeleton.get();
   setup.frame_period_s = 1.0 / rate;
+  setup.capture_rate_hz = source.rate_hz;
   if (o.protocol_version >= protocol::kVersion2)
     setup.sent_stream = [&](size_t, uint64_t frame_number) { return stream_of(frame_number); };
   // Where an actor stands moves the joint that carries the travel (Hips below a fixed
@@ -402,6 +403,7 @@ ReplayReport RunGraphReplay(const GraphReplaySource& source, double seconds, dou
   setup.check_hash = true;
   setup.skeleton = source.library->skeleton.get();
   setup.frame_period_s = 1.0 / send_rate;
+  setup.capture_rate_hz = rate_hz;
   if (o.protocol_version >= protocol::kVersion2)
     setup.sent_stream = [&](size_t, uint64_t frame_number) { return stream_of(frame_number); };
   setup.truth = [&](size_t k, uint64_t frame_number, Pose* scratch) -> const Pose* {
@@ -484,6 +486,7 @@ ReplayReport RunRecordingReplay(const Recording& recording, const std::string& d
   };
   replay::ScheduleSetup setup;
   setup.frame_period_s = rate_hz > 0 ? 1.0 / rate_hz : 1.0 / 120.0;
+  if (rate_hz > 0) setup.capture_rate_hz = rate_hz;
   ReplayReport report = replay::RunSchedule(logs, produce, setup, o);
   report.source = description;
   report.rate_hz = rate_hz;

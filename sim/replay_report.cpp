@@ -147,15 +147,17 @@ std::string ReplayReport::FormatTable() const {
                                 worst_frame_joint + ")");
     if (!p999_tail.empty()) {
       std::string tail;
-      for (size_t i = 0; i < p999_tail.size() && i < 4; ++i) {
+      constexpr size_t kShown = 6;
+      for (size_t i = 0; i < p999_tail.size() && i < kShown; ++i) {
         const auto& t = p999_tail[i];
         tail += (i > 0 ? ", " : "") + t.joint + " " + std::to_string(t.frames) + " (" +
                 std::to_string(t.episodes) + (t.episodes == 1 ? " episode" : " episodes") +
                 ", worst " + num(t.worst_cm, 1) + " at " + t.worst_subject + " frame " +
                 std::to_string(t.worst_frame_number) + ")";
       }
-      if (p999_tail.size() > 4)
-        tail += ", " + std::to_string(p999_tail.size() - 4) + " more joints";
+      if (p999_tail.size() > kShown)
+        tail += ", " + std::to_string(p999_tail.size() - kShown) +
+                (p999_tail.size() - kShown == 1 ? " more joint" : " more joints");
       row("frames over p99.9 by joint", tail);
     }
     row("joint rotation error mean (deg)", num(mean_rotation_error_deg, 3));
@@ -175,11 +177,14 @@ std::vector<ReplayReport::TailJoint> SummarizeTail(
     std::span<const std::pair<size_t, uint64_t>> scored, std::span<const std::string> subject_names,
     const Skeleton& skeleton, uint64_t episode_gap_frames) {
   std::map<int, ReplayReport::TailJoint> by_joint;
-  std::map<std::pair<int, size_t>, uint64_t> last_frame;  // (joint, subject) -> frame number
+  // (joint, subject) -> the latest frame number seen: frame numbers are unique per
+  // subject, and a frame received out of order must not split an episode.
+  std::map<std::pair<int, size_t>, uint64_t> last_frame;
   for (const auto& f : tail) {
     const auto& [subject, frame_number] = scored[static_cast<size_t>(f.frame)];
-    ReplayReport::TailJoint& t = by_joint[f.joint];
-    t.joint = skeleton.joint(f.joint).name;
+    auto [group, new_joint] = by_joint.try_emplace(f.joint);
+    ReplayReport::TailJoint& t = group->second;
+    if (new_joint) t.joint = skeleton.joint(f.joint).name;
     ++t.frames;
     if (f.error_m * 100.0 > t.worst_cm) {
       t.worst_cm = f.error_m * 100.0;
@@ -189,9 +194,8 @@ std::vector<ReplayReport::TailJoint> SummarizeTail(
     // Frames of different subjects interleave: the frame numbers of one subject say
     // whether this continues an episode.
     auto [it, first] = last_frame.try_emplace({f.joint, subject}, frame_number);
-    if (first || frame_number > it->second + episode_gap_frames || frame_number < it->second)
-      ++t.episodes;
-    it->second = frame_number;
+    if (first || frame_number > it->second + episode_gap_frames) ++t.episodes;
+    it->second = std::max(it->second, frame_number);
   }
   std::vector<ReplayReport::TailJoint> out;
   for (auto& [joint, t] : by_joint) out.push_back(std::move(t));

@@ -56,7 +56,7 @@ struct ReplayReport {
   uint64_t worst_frame_number = 0;
   std::string worst_frame_joint;
   /// The frames at or above the p99.9 by the joint that made each worst: how many frames,
-  /// in how many episodes (a subject's tail frames of that joint less than a second apart
+  /// in how many episodes (a subject's tail frames of that joint at most a second apart
   /// are one), and the worst with where it was; most frames first. What to fix to bring
   /// the tail down, and where to look.
   struct TailJoint {

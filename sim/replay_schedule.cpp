@@ -453,7 +453,8 @@ ReplayReport RunSchedule(std::vector<SubjectLog>& logs, const FrameProducer& pro
     report.mean_position_error_cm = accuracy->mean_position_error_m() * 100.0;
     report.max_position_error_cm = accuracy->max_position_error_m() * 100.0;
     report.mean_rotation_error_deg = accuracy->mean_rotation_error_rad() * 180.0 / M_PI;
-    report.p999_frame_error_cm = accuracy->frame_position_error_quantile_m(0.999) * 100.0;
+    const double p999_m = accuracy->frame_position_error_quantile_m(0.999);
+    report.p999_frame_error_cm = p999_m * 100.0;
     int joint = -1;
     const int worst = accuracy->worst_frame(&joint);
     if (worst >= 0 && setup.skeleton != nullptr) {
@@ -461,12 +462,15 @@ ReplayReport RunSchedule(std::vector<SubjectLog>& logs, const FrameProducer& pro
       report.worst_frame_subject = logs[subject].name;
       report.worst_frame_number = frame_number;
       report.worst_frame_joint = setup.skeleton->joint(joint).name;
-      const auto tail = accuracy->frames_at_least(report.p999_frame_error_cm / 100.0);
-      std::vector<std::string> names;
-      for (const auto& log : logs) names.push_back(log.name);
-      report.p999_tail = SummarizeTail(
-          tail, receiver->scored(), names, *setup.skeleton,
-          static_cast<uint64_t>(std::ceil(1.0 / std::max(setup.frame_period_s, 1e-6))));
+      // In metres as measured: through centimetres and back, the p99.9 frame itself could
+      // fall below its own threshold. A take without error has no tail to speak of.
+      if (p999_m > 0.0) {
+        std::vector<std::string> names;
+        for (const auto& log : logs) names.push_back(log.name);
+        report.p999_tail = SummarizeTail(
+            accuracy->frames_at_least(p999_m), receiver->scored(), names, *setup.skeleton,
+            static_cast<uint64_t>(std::ceil(std::max(setup.capture_rate_hz, 1.0))));
+      }
     }
   }
   return report;

@@ -53,6 +53,9 @@ struct ScheduleSetup {
   TruthLookup truth;                    ///< May be empty.
   const Skeleton* skeleton = nullptr;   ///< The truth's skeleton (nullptr: no accuracy).
   double frame_period_s = 1.0 / 120.0;  ///< A frame later than this is "late".
+  /// The frames' own rate (their frame numbers count these), which may differ from the
+  /// rate they are sent at (--rate).
+  double capture_rate_hz = 120.0;
   /// The stream block a subject's frame was sent with, which a v2 daemon must echo (empty:
   /// not checked).
   std::function<protocol::StreamInfo(size_t subject, uint64_t frame_number)> sent_stream;

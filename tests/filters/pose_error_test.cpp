@@ -41,7 +41,9 @@ TEST(PoseErrorTest, TheFramesAtOrAboveAnErrorAreListedWithTheirWorstJoint) {
   const int last = skeleton.num_joints() - 1;
   for (int f = 0; f < 10; ++f) {
     estimate = truth;
-    estimate.p_WJ[1] += Vec3(0.001 * f, 0, 0);  // joint 1: f mm off
+    // Joint 1: f mm off (its rest position is 0 along x, so the error is exactly that
+    // double and the threshold below is met with equality by frame 8).
+    estimate.p_WJ[1] += Vec3(0.001 * f, 0, 0);
     if (f == 3) estimate.p_WJ[static_cast<size_t>(last)] += Vec3(0, 0, 0.02);
     errors.Add(truth, estimate);
   }
@@ -52,6 +54,7 @@ TEST(PoseErrorTest, TheFramesAtOrAboveAnErrorAreListedWithTheirWorstJoint) {
   EXPECT_NEAR(tail[0].error_m, 0.02, 1e-12);
   EXPECT_EQ(tail[1].frame, 8);
   EXPECT_EQ(tail[1].joint, 1);
+  EXPECT_EQ(tail[2].frame, 9);
   EXPECT_NEAR(tail[2].error_m, 0.009, 1e-12);
   EXPECT_TRUE(errors.frames_at_least(0.05).empty());
 }

@@ -112,6 +112,14 @@ def main(mocapd, mocap_sim, config_dir, work, seconds="30"):
     assert worst["subject"] == "actor1" and 0 <= worst["frame_number"] < frames and worst["joint"], worst
     assert (r["accuracy"]["mean_joint_position_error_cm"] <= r["accuracy"]["p999_frame_position_error_cm"]
             <= r["accuracy"]["max_joint_position_error_cm"]), r["accuracy"]
+    # The tail holds at least the frames at or above the p99.9, the worst frame among them:
+    # its joint's group names it, and the groups' frames add up to no fewer than the rank.
+    tail = r["accuracy"]["p999_tail"]
+    assert sum(t["frames"] for t in tail) >= max(1, frames - int(0.999 * frames)), tail
+    assert all(1 <= t["episodes"] <= t["frames"] for t in tail), tail
+    top = max(tail, key=lambda t: t["worst_cm"])
+    assert (top["joint"] == worst["joint"] and top["worst_frame_number"] == worst["frame_number"]
+            and abs(top["worst_cm"] - r["accuracy"]["max_joint_position_error_cm"]) < 1e-9), (top, worst)
     # Sanity bounds, not the accuracy targets (those are the cleanup benchmark's): the
     # humanoid's twist-prone end joints put the clean-marker rotation error near 2-3 deg.
     assert r["accuracy"]["mean_joint_rotation_error_deg"] < 10.0, r["accuracy"]

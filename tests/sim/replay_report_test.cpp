@@ -26,9 +26,10 @@ TEST(ReplayReportTest, TailFramesAreGroupedByJointAndEpisodesAreSplitByGapAndSub
     return static_cast<int>(2 * (frame_number - 100) + subject);
   };
   std::vector<PoseErrorAccumulator::FrameError> tail;
-  // Toe: subject 0 frames 200-204 and 206 (one episode: within the 10-frame gap), then
-  // frame 400 (a second); subject 1 frame 202 (a third). Hand: subject 1 frame 300.
-  for (uint64_t n : {200, 201, 202, 203, 204, 206, 400})
+  // Toe: subject 0 frames 200-204, 206 and 216 (one episode: each at most the 10-frame
+  // gap after the one before), then 227 (11 after: a second) and 400 (a third); subject 1
+  // frame 202 (a fourth). Hand: subject 1 frame 300.
+  for (uint64_t n : {200, 201, 202, 203, 204, 206, 216, 227, 400})
     tail.push_back({index(0, n), toe, 0.05 + 0.001 * static_cast<double>(n % 10)});
   tail.push_back({index(1, 202), toe, 0.2});
   tail.push_back({index(1, 300), hand, 0.3});
@@ -38,8 +39,8 @@ TEST(ReplayReportTest, TailFramesAreGroupedByJointAndEpisodesAreSplitByGapAndSub
   const auto summary = SummarizeTail(tail, scored, names, skeleton, 10);
   ASSERT_EQ(summary.size(), 2u);
   EXPECT_EQ(summary[0].joint, "RightToeBase");  // most frames first
-  EXPECT_EQ(summary[0].frames, 8u);
-  EXPECT_EQ(summary[0].episodes, 3u);
+  EXPECT_EQ(summary[0].frames, 10u);
+  EXPECT_EQ(summary[0].episodes, 4u);
   EXPECT_NEAR(summary[0].worst_cm, 20.0, 1e-9);
   EXPECT_EQ(summary[0].worst_subject, "actor2");
   EXPECT_EQ(summary[0].worst_frame_number, 202u);
@@ -49,6 +50,19 @@ TEST(ReplayReportTest, TailFramesAreGroupedByJointAndEpisodesAreSplitByGapAndSub
   EXPECT_NEAR(summary[1].worst_cm, 30.0, 1e-9);
   EXPECT_EQ(summary[1].worst_subject, "actor2");
   EXPECT_EQ(summary[1].worst_frame_number, 300u);
+}
+
+TEST(ReplayReportTest, AFrameReceivedOutOfOrderDoesNotSplitAnEpisode) {
+  const Skeleton skeleton = MakeHumanoidSkeleton();
+  const int toe = skeleton.FindJoint("RightToeBase")->value;
+  const std::vector<std::pair<size_t, uint64_t>> scored = {{0, 100}, {0, 102}, {0, 101}, {0, 103}};
+  std::vector<PoseErrorAccumulator::FrameError> tail;
+  for (int f = 0; f < 4; ++f) tail.push_back({f, toe, 0.1});
+  const std::vector<std::string> names = {"actor1"};
+  const auto summary = SummarizeTail(tail, scored, names, skeleton, 2);
+  ASSERT_EQ(summary.size(), 1u);
+  EXPECT_EQ(summary[0].frames, 4u);
+  EXPECT_EQ(summary[0].episodes, 1u);
 }
 
 TEST(ReplayReportTest, TheTailIsInTheJsonAndTheTable) {
