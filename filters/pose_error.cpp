@@ -75,10 +75,23 @@ double PoseErrorAccumulator::worst_joint_position_quantile_m(double q, int* wors
   return WorstQuantile(position_, joints_, q, worst_joint);
 }
 
+std::vector<PoseErrorAccumulator::FrameError> PoseErrorAccumulator::FrameWorsts() const {
+  std::vector<FrameError> out;
+  out.reserve(static_cast<size_t>(frames_));
+  for (int f = 0; f < frames_; ++f) {
+    FrameError worst{f, -1, -1.0};
+    for (size_t i = 0; i < position_.size(); ++i)
+      if (position_[i][static_cast<size_t>(f)] > worst.error_m)
+        worst = {f, joints_[i], position_[i][static_cast<size_t>(f)]};
+    out.push_back(worst);
+  }
+  return out;
+}
+
 double PoseErrorAccumulator::frame_position_error_quantile_m(double q) const {
-  std::vector<double> frame_errors(static_cast<size_t>(frames_), 0.0);
-  for (const auto& joint : position_)
-    for (size_t f = 0; f < joint.size(); ++f) frame_errors[f] = std::max(frame_errors[f], joint[f]);
+  std::vector<double> frame_errors;
+  frame_errors.reserve(static_cast<size_t>(frames_));
+  for (const FrameError& f : FrameWorsts()) frame_errors.push_back(std::max(f.error_m, 0.0));
   return Quantile(std::move(frame_errors), q);
 }
 
@@ -100,13 +113,8 @@ int PoseErrorAccumulator::worst_frame(int* worst_joint) const {
 std::vector<PoseErrorAccumulator::FrameError> PoseErrorAccumulator::frames_at_least(
     double threshold_m) const {
   std::vector<FrameError> out;
-  for (int f = 0; f < frames_; ++f) {
-    FrameError worst{f, -1, -1.0};
-    for (size_t i = 0; i < position_.size(); ++i)
-      if (position_[i][static_cast<size_t>(f)] > worst.error_m)
-        worst = {f, joints_[i], position_[i][static_cast<size_t>(f)]};
-    if (worst.joint >= 0 && worst.error_m >= threshold_m) out.push_back(worst);
-  }
+  for (const FrameError& f : FrameWorsts())
+    if (f.joint >= 0 && f.error_m >= threshold_m) out.push_back(f);
   return out;
 }
 

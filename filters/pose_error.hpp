@@ -42,6 +42,9 @@ class PoseErrorAccumulator {
   std::vector<FrameError> frames_at_least(double threshold_m) const;
 
  private:
+  /// Each frame's worst joint and its error (joint -1 when no joint is evaluated).
+  std::vector<FrameError> FrameWorsts() const;
+
   std::vector<int> joints_;
   std::vector<std::vector<double>> position_, rotation_;  // per evaluated joint
   int frames_ = 0;
