@@ -33,6 +33,8 @@
 #include "filters/cleanup_pipeline.hpp"
 #include "filters/pose_error.hpp"
 #include "sim/corruption.hpp"
+#include "sim/graph_stream.hpp"
+#include "sim/replay_sources.hpp"
 #include "sim/synthesis.hpp"
 
 using namespace mocapd;
@@ -479,6 +481,34 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
   return s;
 }
 
+// One actor of the graph replay, offline: the soak's exact stream (walk, chunks,
+// corruption), so its worst frames can be explained and traced.
+int RunGraphActor(const std::string& graph, int actor, uint64_t seed, double seconds,
+                  const std::vector<std::string>& severities, const std::vector<double>& rates,
+                  int lookahead) {
+  const GraphReplaySource source = GraphSource(graph);
+  std::printf(
+      "| actor | severity | rate (Hz) | Δpos (cm) | Δrot (deg) | worst frame / p99.9 (cm) | "
+      "pops | clean segments' worst frame / p99.9 (cm) |\n|---|---|---|---|---|---|---|---|\n");
+  for (const std::string& severity : severities)
+    for (const double rate : rates) {
+      GraphActorStream stream = ReplayGraphActor(source, seed, actor - 1, rate, severity);
+      const auto frames = static_cast<uint64_t>(std::llround(seconds * rate));
+      GraphStreamChunk whole = WholeGraphStream(&stream, frames);
+      bench::BenchTake take;
+      take.name = "actor" + std::to_string(actor);
+      take.bvh = MakeBvhTake(*source.library->skeleton, whole.truth, 1.0 / rate);
+      take.motion = std::move(whole.truth);
+      take.markers = source.markers;
+      const Scores s = RunPipeline(take, whole.corrupted, whole.clean, lookahead, rate);
+      std::printf("| %s | %s | %.0f | %.3f | %.2f | %.1f / %.1f | %d | %.1f / %.1f |\n",
+                  take.name.c_str(), severity.c_str(), rate, s.pos_cm, s.rot_deg, s.worst_frame_cm,
+                  s.p999_frame_cm, s.pops, s.clean_worst_frame_cm, s.clean_p999_frame_cm);
+      std::fflush(stdout);
+    }
+  return 0;
+}
+
 }  // namespace
 
 constexpr const char* kUsage =
@@ -486,7 +516,11 @@ constexpr const char* kUsage =
     "  [--lookahead K (ours only, any K >= 0)] [--jitter-mm MIN,MAX] [--explain-pops]\n"
     "  [--explain-worst] [--explain-rejections] [--trace TAKE:FROM:TO:MARKER,...] [--digest]\n"
     "  [TAKE.bvh ...]\n"
-    "Without takes: the ../shared Bandai takes when present, else the built-in humanoid.\n";
+    "  [--graph-actor K [--graph humanoid|FILE] [--graph-seconds S] [--graph-seed N]]\n"
+    "Without takes: the ../shared Bandai takes when present, else the built-in humanoid.\n"
+    "--graph-actor: instead, actor K of `mocap-sim replay --graph` (the soak's stream: the\n"
+    "same walk, chunks and corruption, for --graph-seconds at each rate; no noise), run once\n"
+    "per severity and rate at --lookahead (default 12).\n";
 
 int Run(int argc, char** argv) {
   int seeds = 2;
@@ -494,6 +528,10 @@ int Run(int argc, char** argv) {
   std::pair<double, double> jitter_mm{-1.0, -1.0};  // < 0: the corruption's default
   std::vector<double> rates;
   std::vector<std::string> severities, paths;
+  int graph_actor = 0;  // 1-based; 0: takes
+  std::string graph = "humanoid";
+  double graph_seconds = 300.0;
+  uint64_t graph_seed = 1;
   for (int i = 1; i < argc; ++i) {
     if (std::strcmp(argv[i], "--seeds") == 0 && i + 1 < argc)
       seeds = std::atoi(argv[++i]);
@@ -505,6 +543,14 @@ int Run(int argc, char** argv) {
       g_explain_rejections = true;
     else if (std::strcmp(argv[i], "--digest") == 0)
       g_digest = true;
+    else if (std::strcmp(argv[i], "--graph-actor") == 0 && i + 1 < argc)
+      graph_actor = std::atoi(argv[++i]);
+    else if (std::strcmp(argv[i], "--graph") == 0 && i + 1 < argc)
+      graph = argv[++i];
+    else if (std::strcmp(argv[i], "--graph-seconds") == 0 && i + 1 < argc)
+      graph_seconds = std::atof(argv[++i]);
+    else if (std::strcmp(argv[i], "--graph-seed") == 0 && i + 1 < argc)
+      graph_seed = std::strtoull(argv[++i], nullptr, 10);
     else if (std::strcmp(argv[i], "--trace") == 0 && i + 1 < argc) {
       if (!ParseTrace(argv[++i], &g_trace)) {
         std::fprintf(stderr, "--trace expects TAKE:FROM:TO:MARKER[,MARKER...], got '%s'\n",
@@ -541,6 +587,13 @@ int Run(int argc, char** argv) {
   }
   if (severities.empty()) severities = {"light", "medium", "heavy"};
   if (rates.empty()) rates = {120.0};
+  if (graph_actor < 0 || !(graph_seconds > 0)) {
+    std::fprintf(stderr, "cleanup_accuracy: --graph-actor and --graph-seconds must be positive\n");
+    return 2;
+  }
+  if (graph_actor > 0)
+    return RunGraphActor(graph, graph_actor, graph_seed, graph_seconds, severities, rates,
+                         only_lookahead < 0 ? 12 : only_lookahead);
   if (paths.empty()) paths = bench::SharedBvhTakes();
   if (paths.empty()) paths.emplace_back("");
   std::printf(

@@ -16,7 +16,7 @@
 #include "formats/take_frames.hpp"
 #include "protocol/messages.hpp"
 #include "sim/corruption.hpp"
-#include "sim/graph_walker.hpp"
+#include "sim/graph_stream.hpp"
 #include "sim/recording.hpp"
 #include "sim/replay_schedule.hpp"
 #include "sim/synthesis.hpp"
@@ -246,20 +246,12 @@ namespace {
 
 // Graph actors stand this far apart: each walks around its own spot (within a few metres).
 constexpr double kGraphActorSpacingM = 8.0;
-// Markers are synthesized (and corrupted) this many seconds at a time, ahead of sending.
-constexpr double kGraphChunkSeconds = 2.0;
 
-// One actor's endless stream: the walk at the graph's rate, resampled to the replay's
-// rate a chunk at a time, and the recent chunks' truth for the receiver thread.
+// One actor's endless stream (GraphActorStream), and the recent chunks' truth for the
+// receiver thread.
 class GraphActor {
  public:
-  GraphActor(const GraphReplaySource& source, uint64_t seed, double rate_hz,
-             const std::string& corrupt, uint64_t corrupt_seed)
-      : source_(source),
-        walker_(*source.library, *source.graph, WalkOptions{.seed = seed}),
-        rate_hz_(rate_hz),
-        corrupt_(corrupt),
-        corrupt_seed_(corrupt_seed) {}
+  explicit GraphActor(GraphActorStream stream) : stream_(std::move(stream)) {}
 
   // The chunk holding frame_number, synthesizing the next one when the stream reaches it.
   const C3dTake& ChunkFor(uint64_t frame_number, uint64_t total, int* frame_in_chunk) {
@@ -284,55 +276,17 @@ class GraphActor {
 
  private:
   void NextChunk(uint64_t first, uint64_t total) {
-    const MotionLibrary& lib = *source_.library;
-    const auto n = static_cast<size_t>(std::min<uint64_t>(
-        total - first, static_cast<uint64_t>(std::llround(kGraphChunkSeconds * rate_hz_))));
-    std::vector<Pose> poses;
-    poses.reserve(n);
-    for (size_t k = 0; k < n; ++k) {
-      const double x = static_cast<double>(first + k) * lib.rate_hz / rate_hz_;
-      const auto i = static_cast<int64_t>(std::floor(x));
-      while (graph_base_ + static_cast<int64_t>(graph_frames_.size()) <= i + 1)
-        walker_.NextFrames(&graph_frames_);
-      const Pose& a = graph_frames_[static_cast<size_t>(i - graph_base_)];
-      const Pose& b = graph_frames_[static_cast<size_t>(i + 1 - graph_base_)];
-      poses.emplace_back();
-      InterpolatePose(a, b, x - static_cast<double>(i), &poses.back());
-    }
-    // Frames the stream has passed are dropped, keeping the buffer to about a chunk: the
-    // next chunk starts at graph frame floor(x) of its first frame, and the last frame
-    // made is always kept (the walk goes on from it).
-    const auto next_first =
-        static_cast<int64_t>(std::floor(static_cast<double>(first + n) * lib.rate_hz / rate_hz_));
-    const int64_t keep_from =
-        std::min(next_first, graph_base_ + static_cast<int64_t>(graph_frames_.size()) - 1);
-    if (keep_from > graph_base_) {
-      graph_frames_.erase(graph_frames_.begin(), graph_frames_.begin() + (keep_from - graph_base_));
-      graph_base_ = keep_from;
-    }
-    chunk_ = SynthesizeMarkers(*lib.skeleton, *source_.markers, poses, rate_hz_, SynthesisNoise{});
-    if (!corrupt_.empty()) {
-      CorruptionOptions c;
-      c.severity = ParseCorruptionSeverity(corrupt_);
-      c.seed = corrupt_seed_ + ++chunks_ * 1000003ull;
-      chunk_ = CorruptTake(chunk_, source_.markers.get(), c).take;
-    }
-    map_ = std::make_unique<TakeMarkerMap>(*source_.markers, chunk_);
+    GraphStreamChunk next = stream_.Next(first, total);
+    chunk_ = std::move(next.corrupted.take);
+    map_ = std::make_unique<TakeMarkerMap>(*stream_.markers(), chunk_);
     chunk_first_ = first;
     std::lock_guard<std::mutex> lock(truth_mutex_);
-    truth_.emplace_back(first, std::move(poses));
+    truth_.emplace_back(first, std::move(next.truth));
     // The receiver scores frames a lookahead and a network hop behind: a few chunks do.
     while (truth_.size() > 4) truth_.pop_front();
   }
 
-  const GraphReplaySource& source_;
-  GraphWalker walker_;
-  double rate_hz_;
-  std::string corrupt_;
-  uint64_t corrupt_seed_;
-  uint64_t chunks_ = 0;
-  std::vector<Pose> graph_frames_;
-  int64_t graph_base_ = 0;
+  GraphActorStream stream_;
   C3dTake chunk_;
   uint64_t chunk_first_ = 0;
   std::unique_ptr<TakeMarkerMap> map_;
@@ -363,9 +317,8 @@ ReplayReport RunGraphReplay(const GraphReplaySource& source, double seconds, dou
     log.sent.reserve(static_cast<size_t>(total) + 1);
     log.received_ns.reserve(static_cast<size_t>(total));
     for (uint64_t seq = 0; seq < total; ++seq) log.received_ns.emplace(seq, 0);
-    actors.push_back(std::make_unique<GraphActor>(source, o.seed + static_cast<uint64_t>(k),
-                                                  rate_hz, o.corrupt,
-                                                  o.seed + 7919ull * static_cast<uint64_t>(k)));
+    actors.push_back(
+        std::make_unique<GraphActor>(ReplayGraphActor(source, o.seed, k, rate_hz, o.corrupt)));
   }
   const uint64_t session = NewSessionBase();
   const std::pair<uint32_t, uint32_t> rate_fraction = RateFraction(rate_hz);
