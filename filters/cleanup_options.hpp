@@ -42,7 +42,9 @@ struct CleanupOptions {
   double swap_search_m = 0.15;      ///< Only markers this close in the previous frame can swap.
   bool relabel_swaps = true;  ///< Swap the labels back (every swap test) instead of filling both.
   /// Frozen: a marker staying within this distance of where it came to rest (wide enough
-  /// for capture jitter, which a per-frame motion test mistakes for motion)...
+  /// for capture jitter, which a per-frame motion test mistakes for motion)... (A still
+  /// marker whose distance to its joint's origin changes by more than this is frozen too:
+  /// a marker on its segment keeps that distance, to within the same jitter.)
   double frozen_radius_m = 0.015;
   /// ...while its reference moves on this far (or a moving marker on its segment changes
   /// its distance to it this much)...

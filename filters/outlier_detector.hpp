@@ -52,15 +52,16 @@ class OutlierDetector {
 
  private:
   struct Track {
-    double residual_scale = 0.0;          // running robust residual scale, metres
-    int residual_run = 0;                 // consecutive residual outliers
-    int64_t still_since = -1;             // first frame of the current still run (-1: none)
-    Vec3 still_anchor = Vec3::Zero();     // where the marker came to rest ...
-    Vec3 still_reference = Vec3::Zero();  // ... and its reference then
-    bool frozen = false;                  // excluded from Y^ while it stays put
-    bool fallen = false;                  // excluded from Y^ until it fits again
-    bool stray = false;                   // far off for a while: excluded until it fits again
-    bool off_joint = false;               // off its joint's distance: out of the next Y^
+    double residual_scale = 0.0;           // running robust residual scale, metres
+    int residual_run = 0;                  // consecutive residual outliers
+    int64_t still_since = -1;              // first frame of the current still run (-1: none)
+    Vec3 still_anchor = Vec3::Zero();      // where the marker came to rest ...
+    Vec3 still_reference = Vec3::Zero();   // ... and its reference then
+    bool frozen = false;                   // excluded from Y^ while it stays put
+    bool fallen = false;                   // excluded from Y^ until it fits again
+    bool stray = false;                    // far off for a while: excluded until it fits again
+    bool off_joint = false;                // off its joint's distance: out of the next Y^
+    double joint_distance_at_rest = kNaN;  // to its joint's origin, in the still run
   };
 
   void ApplyPersistentSwaps(CleanupWindow& window, int64_t t, CleanupCounters* counters);
