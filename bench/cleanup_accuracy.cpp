@@ -16,6 +16,7 @@
 // variables override a few options for experiments (see RunPipeline).
 #include <algorithm>
 #include <cctype>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -481,6 +482,14 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
   return s;
 }
 
+// A command-line whole number >= least (>= 0), or -1 (not a number, trailing text, less).
+long WholeAtLeast(const char* text, long least) {
+  char* end = nullptr;
+  errno = 0;
+  const long value = std::strtol(text, &end, 10);
+  return end == text || *end != '\0' || errno != 0 || value < least ? -1 : value;
+}
+
 // One actor of the graph replay, offline: the soak's exact stream (walk, chunks,
 // corruption), so its worst frames can be explained and traced.
 int RunGraphActor(const std::string& graph, int actor, uint64_t seed, double seconds,
@@ -528,10 +537,10 @@ int Run(int argc, char** argv) {
   std::pair<double, double> jitter_mm{-1.0, -1.0};  // < 0: the corruption's default
   std::vector<double> rates;
   std::vector<std::string> severities, paths;
-  int graph_actor = 0;  // 1-based; 0: takes
+  int graph_actor = 0;  // 1-based; 0: takes, -1: given but not a positive whole number
   std::string graph = "humanoid";
   double graph_seconds = 300.0;
-  uint64_t graph_seed = 1;
+  long graph_seed = 1;  // -1: not a whole number >= 0
   for (int i = 1; i < argc; ++i) {
     if (std::strcmp(argv[i], "--seeds") == 0 && i + 1 < argc)
       seeds = std::atoi(argv[++i]);
@@ -544,13 +553,13 @@ int Run(int argc, char** argv) {
     else if (std::strcmp(argv[i], "--digest") == 0)
       g_digest = true;
     else if (std::strcmp(argv[i], "--graph-actor") == 0 && i + 1 < argc)
-      graph_actor = std::atoi(argv[++i]);
+      graph_actor = static_cast<int>(std::clamp(WholeAtLeast(argv[++i], 1), -1L, 1000000L));
     else if (std::strcmp(argv[i], "--graph") == 0 && i + 1 < argc)
       graph = argv[++i];
     else if (std::strcmp(argv[i], "--graph-seconds") == 0 && i + 1 < argc)
       graph_seconds = std::atof(argv[++i]);
     else if (std::strcmp(argv[i], "--graph-seed") == 0 && i + 1 < argc)
-      graph_seed = std::strtoull(argv[++i], nullptr, 10);
+      graph_seed = WholeAtLeast(argv[++i], 0);
     else if (std::strcmp(argv[i], "--trace") == 0 && i + 1 < argc) {
       if (!ParseTrace(argv[++i], &g_trace)) {
         std::fprintf(stderr, "--trace expects TAKE:FROM:TO:MARKER[,MARKER...], got '%s'\n",
@@ -587,13 +596,20 @@ int Run(int argc, char** argv) {
   }
   if (severities.empty()) severities = {"light", "medium", "heavy"};
   if (rates.empty()) rates = {120.0};
-  if (graph_actor < 0 || !(graph_seconds > 0)) {
-    std::fprintf(stderr, "cleanup_accuracy: --graph-actor and --graph-seconds must be positive\n");
+  if (graph_actor < 0 || graph_seed < 0 || !(graph_seconds > 0) || !std::isfinite(graph_seconds)) {
+    std::fprintf(stderr,
+                 "cleanup_accuracy: --graph-actor takes a whole number >= 1, --graph-seed one "
+                 ">= 0, --graph-seconds a positive number of seconds\n");
     return 2;
   }
+  for (const double rate : rates)
+    if (!(rate > 0) || !std::isfinite(rate)) {
+      std::fprintf(stderr, "cleanup_accuracy: --rates takes positive rates in Hz\n");
+      return 2;
+    }
   if (graph_actor > 0)
-    return RunGraphActor(graph, graph_actor, graph_seed, graph_seconds, severities, rates,
-                         only_lookahead < 0 ? 12 : only_lookahead);
+    return RunGraphActor(graph, graph_actor, static_cast<uint64_t>(graph_seed), graph_seconds,
+                         severities, rates, only_lookahead < 0 ? 12 : only_lookahead);
   if (paths.empty()) paths = bench::SharedBvhTakes();
   if (paths.empty()) paths.emplace_back("");
   std::printf(

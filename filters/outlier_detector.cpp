@@ -457,11 +457,12 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
   // A marker rigidly on its segment keeps its distance to the joint's origin, however
   // the segment turns, to within soft tissue and noise: the radius that counts a marker
   // as still already allows for those. So a still marker whose distance to the origin (as
-  // the parent's fitting samples place it) has changed by more than that radius since it
-  // came to rest has been left by its segment. The change, not the distance against the
-  // model's offset (off_its_joint): a scaled template's offsets are centimetres off from
-  // the start, so that test needs a wide tolerance, and a forearm's only seen marker, stuck,
-  // was published for 0.2 s while the elbow moved away (the soak's actor4, a 16 cm hand).
+  // the robust solve places it, judged only while a marker of the parent fits) has changed
+  // by more than that radius since it came to rest has been left by its segment. The change, not
+  // the distance against the model's offset (off_its_joint): a scaled template's offsets are
+  // centimetres off from the start, so that test needs a wide tolerance, and a forearm's only seen
+  // marker, stuck, was published for 0.2 s while the elbow moved away (the soak's actor4, a 16 cm
+  // hand).
   auto distance_to_joint = [&](size_t m) {
     const MarkerDefinition& d = markers_.marker(static_cast<int>(m));
     if (d.num_attachments != 1 || !parent_fits(m)) return kNaN;
@@ -526,8 +527,8 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
         (s.raw[m] - track.still_anchor).norm() > options_.frozen_radius_m) {
       track.still_since = t;
       for (int k : pairs_of_marker_[m]) DistanceAtRest(static_cast<size_t>(k), m) = kNaN;
-      // Where the run starts (or, if the parent has no fitting sample then, the first
-      // time it has): the origin's motion during the first frozen_s counts too.
+      // Where the run starts, so the origin's motion during the first frozen_s counts too
+      // (if no marker of the parent fits then: when the rule first looks, after frozen_s).
       track.joint_distance_at_rest = distance_to_joint(m);
       track.still_anchor = s.raw[m];
       track.still_reference = s.reference[m];

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <stdexcept>
 
 #include "filters/resample.hpp"
 #include "sim/synthesis.hpp"
@@ -16,14 +17,21 @@ GraphActorStream::GraphActorStream(const GraphReplaySource& source, uint64_t wal
       walker_(*source.library, *source.graph, WalkOptions{.seed = walk_seed}),
       rate_hz_(rate_hz),
       corrupt_(corrupt),
-      corrupt_seed_(corrupt_seed) {}
+      corrupt_seed_(corrupt_seed) {
+  if (!(rate_hz > 0.0) || !std::isfinite(rate_hz))
+    throw std::invalid_argument("graph stream: the rate must be positive and finite");
+  if (!corrupt_.empty()) ParseCorruptionSeverity(corrupt_);  // throws naming the severity
+}
 
 GraphStreamChunk GraphActorStream::Next(uint64_t first, uint64_t total) {
+  if (first >= total) throw std::invalid_argument("graph stream: no frames left to make");
   const MotionLibrary& lib = *source_.library;
   GraphStreamChunk chunk;
   chunk.first_frame = first;
+  // At least one frame, however low the rate.
   const auto n = static_cast<size_t>(std::min<uint64_t>(
-      total - first, static_cast<uint64_t>(std::llround(kChunkSeconds * rate_hz_))));
+      total - first,
+      std::max<uint64_t>(1, static_cast<uint64_t>(std::llround(kChunkSeconds * rate_hz_)))));
   chunk.truth.reserve(n);
   for (size_t k = 0; k < n; ++k) {
     const double x = static_cast<double>(first + k) * lib.rate_hz / rate_hz_;
@@ -78,6 +86,7 @@ void Append(const C3dTake& from, C3dTake* to) {
 }  // namespace
 
 GraphStreamChunk WholeGraphStream(GraphActorStream* stream, uint64_t frames) {
+  if (frames == 0) throw std::invalid_argument("graph stream: no frames asked for");
   GraphStreamChunk whole;
   for (uint64_t first = 0; first < frames;) {
     GraphStreamChunk chunk = stream->Next(first, frames);
@@ -98,6 +107,13 @@ GraphStreamChunk WholeGraphStream(GraphActorStream* stream, uint64_t frames) {
     }
     first += n;
   }
+  // Each chunk's fraction was its own.
+  const auto corrupted = std::count_if(whole.corrupted.truth.begin(), whole.corrupted.truth.end(),
+                                       [](CorruptionKind k) { return k != CorruptionKind::kNone; });
+  whole.corrupted.corrupted_fraction =
+      whole.corrupted.truth.empty()
+          ? 0.0
+          : static_cast<double>(corrupted) / static_cast<double>(whole.corrupted.truth.size());
   return whole;
 }
 

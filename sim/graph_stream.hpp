@@ -24,12 +24,14 @@ struct GraphStreamChunk {
 
 class GraphActorStream {
  public:
-  /// corrupt: "" (none), light, medium or heavy. The source must outlive the stream.
+  /// corrupt: "" (none), light, medium or heavy. The stream shares the source's library,
+  /// graph and markers. Throws std::invalid_argument for a rate that is not positive and
+  /// finite or an unknown severity.
   GraphActorStream(const GraphReplaySource& source, uint64_t walk_seed, double rate_hz,
                    const std::string& corrupt, uint64_t corrupt_seed);
 
   /// The next chunk, starting at frame `first` (where the last one ended), of at most
-  /// total - first frames.
+  /// total - first frames. Throws std::invalid_argument when first >= total.
   GraphStreamChunk Next(uint64_t first, uint64_t total);
 
   /// A chunk is corrupted on its own: an occlusion never spans two chunks.
@@ -37,7 +39,7 @@ class GraphActorStream {
   const std::shared_ptr<const MarkerSet>& markers() const { return source_.markers; }
 
  private:
-  const GraphReplaySource& source_;
+  GraphReplaySource source_;  // shared pointers: the walker's references stay valid
   GraphWalker walker_;
   double rate_hz_;
   std::string corrupt_;
@@ -51,7 +53,7 @@ class GraphActorStream {
 GraphActorStream ReplayGraphActor(const GraphReplaySource& source, uint64_t replay_seed, int k,
                                   double rate_hz, const std::string& corrupt);
 
-/// A whole stream of `frames` frames as one take: the chunks joined.
+/// A whole stream of `frames` frames (at least 1) as one take: the chunks joined.
 GraphStreamChunk WholeGraphStream(GraphActorStream* stream, uint64_t frames);
 
 }  // namespace mocapd

@@ -328,10 +328,16 @@ TEST_F(OutlierDetectorTest, AStuckMarkerIsFrozenOnceItsJointsOriginMovesAStillRa
   options.frozen_s = 0.05;
   options.frozen_reference_motion_m = 0.5;
   const auto out = Run(options);
-  int frozen = 0;
+  int frozen = 0, clean_frozen = 0;
   for (int f = from; f < to; ++f)
     frozen += out[static_cast<size_t>(f)].reason[static_cast<size_t>(stuck)] == MaskReason::kFrozen;
+  // With the other rules blind, any other marker judged frozen is this rule's mistake:
+  // none may be, in the whole take (planted feet, the arm's own clean markers).
+  for (const CleanFrame& frame : out)
+    for (int m = 0; m < static_cast<int>(frame.reason.size()); ++m)
+      clean_frozen += m != stuck && frame.reason[static_cast<size_t>(m)] == MaskReason::kFrozen;
   EXPECT_GT(frozen, 60 * 3 / 4);
+  EXPECT_EQ(clean_frozen, 0);
 }
 
 TEST_F(OutlierDetectorTest, AToeMarkerThatFrozeIsTakenBackOnceItMovesWithTheToeAgain) {

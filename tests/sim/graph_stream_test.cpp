@@ -6,6 +6,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <stdexcept>
+#include <vector>
 
 namespace mocapd {
 namespace {
@@ -70,14 +72,54 @@ TEST(GraphStreamTest, AnActorsSeedsRepeatItsStreamAndOtherActorsDiffer) {
   EXPECT_NE(x.truth.back().rotation, z.truth.back().rotation);
 }
 
-TEST(GraphStreamTest, EachChunkIsCorruptedOnItsOwn) {
+TEST(GraphStreamTest, EachChunkIsCorruptedOnItsOwnWithItsOwnSeed) {
   GraphActorStream stream = ReplayGraphActor(Humanoid(), 3, 0, kRate, "heavy");
-  const GraphStreamChunk whole = WholeGraphStream(&stream, 600);
-  const auto chunk_frames = static_cast<int>(std::llround(GraphActorStream::kChunkSeconds * kRate));
-  ASSERT_FALSE(whole.corrupted.events.empty());
-  for (const CorruptionEvent& e : whole.corrupted.events)
-    EXPECT_EQ(e.first_frame / chunk_frames, e.last_frame / chunk_frames)
-        << to_string(e.kind) << " over frames " << e.first_frame << "-" << e.last_frame;
+  const auto chunk_frames =
+      static_cast<uint64_t>(std::llround(GraphActorStream::kChunkSeconds * kRate));
+  const uint64_t total = 3 * chunk_frames;
+  std::vector<std::vector<CorruptionKind>> masks;
+  for (uint64_t first = 0; first < total; first += chunk_frames) {
+    const GraphStreamChunk chunk = stream.Next(first, total);
+    ASSERT_EQ(chunk.truth.size(), chunk_frames);
+    ASSERT_FALSE(chunk.corrupted.events.empty());
+    // An event of a chunk is inside it: an occlusion never spans two chunks.
+    for (const CorruptionEvent& e : chunk.corrupted.events) {
+      EXPECT_GE(e.first_frame, 0);
+      EXPECT_LT(e.last_frame, static_cast<int>(chunk_frames)) << to_string(e.kind);
+    }
+    masks.push_back(chunk.corrupted.truth);
+  }
+  // Each chunk's corruption has its own seed: no two chunks corrupt the same samples.
+  EXPECT_NE(masks[0], masks[1]);
+  EXPECT_NE(masks[1], masks[2]);
+}
+
+TEST(GraphStreamTest, TheWholeStreamsCorruptedFractionIsOverAllItsSamples) {
+  GraphActorStream stream = ReplayGraphActor(Humanoid(), 1, 0, kRate, "medium");
+  const GraphStreamChunk whole = WholeGraphStream(&stream, 400);
+  size_t corrupted = 0, missing = 0;
+  for (size_t i = 0; i < whole.corrupted.truth.size(); ++i) {
+    corrupted += whole.corrupted.truth[i] != CorruptionKind::kNone;
+    missing += whole.corrupted.take.residuals[i] < 0.0f;
+  }
+  ASSERT_EQ(whole.corrupted.take.residuals.size(), whole.corrupted.truth.size());
+  EXPECT_GT(missing, 0u);
+  EXPECT_DOUBLE_EQ(
+      whole.corrupted.corrupted_fraction,
+      static_cast<double>(corrupted) / static_cast<double>(whole.corrupted.truth.size()));
+}
+
+TEST(GraphStreamTest, ABadRateSeverityOrFrameCountIsRefused) {
+  EXPECT_THROW(ReplayGraphActor(Humanoid(), 1, 0, 0.0, ""), std::invalid_argument);
+  EXPECT_THROW(ReplayGraphActor(Humanoid(), 1, 0, -60.0, ""), std::invalid_argument);
+  EXPECT_THROW(ReplayGraphActor(Humanoid(), 1, 0, std::nan(""), ""), std::invalid_argument);
+  EXPECT_THROW(ReplayGraphActor(Humanoid(), 1, 0, kRate, "extreme"), std::invalid_argument);
+  GraphActorStream stream = ReplayGraphActor(Humanoid(), 1, 0, kRate, "");
+  EXPECT_THROW(WholeGraphStream(&stream, 0), std::invalid_argument);
+  EXPECT_THROW(stream.Next(10, 10), std::invalid_argument);
+  // A rate too low for a whole frame per chunk still makes one a chunk.
+  GraphActorStream slow = ReplayGraphActor(Humanoid(), 1, 0, 0.1, "");
+  EXPECT_EQ(WholeGraphStream(&slow, 3).truth.size(), 3u);
 }
 
 TEST(GraphStreamTest, AnUncorruptedStreamSendsItsCleanMarkers) {
