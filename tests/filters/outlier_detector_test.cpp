@@ -306,13 +306,13 @@ TEST_F(OutlierDetectorTest, AToeMarkerStuckWhereTheFootWasPlantedIsFrozenWhenThe
 }
 
 TEST_F(OutlierDetectorTest, AStuckMarkerIsFrozenOnceItsJointsOriginMovesAStillRadiusFromIt) {
-  // The hand and the forearm's other marker are occluded and the one forearm marker left
-  // sticks while the arm moves on. Nothing on the forearm shows it; the upper arm's
-  // markers fit, and the elbow they place moves away from the stuck sample. A marker on
-  // its segment keeps its distance to the elbow, so a change beyond the still radius
-  // convicts it. Every other frozen test is made blind here (they need the reference or a
-  // partner to move 0.5 m): judged against the model's offset with a template's
-  // tolerance, the soak's actor4 published such a sample for 0.2 s (a hand 16 cm off).
+  // The hand, the elbow marker and the forearm's other marker are occluded (as in the soak)
+  // and the one forearm marker left sticks while the arm moves on. Nothing on the forearm
+  // shows it; the upper arm's markers fit, and the elbow they place moves away from the
+  // stuck sample. A marker on its segment keeps its distance to the elbow, so a change
+  // beyond the still radius convicts it. Every other frozen test is made blind here (they
+  // need the reference or a partner to move 0.5 m): judged against the model's offset with
+  // a template's tolerance, the soak's actor4 published such a sample for 0.2 s (a 16 cm hand).
   const int stuck = Marker("RFRM1");
   int from = -1;  // the first moment the forearm marker moves 15 cm within 0.5 s
   for (int f = 200; f + 60 < static_cast<int>(frames_.size()) && from < 0; ++f)
@@ -321,7 +321,7 @@ TEST_F(OutlierDetectorTest, AStuckMarkerIsFrozenOnceItsJointsOriginMovesAStillRa
   const int to = from + 60;
   for (int f = from; f < to; ++f) {
     Sample(f, stuck) = Truth(from - 1, stuck);
-    for (const char* name : {"RFRM2", "RHND1", "RHND2", "RHND3"})
+    for (const char* name : {"RELB", "RFRM2", "RHND1", "RHND2", "RHND3"})
       Sample(f, Marker(name)) = Vec3::Constant(kNaN);
   }
   CleanupOptions options = Blind();
