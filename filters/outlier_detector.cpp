@@ -91,8 +91,11 @@ void OutlierDetector::SolveReferences(WindowFrame& s, CleanupCounters* counters)
   // off, have strayed far for a while, or were off their joint's distance last frame.
   // Markers flagged only by a modest residual stay in (the Huber loss bounds their pull):
   // excluding them would let the reference drift away and keep them out.
+  // (With relabelling off, a sample a swap test masked stays out too: it is another
+  // marker's trajectory.)
   for (size_t m = 0; m < m_count; ++m)
-    weights_[m] = s.valid[m] && !excluded(static_cast<int>(m)) ? 1.0 : 0.0;
+    weights_[m] =
+        s.valid[m] && !excluded(static_cast<int>(m)) && s.mask[m] != MaskReason::kSwap ? 1.0 : 0.0;
   ReadmitConsistentSegments(s);
   counters->CountSolve(SolveIk(skeleton_, markers_, options_.robust_ik, s.raw, weights_, &robust_));
   const auto predicted = robust_.predicted_markers();
@@ -340,6 +343,63 @@ void OutlierDetector::RelabelSwaps(CleanupWindow& window, int64_t t, CleanupCoun
       }
     }
   }
+  if (has_previous && !s.resync) RelabelLoneSamples(window, t, counters);
+}
+
+// A capture can give a marker's label to a neighbour's trajectory while the neighbour's own
+// label is occluded: one sample, jumped onto where the missing marker was expected. The
+// pair tests above need both samples; on a segment with no other marker seen, the robust
+// solve turns the segment to fit the jumped sample and no residual flags it (a hand's one
+// seen marker carried its occluded neighbour's trajectory, 6.7 cm off, for 0.85 s). A sample
+// far from where its own marker was expected and within the residual threshold of where a
+// missing marker nearby was expected, by trajectory and by the last reference alike, is
+// that marker's: moved to its label, judged again every frame.
+void OutlierDetector::RelabelLoneSamples(CleanupWindow& window, int64_t t,
+                                         CleanupCounters* counters) {
+  WindowFrame& s = window.at(t);
+  const WindowFrame& prev = window.at(t - 1);
+  const bool has_two_before = t > 1 && window.at(t - 2).frame == t - 2;
+  const WindowFrame& prev2 = window.at(t - 2 >= 0 ? t - 2 : 0);
+  auto fine = [](const WindowFrame& f, size_t m) {
+    return f.valid[m] && f.mask[m] == MaskReason::kNone;
+  };
+  auto expected = [&](size_t m) -> Vec3 {
+    if (!fine(prev, m)) return prev.reference[m];
+    if (has_two_before && fine(prev2, m)) return 2.0 * prev.raw[m] - prev2.raw[m];
+    return prev.raw[m];
+  };
+  const auto m_count = static_cast<size_t>(markers_.num_markers());
+  const double search_sq = options_.swap_search_m * options_.swap_search_m;
+  for (size_t i = 0; i < m_count; ++i) {
+    // A stuck or fallen-off sample is nobody's trajectory: a missing marker's expected
+    // position passing by it is no swap.
+    if (!s.valid[i] || s.relabelled[i] || tracks_[i].frozen || tracks_[i].fallen) continue;
+    const Vec3 expected_i = expected(i);
+    const double off_own = (s.raw[i] - expected_i).norm();
+    if (off_own <= ResidualThreshold(i) + options_.swap_margin_m) continue;
+    const double off_own_reference = (s.raw[i] - prev.reference[i]).norm();
+    size_t best = m_count;
+    double best_off = 0.0;
+    for (size_t j = 0; j < m_count; ++j) {
+      if (j == i || s.valid[j] || (prev.reference[j] - prev.reference[i]).squaredNorm() > search_sq)
+        continue;
+      const double off_other = (s.raw[i] - expected(j)).norm();
+      if (off_other > ResidualThreshold(j) || off_other + options_.swap_margin_m >= off_own ||
+          (s.raw[i] - prev.reference[j]).norm() + options_.swap_margin_m >= off_own_reference)
+        continue;
+      if (best == m_count || off_other < best_off) {
+        best = j;
+        best_off = off_other;
+      }
+    }
+    if (best == m_count) continue;
+    if (!options_.relabel_swaps) {  // filled instead
+      s.mask[i] = MaskReason::kSwap;
+      continue;
+    }
+    ExchangeSamples(s, i, best);
+    ++counters->swaps_relabelled;
+  }
 }
 
 void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unpublished,
@@ -351,10 +411,7 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
   const double alpha = rules_.statistics_weight;
 
   // Residuals against X^ and each marker's adaptive threshold.
-  auto threshold = [&](size_t m) {
-    return std::max(options_.residual_floor_m,
-                    options_.residual_scale_factor * tracks_[m].residual_scale);
-  };
+  auto threshold = [&](size_t m) { return ResidualThreshold(m); };
   std::span<Vec3> residual(residual_.data(), m_count);
   for (size_t m = 0; m < m_count; ++m)
     residual[m] = s.valid[m] ? Vec3(s.raw[m] - s.reference[m]) : Vec3::Zero();
@@ -406,15 +463,16 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
   // on the segment any more: it is frozen, whatever the rest of its segment does (which
   // may be frozen with it, so no neighbour fits).
   const KinematicsWorkspace& pose = robust_.kinematics();
-  auto parent_fits = [&](size_t m) {
+  auto parent_fits = [&](size_t m, int need = 1) {
     const int joint = markers_.primary_joint(static_cast<int>(m));
     const int parent = skeleton_.joint(joint).parent.value;
     if (parent < 0) return false;
+    int fitting = 0;
     for (int other : markers_of_joint_[static_cast<size_t>(parent)]) {
       const auto o = static_cast<size_t>(other);
       if (s.valid[o] && !tracks_[o].frozen && s.mask[o] == MaskReason::kNone &&
           residual[o].norm() <= threshold(o))
-        return true;
+        if (++fitting >= need) return true;
     }
     return false;
   };
@@ -435,7 +493,11 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
   // the model's: a scaled template's distances are off by centimetres from the start.
   // (Taken at the start of the still run instead, it cost the synthesized humanoid's
   // heavy 120 Hz take 2.15 -> 2.30 degrees.) A partner already judged off (stray, fallen
-  // off, off its joint) or caught jumping this frame is no evidence.
+  // off, off its joint) or caught jumping this frame is no evidence; off its joint only
+  // while two markers of its parent fit: one leaves the parent free to turn about it, and
+  // the joint goes where the still marker pulls the segment (a toe marker frozen as the
+  // foot lifted, one foot marker seen: the clean toe partner was judged off its joint,
+  // the frozen one never convicted, and the toe published 47 cm off).
   auto left_by_a_moving_partner = [&](size_t m) {
     for (int k : pairs_of_marker_[m]) {
       const auto uk = static_cast<size_t>(k);
@@ -443,8 +505,9 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
                                              ? rigid_pairs_[uk].second
                                              : rigid_pairs_[uk].first);
       const Track& other = tracks_[o];
-      if (!s.valid[o] || other.frozen || other.stray || other.fallen || other.off_joint ||
-          s.mask[o] == MaskReason::kSpike || s.mask[o] == MaskReason::kSwap ||
+      if (!s.valid[o] || other.frozen || other.stray || other.fallen ||
+          (other.off_joint && parent_fits(o, 2)) || s.mask[o] == MaskReason::kSpike ||
+          s.mask[o] == MaskReason::kSwap ||
           (other.still_since >= 0 && t - other.still_since + 1 >= rules_.frozen_frames))
         continue;
       double& at_rest = DistanceAtRest(uk, m);

@@ -2,7 +2,8 @@
 // for the newest frame of the window it
 //  - relabels swapped pairs (rigid-segment distances, trajectory continuity, and a pair
 //    that each fit the other's reference position; a pair of that last kind on two
-//    segments is remembered until the labels as captured fit again or both vanish);
+//    segments is remembered until the labels as captured fit again or both vanish), and a
+//    lone sample that jumped onto where a missing neighbour was expected;
 //  - solves the robust reference Y^ (Huber IRLS, temporal prior, frozen / fallen-off /
 //    stray markers and samples off their joint's distance excluded, unless they are all a segment
 //    has and keep its rigid distances: then they are the segment, and taken back) and writes X^ =
@@ -17,6 +18,7 @@
 // Per-marker state is sized at construction; Process never allocates.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <memory>
 #include <utility>
@@ -66,8 +68,14 @@ class OutlierDetector {
 
   void ApplyPersistentSwaps(CleanupWindow& window, int64_t t, CleanupCounters* counters);
   void RelabelSwaps(CleanupWindow& window, int64_t t, CleanupCounters* counters);
+  void RelabelLoneSamples(CleanupWindow& window, int64_t t, CleanupCounters* counters);
   void Relabel(WindowFrame& s, size_t i, size_t j, CleanupCounters* counters,
                bool remember = false);
+  /// Marker m's residual outlier threshold: the floor or a multiple of its running scale.
+  double ResidualThreshold(size_t m) const {
+    return std::max(options_.residual_floor_m,
+                    options_.residual_scale_factor * tracks_[m].residual_scale);
+  }
   void SolveReferences(WindowFrame& s, CleanupCounters* counters);
   void ReadmitConsistentSegments(const WindowFrame& s);
   void Detect(CleanupWindow& window, int64_t t, int64_t first_unpublished,

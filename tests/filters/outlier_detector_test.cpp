@@ -5,13 +5,44 @@
 
 #include <gtest/gtest.h>
 
+#include <initializer_list>
+
 #include "tests/filters/cleanup_fixture.hpp"
 #include "tests/support/allocation_counter.hpp"
 
 namespace mocapd {
 namespace {
 
-class OutlierDetectorTest : public CleanupFixture {};
+class OutlierDetectorTest : public CleanupFixture {
+ protected:
+  struct StuckToe {
+    int stuck_published = 0;  // frames the stuck sample was published 3 cm off the toe
+    int clean_kept = 0;       // frames the clean toe marker was published as observed
+    double worst_toe = 0.0;   // metres
+  };
+  // For 120 frames from frame 400, RTOE2 and the markers `also_stuck` stay where they were
+  // on frame 399 while the leg walks on, and the markers `occluded` are missing.
+  StuckToe StickAToeMarker(std::initializer_list<const char*> also_stuck,
+                           std::initializer_list<const char*> occluded) {
+    const int stuck = Marker("RTOE2"), clean = Marker("RTOE1");
+    const int from = 400, to = from + 120;
+    for (int f = from; f < to; ++f) {
+      Sample(f, stuck) = Truth(from - 1, stuck);
+      for (const char* name : also_stuck) Sample(f, Marker(name)) = Truth(from - 1, Marker(name));
+      for (const char* name : occluded) Sample(f, Marker(name)) = Vec3::Constant(kNaN);
+    }
+    const auto out = Run(CleanupOptions{});
+    StuckToe o;
+    for (int f = from; f < to; ++f) {
+      const auto uf = static_cast<size_t>(f);
+      o.stuck_published += out[uf].status[static_cast<size_t>(stuck)] == MarkerStatus::kObserved &&
+                           (Truth(f, stuck) - Truth(from - 1, stuck)).norm() > 0.03;
+      o.clean_kept += out[uf].status[static_cast<size_t>(clean)] == MarkerStatus::kObserved;
+    }
+    o.worst_toe = WorstJointError(out, "RightToeBase", from, to);
+    return o;
+  }
+};
 
 TEST_F(OutlierDetectorTest, ResidualDetectorCatchesAPop) {
   const int m = Marker("HED2");
@@ -199,6 +230,51 @@ TEST_F(OutlierDetectorTest, ASwapIntoAnotherSegmentStaysRelabelledWhileTheCaptur
   EXPECT_GE(observed_right, 2 * 50 * 9 / 10);
 }
 
+TEST_F(OutlierDetectorTest, AHandsOneSeenMarkerCarryingItsOccludedNeighbourIsRelabelled) {
+  // Two of the hand's three markers, the elbow and one forearm marker are occluded (as in
+  // the soak's actor2); half-way through, the capture gives the hand's one seen marker's
+  // label to its occluded neighbour's trajectory (there: 0.85 s of a hand 10 cm off, the
+  // soak's p99.9). No pair test sees it (one sample), and the robust solve turns the hand
+  // and forearm to fit it, so no residual does either. The sample jumped onto where the
+  // missing neighbour was expected: it is the neighbour's.
+  const int seen = Marker("LHND3"), carried = Marker("LHND2");
+  const int from = 300, jump = 360, to = 480;
+  for (int f = from; f < to; ++f) {
+    if (f >= jump) Sample(f, seen) = Sample(f, carried);
+    for (const char* name : {"LHND1", "LHND2", "LELB", "LFRM2"})
+      Sample(f, Marker(name)) = Vec3::Constant(kNaN);
+  }
+  auto hand_error = [&](const CleanupOptions& options, int* relabelled_right, int* seen_observed) {
+    const auto out = Run(options);
+    for (int f = jump; f < to; ++f) {
+      const CleanFrame& frame = out[static_cast<size_t>(f)];
+      const auto uc = static_cast<size_t>(carried);
+      *relabelled_right += frame.status[uc] == MarkerStatus::kRepaired &&
+                           frame.reason[uc] == MaskReason::kSwap &&
+                           frame.source[uc] == SampleSource::kCaptured &&
+                           (frame.markers[uc] - Truth(f, carried)).norm() < 0.01;
+      *seen_observed += frame.status[static_cast<size_t>(seen)] == MarkerStatus::kObserved;
+    }
+    return WorstJointError(out, "LeftHand", jump, to);
+  };
+  int relabelled_right = 0, seen_observed = 0;
+  const double relabelled = hand_error(CleanupOptions{}, &relabelled_right, &seen_observed);
+  EXPECT_GE(relabelled_right, (to - jump) * 9 / 10);
+  EXPECT_EQ(seen_observed, 0);
+  EXPECT_LT(relabelled, 0.02);
+  EXPECT_GE(counters_.swaps_relabelled, (to - jump) * 9 / 10);
+  // Without the rule: 0 relabelled, the seen label's sample published in all 120 frames,
+  // the hand 7.9 cm off. With relabelling off, the sample is filled (and kept out of the
+  // reference) while it stays where the neighbour was expected; the guessed hand drifts
+  // from it, so not in every frame (39 of 120 published, where 119 were when kept in).
+  CleanupOptions fill;
+  fill.relabel_swaps = false;
+  relabelled_right = seen_observed = 0;
+  hand_error(fill, &relabelled_right, &seen_observed);
+  EXPECT_EQ(relabelled_right, 0);
+  EXPECT_LE(seen_observed, (to - jump) / 2);
+}
+
 TEST_F(OutlierDetectorTest, ASampleOffItsJointLeavesTheReferenceAndSparesItsSegment) {
   // A forearm marker's label carries a ghost riding the chest (no other label's sample,
   // so no swap to undo) while the hand is occluded: the forearm's one other marker and the
@@ -283,26 +359,26 @@ TEST_F(OutlierDetectorTest, AToeMarkerStuckWhereTheFootWasPlantedIsFrozenWhenThe
   // moved; the reference, with no foot data, follows the stuck one. The stuck sample must
   // go, and the clean one stay (a Bandai punch published the stuck one as observed and
   // rejected the clean one for 0.2 s: a 13 cm worst frame).
-  const int stuck = Marker("RTOE2"), clean = Marker("RTOE1");
-  const int from = 400, to = from + 120;
-  for (int f = from; f < to; ++f) {
-    Sample(f, stuck) = Truth(from - 1, stuck);
-    for (const char* name : {"RFOT1", "RFOT2", "RFOT3"})
-      Sample(f, Marker(name)) = Vec3::Constant(kNaN);
-  }
-  const auto out = Run(CleanupOptions{});
-  int stuck_published = 0, clean_kept = 0;
-  for (int f = from; f < to; ++f) {
-    const auto uf = static_cast<size_t>(f);
-    stuck_published += out[uf].status[static_cast<size_t>(stuck)] == MarkerStatus::kObserved &&
-                       (Truth(f, stuck) - Truth(from - 1, stuck)).norm() > 0.03;
-    clean_kept += out[uf].status[static_cast<size_t>(clean)] == MarkerStatus::kObserved;
-  }
+  const StuckToe o = StickAToeMarker({}, {"RFOT1", "RFOT2", "RFOT3"});
   // Before: the stuck sample published off the toe in 7 frames, the clean one kept in 1
   // of 120, the toe 22 cm off.
-  EXPECT_LE(stuck_published, 2);
-  EXPECT_GT(clean_kept, 120 * 9 / 10);
-  EXPECT_LT(WorstJointError(out, "RightToeBase", from, to), 0.05);
+  EXPECT_LE(o.stuck_published, 2);
+  EXPECT_GT(o.clean_kept, 120 * 9 / 10);
+  EXPECT_LT(o.worst_toe, 0.05);
+}
+
+TEST_F(OutlierDetectorTest, AToeMarkerStuckAsTheFootLiftsIsFrozenWithOneFootMarkerSeen) {
+  // As above, but one of the foot's markers is seen, and the shin has one marker stuck and
+  // the other occluded. The one foot marker cannot hold the foot's rotation about it, so
+  // the toe's joint goes where the stuck marker pulls the toe, and the clean toe marker
+  // looks off its joint: judged so, it was no evidence against the stuck one, which was
+  // never convicted (the humanoid's heavy 240 Hz take, seed 7: 47 cm). One fitting marker
+  // of the parent does not place the joint: the clean partner's motion counts.
+  const StuckToe o = StickAToeMarker({"RSHN1"}, {"RFOT2", "RFOT3", "RSHN2"});
+  // Judged off its joint by the one foot marker: the clean one kept in 1 of 120, 10.4 cm.
+  EXPECT_LE(o.stuck_published, 2);
+  EXPECT_GT(o.clean_kept, 120 * 9 / 10);
+  EXPECT_LT(o.worst_toe, 0.05);
 }
 
 TEST_F(OutlierDetectorTest, AStuckMarkerIsFrozenOnceItsJointsOriginMovesAStillRadiusFromIt) {
