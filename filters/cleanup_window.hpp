@@ -62,7 +62,8 @@ struct CleanupCounters {
   int64_t samples_out = 0;
   std::array<int64_t, kMaskReasonCount> repaired_by{};  ///< Published repaired samples, per reason.
   int64_t unrecoverable = 0;
-  /// Pairs relabelled, once per frame each (a remembered pair every frame).
+  /// Pairs relabelled and lone samples moved to a missing neighbour's label, once per
+  /// frame each (a remembered pair every frame).
   int64_t swaps_relabelled = 0;
   int64_t samples_out_of_volume = 0;  ///< Samples beyond the capture volume: taken as missing.
   int64_t glitch_frames = 0;          ///< Whole frames taken as missing (a jump no body makes).

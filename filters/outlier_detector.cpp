@@ -145,7 +145,7 @@ void OutlierDetector::ReadmitConsistentSegments(const WindowFrame& s) {
   for (size_t m = 0; m < weights_.size(); ++m) {
     const auto joint = static_cast<size_t>(markers_.primary_joint(static_cast<int>(m)));
     if (readmit_on_joint_[joint] > 0 && s.valid[m] && !tracks_[m].frozen &&
-        markers_.marker(static_cast<int>(m)).num_attachments == 1)
+        s.mask[m] != MaskReason::kSwap && markers_.marker(static_cast<int>(m)).num_attachments == 1)
       weights_[m] = 1.0;
   }
   // One trusted marker cannot tell a segment's rotation about it: the reference turns
@@ -158,7 +158,9 @@ void OutlierDetector::ReadmitConsistentSegments(const WindowFrame& s) {
                j = static_cast<size_t>(rigid_pairs_[k].second);
     const auto joint = static_cast<size_t>(markers_.primary_joint(rigid_pairs_[k].first));
     if (trusted_on_joint_[joint] != 1 || !s.valid[i] || !s.valid[j]) continue;
-    const auto trusted = [&](size_t m) { return !excluded(static_cast<int>(m)); };
+    const auto trusted = [&](size_t m) {
+      return !excluded(static_cast<int>(m)) && s.mask[m] != MaskReason::kSwap;
+    };
     const bool i_trusted = trusted(i), j_trusted = trusted(j);
     if (i_trusted == j_trusted) continue;
     const size_t left_out = i_trusted ? j : i;
@@ -281,6 +283,12 @@ void OutlierDetector::RelabelSwaps(CleanupWindow& window, int64_t t, CleanupCoun
     const auto i = static_cast<size_t>(rigid_pairs_[k].first);
     const auto j = static_cast<size_t>(rigid_pairs_[k].second);
     if (!s.valid[i] || !s.valid[j] || s.relabelled[i] || s.relabelled[j]) continue;
+    // A marker judged frozen whose sample is still where it stuck is no member of a swap:
+    // the layout, judged on the segment's few witnesses, once gave its clean neighbour's
+    // label the stuck sample (the soak's actor3: a fallen-off foot marker lying still took
+    // the clean one's label, the robust solve followed it and a frozen one, and the foot
+    // was published 18.8 cm off). One that has moved off may be swapped (and re-identified).
+    if (StuckWhereItFroze(s, i) || StuckWhereItFroze(s, j)) continue;
     double straight = 0.0, crossed = 0.0;
     int witnesses = 0;
     for (int other :
@@ -357,8 +365,11 @@ void OutlierDetector::RelabelSwaps(CleanupWindow& window, int64_t t, CleanupCoun
 void OutlierDetector::RelabelLoneSamples(CleanupWindow& window, int64_t t,
                                          CleanupCounters* counters) {
   WindowFrame& s = window.at(t);
-  const WindowFrame& prev = window.at(t - 1);
-  const bool has_two_before = t > 1 && window.at(t - 2).frame == t - 2;
+  const WindowFrame& prev = window.at(t - 1);  // the caller saw frame t - 1 in the window
+  // After a glitch frame (every sample taken as missing) each expectation would be a
+  // reference up to glitch_resync_s old: nothing to judge a jump against.
+  if (std::none_of(prev.valid.begin(), prev.valid.end(), [](uint8_t v) { return v != 0; })) return;
+  const bool has_two_before = t > 1 && window.at(t - 2).frame == t - 2 && !prev.resync;
   const WindowFrame& prev2 = window.at(t - 2 >= 0 ? t - 2 : 0);
   auto fine = [](const WindowFrame& f, size_t m) {
     return f.valid[m] && f.mask[m] == MaskReason::kNone;
@@ -374,19 +385,23 @@ void OutlierDetector::RelabelLoneSamples(CleanupWindow& window, int64_t t,
     // A stuck or fallen-off sample is nobody's trajectory: a missing marker's expected
     // position passing by it is no swap.
     if (!s.valid[i] || s.relabelled[i] || tracks_[i].frozen || tracks_[i].fallen) continue;
-    const Vec3 expected_i = expected(i);
-    const double off_own = (s.raw[i] - expected_i).norm();
-    if (off_own <= ResidualThreshold(i) + options_.swap_margin_m) continue;
+    // Each test is written to accept, so that a NaN anywhere rejects.
+    const double off_own = (s.raw[i] - expected(i)).norm();
+    if (!(off_own > ResidualThreshold(i) + options_.swap_margin_m)) continue;
     const double off_own_reference = (s.raw[i] - prev.reference[i]).norm();
     size_t best = m_count;
     double best_off = 0.0;
     for (size_t j = 0; j < m_count; ++j) {
-      if (j == i || s.valid[j] || (prev.reference[j] - prev.reference[i]).squaredNorm() > search_sq)
+      // Only a label missing as captured: not one a swap emptied (a remembered pair's, or
+      // one this loop has moved a sample from).
+      if (j == i || s.valid[j] || s.relabelled[j] || swap_partner_[j] >= 0 ||
+          !((prev.reference[j] - prev.reference[i]).squaredNorm() <= search_sq))
         continue;
       const double off_other = (s.raw[i] - expected(j)).norm();
-      if (off_other > ResidualThreshold(j) || off_other + options_.swap_margin_m >= off_own ||
-          (s.raw[i] - prev.reference[j]).norm() + options_.swap_margin_m >= off_own_reference)
-        continue;
+      const bool fits_other =
+          off_other <= ResidualThreshold(j) && off_other + options_.swap_margin_m < off_own &&
+          (s.raw[i] - prev.reference[j]).norm() + options_.swap_margin_m < off_own_reference;
+      if (!fits_other) continue;
       if (best == m_count || off_other < best_off) {
         best = j;
         best_off = off_other;

@@ -71,6 +71,11 @@ class OutlierDetector {
   void RelabelLoneSamples(CleanupWindow& window, int64_t t, CleanupCounters* counters);
   void Relabel(WindowFrame& s, size_t i, size_t j, CleanupCounters* counters,
                bool remember = false);
+  /// True if marker m is judged frozen and its sample in s is still where it stuck.
+  bool StuckWhereItFroze(const WindowFrame& s, size_t m) const {
+    return tracks_[m].frozen &&
+           (s.raw[m] - tracks_[m].still_anchor).norm() <= options_.frozen_radius_m;
+  }
   /// Marker m's residual outlier threshold: the floor or a multiple of its running scale.
   double ResidualThreshold(size_t m) const {
     return std::max(options_.residual_floor_m,
