@@ -491,12 +491,19 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
     }
     return false;
   };
-  auto off_its_joint = [&](size_t m, double tolerance) {
+  // A sample's distance to its joint's origin, where the robust solve puts it; NaN unless
+  // the marker is rigidly on one joint and a marker of the parent fits (the origin is
+  // where the parent segment ends: without the parent's data it is the solve's guess).
+  auto distance_to_joint = [&](size_t m) {
     const MarkerDefinition& d = markers_.marker(static_cast<int>(m));
-    if (d.num_attachments != 1) return false;
-    const Vec3& origin = pose.p_WJ[static_cast<size_t>(d.attachments[0].joint)];
-    return std::abs((s.raw[m] - origin).norm() - d.attachments[0].offset.norm()) > tolerance &&
-           parent_fits(m);
+    if (d.num_attachments != 1 || !parent_fits(m)) return kNaN;
+    return (s.raw[m] - pose.p_WJ[static_cast<size_t>(d.attachments[0].joint)]).norm();
+  };
+  auto off_its_joint = [&](size_t m, double tolerance) {
+    const double distance = distance_to_joint(m);
+    return !std::isnan(distance) &&
+           std::abs(distance - markers_.marker(static_cast<int>(m)).attachments[0].offset.norm()) >
+               tolerance;
   };
   // A still marker that a moving marker rigidly on its segment has left (their distance
   // changed, while the still one stayed put, by what a frozen marker's reference must
@@ -545,11 +552,6 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
   // parent's bones, and with a subject calibrated from markers alone, centimetres off,
   // judging every still marker this way convicted clean ones (markers_only_accuracy,
   // Plug-in Gait: the kick's cleaned markers 39 -> 60 mm).
-  auto distance_to_joint = [&](size_t m) {
-    const MarkerDefinition& d = markers_.marker(static_cast<int>(m));
-    if (d.num_attachments != 1 || !parent_fits(m)) return kNaN;
-    return (s.raw[m] - pose.p_WJ[static_cast<size_t>(d.attachments[0].joint)]).norm();
-  };
   auto left_by_its_joint = [&](size_t m) {
     double& at_rest = tracks_[m].joint_distance_at_rest;
     const double distance = distance_to_joint(m);
