@@ -13,7 +13,8 @@
 // --digest prints, per row of ours, a hash of every published bit (markers, status,
 // reasons, weights, poses): a change meant to alter no arithmetic must keep it.
 // MOCAPD_EXPLAIN_BACK=N shows N frames before each pop (default 4); MOCAPD_EXP_<FIELD>
-// variables override a few options for experiments (see RunPipeline).
+// variables override a few options for experiments (see RunPipeline); MOCAPD_TAIL_CM=X lists
+// the frames more than X cm off.
 #include <algorithm>
 #include <cctype>
 #include <cerrno>
@@ -64,6 +65,11 @@ struct Scores {
   int clean_worst_frame = -1, clean_worst_joint = -1;
   uint64_t digest = 0;  ///< FNV-1a over every published frame (--digest)
 };
+
+// MOCAPD_TAIL_CM=X lists every frame whose worst joint is more than X cm off (the tail
+// that makes a p99.9), to see which episodes a change moved.
+const double g_tail_cm =
+    std::getenv("MOCAPD_TAIL_CM") ? std::atof(std::getenv("MOCAPD_TAIL_CM")) : 0.0;
 
 // Accumulates a solved take against the truth.
 class Scorer {
@@ -141,6 +147,9 @@ class Scorer {
         }
       }
       frame_errors.push_back(worst * 100);
+      if (g_tail_cm > 0.0 && worst * 100 > g_tail_cm && joint >= 0)
+        std::printf("tail frame %d %s %.1f cm\n", frames[f], sk_.joint(joint).name.c_str(),
+                    worst * 100);
       // A frame with no clean segment says nothing of them: left out, not counted as 0.
       if (any_clean) clean_frame_errors.push_back(clean_worst * 100);
       if (worst * 100 > s.worst_frame_cm) {
