@@ -319,9 +319,10 @@ void OutlierDetector::RelabelSwaps(CleanupWindow& window, int64_t t, CleanupCoun
   // Only a segment of four or more markers has two pairs with no marker in common, and
   // so a wrong exchange that makes another fit; on a smaller one the pairs are taken in
   // the order of the labels. (Best first on a three-marker hand as well changed which of
-  // two overlapping pairs won against its one witness, and a stuck sample then moved
-  // between the labels every frame, so neither was judged frozen: the soak's actor3 gained
-  // an 11 cm forearm for 0.8 s.)
+  // two overlapping pairs won against its one witness: in the soak's actor3 it put a stuck
+  // sample under LHND2, the hand moved less than the 4 cm that convicts a still marker,
+  // and once the forearm lost a marker the robust solve followed the stuck sample: an
+  // 11 cm forearm for 0.8 s.)
   auto on_large_segment = [&](size_t k) {
     return pairs_of_marker_[static_cast<size_t>(rigid_pairs_[k].first)].size() >= 3;
   };
