@@ -74,8 +74,9 @@ const double g_tail_cm =
 // Accumulates a solved take against the truth.
 class Scorer {
  public:
-  Scorer(const Skeleton& sk, const std::vector<Pose>& truth)
-      : sk_(sk), truth_(truth), errors_(sk) {}
+  /// label names the run in the MOCAPD_TAIL_CM lines.
+  Scorer(const Skeleton& sk, const std::vector<Pose>& truth, std::string label)
+      : sk_(sk), truth_(truth), errors_(sk), label_(std::move(label)) {}
   void Add(int frame, const Pose& pose) { estimates_[frame] = pose; }
   /// Per frame of the take, per joint: its own segment's markers are all clean.
   void SetCleanSegments(std::vector<std::vector<uint8_t>> clean) {
@@ -148,8 +149,8 @@ class Scorer {
       }
       frame_errors.push_back(worst * 100);
       if (g_tail_cm > 0.0 && worst * 100 > g_tail_cm && joint >= 0)
-        std::printf("tail frame %d %s %.1f cm\n", frames[f], sk_.joint(joint).name.c_str(),
-                    worst * 100);
+        std::printf("tail %s frame %d %s %.1f cm\n", label_.c_str(), frames[f],
+                    sk_.joint(joint).name.c_str(), worst * 100);
       // A frame with no clean segment says nothing of them: left out, not counted as 0.
       if (any_clean) clean_frame_errors.push_back(clean_worst * 100);
       if (worst * 100 > s.worst_frame_cm) {
@@ -175,6 +176,7 @@ class Scorer {
   PoseErrorAccumulator errors_;
   std::map<int, Pose> estimates_;
   std::vector<std::vector<uint8_t>> clean_segments_;
+  std::string label_;
 };
 
 // Per frame, per joint: the joint's own segment carries at least two markers and nothing
@@ -202,7 +204,7 @@ Scores SolveBaseline(const bench::BenchTake& take, const C3dTake& markers) {
   IkState ik(sk, *take.markers);
   std::vector<Vec3> obs(static_cast<size_t>(take.markers->num_markers()));
   std::vector<double> w(obs.size());
-  Scorer scorer(sk, take.motion);
+  Scorer scorer(sk, take.motion, take.name + " ik-baseline");
   for (int f = 0; f < markers.num_frames; ++f) {
     for (size_t m = 0; m < obs.size(); ++m) {
       obs[m] = markers.at(f, static_cast<int>(m));
@@ -293,7 +295,7 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
           f.member);
   }
   CleanupPipeline pipeline(skeleton, take.markers, options);
-  Scorer scorer(*skeleton, take.motion);
+  Scorer scorer(*skeleton, take.motion, take.name + " mocapd K=" + std::to_string(lookahead));
   scorer.SetCleanSegments(CleanSegments(*take.markers, bad, skeleton->num_joints()));
   std::vector<Vec3> obs(static_cast<size_t>(take.markers->num_markers()));
   std::vector<double> times;

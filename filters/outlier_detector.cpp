@@ -286,9 +286,7 @@ void OutlierDetector::RelabelSwaps(CleanupWindow& window, int64_t t, CleanupCoun
   auto layout_gain = [&](size_t k) {
     const auto i = static_cast<size_t>(rigid_pairs_[k].first);
     const auto j = static_cast<size_t>(rigid_pairs_[k].second);
-    if (!s.valid[i] || !s.valid[j] || s.relabelled[i] || s.relabelled[j] ||
-        s.mask[i] == MaskReason::kSwap || s.mask[j] == MaskReason::kSwap)
-      return 0.0;
+    if (!s.valid[i] || !s.valid[j] || s.relabelled[i] || s.relabelled[j]) return 0.0;
     // A marker judged frozen whose sample is still where it stuck is no member of a swap:
     // the layout, judged on the segment's few witnesses, once gave its clean neighbour's
     // label the stuck sample (the soak's actor3: a fallen-off foot marker lying still took
@@ -316,27 +314,36 @@ void OutlierDetector::RelabelSwaps(CleanupWindow& window, int64_t t, CleanupCoun
     const double gain = straight - crossed - options_.swap_margin_m * witnesses;
     return witnesses > 0 && gain > 0.0 ? gain : 0.0;
   };
-  // Only a segment of four or more markers has two pairs with no marker in common, and
-  // so a wrong exchange that makes another fit; on a smaller one the pairs are taken in
-  // the order of the labels. (Best first on a three-marker hand as well changed which of
-  // two overlapping pairs won against its one witness: in the soak's actor3 it put a stuck
+  // Only a segment with four or more markers present has two pairs with no marker in
+  // common, and so a wrong exchange that makes another fit; on one with fewer the pairs
+  // are taken in the order of the labels. (Best first on a three-marker hand as well changed which
+  // of two overlapping pairs won against its one witness: in the soak's actor3 it put a stuck
   // sample under LHND2, the hand moved less than the 4 cm that convicts a still marker,
   // and once the forearm lost a marker the robust solve followed the stuck sample: an
   // 11 cm forearm for 0.8 s.)
   auto on_large_segment = [&](size_t k) {
-    return pairs_of_marker_[static_cast<size_t>(rigid_pairs_[k].first)].size() >= 3;
+    const auto first = static_cast<size_t>(rigid_pairs_[k].first);
+    int present = s.valid[first] ? 1 : 0;
+    for (int pair : pairs_of_marker_[first]) {
+      const auto& [a, b] = rigid_pairs_[static_cast<size_t>(pair)];
+      present += s.valid[static_cast<size_t>(static_cast<size_t>(a) == first ? b : a)] ? 1 : 0;
+    }
+    return present >= 4;
   };
   for (size_t k = 0; k < rigid_pairs_.size(); ++k)
     if (!on_large_segment(k) && layout_gain(k) > 0.0)
       Relabel(s, static_cast<size_t>(rigid_pairs_[k].first),
               static_cast<size_t>(rigid_pairs_[k].second), counters);
-  // Each round relabels a pair (or, with relabel_swaps off, masks it; or exchanges a
-  // carried pair back, after which its exchange no longer fits better): it ends.
+  // Each round relabels a pair (or, with relabel_swaps off, masks it kSwap, which is
+  // why a masked pair is passed over), so no pair is chosen twice and the rounds end.
   for (size_t round = 0; round < rigid_pairs_.size(); ++round) {
     size_t best = rigid_pairs_.size();
     double best_gain = 0.0;
     for (size_t k = 0; k < rigid_pairs_.size(); ++k) {
-      if (!on_large_segment(k)) continue;
+      if (!on_large_segment(k) ||
+          s.mask[static_cast<size_t>(rigid_pairs_[k].first)] == MaskReason::kSwap ||
+          s.mask[static_cast<size_t>(rigid_pairs_[k].second)] == MaskReason::kSwap)
+        continue;
       const double gain = layout_gain(k);
       if (gain > best_gain) {
         best = k;

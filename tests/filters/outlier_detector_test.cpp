@@ -432,8 +432,10 @@ TEST_F(OutlierDetectorTest, AHeadSwapIsUndoneByItsOwnPairNotMirroredByTheOtherTw
   // swapped by the capture, exchanging HED1 and HED4 also fits the layout better than the
   // labels as captured. Taken in the order of the labels, that pair went first, the head
   // was published mirrored and the soak's actor3 had a 10 cm head for 0.2 s. As there:
-  // HED3 sticks for 10 frames, then the capture swaps HED2 and HED3 for 60. The pair whose
-  // exchange fits best is relabelled first.
+  // HED3 sticks for 10 frames, then the capture swaps HED2 and HED3 for 60. The stuck HED3
+  // is judged frozen, so on the swap's first frame it is no witness and HED1 / HED4,
+  // judged on HED2 alone, fit exchanged (without the stuck run the order made no
+  // difference here). The pair whose exchange fits best is relabelled first.
   const int h1 = Marker("HED1"), h2 = Marker("HED2"), h3 = Marker("HED3"), h4 = Marker("HED4");
   const int stuck = 190, from = 200, to = 260;
   for (int f = stuck; f < from; ++f) Sample(f, h3) = Truth(stuck - 1, h3);
