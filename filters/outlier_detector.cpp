@@ -278,11 +278,8 @@ void OutlierDetector::RelabelSwaps(CleanupWindow& window, int64_t t, CleanupCoun
   };
   // Swaps first: a relabelled pair is fine for every other detector. Within one rigid
   // segment the layout's distances identify each marker: a pair whose exchanged labels
-  // fit the distances to the segment's other markers clearly better is relabelled. The
-  // pair whose exchange fits best goes first, then the others are judged again: taken in
-  // the order of the labels, a swap of two head markers once made the exchange of the
-  // other two fit (four markers round a head are nearly a mirror image of themselves),
-  // that pair was relabelled first, and the head was published mirrored, 10 cm off.
+  // fit the distances to the segment's other markers clearly better is relabelled (below:
+  // in which order).
   auto layout_gain = [&](size_t k) {
     const auto i = static_cast<size_t>(rigid_pairs_[k].first);
     const auto j = static_cast<size_t>(rigid_pairs_[k].second);
@@ -314,10 +311,14 @@ void OutlierDetector::RelabelSwaps(CleanupWindow& window, int64_t t, CleanupCoun
     const double gain = straight - crossed - options_.swap_margin_m * witnesses;
     return witnesses > 0 && gain > 0.0 ? gain : 0.0;
   };
-  // Only a segment with four or more markers present has two pairs with no marker in
-  // common, and so a wrong exchange that makes another fit; on one with fewer the pairs
-  // are taken in the order of the labels. (Best first on a three-marker hand as well changed which
-  // of two overlapping pairs won against its one witness: in the soak's actor3 it put a stuck
+  // On a segment with four or more markers present the pair whose exchange fits best goes
+  // first, then the others are judged again. Only such a segment has two pairs with no
+  // marker in common, and so a wrong exchange that makes another fit: taken in the order
+  // of the labels, a swap of two head markers once made the exchange of the other two fit
+  // (four markers round a head are nearly a mirror image of themselves), that pair went
+  // first, and the head was published mirrored, 10 cm off. With fewer markers the label
+  // order stays. (Best first on a three-marker hand as well changed which of two
+  // overlapping pairs won against its one witness: in the soak's actor3 it put a stuck
   // sample under LHND2, the hand moved less than the 4 cm that convicts a still marker,
   // and once the forearm lost a marker the robust solve followed the stuck sample: an
   // 11 cm forearm for 0.8 s.)
