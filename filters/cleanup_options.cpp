@@ -61,6 +61,9 @@ const std::array kFields = {
     F{"fill_start_velocity_s", nullptr, "fill_start_velocity_ms", kMs, 0, 1e6,
       &O::fill_start_velocity_s},
     F{"fill_end_velocity_s", nullptr, "fill_end_velocity_ms", kMs, 0, 1e6, &O::fill_end_velocity_s},
+    F{"fill_ease_s", nullptr, "fill_ease_ms", kMs, 0, 1e6, &O::fill_ease_s},
+    F{"fill_interpolation_horizon_s", nullptr, "fill_interpolation_horizon_ms", kMs, 0, 1e6,
+      &O::fill_interpolation_horizon_s},
     F{"repaired_weight", nullptr, "repaired_weight", kNone, 0, 1, &O::repaired_weight},
     F{"interpolated_weight", nullptr, "interpolated_weight", kNone, 0, 1, &O::interpolated_weight},
     F{"fill_weight_growth_per_s", nullptr, "fill_weight_growth_per_s", kNone, 0, 1e6,
@@ -158,6 +161,8 @@ CleanupFrameRules FrameRules(const CleanupOptions& o) {
   r.fill_start_velocity_weight =
       o.fill_start_velocity_s > 0.0 ? 1.0 - std::exp(-dt / o.fill_start_velocity_s) : 1.0;
   r.fill_end_velocity_frames = frames(o.fill_end_velocity_s, 1);
+  r.fill_ease_frames = std::max(1.0, std::round(o.fill_ease_s * rate));
+  r.fill_interpolation_horizon_frames = frames(o.fill_interpolation_horizon_s, 1);
   r.fill_weight_ramp =
       o.fill_weight_growth_per_s > 0.0 ? std::exp(o.fill_weight_growth_per_s * dt) : 1.0;
   r.data_catchup_m = o.data_catchup_mps / rate;

@@ -83,6 +83,16 @@ struct CleanupOptions {
   double fill_start_velocity_s = 0.05;
   /// ...and ends on the returning track's offset velocity over up to this long.
   double fill_end_velocity_s = 0.05;
+  /// A one-sided fill (its marker's return not in sight) eases its offset velocity out
+  /// over this long (it was the lookahead's K + 1 frames: 0.22 s at 60 Hz, 0.05 s at
+  /// 240 Hz, and a second at K = 240 and 240 Hz, which let a fill drift).
+  double fill_ease_s = 0.05;
+  /// A fill turns toward its marker's return only once the return is this near (and in
+  /// the lookahead). Over a longer stretch the path from the gap's start to the return
+  /// was worse than the reference's: Bandai medium, 120 Hz, K = 48 gave corrupted samples
+  /// 12.4 mm and 1.54 deg where K = 12 gave 10.4 mm and 1.36 deg; on a limb occluded whole
+  /// too (its reference a guess), where a 34 cm frame came of it.
+  double fill_interpolation_horizon_s = 0.1;
 
   // Final solve (filters/final_solve.hpp).
   /// Weight of a one-sided repair in the final solve (observed samples weigh 1): it is
@@ -191,6 +201,8 @@ struct CleanupFrameRules {
   double fill_snap_release;                   ///< Share taken up per frame.
   double fill_start_velocity_weight;          ///< A new frame's share of the smoothed velocity.
   int fill_end_velocity_frames;               ///< At least 1.
+  double fill_ease_frames;                    ///< At least 1.
+  int fill_interpolation_horizon_frames;      ///< At least 1.
   double fill_weight_ramp;                    ///< Factor per frame (<= 1: no limit).
   double data_catchup_m;                      ///< Per frame.
   double data_motion_acceleration_m;          ///< Change of the per-frame motion, per frame.

@@ -62,8 +62,11 @@ void GapRepair::Repair(const CleanupWindow& window, int64_t tau, int64_t newest,
       track.held_snap.setZero();
       track.last_observed = tau;
     } else {
-      int64_t end = -1;  // the returning track, if the lookahead shows it
-      for (int64_t f = tau + 1; f <= newest; ++f) {
+      // The returning track, if the lookahead shows it within the horizon: further off,
+      // the reference carries the fill better than a path to the return would.
+      const int64_t sight = std::min(newest, tau + rules_.fill_interpolation_horizon_frames);
+      int64_t end = -1;
+      for (int64_t f = tau + 1; f <= sight; ++f) {
         if (window.at(f).mask[m] == MaskReason::kNone) {
           end = f;
           break;
@@ -128,7 +131,7 @@ void GapRepair::Repair(const CleanupWindow& window, int64_t tau, int64_t newest,
         } else {
           h.p1 = h.p0;
           h.m1 = Vec3::Zero();
-          h.length = static_cast<double>(options_.lookahead + 1);
+          h.length = rules_.fill_ease_frames + 1.0;
         }
         x = ref - snap_now + h.Value(1.0);
         if (end < 0) {

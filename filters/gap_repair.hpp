@@ -2,13 +2,14 @@
 // every marker's published sample for the frame leaving the lookahead. A fine sample is
 // published exactly as captured. A bad one is filled with a cubic Hermite offset onto the
 // reference path X^: from the last published offset and velocity to the returning
-// track's when its end is within the lookahead (two-sided, which is also the no-pop
-// re-entry blend), or easing to a constant offset while the gap is still open
-// (one-sided). The reference's path is taken without its snaps (accelerations beyond a
-// limb's), so a guessed segment snapping back to returning markers moves no fill, and a
-// one-sided fill takes up what it held back a little each frame. Short gaps right after
-// a captured sample get a plain Hermite on the raw path. Per-marker state is sized at
-// construction; Repair never allocates.
+// track's once its end is within fill_interpolation_horizon_s and the lookahead
+// (two-sided, which is also the no-pop re-entry blend), or easing to a constant offset
+// while the gap is still open or its end further off (one-sided). The reference's path
+// is taken without its snaps (accelerations beyond a limb's), so a guessed segment
+// snapping back to returning markers moves no fill, and a one-sided fill takes up what
+// it held back a little each frame. Short gaps right after a captured sample get a plain
+// Hermite on the raw path. Per-marker state is sized at construction; Repair never
+// allocates.
 #pragma once
 
 #include <vector>

@@ -200,6 +200,27 @@ TEST_F(GapRepairAloneTest, OneSidedFillHoldsTheLastOffsetWhileTheGapIsOpen) {
   }
 }
 
+// An offline user raising the lookahead must not get worse fills: the reference carries
+// a long gap, and the return pulls the fill only within fill_interpolation_horizon_s; the
+// one-sided fill eases its start velocity out over fill_ease_s, not over the lookahead.
+TEST_F(GapRepairAloneTest, ALongGapIsFilledTheSameWithALongerLookahead) {
+  options_.rate_hz = 120.0;
+  auto offset = [](int t) -> Vec3 {  // drifting before the gap, a different offset after
+    return t < 20 ? Vec3(0.001 * t, 0, 0) : t < 140 ? Vec3::Constant(kNaN) : Vec3(0.05, 0, 0);
+  };
+  const auto near = Run(12, 200, offset);
+  const auto far = Run(240, 200, offset);
+  ASSERT_EQ(near.size(), far.size());
+  const int horizon = FrameRules(options_).fill_interpolation_horizon_frames;
+  for (int t = 20; t < 140; ++t) {
+    const auto f = static_cast<size_t>(t);
+    EXPECT_LT((near[f].markers[0] - far[f].markers[0]).norm(), 1e-12) << t;
+    EXPECT_EQ(far[f].source[0],
+              140 - t <= horizon ? SampleSource::kInterpolated : SampleSource::kExtrapolated)
+        << t;
+  }
+}
+
 TEST_F(GapRepairAloneTest, ShortGapIsAPlainHermiteOnTheRawPath) {
   // The raw path bends; during the gap alone the reference bulges up to 8 mm away from
   // it (slowly enough that no snap rule hides it). A short gap interpolates the raw path
