@@ -673,8 +673,11 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
       track.frozen = true;
     }
     if (track.frozen) {
-      // Still and far from its reference for long is the more specific diagnosis.
-      for (int64_t f = std::max(first_unpublished, track.still_since); f <= t; ++f)
+      // Still and far from its reference for long is the more specific diagnosis (back
+      // over the still run, as far as frozen_backdate_s).
+      const int64_t from = std::max({first_unpublished, track.still_since,
+                                     t - static_cast<int64_t>(rules_.frozen_backdate_frames)});
+      for (int64_t f = from; f <= t; ++f)
         if (window.at(f).valid[m] && window.at(f).mask[m] != MaskReason::kFallenOff)
           window.at(f).mask[m] = MaskReason::kFrozen;
     }

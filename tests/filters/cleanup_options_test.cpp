@@ -59,7 +59,7 @@ TEST(CleanupOptionsTest, EveryOptionIsInTheTableOnceWithItsDefaultInBounds) {
     EXPECT_GE(value, f.min * f.to_si) << f.name;
     EXPECT_LE(value, f.max * f.to_si) << f.name;
   }
-  EXPECT_EQ(names.size(), 47u);  // a new option must be added to the table (and this count)
+  EXPECT_EQ(names.size(), 48u);  // a new option must be added to the table (and this count)
 }
 
 TEST(CleanupOptionsTest, EveryPerFrameRuleMeansTheSameSpeedOrTimeAtEveryRate) {
@@ -91,6 +91,8 @@ TEST(CleanupOptionsTest, EveryPerFrameRuleMeansTheSameSpeedOrTimeAtEveryRate) {
   EXPECT_NEAR(f.frozen_frames / 240.0, fast.frozen_s, 0.5 / 240);
   EXPECT_NEAR(s.fallen_frames / 60.0, slow.fallen_s, 0.5 / 60);
   EXPECT_NEAR(f.fallen_frames / 240.0, fast.fallen_s, 0.5 / 240);
+  EXPECT_NEAR(s.frozen_backdate_frames / 60.0, slow.frozen_backdate_s, 0.5 / 60);
+  EXPECT_NEAR(f.frozen_backdate_frames / 240.0, fast.frozen_backdate_s, 0.5 / 240);
   EXPECT_NEAR(s.fill_ease_frames / 60.0, slow.fill_ease_s, 0.5 / 60);
   EXPECT_NEAR(f.fill_ease_frames / 240.0, fast.fill_ease_s, 0.5 / 240);
   EXPECT_NEAR(s.fill_interpolation_horizon_frames / 60.0, slow.fill_interpolation_horizon_s,

@@ -184,6 +184,39 @@ TEST_F(OutlierDetectorTest, APlantedFootIsNotFrozenWhenItsOtherMarkersAreOcclude
     EXPECT_NE(out[static_cast<size_t>(f)].reason[static_cast<size_t>(m)], MaskReason::kFrozen) << f;
 }
 
+TEST_F(OutlierDetectorTest, AStuckMarkerKeepsItsSamplesFromBeforeItLeftTheTruth) {
+  // A marker sticks while its segment is nearly still, and stays as the segment moves on.
+  // Judged frozen, its still run was masked as far back as the lookahead reached: with an
+  // offline user's K = 120 (1 s), samples still right by a centimetre went too. The
+  // marker and moment: the longest stretch (at least 0.3 s) in which a marker's truth
+  // stays within 1 cm, then moves 5 cm within 0.5 s.
+  int m = -1, from = -1, still = 0;
+  const int frames = static_cast<int>(frames_.size());
+  for (int c = 0; c < static_cast<int>(frames_[0].size()); ++c)
+    for (int f = 0; f + 200 < frames; ++f) {
+      int g = f;
+      while (g + 100 < frames && (Truth(g, c) - Truth(f, c)).norm() < 0.01) ++g;
+      if (g - f >= 36 && g - f > still && (Truth(g + 60, c) - Truth(f, c)).norm() > 0.05)
+        m = c, from = f, still = g - f;
+    }
+  ASSERT_GE(m, 0) << "the motion has no still stretch to test";
+  const int to = from + still + 60;
+  for (int f = from; f < to; ++f) Sample(f, m) = Truth(from, m);
+  CleanupOptions options;
+  options.lookahead = 120;
+  const auto out = Run(options);
+  int right_kept = 0, wrong_published = 0;
+  for (int f = from; f < to; ++f) {
+    const bool observed =
+        out[static_cast<size_t>(f)].status[static_cast<size_t>(m)] == MarkerStatus::kObserved;
+    const double off = (Truth(f, m) - Truth(from, m)).norm();
+    right_kept += observed && off < 0.01;
+    wrong_published += observed && off > 0.03;
+  }
+  EXPECT_GE(right_kept, still / 2);  // before: none
+  EXPECT_LE(wrong_published, 2);
+}
+
 TEST_F(OutlierDetectorTest, ASwapIntoAnotherSegmentStaysRelabelledWhileTheCaptureKeepsIt) {
   // A forearm marker and a clavicle marker exchange labels for 1.5 s while the hand is
   // occluded (a punch from the chest, bench/README.md): relabelled on one frame only, the
