@@ -93,8 +93,10 @@ TEST(CleanupOptionsTest, EveryPerFrameRuleMeansTheSameSpeedOrTimeAtEveryRate) {
   EXPECT_NEAR(f.fallen_frames / 240.0, fast.fallen_s, 0.5 / 240);
   EXPECT_NEAR(s.frozen_backdate_frames / 60.0, slow.frozen_backdate_s, 0.5 / 60);
   EXPECT_NEAR(f.frozen_backdate_frames / 240.0, fast.frozen_backdate_s, 0.5 / 240);
-  EXPECT_NEAR(s.fill_ease_frames / 60.0, slow.fill_ease_s, 0.5 / 60);
-  EXPECT_NEAR(f.fill_ease_frames / 240.0, fast.fill_ease_s, 0.5 / 240);
+  CleanupOptions slow_ease = slow, fast_ease = fast;  // the default, 0, holds at once
+  slow_ease.fill_ease_s = fast_ease.fill_ease_s = 0.05;
+  EXPECT_NEAR(FrameRules(slow_ease).fill_ease_frames / 60.0, 0.05, 0.5 / 60);
+  EXPECT_NEAR(FrameRules(fast_ease).fill_ease_frames / 240.0, 0.05, 0.5 / 240);
   EXPECT_NEAR(s.fill_interpolation_horizon_frames / 60.0, slow.fill_interpolation_horizon_s,
               0.5 / 60);
   EXPECT_NEAR(f.fill_interpolation_horizon_frames / 240.0, fast.fill_interpolation_horizon_s,
