@@ -63,8 +63,12 @@ void GapRepair::Repair(const CleanupWindow& window, int64_t tau, int64_t newest,
       track.last_observed = tau;
     } else {
       // The returning track, if the lookahead shows it within the horizon: further off,
-      // the reference carries the fill better than a path to the return would.
-      const int64_t sight = std::min(newest, tau + rules_.fill_interpolation_horizon_frames);
+      // the reference carries the fill better than a path to the return would. A marker
+      // not published yet has no path to bend, only the return's offset to ride the
+      // reference at, so it looks as far as the lookahead shows.
+      const int64_t sight = track.has_published
+                                ? std::min(newest, tau + rules_.fill_interpolation_horizon_frames)
+                                : newest;
       int64_t end = -1;
       for (int64_t f = tau + 1; f <= sight; ++f) {
         if (window.at(f).mask[m] == MaskReason::kNone) {
@@ -78,11 +82,16 @@ void GapRepair::Repair(const CleanupWindow& window, int64_t tau, int64_t newest,
         if (end < 0) {
           status = MarkerStatus::kUnrecoverable;  // never seen: nothing to repair from
         } else {
-          // Nothing before the gap: ride the reference at the returning track's offset.
+          // Nothing before the gap: ride the reference at the returning track's offset,
+          // moving with it (its velocity from the frame before, or on a take's first frame
+          // the frame after), so the next frame takes none of its motion for a snap.
           track.offset = window.at(end).raw[m] - window.at(end).reference[m];
           track.offset_velocity = Vec3::Zero();
           x = ref + track.offset;
           track.output_velocity = Vec3::Zero();
+          track.reference_velocity = has_reference_before
+                                         ? Vec3(ref - window.at(tau - 1).reference[m])
+                                         : Vec3(window.at(tau + 1).reference[m] - ref);
         }
       } else if (end >= 0 && track.last_observed == tau - 1 &&
                  end - tau <= rules_.small_gap_frames) {

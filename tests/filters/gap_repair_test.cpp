@@ -221,6 +221,30 @@ TEST_F(GapRepairAloneTest, ALongGapIsFilledTheSameWithALongerLookahead) {
   }
 }
 
+TEST_F(GapRepairAloneTest, OneSidedFillHoldsTheLastOffsetOfADriftingMarker) {
+  // The marker drifts from its reference by 1 mm a frame before the gap; the fill does
+  // not carry the drift on (fill_ease_s = 0), nor ring about the offset it holds.
+  const auto out = Run(2, 60, [&](int t) -> Vec3 {
+    return t < 20 ? Vec3(0.001 * t, 0, 0) : t < 40 ? Vec3::Constant(kNaN) : Vec3(0.019, 0, 0);
+  });
+  const Vec3 held = out[19].markers[0] - Reference(19);
+  for (int t = 20; t < 37; ++t)
+    EXPECT_LT((out[static_cast<size_t>(t)].markers[0] - (Reference(t) + held)).norm(), 1e-12) << t;
+}
+
+TEST_F(GapRepairAloneTest, AMarkerNotSeenYetRidesItsFirstOffsetAsFarAsTheLookaheadShows) {
+  // Occluded from the take's start: nothing to bend toward the return, so the horizon
+  // does not apply, and every frame the lookahead reaches is filled.
+  const Vec3 offset(0.0, 0.02, 0.0);
+  const auto out =
+      Run(60, 120, [&](int t) -> Vec3 { return t < 50 ? Vec3::Constant(kNaN) : offset; });
+  for (int t = 0; t < 50; ++t) {
+    const CleanFrame& f = out[static_cast<size_t>(t)];
+    EXPECT_EQ(f.status[0], MarkerStatus::kRepaired) << t;
+    EXPECT_LT((f.markers[0] - (Reference(t) + offset)).norm(), 1e-12) << t;
+  }
+}
+
 TEST_F(GapRepairAloneTest, ShortGapIsAPlainHermiteOnTheRawPath) {
   // The raw path bends; during the gap alone the reference bulges up to 8 mm away from
   // it (slowly enough that no snap rule hides it). A short gap interpolates the raw path
