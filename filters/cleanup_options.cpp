@@ -163,7 +163,7 @@ CleanupFrameRules FrameRules(const CleanupOptions& o) {
   r.fill_start_velocity_weight =
       o.fill_start_velocity_s > 0.0 ? 1.0 - std::exp(-dt / o.fill_start_velocity_s) : 1.0;
   r.fill_end_velocity_frames = frames(o.fill_end_velocity_s, 1);
-  r.fill_ease_frames = std::max(0.0, std::round(o.fill_ease_s * rate));
+  r.fill_ease_frames = frames(o.fill_ease_s, 0);
   r.fill_interpolation_horizon_frames = frames(o.fill_interpolation_horizon_s, 1);
   r.fill_weight_ramp =
       o.fill_weight_growth_per_s > 0.0 ? std::exp(o.fill_weight_growth_per_s * dt) : 1.0;
