@@ -164,9 +164,12 @@ CleanupFrameRules FrameRules(const CleanupOptions& o) {
       o.fill_start_velocity_s > 0.0 ? 1.0 - std::exp(-dt / o.fill_start_velocity_s) : 1.0;
   r.fill_end_velocity_frames = frames(o.fill_end_velocity_s, 1);
   r.fill_ease_frames = frames(o.fill_ease_s, 0);
-  r.fill_interpolation_horizon_frames = frames(o.fill_interpolation_horizon_s, 1);
+  // Never short of the small gaps: a plain Hermite must see its gap's end.
+  r.fill_interpolation_horizon_frames =
+      std::max(frames(o.fill_interpolation_horizon_s, 1), r.small_gap_frames);
   r.fill_weight_ramp =
       o.fill_weight_growth_per_s > 0.0 ? std::exp(o.fill_weight_growth_per_s * dt) : 1.0;
+  r.marker_jump_m = o.glitch_speed_mps / rate;
   r.data_catchup_m = o.data_catchup_mps / rate;
   r.data_motion_acceleration_m = o.data_motion_acceleration_mps2 / (rate * rate);
   r.fill_anchor_radius_m = o.fill_anchor_speed_mps / rate;

@@ -22,7 +22,9 @@ struct CleanupOptions {
   /// position (1e30, FLT_MAX, an exporter's sentinel): missing, kept out of every solve.
   double capture_volume_m = 100.0;
   /// A frame whose markers (the median of them) moved faster than this since the last
-  /// frame taken is a capture glitch: all its samples are missing...
+  /// frame taken is a capture glitch: all its samples are missing... (One marker moving
+  /// this fast has jumped: a short run of its samples between such a jump and a gap or
+  /// another jump is a small track, see small_track_s.)
   double glitch_speed_mps = 40.0;
   /// ...unless the jump persists this long: then it is a re-synchronisation (the world
   /// frame moved), taken as it is, the solves starting afresh.
@@ -69,8 +71,10 @@ struct CleanupOptions {
   /// out of the next frame's robust solve, judged again every frame. 0 disables.
   double off_joint_m = 0.05;
   // Mask clean-up, bounded by the lookahead.
-  double small_gap_s = 0.042;    ///< Gaps up to this long between observed samples: plain Hermite.
-  double small_track_s = 0.083;  ///< Observed runs up to this long between gaps are dropped.
+  double small_gap_s = 0.042;  ///< Gaps up to this long between observed samples: plain Hermite.
+  /// Observed runs up to this long between gaps (or jumps faster than glitch_speed_mps)
+  /// are dropped.
+  double small_track_s = 0.083;
   double trim_slope_mps = 1.2;  ///< A returning track is trimmed while its velocity differs more...
   double max_trim_s = 0.05;     ///< ...for at most this long.
 
@@ -98,7 +102,9 @@ struct CleanupOptions {
   /// the lookahead). Over a longer stretch the path from the gap's start to the return
   /// was worse than the reference's: Bandai medium, 120 Hz, K = 48 gave corrupted samples
   /// 12.4 mm and 1.54 deg where K = 12 gave 10.4 mm and 1.36 deg; on a limb occluded whole
-  /// too (its reference a guess), where a 34 cm frame came of it.
+  /// too (its reference a guess), where a 34 cm frame came of it. Never shorter than
+  /// small_gap_s (a shorter one is taken as small_gap_s), so a small gap's plain Hermite
+  /// always sees its end.
   double fill_interpolation_horizon_s = 0.1;
 
   // Final solve (filters/final_solve.hpp).
@@ -209,8 +215,9 @@ struct CleanupFrameRules {
   double fill_start_velocity_weight;          ///< A new frame's share of the smoothed velocity.
   int fill_end_velocity_frames;               ///< At least 1.
   double fill_ease_frames;                    ///< 0: the offset is held exactly.
-  int fill_interpolation_horizon_frames;      ///< At least 1 (0 s: the next frame's return).
+  int fill_interpolation_horizon_frames;      ///< At least 1 and small_gap_frames.
   double fill_weight_ramp;                    ///< Factor per frame (<= 1: no limit).
+  double marker_jump_m;                       ///< Per frame (glitch_speed_mps).
   double data_catchup_m;                      ///< Per frame.
   double data_motion_acceleration_m;          ///< Change of the per-frame motion, per frame.
   double fill_anchor_radius_m;                ///< Per frame.

@@ -714,8 +714,12 @@ void OutlierDetector::CleanMask(CleanupWindow& window, int64_t t, int64_t first_
   // part).
   std::fill(marker_flags_.begin(), marker_flags_.end(), 0);
   for (int64_t f = std::max<int64_t>(first - 1, 0); f <= t; ++f) {
-    const std::vector<MaskReason>& mask = window.at(f).mask;
-    for (size_t m = 0; m < m_count; ++m) marker_flags_[m] |= mask[m] != MaskReason::kNone;
+    const WindowFrame& frame = window.at(f);
+    const bool has_previous = f >= first && f > 0;
+    for (size_t m = 0; m < m_count; ++m)
+      marker_flags_[m] |=
+          frame.mask[m] != MaskReason::kNone ||
+          (has_previous && (frame.raw[m] - window.at(f - 1).raw[m]).norm() > rules_.marker_jump_m);
   }
   for (size_t m = 0; m < m_count; ++m) {
     if (!marker_flags_[m]) continue;
@@ -732,17 +736,25 @@ void OutlierDetector::CleanMask(CleanupWindow& window, int64_t t, int64_t first_
         window.at(g).mask[m] = MaskReason::kTrimmed;
       }
     }
-    // Small tracks: a short observed run with a gap on both sides, all still unpublished.
+    // Small tracks: a short observed run, all still unpublished, with a gap or a jump no
+    // body makes on both sides. A pop on a limb with no other marker seen is taken by the
+    // reference after its first frame (nothing holds the limb), and its samples then fit;
+    // but it left with a jump and comes back with one (the soak's actor3: a hand marker
+    // published 42 cm off for two frames at 240 Hz).
+    auto jumped = [&](int64_t f) {
+      return (window.at(f).raw[m] - window.at(f - 1).raw[m]).norm() > rules_.marker_jump_m;
+    };
     int64_t run_start = -1;
     for (int64_t f = first; f <= t; ++f) {
-      if (good(f, m)) {
+      const bool jump = run_start >= 0 && good(f, m) && jumped(f);
+      if (good(f, m) && !jump) {
         if (run_start < 0) run_start = f;
         continue;
       }
-      if (run_start > first && !good(run_start - 1, m) &&
+      if (run_start > first && (!good(run_start - 1, m) || jumped(run_start)) &&
           f - run_start <= rules_.small_track_frames)
         for (int64_t g = run_start; g < f; ++g) window.at(g).mask[m] = MaskReason::kSmallTrack;
-      run_start = -1;
+      run_start = jump ? f : -1;
     }
   }
 }

@@ -101,6 +101,11 @@ TEST(CleanupOptionsTest, EveryPerFrameRuleMeansTheSameSpeedOrTimeAtEveryRate) {
               0.5 / 60);
   EXPECT_NEAR(f.fill_interpolation_horizon_frames / 240.0, fast.fill_interpolation_horizon_s,
               0.5 / 240);
+  // A horizon shorter than a small gap would hide the small gap's end from its Hermite.
+  CleanupOptions short_horizon = fast;
+  short_horizon.fill_interpolation_horizon_s = 0.01;
+  EXPECT_EQ(FrameRules(short_horizon).fill_interpolation_horizon_frames,
+            FrameRules(short_horizon).small_gap_frames);
   // The weight ramp grows by the same factor per second.
   EXPECT_NEAR(60 * std::log(s.fill_weight_ramp), 240 * std::log(f.fill_weight_ramp), 1e-9);
 }

@@ -563,6 +563,26 @@ TEST_F(OutlierDetectorTest, AFrozenMarkerIsNoWitnessToTheLayoutOfItsSegment) {
   EXPECT_GT(observed, 2 * 120 * 9 / 10);
 }
 
+TEST_F(OutlierDetectorTest, ARunBetweenTwoJumpsNoBodyMakesIsASmallTrack) {
+  // A marker pops 40 cm for three frames and back. With nothing else to catch it (a limb
+  // with no other marker seen lets the reference follow it after its first frame: the
+  // soak's actor3, a hand marker published 42 cm off for two frames at 240 Hz), the run
+  // between the jump out and the jump back, faster than glitch_speed_mps, is dropped.
+  const int m = Marker("RHND2");
+  for (int f = 500; f < 503; ++f) Sample(f, m) += Vec3(0.0, 0.4, 0.0);
+  const auto out = Run(Blind());
+  for (int f = 500; f < 503; ++f)
+    EXPECT_EQ(out[static_cast<size_t>(f)].reason[static_cast<size_t>(m)], MaskReason::kSmallTrack)
+        << "frame " << f;
+  EXPECT_EQ(out[499].status[static_cast<size_t>(m)], MarkerStatus::kObserved);
+  EXPECT_EQ(out[503].status[static_cast<size_t>(m)], MarkerStatus::kObserved);
+  // A fast hand is not a jump: nothing else of the take is dropped.
+  int dropped = 0;
+  for (const CleanFrame& frame : out)
+    for (MaskReason reason : frame.reason) dropped += reason == MaskReason::kSmallTrack;
+  EXPECT_EQ(dropped, 3);
+}
+
 TEST_F(OutlierDetectorTest, FallenOffMarkerIsClassifiedAndExcluded) {
   const int m = Marker("RUPA2");
   for (int f = 300; f < static_cast<int>(frames_.size()); ++f)
