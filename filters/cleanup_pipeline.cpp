@@ -37,6 +37,7 @@ CleanupPipeline::CleanupPipeline(std::shared_ptr<const Skeleton> skeleton,
   has_last_taken_.assign(m, 0);
   displacement_.assign(m, 0.0);
   solve_samples_.assign(m, Vec3::Zero());
+  return_motion_.assign(m, Vec3::Constant(kNaN));
   // Centre weights of a least-squares cubic (equally, quadratic) through 2n + 1
   // equally spaced samples: 3 (3n^2 + 3n - 1 - 5j^2) / ((2n - 1)(2n + 1)(2n + 3)).
   const int n_max = smoothing_frames_;
@@ -140,12 +141,23 @@ void CleanupPipeline::SmoothCapturedSamples(int64_t tau, int64_t newest) {
   const size_t row = static_cast<size_t>(smoothing_frames_ + 1);
   for (size_t m = 0; m < m_count; ++m) {
     solve_samples_[m] = out_.markers[m];
-    if (reach <= 0 || out_.source[m] != SampleSource::kCaptured) continue;
+    return_motion_[m] = Vec3::Constant(kNaN);
+    if (out_.source[m] != SampleSource::kCaptured) continue;
     auto clean = [&](int64_t f) {
       if (!window_.Holds(f)) return false;
       const WindowFrame& w = window_.at(f);
       return w.valid[m] && w.mask[m] == MaskReason::kNone;
     };
+    // Back from a gap: its motion over the next two frames, for the final solve's
+    // catch-up to start from, if the lookahead shows both and they differ by no more than
+    // a spike (spike_m: a swap or pop the detectors missed is no motion; capture jitter
+    // alone moves a 240 Hz step by more than the catch-up's acceleration limit).
+    if (!clean(tau - 1) && clean(tau + 1) && clean(tau + 2)) {
+      const Vec3 first = window_.at(tau + 1).raw[m] - out_.markers[m];
+      const Vec3 second = window_.at(tau + 2).raw[m] - window_.at(tau + 1).raw[m];
+      if ((second - first).norm() <= options_.spike_m) return_motion_[m] = 0.5 * (first + second);
+    }
+    if (reach <= 0) continue;
     int n = 0;
     // The window's older frame may be a resync's start: nothing before it belongs.
     while (n < reach && clean(tau - n - 1) && clean(tau + n + 1) && !window_.at(tau - n).resync &&
@@ -174,7 +186,7 @@ void CleanupPipeline::Publish(int64_t tau, int64_t newest) {
   }
   repair_.Repair(window_, tau, newest, &out_, &counters_);
   SmoothCapturedSamples(tau, newest);
-  final_.Solve(&out_, &counters_, solve_samples_);
+  final_.Solve(&out_, &counters_, solve_samples_, return_motion_);
   ++counters_.frames_out;
   next_out_ = tau + 1;
 }

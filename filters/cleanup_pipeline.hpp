@@ -76,6 +76,7 @@ class CleanupPipeline {
   /// weights of offsets 0..n.
   std::vector<double> smoothing_weights_;
   std::vector<Vec3> solve_samples_;  ///< What the final solve fits for captured samples.
+  std::vector<Vec3> return_motion_;  ///< A sample's motion back from a gap (NaN: not shown).
   int64_t last_taken_frame_ = -1;
   int64_t glitch_since_ = -1;
   int64_t next_in_ = 0;   ///< Frame number of the next Push.

@@ -86,7 +86,10 @@ struct WindowFrame {
   std::vector<uint8_t> relabelled;
   std::vector<MaskReason> mask;
   std::vector<Vec3> reference;  ///< X^ = LBS(Y^), metres.
-  bool resync = false;          ///< The capture re-synchronised here: nothing before carries over.
+  /// Y^ is a solution (this frame's, or one held over a frame with too few markers), not
+  /// the rest pose of a subject never solved since the take began or re-synchronised.
+  bool reference_solved = false;
+  bool resync = false;  ///< The capture re-synchronised here: nothing before carries over.
 };
 
 /// A ring of frames addressed by frame number, allocated once.

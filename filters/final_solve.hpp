@@ -14,6 +14,7 @@
 // Per-marker state is sized at construction; Solve never allocates.
 #pragma once
 
+#include <limits>
 #include <span>
 #include <vector>
 
@@ -31,8 +32,11 @@ class FinalSolve {
   /// Solves the frame whose markers, status and source the repair filled (frames in
   /// order); writes its weight, pose and final_solve. captured_fit, if given (one per
   /// marker), is what to fit for captured samples instead of frame->markers (their
-  /// smoothed positions). Never allocates or throws.
-  void Solve(CleanFrame* frame, CleanupCounters* counters, std::span<const Vec3> captured_fit = {});
+  /// smoothed positions). return_motion, if given, is per marker the motion per frame of
+  /// a captured sample back from a gap, as the lookahead shows it (NaN: not shown). Never
+  /// allocates or throws.
+  void Solve(CleanFrame* frame, CleanupCounters* counters, std::span<const Vec3> captured_fit = {},
+             std::span<const Vec3> return_motion = {});
   /// Forgets all state (a capture restart).
   void Reset();
 
@@ -42,7 +46,8 @@ class FinalSolve {
     bool catching_up = false;         // the target is still closing on the sample
     Vec3 data_motion = Vec3::Zero();  // the sample's motion as the catch-up last took it
     Vec3 output = Vec3::Zero();       // last published sample ...
-    int64_t last_captured = -1;       // ... and the frame of the last captured one
+    // ... and the frame of the last captured one (never one less than a frame number).
+    int64_t last_captured = std::numeric_limits<int64_t>::min();
   };
 
   void AnchorRepairs(const CleanFrame& frame, CleanupCounters* counters);

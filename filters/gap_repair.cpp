@@ -87,11 +87,20 @@ void GapRepair::Repair(const CleanupWindow& window, int64_t tau, int64_t newest,
           // the frame after), so the next frame takes none of its motion for a snap.
           track.offset = window.at(end).raw[m] - window.at(end).reference[m];
           track.offset_velocity = Vec3::Zero();
-          x = ref + track.offset;
           track.output_velocity = Vec3::Zero();
-          track.reference_velocity = has_reference_before
-                                         ? Vec3(ref - window.at(tau - 1).reference[m])
-                                         : Vec3(window.at(tau + 1).reference[m] - ref);
+          if (s.reference_solved) {
+            x = ref + track.offset;
+            track.reference_velocity = has_reference_before
+                                           ? Vec3(ref - window.at(tau - 1).reference[m])
+                                           : Vec3(window.at(tau + 1).reference[m] - ref);
+          } else {
+            // No reference yet (a take or re-synchronisation that starts with too few
+            // markers): the reference here is the template's rest pose, wherever it
+            // stands, and riding it put the first frames' markers 1.5 m from the body
+            // (a CMU capture with an empty first frame). The first sample seen is nearer.
+            x = window.at(end).raw[m];
+            track.reference_velocity = Vec3::Zero();
+          }
         }
       } else if (end >= 0 && track.last_observed == tau - 1 &&
                  end - tau <= rules_.small_gap_frames) {
@@ -107,6 +116,12 @@ void GapRepair::Repair(const CleanupWindow& window, int64_t tau, int64_t newest,
         const Vec3 offset = x - ref;
         track.offset_velocity = offset - track.offset;
         track.offset = offset;
+      } else if (!s.reference_solved) {
+        // No reference to ride (see above): the last sample published stays where it is.
+        x = track.output;
+        track.offset_velocity = Vec3::Zero();
+        track.reference_velocity = Vec3::Zero();
+        track.output_velocity = Vec3::Zero();
       } else {
         // Offset onto the reference path, from the last published offset and velocity
         // to the returning track's (two-sided), or easing to a constant (one-sided).

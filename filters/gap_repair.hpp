@@ -12,6 +12,7 @@
 // allocates.
 #pragma once
 
+#include <limits>
 #include <vector>
 
 #include "filters/cleanup_options.hpp"
@@ -35,7 +36,8 @@ class GapRepair {
  private:
   struct Track {
     bool has_published = false;
-    int64_t last_observed = -1;              // frame of the last published captured sample
+    // Frame of the last published captured sample; never one less than a frame number.
+    int64_t last_observed = std::numeric_limits<int64_t>::min();
     Vec3 offset = Vec3::Zero();              // last published X- - X^ ...
     Vec3 offset_velocity = Vec3::Zero();     // ... and its per-frame change
     Vec3 output = Vec3::Zero();              // last published X- ...

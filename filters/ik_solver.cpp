@@ -533,6 +533,8 @@ void IkOptions::Validate() const {
   require(residual_tolerance_m >= 0.0, "residual_tolerance_m", ">= 0");
   require(huber_delta_m >= 0.0 && std::isfinite(huber_delta_m), "huber_delta_m",
           "a finite value >= 0");
+  require(cold_start_min_fraction >= 0.0 && cold_start_min_fraction <= 1.0,
+          "cold_start_min_fraction", "0..1");
   require(temporal_weight >= 0.0 && std::isfinite(temporal_weight), "temporal_weight",
           "a finite value >= 0");
   require(rest_weight >= 0.0 && std::isfinite(rest_weight), "rest_weight", "a finite value >= 0");
@@ -641,7 +643,9 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
   for (int m = 0; m < markers.num_markers(); ++m)
     if (UsableMarker(observed[static_cast<size_t>(m)], weights[static_cast<size_t>(m)]))
       ++summary.markers_used;
-  if (summary.markers_used < options.min_markers) {
+  if (summary.markers_used < options.min_markers ||
+      (s.history_ == 0 &&
+       summary.markers_used < options.cold_start_min_fraction * markers.num_markers())) {
     // Hold the last solution; the velocity history is no longer trustworthy.
     summary.status = IkStatus::kTooFewMarkers;
     s.history_ = std::min(s.history_, 1);

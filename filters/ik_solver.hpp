@@ -48,6 +48,9 @@ struct IkOptions {
   double temporal_weight = 3e-4;  ///< a_t, m^2 per rad^2, on rotations, toward the warm start.
   double rest_weight = 1e-7;      ///< a_r, m^2 per rad^2, toward the rest pose.
   int min_markers = 3;            ///< Fewer usable markers than this: no solve.
+  /// A cold start (no previous solution) needs at least this fraction of the marker set
+  /// usable: three markers hold a pose the solve can keep, not one it can find.
+  double cold_start_min_fraction = 0.0;
   bool apply_joint_limits = true;
   /// A leg with no marker seen on its thigh or shin but two on its foot has its knee turned
   /// about the hip-ankle line until its bend axis is within this of the axis the leg has

@@ -100,6 +100,7 @@ void OutlierDetector::SolveReferences(WindowFrame& s, CleanupCounters* counters)
   counters->CountSolve(SolveIk(skeleton_, markers_, options_.robust_ik, s.raw, weights_, &robust_));
   const auto predicted = robust_.predicted_markers();
   std::copy(predicted.begin(), predicted.end(), s.reference.begin());
+  s.reference_solved = robust_.has_solution();
   // Y: the markers as they are. Disagreement can only mark markers further than
   // disagreement_residual_m from X^, so on frames with none the naive solve is skipped
   // (and re-seeded from Y^ when next needed): about a third of the per-frame work.

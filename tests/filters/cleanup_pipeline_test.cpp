@@ -145,6 +145,61 @@ TEST_F(CleanupPipelineTest, AnAbsurdFrameHarmsNoGoodSampleAfterIt) {
   }
 }
 
+// A take whose first frames hold no marker (the subject not yet tracked, an exporter's
+// empty first frame): once the markers appear the skeleton is where they are, and the
+// frames before them that the lookahead reaches hold the first samples seen. They rode
+// the template's rest pose, wherever it stood, and the skeleton then caught up from there
+// at data_catchup_mps: a CMU capture with an empty first frame was 1-2 m off for 4 s.
+TEST_F(CleanupPipelineTest, ATakeThatStartsWithNoMarkersIsTrackedFromItsFirstSamples) {
+  const int lookahead = CleanupOptions{}.lookahead;
+  for (const int empty : {1, 5, 30}) {
+    const std::vector<std::vector<Vec3>> saved(frames_.begin(), frames_.begin() + empty);
+    for (int f = 0; f < empty; ++f)
+      for (Vec3& p : frames_[static_cast<size_t>(f)]) p = Vec3::Constant(kNaN);
+    const auto out = Run(CleanupOptions{});
+    const std::vector<CleanFrame> seen(out.begin() + empty, out.end());
+    EXPECT_LT(Errors(seen).max_position_error_m(), 0.03) << empty << " empty frames";
+    for (int f = std::max(0, empty - lookahead); f < empty; ++f)
+      for (size_t m = 0; m < frames_[0].size(); ++m)
+        EXPECT_LT(
+            (out[static_cast<size_t>(f)].markers[m] - Truth(empty, static_cast<int>(m))).norm(),
+            0.001)
+            << empty << " empty frames, frame " << f << ", marker " << m;
+    std::copy(saved.begin(), saved.end(), frames_.begin());
+  }
+}
+
+// A take whose first frame shows three markers (tracking locking on): no reference is
+// solved on them (robust_ik.cold_start_min_fraction), so nothing rides a pose three
+// markers cannot place. Solved on them, the reference put a CMU capture's hands 68 cm
+// off, and the skeleton took 2 s to come back.
+TEST_F(CleanupPipelineTest, ATakeThatOpensWithThreeMarkersIsNotSolvedOnThem) {
+  for (size_t m = 3; m < frames_[0].size(); ++m) frames_[0][m] = Vec3::Constant(kNaN);
+  CleanupOptions options;
+  const auto out = Run(options);
+  const std::vector<CleanFrame> after(out.begin() + 1, out.end());
+  EXPECT_LT(Errors(after).max_position_error_m(), 0.03);
+  options.robust_ik.cold_start_min_fraction = 0.0;  // the reference solved on three
+  const auto on_three = Run(options);
+  EXPECT_GT(Errors({on_three.begin() + 1, on_three.end()}).max_position_error_m(), 0.1);
+}
+
+// Every marker missing for 10 frames (83 ms, inside the lookahead): the skeleton follows
+// the gaps' interpolations through it and is on the markers when they return. Held to
+// last frame's skeleton (nothing trusted to solve an anchor on), it stood still, and the
+// returning samples, taken as still on their first frame back, held it back further: a
+// CMU capture's hand 23 cm behind its markers for 0.3 s.
+TEST_F(CleanupPipelineTest, TheSkeletonFollowsThroughAFrameDropoutInsideTheLookahead) {
+  for (int f = 500; f < 510; ++f)
+    for (Vec3& p : frames_[static_cast<size_t>(f)]) p = Vec3::Constant(kNaN);
+  const auto out = Run(CleanupOptions{});
+  // Through it, the interpolations' error; after it, none of the catching up.
+  const std::vector<CleanFrame> through(out.begin() + 500, out.begin() + 510),
+      after(out.begin() + 510, out.begin() + 600);
+  EXPECT_LT(Errors(through).max_position_error_m(), 0.04);
+  EXPECT_LT(Errors(after).max_position_error_m(), 0.01);
+}
+
 // A frame whose every marker is shifted 10 m is a capture glitch: never published as
 // observed; the frames after it are.
 TEST_F(CleanupPipelineTest, AWholeFrameJumpIsAGlitchNotObserved) {

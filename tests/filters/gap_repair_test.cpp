@@ -146,6 +146,7 @@ class GapRepairAloneTest : public ::testing::Test {
       s.valid[0] = s.raw[0].allFinite();
       s.mask[0] = s.valid[0] ? MaskReason::kNone : MaskReason::kMissing;
       s.reference[0] = Reference(t);
+      s.reference_solved = true;  // a reference solved from data
       if (t >= lookahead) publish(t - lookahead, t);
     }
     for (int tau = std::max(0, frames - lookahead); tau < frames; ++tau) publish(tau, frames - 1);
