@@ -3,6 +3,7 @@
 #include "formats/c3d.hpp"
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstring>
 #include <fstream>
@@ -10,6 +11,7 @@
 #include <map>
 #include <optional>
 
+#include "formats/marker_set.hpp"
 #include "protocol/byte_io.hpp"
 
 namespace mocapd {
@@ -427,7 +429,25 @@ void WriteStrings(ByteWriter& w, std::vector<uint8_t>& out, ByteOrder order, int
 int C3dTake::FindLabel(const std::string& label) const {
   for (size_t i = 0; i < labels.size(); ++i)
     if (labels[i] == label) return static_cast<int>(i);
-  return -1;
+  // Exporters prefix the subject ("Dan:LBWT"), pad with spaces or change the case; the
+  // subject file, written by `mocapd calibrate`, names the bare label. Only a unique
+  // match counts: two subjects' LBWT in one file is no answer.
+  auto loose = [](const std::string& text) {
+    std::string bare = BareLabel(text);
+    while (!bare.empty() && std::isspace(static_cast<unsigned char>(bare.front())))
+      bare.erase(bare.begin());
+    std::transform(bare.begin(), bare.end(), bare.begin(),
+                   [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+    return bare;
+  };
+  const std::string want = loose(label);
+  int found = -1;
+  for (size_t i = 0; i < labels.size(); ++i) {
+    if (loose(labels[i]) != want) continue;
+    if (found >= 0) return -1;
+    found = static_cast<int>(i);
+  }
+  return found;
 }
 
 void C3dTake::Allocate(int frames) {

@@ -44,7 +44,8 @@ struct C3dTake {
   Vec3& at(int frame, int point) { return positions[Index(frame, point)]; }
   bool valid(int frame, int point) const { return residuals[Index(frame, point)] >= 0.0f; }
   bool is_marker(int point) const { return model_output_kind[static_cast<size_t>(point)].empty(); }
-  /// Index of the point with this label, or -1.
+  /// Index of the point with this label, or else the one point whose label is it with a
+  /// subject prefix ("Dan:"), padding or another case; -1 if none or several.
   int FindLabel(const std::string& label) const;
   /// Sizes positions/residuals for num_frames x labels.size(), all missing.
   void Allocate(int frames);

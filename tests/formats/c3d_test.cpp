@@ -192,6 +192,22 @@ TEST(C3dTest, WriterRejectsInconsistentTakes) {
   EXPECT_THROW(EncodeC3d(take), std::invalid_argument);
 }
 
+// A Vicon file labels "Dan:LBWT"; the subject written from it by `mocapd calibrate` says
+// "LBWT", and `mocapd process` and `mocap-sim replay` found none of its markers.
+TEST(C3dTest, FindsALabelUnderASubjectPrefixPaddingOrAnotherCase) {
+  C3dTake take;
+  take.labels = {"Dan:LBWT", "Dan:RBWT  ", "lfhd", "LBWT2"};
+  EXPECT_EQ(take.FindLabel("LBWT"), 0);
+  EXPECT_EQ(take.FindLabel("RBWT"), 1);
+  EXPECT_EQ(take.FindLabel("LFHD"), 2);
+  EXPECT_EQ(take.FindLabel("LBWT2"), 3);
+  EXPECT_EQ(take.FindLabel("Dan:LBWT"), 0);  // exact first
+  EXPECT_EQ(take.FindLabel("RFHD"), -1);
+  take.labels = {"Dan:LBWT", "Eve:LBWT"};  // two subjects: no unique answer
+  EXPECT_EQ(take.FindLabel("LBWT"), -1);
+  EXPECT_EQ(take.FindLabel("Eve:LBWT"), 1);
+}
+
 TEST(C3dTest, MetresPerUnitKnowsTheUsualUnits) {
   EXPECT_DOUBLE_EQ(MetresPerUnit("mm"), 1e-3);
   EXPECT_DOUBLE_EQ(MetresPerUnit("M "), 1.0);
