@@ -262,16 +262,15 @@ class Parser {
       if (header_last_ == 65535 || frames <= 0 || static_cast<int64_t>(v) > frames)
         frames = static_cast<int64_t>(v);
     }
+    int64_t trial_frames = -1;
     if (auto end_lo = Number("TRIAL:ACTUAL_END_FIELD", 0)) {
       const auto lo = static_cast<int64_t>(static_cast<uint16_t>(static_cast<int16_t>(*end_lo)));
       const auto hi = static_cast<int64_t>(static_cast<uint16_t>(
           static_cast<int16_t>(Number("TRIAL:ACTUAL_END_FIELD", 1).value_or(0))));
       const auto slo = static_cast<int64_t>(static_cast<uint16_t>(
           static_cast<int16_t>(Number("TRIAL:ACTUAL_START_FIELD", 0).value_or(1))));
-      const int64_t trial_frames = (lo + (hi << 16)) - slo + 1;
-      if (trial_frames > frames) frames = trial_frames;
+      trial_frames = (lo + (hi << 16)) - slo + 1;
     }
-    if (frames < 0) frames = 0;
     take.first_frame = header_first_;
 
     take.labels = StringsContinued("POINT", "LABELS");
@@ -300,6 +299,13 @@ class Parser {
     const size_t analog_values = header_analog_;
     const size_t frame_bytes = (used * 4 + analog_values) * value_size;
     const size_t available = data_start <= reader_.size() ? reader_.size() - data_start : 0;
+    // TRIAL counts past 65535 frames, where the header cannot; but a cropping tool can
+    // leave it behind, longer than the header and the data: trusted over the header only
+    // when the header is capped or the data holds that many frames.
+    if (trial_frames > frames && (header_last_ == 65535 || frames <= 0 || frame_bytes == 0 ||
+                                  static_cast<size_t>(trial_frames) <= available / frame_bytes))
+      frames = trial_frames;
+    if (frames < 0) frames = 0;
     if (frame_bytes > 0 && static_cast<size_t>(frames) > available / frame_bytes) {
       const size_t whole = available / frame_bytes;
       Fail("data", data_start + whole * frame_bytes,
@@ -513,6 +519,7 @@ std::vector<uint8_t> EncodeC3d(const C3dTake& take, const C3dEncoding& encoding)
   pw.WriteU8(layout.processor);
   WriteGroup(pw, 1, "POINT");
   WriteGroup(pw, 2, "ANALOG");
+  WriteGroup(pw, 3, "TRIAL");
   WriteParameter(pw, params, order, 1, "USED", 2, {},
                  Int16Data(layout, {static_cast<int16_t>(static_cast<uint16_t>(points))}));
   WriteParameter(pw, params, order, 1, "SCALE", 4, {}, FloatData(layout, {scale}));
@@ -549,6 +556,17 @@ std::vector<uint8_t> EncodeC3d(const C3dTake& take, const C3dEncoding& encoding)
   WriteParameter(pw, params, order, 2, "USED", 2, {}, Int16Data(layout, {0}));
   WriteParameter(pw, params, order, 2, "RATE", 4, {},
                  FloatData(layout, {static_cast<float>(take.rate_hz)}));
+  // The standard's frame range past the header's 65535 (POINT:FRAMES above is this
+  // reader's own way, which other readers may not share): low word, high word.
+  if (take.num_frames > 0) {
+    const int64_t last = static_cast<int64_t>(first) + take.num_frames - 1;
+    auto words = [&](int64_t frame) {
+      return Int16Data(layout, {static_cast<int16_t>(static_cast<uint16_t>(frame & 0xffff)),
+                                static_cast<int16_t>(static_cast<uint16_t>(frame >> 16))});
+    };
+    WriteParameter(pw, params, order, 3, "ACTUAL_START_FIELD", 2, {2}, words(first));
+    WriteParameter(pw, params, order, 3, "ACTUAL_END_FIELD", 2, {2}, words(last));
+  }
   // Terminate the list: an entry whose name length is 0.
   pw.WriteU8(0);
   pw.WriteU8(0);

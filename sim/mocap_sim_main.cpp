@@ -381,7 +381,7 @@ int main(int argc, char** argv) {
   replay_cmd
       ->add_option("--timecode", replay.options.timecode_fps,
                    "Stamp frames with non-drop SMPTE timecode at this many fps (protocol 2)")
-      ->check(CLI::Range(0, 1000));
+      ->check(CLI::Range(0, 256));
   replay_cmd->add_option("--report", replay.report, "Write the report as JSON");
   replay_cmd->add_option("--plot", replay.plot, "Write a processing-latency histogram (SVG)");
   replay_cmd

@@ -69,8 +69,9 @@ protocol::Timecode TimecodeOf(uint64_t f, double rate_hz, int fps) {
 void CheckStreamOptions(const ReplayOptions& o) {
   if (o.protocol_version != protocol::kVersion1 && o.protocol_version != protocol::kVersion2)
     throw std::invalid_argument("replay: protocol version must be 1 or 2");
-  if (o.timecode_fps < 0 || o.timecode_fps > 1000)
-    throw std::invalid_argument("replay: timecode rate must be 0 (none) .. 1000 fps");
+  // The frames field is one byte: above 256 fps the frame numbers would wrap unseen.
+  if (o.timecode_fps < 0 || o.timecode_fps > 256)
+    throw std::invalid_argument("replay: timecode rate must be 0 (none) .. 256 fps");
   if (o.timecode_fps > 0 && o.protocol_version < protocol::kVersion2)
     throw std::invalid_argument("replay: timecode needs protocol version 2");
 }

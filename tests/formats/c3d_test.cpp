@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <random>
 
 namespace mocapd {
@@ -206,6 +207,27 @@ TEST(C3dTest, FindsALabelUnderASubjectPrefixPaddingOrAnotherCase) {
   take.labels = {"Dan:LBWT", "Eve:LBWT"};  // two subjects: no unique answer
   EXPECT_EQ(take.FindLabel("LBWT"), -1);
   EXPECT_EQ(take.FindLabel("Eve:LBWT"), 1);
+}
+
+// TRIAL:ACTUAL_END_FIELD counts frames past the header's 65535; a cropping tool can leave
+// a stale one behind, longer than the header and the data. The header's count then
+// stands (the file was refused: "file ends inside frame 601 of 5000").
+TEST(C3dTest, AStaleTrialRangeLongerThanTheDataLeavesTheHeadersCount) {
+  const C3dTake take = MakeTake(3, 20);
+  std::vector<uint8_t> bytes = EncodeC3d(take);
+  EXPECT_EQ(ParseC3d(bytes, "t.c3d").num_frames, 20);
+  // ACTUAL_END_FIELD's value follows its name, link (2), type (1), dimension count (1)
+  // and dimension (1): low word, high word, little-endian.
+  const std::string name = "ACTUAL_END_FIELD";
+  const auto at = std::search(bytes.begin(), bytes.end(), name.begin(), name.end());
+  ASSERT_NE(at, bytes.end());
+  const auto value = static_cast<size_t>(at - bytes.begin()) + name.size() + 2 + 1 + 1 + 1;
+  EXPECT_EQ(bytes[value] + 256 * bytes[value + 1], take.first_frame + 19);
+  bytes[value] = 5000 & 0xff;
+  bytes[value + 1] = 5000 >> 8;
+  const C3dTake read = ParseC3d(bytes, "t.c3d");
+  EXPECT_EQ(read.num_frames, 20);
+  EXPECT_LT((read.at(19, 2) - take.at(19, 2)).norm(), 1e-6);
 }
 
 TEST(C3dTest, MetresPerUnitKnowsTheUsualUnits) {

@@ -931,6 +931,19 @@ TEST(DaemonTest, AReplayRefusesANegativeTimeout) {
   }
 }
 
+// The timecode's frames field is one byte: a rate above 256 fps would wrap its frame
+// numbers unseen (1000 fps stamped frame 886 as 118), so it is refused before any socket.
+TEST(DaemonTest, AReplayRefusesATimecodeRateItsFramesByteCannotCount) {
+  const ReplaySource source = HumanoidReplaySource("walk", 0.5, 120.0, 0.0, 1);
+  ReplayOptions options;
+  options.to = "tcp://127.0.0.1:1";
+  options.push = true;
+  options.from = "";
+  options.protocol_version = protocol::kVersion2;
+  options.timecode_fps = 1000;
+  EXPECT_THROW((void)RunReplay(source, options), std::invalid_argument);
+}
+
 // A replay pushing into a CURVE daemon's PULL input with a key the daemon does not allow
 // stops with an error naming the allow-list, where its frames used to queue for a peer that
 // never took them (and a send could wait for ever); with an allowed key every frame is solved.
