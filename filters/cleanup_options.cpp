@@ -45,6 +45,8 @@ const std::array kFields = {
       &O::frozen_reference_motion_m},
     F{"frozen_s", kDetectors, "frozen_ms", kMs, 1, 1e7, &O::frozen_s},
     F{"frozen_backdate_s", nullptr, "frozen_backdate_ms", kMs, 0, 1e7, &O::frozen_backdate_s},
+    F{"reference_cold_start_wait_s", nullptr, "reference_cold_start_wait_ms", kMs, 0, 1e7,
+      &O::reference_cold_start_wait_s},
     F{"stray_residual_m", kDetectors, "stray_residual_mm", kMm, 1, 1e5, &O::stray_residual_m},
     F{"stray_s", kDetectors, "stray_ms", kMs, 1, 1e7, &O::stray_s},
     F{"fallen_s", kDetectors, "fallen_ms", kMs, 1, 1e7, &O::fallen_s},
@@ -155,6 +157,7 @@ CleanupFrameRules FrameRules(const CleanupOptions& o) {
   r.statistics_weight = 2.0 / (std::max(1.0, o.window_s * rate) + 1.0);
   r.frozen_frames = frames(o.frozen_s, 1);
   r.frozen_backdate_frames = frames(o.frozen_backdate_s, 0);
+  r.reference_cold_start_wait_frames = frames(o.reference_cold_start_wait_s, 0);
   r.stray_frames = frames(o.stray_s, 1);
   r.fallen_frames = frames(o.fallen_s, 1);
   r.small_gap_frames = frames(o.small_gap_s, 0);

@@ -57,6 +57,10 @@ struct CleanupOptions {
   /// there cost a longer lookahead (Bandai medium, 120 Hz, K = 48: 1.42 against K = 12's
   /// 1.36 deg). 0.2 s is the whole K = 12 lookahead at 60 Hz.
   double frozen_backdate_s = 0.2;
+  /// The reference starts cold only on half the marker set (robust_ik's
+  /// cold_start_min_fraction) for this long after a frame first showed enough markers to
+  /// solve; then on what there is (a take that labels fewer markers than its subject has).
+  double reference_cold_start_wait_s = 0.25;
   /// A residual outlier this far off for stray_s in a row leaves the robust solve
   /// until it fits again: a swapped or stray sample on a segment whose neighbours are
   /// occluded would otherwise drag the reference, and the segment's good markers, along.
@@ -208,6 +212,7 @@ std::span<const CleanupOptionField> CleanupOptionFields();
 struct CleanupFrameRules {
   double statistics_weight;  ///< The running statistics' weight per frame, 2 / (W + 1).
   int frozen_frames, frozen_backdate_frames, stray_frames, fallen_frames;
+  int reference_cold_start_wait_frames;
   int small_gap_frames, small_track_frames, max_trim_frames;
   double trim_slope_m;                        ///< Per frame.
   double max_offset_velocity_m;               ///< Per frame.

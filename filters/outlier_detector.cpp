@@ -23,7 +23,9 @@ OutlierDetector::OutlierDetector(const Skeleton& skeleton, const MarkerSet& mark
       options_(options),
       rules_(FrameRules(options)),
       naive_(skeleton, markers),
-      robust_(skeleton, markers) {
+      robust_(skeleton, markers),
+      robust_ik_on_any_(options.robust_ik) {
+  robust_ik_on_any_.cold_start_min_fraction = 0.0;
   const auto m = static_cast<size_t>(markers_.num_markers());
   tracks_.assign(m, FreshTrack());
   swap_partner_.assign(m, -1);
@@ -74,6 +76,7 @@ void OutlierDetector::Reset() {
   naive_.Reset();
   naive_fresh_ = false;
   robust_.Reset();
+  unsolved_since_ = -1;
 }
 
 void OutlierDetector::Process(CleanupWindow& window, int64_t t, int64_t first_unpublished,
@@ -81,7 +84,9 @@ void OutlierDetector::Process(CleanupWindow& window, int64_t t, int64_t first_un
   ApplyPersistentSwaps(window, t, counters);
   RelabelSwaps(window, t, counters);
   SolveReferences(window.at(t), counters);
-  Detect(window, t, first_unpublished, counters);
+  // With no reference yet, every sample would be judged against the template's rest pose
+  // wherever it stands: the samples are data, kept as they came.
+  if (window.at(t).reference_solved) Detect(window, t, first_unpublished, counters);
   CleanMask(window, t, first_unpublished);
 }
 
@@ -97,7 +102,18 @@ void OutlierDetector::SolveReferences(WindowFrame& s, CleanupCounters* counters)
     weights_[m] =
         s.valid[m] && !excluded(static_cast<int>(m)) && s.mask[m] != MaskReason::kSwap ? 1.0 : 0.0;
   ReadmitConsistentSegments(s);
-  counters->CountSolve(SolveIk(skeleton_, markers_, options_.robust_ik, s.raw, weights_, &robust_));
+  // A cold start waits for half the marker set (robust_ik.cold_start_min_fraction), but
+  // only reference_cold_start_wait_s: a take may never show that many.
+  const bool waited =
+      unsolved_since_ >= 0 && s.frame - unsolved_since_ >= rules_.reference_cold_start_wait_frames;
+  counters->CountSolve(SolveIk(skeleton_, markers_, waited ? robust_ik_on_any_ : options_.robust_ik,
+                               s.raw, weights_, &robust_));
+  if (robust_.has_solution()) {
+    unsolved_since_ = -1;
+  } else if (unsolved_since_ < 0 &&
+             std::count(weights_.begin(), weights_.end(), 1.0) >= options_.robust_ik.min_markers) {
+    unsolved_since_ = s.frame;
+  }
   const auto predicted = robust_.predicted_markers();
   std::copy(predicted.begin(), predicted.end(), s.reference.begin());
   s.reference_solved = robust_.has_solution();

@@ -97,8 +97,10 @@ class OutlierDetector {
   const CleanupOptions options_;
   const CleanupFrameRules rules_;
   IkState naive_, robust_;
-  bool naive_solved_ = false;  // Y was solved for the newest frame
-  bool naive_fresh_ = false;   // Y's warm start is the previous frame's solution
+  IkOptions robust_ik_on_any_;   ///< robust_ik starting cold on as few markers as it solves.
+  int64_t unsolved_since_ = -1;  ///< First frame with enough markers and no Y^ yet (-1: none).
+  bool naive_solved_ = false;    // Y was solved for the newest frame
+  bool naive_fresh_ = false;     // Y's warm start is the previous frame's solution
   std::vector<Track> tracks_;
   std::vector<int> swap_partner_;  // per marker: the label its samples are carried under, or -1
   std::vector<std::pair<int, int>> rigid_pairs_;   // markers rigidly on one joint...

@@ -437,9 +437,12 @@ int C3dTake::FindLabel(const std::string& label) const {
     if (labels[i] == label) return static_cast<int>(i);
   // Exporters prefix the subject ("Dan:LBWT"), pad with spaces or change the case; the
   // subject file, written by `mocapd calibrate`, names the bare label. Only a unique
-  // match counts: two subjects' LBWT in one file is no answer.
-  auto loose = [](const std::string& text) {
-    std::string bare = BareLabel(text);
+  // match counts: two subjects' LBWT in one file is no answer. A prefixed name keeps its
+  // prefix: "Dan:LBWT" is never Eve's.
+  const bool prefixed = label.find(':') != std::string::npos;
+  auto loose = [prefixed](const std::string& text) {
+    std::string bare = prefixed ? text : BareLabel(text);
+    while (!bare.empty() && std::isspace(static_cast<unsigned char>(bare.back()))) bare.pop_back();
     while (!bare.empty() && std::isspace(static_cast<unsigned char>(bare.front())))
       bare.erase(bare.begin());
     std::transform(bare.begin(), bare.end(), bare.begin(),

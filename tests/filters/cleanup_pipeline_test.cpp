@@ -184,6 +184,22 @@ TEST_F(CleanupPipelineTest, ATakeThatOpensWithThreeMarkersIsNotSolvedOnThem) {
   EXPECT_GT(Errors({on_three.begin() + 1, on_three.end()}).max_position_error_m(), 0.1);
 }
 
+// A take that labels fewer markers than its subject has (20 of 59, for good): the
+// reference waits for half the set only reference_cold_start_wait_s, then starts on what
+// there is, and the samples there are published as they came (waiting for ever, none
+// was: every one masked against the rest pose and unrecoverable).
+TEST_F(CleanupPipelineTest, ATakeWithFewerMarkersThanItsSubjectIsStillCleaned) {
+  for (auto& frame : frames_)
+    for (size_t m = 20; m < frame.size(); ++m) frame[m] = Vec3::Constant(kNaN);
+  const auto out = Run(CleanupOptions{});
+  int observed = 0, samples = 0;
+  for (size_t f = 60; f < out.size(); ++f)
+    for (size_t m = 0; m < 20; ++m, ++samples)
+      observed += out[f].status[m] == MarkerStatus::kObserved;
+  EXPECT_GT(observed, samples * 95 / 100);
+  EXPECT_NE(out[60].final_solve.status, IkStatus::kTooFewMarkers);
+}
+
 // Every marker missing for 10 frames (83 ms, inside the lookahead): the skeleton follows
 // the gaps' interpolations through it and is on the markers when they return. Held to
 // last frame's skeleton (nothing trusted to solve an anchor on), it stood still, and the
