@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <fstream>
 #include <sstream>
+#include <string_view>
 
 #include "filters/rotation.hpp"
 #include "formats/c3d.hpp"
@@ -197,7 +198,10 @@ Quat RotationFromChannels(const std::vector<BvhChannel>& channels, const double*
 
 BvhTake ParseBvh(const std::string& text, const std::string& source_name,
                  const BvhReadOptions& options) {
-  Tokens t(text, source_name);
+  // A UTF-8 byte order mark, which some Windows editors and exporters write, is no token.
+  const std::string_view bom = "\xEF\xBB\xBF";
+  const bool has_bom = text.compare(0, bom.size(), bom) == 0;
+  Tokens t(has_bom ? text.substr(bom.size()) : text, source_name);
   t.Expect("HIERARCHY");
   t.Expect("ROOT");
   std::vector<RawJoint> raw;

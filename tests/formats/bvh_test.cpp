@@ -128,6 +128,16 @@ TEST(BvhTest, AOneFrameFileTypesTheRootByItsChannels) {
   EXPECT_EQ(ReadBvh(kTinyPath).skeleton.joint(0).type, JointType::kFixed);
 }
 
+// Some Windows editors and exporters start a text file with a UTF-8 byte order mark; the
+// file was refused as "binary data".
+TEST(BvhTest, AByteOrderMarkIsNotPartOfTheFile) {
+  const std::string text = ReadText(kTinyPath);
+  const BvhTake plain = ParseBvh(text, "plain.bvh");
+  const BvhTake marked = ParseBvh("\xEF\xBB\xBF" + text, "marked.bvh");
+  EXPECT_EQ(marked.skeleton.num_joints(), plain.skeleton.num_joints());
+  EXPECT_EQ(marked.frames.size(), plain.frames.size());
+}
+
 TEST(BvhTest, UnitsCanBeForced) {
   BvhReadOptions options;
   options.units = "mm";
