@@ -445,9 +445,7 @@ int C3dTake::FindLabel(const std::string& label) const {
     while (!bare.empty() && std::isspace(static_cast<unsigned char>(bare.back()))) bare.pop_back();
     while (!bare.empty() && std::isspace(static_cast<unsigned char>(bare.front())))
       bare.erase(bare.begin());
-    std::transform(bare.begin(), bare.end(), bare.begin(),
-                   [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-    return bare;
+    return Upper(bare);
   };
   const std::string want = loose(label);
   int found = -1;
