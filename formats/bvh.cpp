@@ -9,6 +9,9 @@
 #include <sstream>
 #include <string_view>
 
+#include <boost/algorithm/string/case_conv.hpp>
+#include <boost/algorithm/string/predicate.hpp>
+
 #include "filters/rotation.hpp"
 #include "formats/c3d.hpp"
 
@@ -49,6 +52,11 @@ class Tokens {
     static const std::string kEnd;
     return done() ? kEnd : tokens_[pos_].text;
   }
+  // Keywords match in any case: exporters write "End site", "Hierarchy" or "FRAMES:".
+  static bool IsKeyword(const std::string& token, const char* keyword) {
+    return boost::algorithm::iequals(token, keyword);
+  }
+  bool PeekIs(const char* keyword) const { return IsKeyword(Peek(), keyword); }
   std::string Next(const char* what) {
     if (done()) Fail(std::string("unexpected end of file, expected ") + what);
     return tokens_[pos_++].text;
@@ -56,7 +64,7 @@ class Tokens {
   void Expect(const std::string& word) {
     const int at = line();
     const std::string got = Next(word.c_str());
-    if (got != word) FailAt(at, "expected '" + word + "', found " + Shown(got));
+    if (!IsKeyword(got, word.c_str())) FailAt(at, "expected '" + word + "', found " + Shown(got));
   }
   double Number(const char* what) {
     const int at = line();
@@ -95,9 +103,7 @@ struct RawJoint {
 
 BvhChannel ParseChannel(Tokens& t) {
   const int at = t.line();
-  std::string name = t.Next("a channel name");
-  std::transform(name.begin(), name.end(), name.begin(),
-                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  const std::string name = boost::algorithm::to_lower_copy(t.Next("a channel name"));
   if (name == "xposition") return BvhChannel::kXposition;
   if (name == "yposition") return BvhChannel::kYposition;
   if (name == "zposition") return BvhChannel::kZposition;
@@ -119,7 +125,7 @@ void ParseJoint(Tokens& t, int parent, std::vector<RawJoint>* joints,
   t.Expect("{");
   t.Expect("OFFSET");
   for (int k = 0; k < 3; ++k) joint.offset[k] = t.Number("OFFSET");
-  if (t.Peek() == "CHANNELS") {
+  if (t.PeekIs("CHANNELS")) {
     t.Next("CHANNELS");
     const double n = t.Number("the channel count");
     if (n < 0 || n > 6 || n != std::floor(n))
@@ -143,9 +149,9 @@ void ParseJoint(Tokens& t, int parent, std::vector<RawJoint>* joints,
   while (true) {
     const std::string word = t.Next("JOINT, End Site or '}'");
     if (word == "}") return;
-    if (word == "JOINT") {
+    if (Tokens::IsKeyword(word, "JOINT")) {
       ParseJoint(t, index, joints, end_sites);
-    } else if (word == "End") {
+    } else if (Tokens::IsKeyword(word, "End")) {
       t.Expect("Site");
       t.Expect("{");
       t.Expect("OFFSET");
@@ -207,7 +213,7 @@ BvhTake ParseBvh(const std::string& text, const std::string& source_name,
   std::vector<RawJoint> raw;
   std::vector<std::pair<int, Vec3>> raw_end_sites;
   ParseJoint(t, -1, &raw, &raw_end_sites);
-  if (t.Peek() == "ROOT") t.Fail("more than one ROOT is not supported");
+  if (t.PeekIs("ROOT")) t.Fail("more than one ROOT is not supported");
   t.Expect("MOTION");
   t.Expect("Frames:");
   const double frames_d = t.Number("the frame count");

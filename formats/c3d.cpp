@@ -11,6 +11,8 @@
 #include <map>
 #include <optional>
 
+#include <boost/algorithm/string/case_conv.hpp>
+
 #include "formats/marker_set.hpp"
 #include "protocol/byte_io.hpp"
 
@@ -19,12 +21,6 @@ namespace {
 
 constexpr size_t kBlock = 512;
 constexpr uint8_t kProcessorIntel = 84, kProcessorDec = 85, kProcessorMips = 86;
-
-std::string Upper(std::string s) {
-  std::transform(s.begin(), s.end(), s.begin(),
-                 [](unsigned char c) { return static_cast<char>(std::toupper(c)); });
-  return s;
-}
 
 std::string TrimRight(std::string s) {
   while (!s.empty() && (s.back() == ' ' || s.back() == '\0')) s.pop_back();
@@ -134,7 +130,7 @@ class Parser {
         uint8_t desc_len = 0;
         Require(reader_.ReadU8(&desc_len) && reader_.Skip(desc_len), "parameters",
                 "group '" + name + "' description runs past the end");
-        group_names[-id] = Upper(TrimRight(name));
+        group_names[-id] = boost::algorithm::to_upper_copy(TrimRight(name));
       } else {
         Parameter p;
         uint8_t ndims = 0;
@@ -156,7 +152,7 @@ class Parser {
         Require(reader_.ReadBytes(bytes, &p.data), "parameters",
                 "parameter '" + name + "' data (" + std::to_string(bytes) +
                     " bytes) runs past the end");
-        pending.push_back({id, Upper(TrimRight(name)), std::move(p)});
+        pending.push_back({id, boost::algorithm::to_upper_copy(TrimRight(name)), std::move(p)});
       }
       if (next <= 0) break;  // 0 marks the last entry; a negative link cannot move forward
       pos = next_field + static_cast<size_t>(next);
@@ -445,7 +441,7 @@ int C3dTake::FindLabel(const std::string& label) const {
     while (!bare.empty() && std::isspace(static_cast<unsigned char>(bare.back()))) bare.pop_back();
     while (!bare.empty() && std::isspace(static_cast<unsigned char>(bare.front())))
       bare.erase(bare.begin());
-    return Upper(bare);
+    return boost::algorithm::to_upper_copy(bare);
   };
   const std::string want = loose(label);
   int found = -1;
@@ -467,7 +463,7 @@ void C3dTake::Allocate(int frames) {
 }
 
 double MetresPerUnit(const std::string& units) {
-  const std::string u = Upper(TrimRight(units));
+  const std::string u = boost::algorithm::to_upper_copy(TrimRight(units));
   if (u == "MM") return 1e-3;
   if (u == "CM") return 1e-2;
   if (u == "M") return 1.0;

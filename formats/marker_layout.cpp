@@ -1,29 +1,25 @@
 // Humanoid segment matching and marker placement.
 #include "formats/marker_layout.hpp"
 
-#include "formats/toml_reader.hpp"
-
 #include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
 
+#include <boost/algorithm/string/case_conv.hpp>
+
+#include "formats/toml_reader.hpp"
+
 namespace mocapd {
 namespace {
-
-std::string Lower(std::string s) {
-  std::transform(s.begin(), s.end(), s.begin(),
-                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  return s;
-}
 
 // Returns 'l', 'r' or 0, and the name with the side marker and punctuation removed.
 std::pair<char, std::string> SplitSide(const std::string& original) {
   std::string name = original;
   const size_t colon = name.rfind(':');  // mixamorig:LeftArm
   if (colon != std::string::npos) name = name.substr(colon + 1);
-  std::string lower = Lower(name);
+  std::string lower = boost::algorithm::to_lower_copy(name);
   char side = 0;
   auto erase = [&](const std::string& word) {
     const size_t at = lower.find(word);
@@ -59,7 +55,7 @@ std::pair<char, std::string> SplitSide(const std::string& original) {
   if (side == 0 && name.size() > 2 && (name[0] == 'L' || name[0] == 'R') &&
       std::isupper(static_cast<unsigned char>(name[1]))) {
     side = static_cast<char>(std::tolower(name[0]));
-    joined = Lower(name.substr(1));
+    joined = boost::algorithm::to_lower_copy(name.substr(1));
   }
   return {side, joined};
 }

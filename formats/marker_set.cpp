@@ -8,6 +8,9 @@
 #include <sstream>
 #include <stdexcept>
 
+#include <boost/algorithm/string/case_conv.hpp>
+#include <boost/algorithm/string/predicate.hpp>
+
 #include "formats/toml_reader.hpp"
 
 namespace mocapd {
@@ -17,12 +20,6 @@ namespace mocapd {
 extern const std::vector<std::pair<std::string, std::string>>& BuiltInMarkerSetTexts();
 
 namespace {
-
-std::string Lower(std::string s) {
-  std::transform(s.begin(), s.end(), s.begin(),
-                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  return s;
-}
 
 // The template at 1.75 m: each role's parent and joint offset (the joint's origin in its
 // parent's frame), and the bone of its segment (to where the segment ends). Proportions
@@ -94,11 +91,11 @@ bool IsBoneOutput(const std::string& bare) {
 }  // namespace
 
 std::optional<int> MarkerSetDefinition::Find(const std::string& label) const {
-  const std::string want = Lower(BareLabel(label));
+  const std::string want = BareLabel(label);
   for (size_t m = 0; m < markers.size(); ++m) {
-    if (Lower(markers[m].name) == want) return static_cast<int>(m);
+    if (boost::algorithm::iequals(markers[m].name, want)) return static_cast<int>(m);
     for (const std::string& a : markers[m].aliases)
-      if (Lower(a) == want) return static_cast<int>(m);
+      if (boost::algorithm::iequals(a, want)) return static_cast<int>(m);
   }
   return std::nullopt;
 }
@@ -145,7 +142,7 @@ MarkerSetDefinition ParseMarkerSet(const std::string& text, const std::string& s
            all.push_back(m.name);
            return all;
          }()) {
-      if (!seen.insert(Lower(n)).second)
+      if (!seen.insert(boost::algorithm::to_lower_copy(n)).second)
         t.Fail(t.Find("name"), "name", "'" + n + "' names two markers of the set");
     }
     set.markers.push_back(std::move(m));
@@ -198,7 +195,7 @@ const char* to_string(ChannelKind kind) {
 ChannelKind ClassifyChannel(const std::string& label, bool is_model_output, double valid_fraction,
                             double min_valid_fraction) {
   const std::string bare = BareLabel(label);
-  const std::string lower = Lower(bare);
+  const std::string lower = boost::algorithm::to_lower_copy(bare);
   if (is_model_output) return ChannelKind::kModelOutput;
   for (const char* word :
        {"angle", "force", "moment", "power", "centreofmass", "centerofmass", "com"})

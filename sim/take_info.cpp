@@ -6,6 +6,8 @@
 #include <nlohmann/json.hpp>
 #include <stdexcept>
 
+#include <boost/algorithm/string/case_conv.hpp>
+
 #include "formats/bvh.hpp"
 #include "formats/c3d.hpp"
 
@@ -15,10 +17,7 @@ std::string FileExtension(const std::string& path) {
   const size_t dot = path.rfind('.');
   const size_t slash = path.find_last_of('/');
   if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) return "";
-  std::string ext = path.substr(dot + 1);
-  std::transform(ext.begin(), ext.end(), ext.begin(),
-                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  return ext;
+  return boost::algorithm::to_lower_copy(path.substr(dot + 1));
 }
 
 TakeInfo InspectTake(const std::string& path) {

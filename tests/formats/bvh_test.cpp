@@ -138,6 +138,30 @@ TEST(BvhTest, AByteOrderMarkIsNotPartOfTheFile) {
   EXPECT_EQ(marked.frames.size(), plain.frames.size());
 }
 
+TEST(BvhTest, KeywordsAreReadInAnyCase) {
+  std::string text = ReadText(kTinyPath);
+  const BvhTake plain = ParseBvh(text, "plain.bvh");
+  for (const auto& [from, to] :
+       std::vector<std::pair<std::string, std::string>>{{"HIERARCHY", "Hierarchy"},
+                                                        {"ROOT", "root"},
+                                                        {"CHANNELS", "channels"},
+                                                        {"JOINT", "Joint"},
+                                                        {"End Site", "end site"},
+                                                        {"OFFSET", "Offset"},
+                                                        {"MOTION", "motion"},
+                                                        {"Frames:", "FRAMES:"},
+                                                        {"Frame Time:", "frame time:"}}) {
+    for (size_t at = text.find(from); at != std::string::npos; at = text.find(from, at))
+      text.replace(at, from.size(), to);
+  }
+  const BvhTake mixed = ParseBvh(text, "mixed.bvh");
+  ASSERT_EQ(mixed.skeleton.num_joints(), plain.skeleton.num_joints());
+  ASSERT_EQ(mixed.frames.size(), plain.frames.size());
+  EXPECT_EQ(mixed.skeleton.joint(4).name, "Hand");
+  EXPECT_LT((mixed.frames[2].translation[1] - plain.frames[2].translation[1]).norm(), 1e-12);
+  EXPECT_TRUE(mixed.frames[2].rotation[4].isApprox(plain.frames[2].rotation[4]));
+}
+
 TEST(BvhTest, UnitsCanBeForced) {
   BvhReadOptions options;
   options.units = "mm";
