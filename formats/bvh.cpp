@@ -200,6 +200,29 @@ Quat RotationFromChannels(const std::vector<BvhChannel>& channels, const double*
   return q.normalized();
 }
 
+// Exporters print the frame time to a few decimals: 0.0333333 is 30 Hz, not 30.00003 Hz,
+// and 0.008342 is 119.88 Hz. A whole rate, or an NTSC one (n * 1000/1001), whose frame
+// time prints as the file's digits is taken as the rate meant; any other frame time is
+// kept as written. Below four significant digits a frame time is taken as exact (0.03 is
+// 33.3 Hz, not 33 Hz): so few digits say nothing about a rounded rate.
+double ExactFrameTime(double printed, const std::string& text) {
+  if (!(printed > 0.0) || text.find_first_of("eE") != std::string::npos) return printed;
+  const size_t first_significant = text.find_first_of("123456789");
+  const auto significant_digits = static_cast<int>(
+      std::count_if(text.begin() + static_cast<long>(std::min(first_significant, text.size())),
+                    text.end(), [](unsigned char c) { return std::isdigit(c) != 0; }));
+  if (significant_digits < 4) return printed;
+  const size_t point = text.find('.');
+  const int decimals = point == std::string::npos ? 0 : static_cast<int>(text.size() - point - 1);
+  const double half_last_digit = 0.5 * std::pow(10.0, -decimals);
+  const double rate = 1.0 / printed;
+  for (const double meant : {std::round(rate), std::round(rate * 1.001) / 1.001}) {
+    if (meant >= 1.0 && std::abs(1.0 / meant - printed) <= half_last_digit * (1.0 + 1e-9))
+      return 1.0 / meant;
+  }
+  return printed;
+}
+
 }  // namespace
 
 BvhTake ParseBvh(const std::string& text, const std::string& source_name,
@@ -222,7 +245,8 @@ BvhTake ParseBvh(const std::string& text, const std::string& source_name,
   const auto num_frames = static_cast<size_t>(frames_d);
   t.Expect("Frame");
   t.Expect("Time:");
-  const double frame_time = t.Number("the frame time");
+  const std::string frame_time_text = t.Peek();
+  const double frame_time = ExactFrameTime(t.Number("the frame time"), frame_time_text);
   if (!(frame_time > 0.0)) t.Fail("frame time must be > 0");
 
   size_t total_channels = 0;

@@ -162,6 +162,23 @@ TEST(BvhTest, KeywordsAreReadInAnyCase) {
   EXPECT_TRUE(mixed.frames[2].rotation[4].isApprox(plain.frames[2].rotation[4]));
 }
 
+TEST(BvhTest, AFrameTimeRoundedToItsDigitsMeansTheRateItWasPrintedFrom) {
+  const std::string text = ReadText(kTinyPath);
+  const auto rate_for = [&](const std::string& frame_time) {
+    std::string edited = text;
+    edited.replace(edited.find("0.0333333"), 9, frame_time);
+    return ParseBvh(edited, "rate.bvh").rate_hz();
+  };
+  EXPECT_NEAR(rate_for("0.0333333"), 30.0, 1e-9);
+  EXPECT_NEAR(rate_for("0.008333"), 120.0, 1e-9);
+  EXPECT_NEAR(rate_for("0.00834167"), 120000.0 / 1001.0, 1e-9);
+  EXPECT_NEAR(rate_for("0.008342"), 120000.0 / 1001.0, 1e-9);
+  // Kept as written: too few digits to say, or no whole or NTSC rate prints this way.
+  EXPECT_NEAR(rate_for("0.03"), 1.0 / 0.03, 1e-9);
+  EXPECT_NEAR(rate_for("0.007000"), 1.0 / 0.007, 1e-9);
+  EXPECT_NEAR(rate_for("3.33333e-2"), 1.0 / 0.0333333, 1e-9);
+}
+
 TEST(BvhTest, UnitsCanBeForced) {
   BvhReadOptions options;
   options.units = "mm";
