@@ -1,6 +1,7 @@
 // Marker-to-label mapping for recorded takes.
 #include "formats/take_frames.hpp"
 
+#include <algorithm>
 #include <stdexcept>
 
 namespace mocapd {
@@ -9,10 +10,14 @@ TakeMarkerMap::TakeMarkerMap(const MarkerSet& markers, const C3dTake& take, int 
   for (const MarkerDefinition& m : markers.markers()) {
     const int p = take.FindLabel(m.name);
     point_of_marker_.push_back(p);
-    if (p < 0)
+    if (p < 0) {
       unmatched_.push_back(m.name);
-    else
-      ++matched_;
+      continue;
+    }
+    ++matched_;
+    const std::string& label = take.labels[static_cast<size_t>(p)];
+    if (std::count(take.labels.begin(), take.labels.end(), label) > 1)
+      duplicated_.push_back(m.name);
   }
   if (matched_ < min_matched) {
     std::string msg = "take has " + std::to_string(matched_) + " of the subject's " +

@@ -27,10 +27,13 @@ class TakeMarkerMap {
   void FillMessage(const C3dTake& take, int frame, protocol::MarkerFrameMessage* message) const;
   int matched() const { return matched_; }
   const std::vector<std::string>& unmatched() const { return unmatched_; }
+  /// The subject's markers whose label the take gives to more than one point (the first
+  /// such point is used): an exporter's merge or a labelling mistake worth a warning.
+  const std::vector<std::string>& duplicated() const { return duplicated_; }
 
  private:
   std::vector<int> point_of_marker_;
-  std::vector<std::string> unmatched_;
+  std::vector<std::string> unmatched_, duplicated_;
   int matched_ = 0;
 };
 

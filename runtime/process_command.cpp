@@ -78,12 +78,21 @@ void WritePlots(const ProcessCommandOptions& options, const PlotData& data,
 ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostream& out) {
   const SubjectModel subject = ReadSubjectModel(options.subject);
   C3dTake take = ReadC3d(options.input_c3d);
+  if (take.num_frames == 0)
+    throw std::runtime_error(options.input_c3d + ": the take has no frames: nothing to process");
   const MarkerSet& markers = *subject.markers;
   const TakeMarkerMap map(markers, take);
   if (!map.unmatched().empty()) {
     out << "warning: " << map.unmatched().size()
         << " of the subject's markers are not in the take and stay missing:";
     for (const auto& n : map.unmatched()) out << " " << n;
+    out << "\n";
+  }
+  if (!map.duplicated().empty()) {
+    out << "warning: " << map.duplicated().size()
+        << " of the subject's markers label more than one point of the take; the first "
+           "point is used for:";
+    for (const auto& n : map.duplicated()) out << " " << n;
     out << "\n";
   }
   CleanupOptions cleanup;
@@ -167,6 +176,7 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
   KinematicsWorkspace solved(*subject.skeleton);
   std::vector<double> residuals, sum_sq(observed.size(), 0.0);
   std::vector<int> residual_count(observed.size(), 0);
+  std::optional<int> first_solved;
   auto collect = [&]() {
     const CleanFrame& frame = pipeline.output();
     const auto f = static_cast<int>(frame.frame);
@@ -183,24 +193,11 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
             : frame.reason[m] == MaskReason::kNone            ? 12
                                                    : static_cast<uint8_t>(frame.reason[m]);
     }
-    if (truth && f < truth->num_frames()) {
-      ForwardKinematics(truth->skeleton, truth->frames[frame_index], &*truth_kinematics);
-      double sum = 0.0, worst = 0.0;
-      for (const auto& [j, t] : truth_joints) {
-        const double e =
-            (solved.p_WJ[static_cast<size_t>(j)] - truth_kinematics->p_WJ[static_cast<size_t>(t)])
-                .norm() *
-            100.0;
-        sum += e;
-        worst = std::max(worst, e);
-      }
-      if (plotting) {
-        plot.truth_mean_cm[frame_index] = sum / static_cast<double>(truth_joints.size());
-        plot.truth_worst_cm[frame_index] = worst;
-      }
-      truth_sum += sum;
-      truth_count += static_cast<int64_t>(truth_joints.size());
-      summary.truth_worst_cm = std::max(summary.truth_worst_cm, worst);
+    if (frame.final_solve.status == IkStatus::kTooFewMarkers) {
+      ++summary.unsolved_frames;
+      if (!first_solved) ++summary.frames_before_first_solve;
+    } else if (!first_solved) {
+      first_solved = f;
     }
     for (size_t m = 0; m < observed.size(); ++m) {
       if (frame.status[m] != MarkerStatus::kObserved) continue;
@@ -240,6 +237,38 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
   while (pipeline.Flush()) collect();
   draw_progress(take.num_frames);
   if (options.progress) out << "\n";
+
+  if (take.num_frames > 0 && !first_solved)
+    throw std::runtime_error(options.input_c3d + ": no frame of " +
+                             std::to_string(take.num_frames) + " shows enough of the " +
+                             std::to_string(map.matched()) +
+                             " labelled markers to solve the subject: nothing to write");
+  // Offline, frames before the subject is first seen hold its first solved pose: the rest
+  // pose at the origin, which the live path publishes (marked too_few_markers), would be a
+  // jump across the stage in the written file.
+  for (int f = 0; f < summary.frames_before_first_solve; ++f)
+    poses[static_cast<size_t>(f)] = poses[static_cast<size_t>(*first_solved)];
+  for (int f = 0; truth && f < take.num_frames; ++f) {
+    const auto frame_index = static_cast<size_t>(f);
+    ForwardKinematics(*subject.skeleton, poses[frame_index], &solved);
+    ForwardKinematics(truth->skeleton, truth->frames[frame_index], &*truth_kinematics);
+    double sum = 0.0, worst = 0.0;
+    for (const auto& [j, t] : truth_joints) {
+      const double e =
+          (solved.p_WJ[static_cast<size_t>(j)] - truth_kinematics->p_WJ[static_cast<size_t>(t)])
+              .norm() *
+          100.0;
+      sum += e;
+      worst = std::max(worst, e);
+    }
+    if (plotting) {
+      plot.truth_mean_cm[frame_index] = sum / static_cast<double>(truth_joints.size());
+      plot.truth_worst_cm[frame_index] = worst;
+    }
+    truth_sum += sum;
+    truth_count += static_cast<int64_t>(truth_joints.size());
+    summary.truth_worst_cm = std::max(summary.truth_worst_cm, worst);
+  }
 
   summary.counters = pipeline.counters();
   if (truth_count > 0) {
@@ -328,11 +357,23 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
                 static_cast<long long>(c.unrecoverable),
                 100.0 * static_cast<double>(c.unrecoverable) / samples);
   out << line;
-  std::snprintf(line, sizeof(line),
-                "per frame (after the first K + 1 cold-start frames): mean %.1f us, p50 %.1f us, "
-                "p99 %.1f us, max %.1f us\n",
-                summary.mean_us, summary.p50_us, summary.p99_us, summary.max_us);
-  out << line;
+  if (times_us.empty()) {
+    out << "per frame: not timed (the take is no longer than the first K + 1 cold-start "
+           "frames)\n";
+  } else {
+    std::snprintf(line, sizeof(line),
+                  "per frame (after the first K + 1 cold-start frames): mean %.1f us, p50 %.1f "
+                  "us, p99 %.1f us, max %.1f us\n",
+                  summary.mean_us, summary.p50_us, summary.p99_us, summary.max_us);
+    out << line;
+  }
+  if (summary.unsolved_frames > 0) {
+    std::snprintf(line, sizeof(line),
+                  "warning: %d frames show too few markers to solve; the first %d, before the "
+                  "subject is seen, hold its first solved pose, the others the last one\n",
+                  summary.unsolved_frames, summary.frames_before_first_solve);
+    out << line;
+  }
   std::snprintf(line, sizeof(line),
                 "solved skeleton against the observed samples: median %.1f mm per sample; per "
                 "marker RMS median %.1f mm, worst %.1f mm\n",
@@ -374,6 +415,8 @@ nlohmann::json ProcessSummaryJson(const ProcessSummary& summary,
           {"repaired_samples_by_reason", repaired},
           {"swaps_relabelled", c.swaps_relabelled},
           {"unrecoverable_samples", c.unrecoverable},
+          {"unsolved_frames", summary.unsolved_frames},
+          {"frames_before_first_solve", summary.frames_before_first_solve},
           {"per_frame_us",
            {{"mean", summary.mean_us},
             {"p50", summary.p50_us},

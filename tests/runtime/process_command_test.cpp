@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <sstream>
@@ -101,6 +102,104 @@ TEST(ProcessCommandTest, RefusesATakeWithoutTheSubjectsMarkers) {
   options.output_bvh = dir + "/o.bvh";
   std::ostringstream out;
   EXPECT_THROW(RunProcessCommand(options, out), std::invalid_argument);
+}
+
+// A take the subject cannot be solved from at all gets an error naming the file, never a
+// rest-pose BVH reported as a success.
+TEST(ProcessCommandTest, RefusesATakeWithNoFramesOrNoSeenMarker) {
+  const auto f = testing::MakeHumanoidFixture("walk", 1.0, 60.0);
+  const std::string dir = testing::TempDir("process_empty");
+  WriteFixtureSubject(f, dir + "/actor.toml");
+  ProcessCommandOptions options;
+  options.subject = dir + "/actor.toml";
+  options.input_c3d = dir + "/take.c3d";
+  options.output_bvh = dir + "/o.bvh";
+  const auto expect_refused = [&](const C3dTake& take, const std::string& why) {
+    WriteC3d(options.input_c3d, take);
+    std::ostringstream out;
+    try {
+      RunProcessCommand(options, out);
+      ADD_FAILURE() << "expected an error containing: " << why;
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find(why), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("take.c3d"), std::string::npos) << e.what();
+    }
+    EXPECT_FALSE(std::filesystem::exists(options.output_bvh));
+  };
+  C3dTake unseen = f.take;
+  unseen.Allocate(f.take.num_frames);  // every sample missing
+  expect_refused(unseen, "no frame of 60 shows enough");
+  C3dTake empty = f.take;
+  empty.Allocate(0);
+  expect_refused(empty, "no frames");
+}
+
+TEST(ProcessCommandTest, WarnsOfALabelGivenToTwoPoints) {
+  const auto f = testing::MakeHumanoidFixture("walk", 1.0, 60.0);
+  const std::string dir = testing::TempDir("process_duplicate");
+  WriteFixtureSubject(f, dir + "/actor.toml");
+  C3dTake doubled = f.take;
+  doubled.labels.push_back(f.take.labels[3]);
+  doubled.Allocate(f.take.num_frames);
+  for (int fr = 0; fr < f.take.num_frames; ++fr) {
+    for (int p = 0; p < f.take.num_points(); ++p) doubled.at(fr, p) = f.take.at(fr, p);
+    doubled.at(fr, f.take.num_points()) = f.take.at(fr, 3) + Vec3(0.3, 0.0, 0.0);
+  }
+  std::fill(doubled.residuals.begin(), doubled.residuals.end(), 0.0f);
+  WriteC3d(dir + "/take.c3d", doubled);
+  ProcessCommandOptions options;
+  options.subject = dir + "/actor.toml";
+  options.input_c3d = dir + "/take.c3d";
+  options.output_bvh = dir + "/o.bvh";
+  std::ostringstream out;
+  RunProcessCommand(options, out);
+  EXPECT_NE(out.str().find("warning: 1 of the subject's markers label more than one point of the "
+                           "take; the first point is used for: " +
+                           f.take.labels[3] + "\n"),
+            std::string::npos)
+      << out.str();
+}
+
+// Offline, the frames before the subject comes into view hold its first solved pose
+// (the live path's rest pose at the origin would be a jump across the stage in the
+// file), and the summary says so.
+TEST(ProcessCommandTest, FramesBeforeTheSubjectIsSeenHoldItsFirstSolvedPose) {
+  const auto f = testing::MakeHumanoidFixture("walk", 2.0, 60.0);
+  const std::string dir = testing::TempDir("process_late");
+  WriteFixtureSubject(f, dir + "/actor.toml");
+  C3dTake late = f.take;
+  constexpr int kBlank = 20;
+  for (int fr = 0; fr < kBlank; ++fr)
+    for (int p = 0; p < late.num_points(); ++p) {
+      late.at(fr, p) = Vec3::Constant(kNaN);
+      late.residuals[static_cast<size_t>(fr) * static_cast<size_t>(late.num_points()) +
+                     static_cast<size_t>(p)] = -1.0f;
+    }
+  WriteC3d(dir + "/take.c3d", late);
+  ProcessCommandOptions options;
+  options.subject = dir + "/actor.toml";
+  options.input_c3d = dir + "/take.c3d";
+  options.output_bvh = dir + "/o.bvh";
+  std::ostringstream out;
+  const ProcessSummary summary = RunProcessCommand(options, out);
+  // The lookahead's frames before the first samples are filled from them; the ones
+  // further back have nothing to solve.
+  const int unsolved = kBlank - options.lookahead;
+  EXPECT_EQ(summary.frames_before_first_solve, unsolved);
+  EXPECT_EQ(summary.unsolved_frames, unsolved);
+  EXPECT_NE(out.str().find("warning: " + std::to_string(unsolved) + " frames show too few markers"),
+            std::string::npos)
+      << out.str();
+  const BvhTake solved = ReadBvh(options.output_bvh);
+  ASSERT_EQ(solved.num_frames(), f.take.num_frames);
+  KinematicsWorkspace first(solved.skeleton), held(solved.skeleton), truth(*f.skeleton);
+  ForwardKinematics(solved.skeleton, solved.frames[static_cast<size_t>(unsolved)], &first);
+  ForwardKinematics(*f.skeleton, f.motion[static_cast<size_t>(kBlank)], &truth);
+  EXPECT_LT((first.p_WJ[0] - truth.p_WJ[0]).norm(), 0.05);
+  for (int fr = 0; fr < unsolved; ++fr) {
+    ForwardKinematics(solved.skeleton, solved.frames[static_cast<size_t>(fr)], &held);
+    EXPECT_LT((held.p_WJ[0] - first.p_WJ[0]).norm(), 1e-4) << "frame " << fr;
+  }
 }
 
 // --plot draws what the cleanup did: every marker's row with the repairs it made, the
