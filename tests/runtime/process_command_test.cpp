@@ -29,6 +29,15 @@ void WriteFixtureSubject(const testing::HumanoidFixture& f, const std::string& p
   WriteSubjectModel(path, subject);
 }
 
+// The subject actor.toml and the take take.c3d in dir, the solve to dir/out_bvh.
+ProcessCommandOptions OptionsIn(const std::string& dir, const std::string& out_bvh = "o.bvh") {
+  ProcessCommandOptions options;
+  options.subject = dir + "/actor.toml";
+  options.input_c3d = dir + "/take.c3d";
+  options.output_bvh = dir + "/" + out_bvh;
+  return options;
+}
+
 TEST(ProcessCommandTest, CleansATakeAndWritesAlignedBvhCleanedC3dAndReport) {
   const auto f = testing::MakeHumanoidFixture("mixed", 6.0, 120.0);
   const std::string dir = testing::TempDir("process");
@@ -37,10 +46,7 @@ TEST(ProcessCommandTest, CleansATakeAndWritesAlignedBvhCleanedC3dAndReport) {
   const CorruptedTake bad = CorruptTake(f.take, f.markers.get(), corruption);
   WriteC3d(dir + "/take.c3d", bad.take);
 
-  ProcessCommandOptions options;
-  options.subject = dir + "/actor.toml";
-  options.input_c3d = dir + "/take.c3d";
-  options.output_bvh = dir + "/solved.bvh";
+  ProcessCommandOptions options = OptionsIn(dir, "solved.bvh");
   options.output_c3d = dir + "/cleaned.c3d";
   options.report_json = dir + "/report.json";
   std::ostringstream out;
@@ -96,10 +102,7 @@ TEST(ProcessCommandTest, RefusesATakeWithoutTheSubjectsMarkers) {
   other.rate_hz = 60;
   other.Allocate(10);
   WriteC3d(dir + "/take.c3d", other);
-  ProcessCommandOptions options;
-  options.subject = dir + "/actor.toml";
-  options.input_c3d = dir + "/take.c3d";
-  options.output_bvh = dir + "/o.bvh";
+  ProcessCommandOptions options = OptionsIn(dir);
   std::ostringstream out;
   EXPECT_THROW(RunProcessCommand(options, out), std::invalid_argument);
 }
@@ -110,10 +113,7 @@ TEST(ProcessCommandTest, RefusesATakeWithNoFramesOrNoSeenMarker) {
   const auto f = testing::MakeHumanoidFixture("walk", 1.0, 60.0);
   const std::string dir = testing::TempDir("process_empty");
   WriteFixtureSubject(f, dir + "/actor.toml");
-  ProcessCommandOptions options;
-  options.subject = dir + "/actor.toml";
-  options.input_c3d = dir + "/take.c3d";
-  options.output_bvh = dir + "/o.bvh";
+  ProcessCommandOptions options = OptionsIn(dir);
   const auto expect_refused = [&](const C3dTake& take, const std::string& why) {
     WriteC3d(options.input_c3d, take);
     std::ostringstream out;
@@ -147,10 +147,7 @@ TEST(ProcessCommandTest, WarnsOfALabelGivenToTwoPoints) {
   }
   std::fill(doubled.residuals.begin(), doubled.residuals.end(), 0.0f);
   WriteC3d(dir + "/take.c3d", doubled);
-  ProcessCommandOptions options;
-  options.subject = dir + "/actor.toml";
-  options.input_c3d = dir + "/take.c3d";
-  options.output_bvh = dir + "/o.bvh";
+  ProcessCommandOptions options = OptionsIn(dir);
   std::ostringstream out;
   RunProcessCommand(options, out);
   EXPECT_NE(out.str().find("warning: 1 of the subject's markers label more than one point of the "
@@ -176,10 +173,7 @@ TEST(ProcessCommandTest, FramesBeforeTheSubjectIsSeenHoldItsFirstSolvedPose) {
                      static_cast<size_t>(p)] = -1.0f;
     }
   WriteC3d(dir + "/take.c3d", late);
-  ProcessCommandOptions options;
-  options.subject = dir + "/actor.toml";
-  options.input_c3d = dir + "/take.c3d";
-  options.output_bvh = dir + "/o.bvh";
+  ProcessCommandOptions options = OptionsIn(dir);
   std::ostringstream out;
   const ProcessSummary summary = RunProcessCommand(options, out);
   // The lookahead's frames before the first samples are filled from them; the ones
@@ -213,10 +207,7 @@ TEST(ProcessCommandTest, PlotsShowEveryMarkerTheSolveAndTheErrorAgainstTheTruth)
   WriteC3d(dir + "/take.c3d", bad.take);
   WriteBvh(dir + "/truth.bvh", MakeBvhTake(*f.skeleton, f.motion, 1.0 / 120.0, "cm"));
 
-  ProcessCommandOptions options;
-  options.subject = dir + "/actor.toml";
-  options.input_c3d = dir + "/take.c3d";
-  options.output_bvh = dir + "/solved.bvh";
+  ProcessCommandOptions options = OptionsIn(dir, "solved.bvh");
   options.plot_dir = dir + "/plots";
   options.truth_bvh = dir + "/truth.bvh";
   std::ostringstream out;
@@ -264,10 +255,7 @@ TEST(ProcessCommandTest, ATruthWithOtherJointNamesIsMatchedByRoleOnTheLimbs) {
   std::ostringstream calibrate_out;
   ASSERT_GT(RunCalibrateCommand(calibrate, calibrate_out), 0) << calibrate_out.str();
 
-  ProcessCommandOptions options;
-  options.subject = dir + "/actor.toml";
-  options.input_c3d = dir + "/take.c3d";
-  options.output_bvh = dir + "/solved.bvh";
+  ProcessCommandOptions options = OptionsIn(dir, "solved.bvh");
   options.truth_bvh = dir + "/truth.bvh";
   std::ostringstream out;
   const ProcessSummary summary = RunProcessCommand(options, out);
