@@ -61,6 +61,7 @@ nlohmann::json ReplayReport::ToJson() const {
                       {"stream_checked", stream_checked},
                       {"stream_mismatched", stream_mismatched},
                       {"send_seconds", send_seconds},
+                      {"receive_seconds", receive_seconds},
                       {"throughput_fps", throughput_fps},
                       {"end_to_end_latency", SummaryJson(end_to_end)},
                       {"processing_latency", SummaryJson(processing)}};

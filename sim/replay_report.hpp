@@ -34,8 +34,9 @@ struct ReplayReport {
   /// frame's, and of those, how many differed.
   uint64_t stream_checked = 0;
   uint64_t stream_mismatched = 0;
-  double send_seconds = 0.0;    ///< Wall time spent sending.
-  double throughput_fps = 0.0;  ///< Skeleton frames received per second while sending.
+  double send_seconds = 0.0;     ///< Wall time spent sending.
+  double receive_seconds = 0.0;  ///< From the first frame sent to the last skeleton received.
+  double throughput_fps = 0.0;   ///< Skeleton frames received per receive_seconds.
   LatencySummary end_to_end;
   LatencySummary processing;
   std::vector<double> processing_ms;  ///< Every frame's, for the histogram.

@@ -442,8 +442,15 @@ ReplayReport RunSchedule(std::vector<SubjectLog>& logs, const FrameProducer& pro
   report.stream_mismatched = receiver->stream_mismatched();
   report.frames_lost = sent - std::min<uint64_t>(sent, report.frames_received);
   MeasureLatencies(logs, setup.frame_period_s, start, o.latency_interval_s, &report);
-  report.throughput_fps = report.send_seconds > 0
-                              ? static_cast<double>(report.frames_received) / report.send_seconds
+  // Until the last skeleton came back, not until the last frame went out: at --rate max
+  // the sender finishes long before the daemon does.
+  int64_t last_received_ns = start;
+  for (const SubjectLog& log : logs)
+    for (const auto& [frame, ns] : log.received_ns)
+      last_received_ns = std::max(last_received_ns, ns);
+  report.receive_seconds = static_cast<double>(last_received_ns - start) * 1e-9;
+  report.throughput_fps = report.receive_seconds > 0
+                              ? static_cast<double>(report.frames_received) / report.receive_seconds
                               : 0.0;
   report.frames_unscored = receiver->unscored();
   report.unscored_reason = receiver->unscored_reason();

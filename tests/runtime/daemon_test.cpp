@@ -944,6 +944,29 @@ TEST(DaemonTest, AReplayRefusesATimecodeRateItsFramesByteCannotCount) {
   EXPECT_THROW((void)RunReplay(source, options), std::invalid_argument);
 }
 
+// At --rate max the sender is done long before the daemon: the throughput counts until
+// the last skeleton came back (it divided by the sending time, 287 173 frames/s for a take
+// received at about 17 700/s).
+TEST(DaemonTest, AReplayAtMaxRateCountsThroughputUntilTheLastSkeletonArrives) {
+  const std::string in = "tcp://127.0.0.1:27361", out = "tcp://127.0.0.1:27362";
+  zmq::context_t context;
+  RunningDaemon daemon(context, TestConfig(in, out, 12));
+  ReplayOptions options;
+  options.to = in;
+  options.push = true;
+  options.from = out;
+  options.rate_hz = -1.0;
+  options.connect_timeout_s = 5.0;
+  const ReplaySource source = HumanoidReplaySource("walk", 2.0, 120.0, 0.0, 1);
+  const ReplayReport report = RunReplay(source, options);
+  ASSERT_EQ(report.frames_received, report.frames_sent);
+  // The lookahead's last frames come out only after the end of stream, the last thing sent.
+  EXPECT_GT(report.receive_seconds, report.send_seconds);
+  EXPECT_NEAR(report.throughput_fps,
+              static_cast<double>(report.frames_received) / report.receive_seconds,
+              1e-6 * report.throughput_fps);
+}
+
 // A replay pushing into a CURVE daemon's PULL input with a key the daemon does not allow
 // stops with an error naming the allow-list, where its frames used to queue for a peer that
 // never took them (and a send could wait for ever); with an allowed key every frame is solved.
