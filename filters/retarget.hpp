@@ -45,7 +45,7 @@ struct RetargetMap {
   std::vector<RetargetBone> bones;
   int source_root = 0;  ///< The pelvis joints.
   int target_root = 0;
-  double source_leg_length_m = 1.0;  ///< Hip to floor in the rest pose.
+  double source_leg_length_m = 1.0;  ///< Hip to ankle along the leg's bones.
   double target_leg_length_m = 1.0;
   std::array<int, 2> source_ankles{-1, -1};  ///< Per side, for contact detection.
   std::array<int, 2> target_ankles{-1, -1};  ///< Per side: where a planted foot is held.

@@ -37,18 +37,33 @@ const char* RegionName(RetargetRegion r) {
                                            : "normals (limb)";
 }
 
-// Rest height of the root above the lowest joint or End Site: the leg length that
-// scales the actor's positions onto the character.
-double RootHeight(const Skeleton& sk, const KinematicsWorkspace& rest,
-                  std::span<const BvhEndSite> end_sites, int root) {
-  double lowest = rest.p_WJ[static_cast<size_t>(root)].y();
-  for (int j = 0; j < sk.num_joints(); ++j)
-    lowest = std::min(lowest, rest.p_WJ[static_cast<size_t>(j)].y());
-  for (const BvhEndSite& e : end_sites)
-    lowest = std::min(lowest, Vec3(rest.R_WJ[static_cast<size_t>(e.parent)] * e.offset +
-                                   rest.p_WJ[static_cast<size_t>(e.parent)])
-                                  .y());
-  return rest.p_WJ[static_cast<size_t>(root)].y() - lowest;
+// The leg's length along its bones, hip to ankle, averaged over both legs: the scale of
+// the actor's positions onto the character. Along the bones, not as a height in the rest
+// pose: a rig's rest pose need not stand (Bandai's, all rotations zero, folds its legs to
+// 6.5 cm), and its pelvis's height above the floor origin is wherever the file put it (a
+// one-frame character file: where the take starts; the same rig with its animation: its
+// OFFSET), which gave one rig two scales.
+double LegLength(const Skeleton& sk, const HumanoidRoles& roles) {
+  double total = 0.0;
+  int legs = 0;
+  for (const auto& [hip_role, ankle_role] :
+       {std::pair{"thigh_l", "foot_l"}, {"thigh_r", "foot_r"}}) {
+    const auto hip = roles.joint_of_role.find(hip_role);
+    const auto ankle = roles.joint_of_role.find(ankle_role);
+    if (hip == roles.joint_of_role.end() || ankle == roles.joint_of_role.end()) continue;
+    double length = 0.0;
+    int j = ankle->second;
+    while (j > hip->second) {
+      length += sk.joint(j).offset.norm();
+      j = sk.joint(j).parent;
+    }
+    if (j != hip->second) continue;  // the ankle is not below that hip
+    total += length;
+    ++legs;
+  }
+  if (legs == 0 || !(total > 0.0))
+    throw std::invalid_argument("retarget: no leg from a hip (thigh) down to an ankle (foot)");
+  return total / legs;
 }
 
 double Height(const KinematicsWorkspace& rest) {
@@ -86,8 +101,8 @@ RetargetMap MakeRetargetMap(const Skeleton& source, std::span<const BvhEndSite> 
   RetargetMap map;
   map.source_root = source_roles.joint_of_role.at("pelvis");
   map.target_root = target_roles.joint_of_role.at("pelvis");
-  map.source_leg_length_m = RootHeight(source, source_rest, source_end_sites, map.source_root);
-  map.target_leg_length_m = RootHeight(target, target_rest, target_end_sites, map.target_root);
+  map.source_leg_length_m = LegLength(source, source_roles);
+  map.target_leg_length_m = LegLength(target, target_roles);
   map.source_ankles = {source_roles.joint_of_role.at("foot_l"),
                        source_roles.joint_of_role.at("foot_r")};
   map.target_ankles = {target_roles.joint_of_role.at("foot_l"),

@@ -74,6 +74,29 @@ TEST_F(RetargetTest, ACharacterFromAOneFrameFileFollowsTheRoot) {
   EXPECT_LT(worst_root, 0.01);
 }
 
+// The scale is the legs' length along their bones, wherever the file stood the pelvis:
+// under a floor-level root joint (Bandai's joint_Root) its height was taken as the leg
+// length, so a one-frame character file (the pelvis where the take starts) and the same
+// rig with its animation (the pelvis at its OFFSET) got two scales (0.928 and 0.965).
+TEST_F(RetargetTest, TheScaleIsTheLegsLengthWhereverThePelvisStands) {
+  for (const double pelvis_height_m : {0.4, 0.9, 1.6}) {
+    std::vector<Joint> joints;
+    Joint floor;
+    floor.name = "joint_Root";
+    floor.type = JointType::kFixed;
+    joints.push_back(floor);
+    for (Joint j : source_->joints()) {
+      j.parent = j.parent.is_valid() ? JointIndex(j.parent.value + 1) : JointIndex(0);
+      joints.push_back(j);
+    }
+    joints[1].offset = Vec3(0.3, pelvis_height_m, -0.2);
+    const Skeleton rig(std::move(joints));
+    const RetargetMap map = MakeRetargetMap(*source_, {}, rig, {});
+    EXPECT_NEAR(map.target_leg_length_m / map.source_leg_length_m, 1.0, 1e-9)
+        << "pelvis at " << pelvis_height_m << " m";
+  }
+}
+
 TEST_F(RetargetTest, AUniformlyScaledRigGetsTheSameJointAngles) {
   const auto big = Scaled(*source_, 1.25);
   Retargeter r(source_, big, MakeRetargetMap(*source_, {}, *big, {}), NoContacts());
