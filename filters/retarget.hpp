@@ -6,7 +6,7 @@
 // least-squares IK on the character (thesis Algorithm 6, here the project's LM solver,
 // whose temporal prior toward the warm start is the DLS damping) makes
 //  - end-effector points (hands, feet, toes, head) track the actor's, positions scaled
-//    by the leg-length ratio about the floor origin (root height by leg length);
+//    by the leg-length ratio (hip to ankle along the bones) about the floor origin;
 //  - torso and limb points track the actor's surface normals (the blend mask), through
 //    a lever point one normal_lever_m out along each normal, anchored at the target
 //    joint's origin as the actor's motion moves it (so no lag and no self-feedback);

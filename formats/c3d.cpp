@@ -12,6 +12,7 @@
 #include <optional>
 
 #include <boost/algorithm/string/case_conv.hpp>
+#include <boost/algorithm/string/trim.hpp>
 
 #include "formats/marker_set.hpp"
 #include "protocol/byte_io.hpp"
@@ -428,29 +429,32 @@ void WriteStrings(ByteWriter& w, std::vector<uint8_t>& out, ByteOrder order, int
 
 }  // namespace
 
-int C3dTake::FindLabel(const std::string& label) const {
+std::vector<int> C3dTake::MatchingLabels(const std::string& label) const {
+  std::vector<int> exact, loose_matches;
   for (size_t i = 0; i < labels.size(); ++i)
-    if (labels[i] == label) return static_cast<int>(i);
+    if (labels[i] == label) exact.push_back(static_cast<int>(i));
+  if (!exact.empty()) return exact;
   // Exporters prefix the subject ("Dan:LBWT"), pad with spaces or change the case; the
-  // subject file, written by `mocapd calibrate`, names the bare label. Only a unique
-  // match counts: two subjects' LBWT in one file is no answer. A prefixed name keeps its
-  // prefix: "Dan:LBWT" is never Eve's.
+  // subject file, written by `mocapd calibrate`, names the bare label. A prefixed name
+  // keeps its prefix: "Dan:LBWT" is never Eve's.
   const bool prefixed = label.find(':') != std::string::npos;
   auto loose = [prefixed](const std::string& text) {
-    std::string bare = prefixed ? text : BareLabel(text);
-    while (!bare.empty() && std::isspace(static_cast<unsigned char>(bare.back()))) bare.pop_back();
-    while (!bare.empty() && std::isspace(static_cast<unsigned char>(bare.front())))
-      bare.erase(bare.begin());
-    return boost::algorithm::to_upper_copy(bare);
+    return boost::algorithm::to_upper_copy(
+        boost::algorithm::trim_copy(prefixed ? text : BareLabel(text)));
   };
   const std::string want = loose(label);
-  int found = -1;
-  for (size_t i = 0; i < labels.size(); ++i) {
-    if (loose(labels[i]) != want) continue;
-    if (found >= 0) return -1;
-    found = static_cast<int>(i);
-  }
-  return found;
+  for (size_t i = 0; i < labels.size(); ++i)
+    if (loose(labels[i]) == want) loose_matches.push_back(static_cast<int>(i));
+  return loose_matches;
+}
+
+int C3dTake::FindLabel(const std::string& label) const {
+  const std::vector<int> matches = MatchingLabels(label);
+  if (matches.empty()) return -1;
+  // Only a unique loose match counts: two subjects' LBWT in one file is no answer. A
+  // label repeated exactly is the file's own (its first point, as other readers take it).
+  if (matches.size() > 1 && labels[static_cast<size_t>(matches[0])] != label) return -1;
+  return matches[0];
 }
 
 void C3dTake::Allocate(int frames) {

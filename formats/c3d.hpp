@@ -47,6 +47,9 @@ struct C3dTake {
   /// Index of the point with this label, or else the one point whose label is it with a
   /// subject prefix ("Dan:"), padding or another case; -1 if none or several.
   int FindLabel(const std::string& label) const;
+  /// The points whose label is this one exactly or, when none is, with a subject prefix,
+  /// padding or another case; in file order.
+  std::vector<int> MatchingLabels(const std::string& label) const;
   /// Sizes positions/residuals for num_frames x labels.size(), all missing.
   void Allocate(int frames);
 

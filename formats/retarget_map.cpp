@@ -43,7 +43,7 @@ const char* RegionName(RetargetRegion r) {
 // 6.5 cm), and its pelvis's height above the floor origin is wherever the file put it (a
 // one-frame character file: where the take starts; the same rig with its animation: its
 // OFFSET), which gave one rig two scales.
-double LegLength(const Skeleton& sk, const HumanoidRoles& roles) {
+double LegLength(const Skeleton& sk, const HumanoidRoles& roles, const char* which) {
   double total = 0.0;
   int legs = 0;
   for (const auto& [hip_role, ankle_role] :
@@ -62,7 +62,8 @@ double LegLength(const Skeleton& sk, const HumanoidRoles& roles) {
     ++legs;
   }
   if (legs == 0 || !(total > 0.0))
-    throw std::invalid_argument("retarget: no leg from a hip (thigh) down to an ankle (foot)");
+    throw std::invalid_argument(std::string("retarget: the ") + which +
+                                " has no leg from a hip (thigh) down to an ankle (foot)");
   return total / legs;
 }
 
@@ -101,8 +102,8 @@ RetargetMap MakeRetargetMap(const Skeleton& source, std::span<const BvhEndSite> 
   RetargetMap map;
   map.source_root = source_roles.joint_of_role.at("pelvis");
   map.target_root = target_roles.joint_of_role.at("pelvis");
-  map.source_leg_length_m = LegLength(source, source_roles);
-  map.target_leg_length_m = LegLength(target, target_roles);
+  map.source_leg_length_m = LegLength(source, source_roles, "actor");
+  map.target_leg_length_m = LegLength(target, target_roles, "character");
   map.source_ankles = {source_roles.joint_of_role.at("foot_l"),
                        source_roles.joint_of_role.at("foot_r")};
   map.target_ankles = {target_roles.joint_of_role.at("foot_l"),

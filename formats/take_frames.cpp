@@ -1,29 +1,33 @@
 // Marker-to-label mapping for recorded takes.
 #include "formats/take_frames.hpp"
 
-#include <algorithm>
 #include <stdexcept>
 
 namespace mocapd {
 
 TakeMarkerMap::TakeMarkerMap(const MarkerSet& markers, const C3dTake& take, int min_matched) {
   for (const MarkerDefinition& m : markers.markers()) {
+    const std::vector<int> matches = take.MatchingLabels(m.name);
     const int p = take.FindLabel(m.name);
     point_of_marker_.push_back(p);
-    if (p < 0) {
+    if (p >= 0) {
+      ++matched_;
+      if (matches.size() > 1) duplicated_.push_back(m.name);
+    } else if (matches.size() > 1) {
+      std::string competing;
+      for (int q : matches)
+        competing += (competing.empty() ? "" : ", ") + take.labels[static_cast<size_t>(q)];
+      ambiguous_.push_back(m.name + " (" + competing + ")");
+    } else {
       unmatched_.push_back(m.name);
-      continue;
     }
-    ++matched_;
-    const std::string& label = take.labels[static_cast<size_t>(p)];
-    if (std::count(take.labels.begin(), take.labels.end(), label) > 1)
-      duplicated_.push_back(m.name);
   }
   if (matched_ < min_matched) {
     std::string msg = "take has " + std::to_string(matched_) + " of the subject's " +
                       std::to_string(markers.num_markers()) + " markers (need " +
                       std::to_string(min_matched) + "); missing:";
     for (const auto& n : unmatched_) msg += " " + n;
+    for (const auto& n : ambiguous_) msg += " " + n;
     throw std::invalid_argument(msg);
   }
 }

@@ -27,13 +27,17 @@ class TakeMarkerMap {
   void FillMessage(const C3dTake& take, int frame, protocol::MarkerFrameMessage* message) const;
   int matched() const { return matched_; }
   const std::vector<std::string>& unmatched() const { return unmatched_; }
-  /// The subject's markers whose label the take gives to more than one point (the first
-  /// such point is used): an exporter's merge or a labelling mistake worth a warning.
+  /// The subject's markers whose exact label the take gives to more than one point (the
+  /// first such point is used): an exporter's merge or a labelling mistake.
   const std::vector<std::string>& duplicated() const { return duplicated_; }
+  /// The subject's markers that no label names exactly and several name loosely (two
+  /// subjects' Dan:LBWT and Eve:LBWT, or LBWT padded twice), each with the competing
+  /// labels: none is used, so the marker stays missing.
+  const std::vector<std::string>& ambiguous() const { return ambiguous_; }
 
  private:
   std::vector<int> point_of_marker_;
-  std::vector<std::string> unmatched_, duplicated_;
+  std::vector<std::string> unmatched_, duplicated_, ambiguous_;
   int matched_ = 0;
 };
 

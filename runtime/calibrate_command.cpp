@@ -189,7 +189,9 @@ int RunCalibrateCommand(const CalibrateCommandOptions& options, std::ostream& ou
   const BvhTake bvh = ReadBvh(options.skeleton_bvh, bvh_options);
   const C3dTake c3d = ReadC3d(options.markers_c3d.front());
   std::vector<Pose> motion = bvh.frames;
-  if (std::abs(bvh.rate_hz() - c3d.rate_hz) > 1e-6 * c3d.rate_hz) {
+  // The same rate as two files print it: a C3D stores 119.88 Hz as a float of its
+  // decimal digits, a BVH reads as 120000/1001 Hz; 1e-6 apart, no reason to resample.
+  if (std::abs(bvh.rate_hz() - c3d.rate_hz) > 2e-5 * c3d.rate_hz) {
     out << "resampling " << options.skeleton_bvh << " from " << bvh.rate_hz()
         << " Hz to the capture's " << c3d.rate_hz << " Hz\n";
     motion = ResampleMotion(bvh.skeleton, bvh.frames, bvh.rate_hz(), c3d.rate_hz);

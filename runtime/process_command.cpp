@@ -82,19 +82,17 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
     throw std::runtime_error(options.input_c3d + ": the take has no frames: nothing to process");
   const MarkerSet& markers = *subject.markers;
   const TakeMarkerMap map(markers, take);
-  if (!map.unmatched().empty()) {
-    out << "warning: " << map.unmatched().size()
-        << " of the subject's markers are not in the take and stay missing:";
-    for (const auto& n : map.unmatched()) out << " " << n;
+  auto warn = [&out](const std::vector<std::string>& names, const char* what) {
+    if (names.empty()) return;
+    out << "warning: " << names.size() << " of the subject's markers " << what << ":";
+    for (const auto& n : names) out << " " << n;
     out << "\n";
-  }
-  if (!map.duplicated().empty()) {
-    out << "warning: " << map.duplicated().size()
-        << " of the subject's markers label more than one point of the take; the first "
-           "point is used for:";
-    for (const auto& n : map.duplicated()) out << " " << n;
-    out << "\n";
-  }
+  };
+  warn(map.unmatched(), "are not in the take and stay missing");
+  warn(map.ambiguous(),
+       "match several of the take's labels, so none is used and they stay missing");
+  warn(map.duplicated(), "label more than one point of the take; the first point is used for");
+
   CleanupOptions cleanup;
   cleanup.rate_hz = take.rate_hz;
   cleanup.lookahead = options.lookahead;
@@ -193,13 +191,17 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
             : frame.reason[m] == MaskReason::kNone            ? 12
                                                    : static_cast<uint8_t>(frame.reason[m]);
     }
-    if (frame.final_solve.status == IkStatus::kTooFewMarkers) {
+    if (frame.final_solve.status != IkStatus::kConverged &&
+        frame.final_solve.status != IkStatus::kMaxIterations) {
       ++summary.unsolved_frames;
       if (!first_solved) ++summary.frames_before_first_solve;
     } else if (!first_solved) {
       first_solved = f;
     }
-    for (size_t m = 0; m < observed.size(); ++m) {
+    // An unsolved frame's pose is a held one, not a fit: no residual to report.
+    const bool solved_here = frame.final_solve.status == IkStatus::kConverged ||
+                             frame.final_solve.status == IkStatus::kMaxIterations;
+    for (size_t m = 0; m < observed.size() && solved_here; ++m) {
       if (frame.status[m] != MarkerStatus::kObserved) continue;
       const double r =
           (frame.markers[m] - EvaluateMarker(markers.marker(static_cast<int>(m)), solved)).norm();
@@ -284,6 +286,7 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
     summary.marker_rms_worst_mm = *std::max_element(marker_rms.begin(), marker_rms.end()) * 1e3;
   }
   if (!times_us.empty()) {
+    summary.timed = true;
     double sum = 0.0, worst = 0.0;
     for (double t : times_us) {
       sum += t;
@@ -305,11 +308,18 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
     out << "wrote " << options.output_c3d << "\n";
   }
   if (!options.retarget_bvh.empty()) {
-    // The solved frames in order, exactly as the live path feeds them to the retargeter.
+    // The written frames in order, one at a time as the live path feeds the retargeter
+    // (the frames before the subject is seen hold its first solved pose here).
     BvhTake character = ReadBvh(options.retarget_bvh);
     auto target = std::make_shared<const Skeleton>(character.skeleton);
-    const RetargetMap joints =
-        MakeRetargetMap(*subject.skeleton, {}, *target, character.end_sites, options.joint_map);
+    const RetargetMap joints = [&] {
+      try {
+        return MakeRetargetMap(*subject.skeleton, {}, *target, character.end_sites,
+                               options.joint_map);
+      } catch (const std::invalid_argument& e) {
+        throw std::runtime_error(options.retarget_bvh + ": " + e.what());
+      }
+    }();
     out << joints.report;
     RetargetOptions retarget_options;
     retarget_options.rate_hz = take.rate_hz;
@@ -357,7 +367,7 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
                 static_cast<long long>(c.unrecoverable),
                 100.0 * static_cast<double>(c.unrecoverable) / samples);
   out << line;
-  if (times_us.empty()) {
+  if (!summary.timed) {
     out << "per frame: not timed (the take is no longer than the first K + 1 cold-start "
            "frames)\n";
   } else {
@@ -367,13 +377,12 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
                   summary.mean_us, summary.p50_us, summary.p99_us, summary.max_us);
     out << line;
   }
-  if (summary.unsolved_frames > 0) {
-    std::snprintf(line, sizeof(line),
-                  "warning: %d frames show too few markers to solve; the first %d, before the "
-                  "subject is seen, hold its first solved pose, the others the last one\n",
-                  summary.unsolved_frames, summary.frames_before_first_solve);
-    out << line;
-  }
+  if (summary.unsolved_frames > 0)
+    out << "warning: " << summary.unsolved_frames
+        << " frames could not be solved (too few markers, or the solve failed); "
+        << summary.frames_before_first_solve
+        << " of them, before the subject is first seen, hold its first solved pose, the "
+           "others the last solved one\n";
   std::snprintf(line, sizeof(line),
                 "solved skeleton against the observed samples: median %.1f mm per sample; per "
                 "marker RMS median %.1f mm, worst %.1f mm\n",
@@ -417,11 +426,11 @@ nlohmann::json ProcessSummaryJson(const ProcessSummary& summary,
           {"unrecoverable_samples", c.unrecoverable},
           {"unsolved_frames", summary.unsolved_frames},
           {"frames_before_first_solve", summary.frames_before_first_solve},
-          {"per_frame_us",
-           {{"mean", summary.mean_us},
-            {"p50", summary.p50_us},
-            {"p99", summary.p99_us},
-            {"max", summary.max_us}}},
+          {"per_frame_us", summary.timed ? nlohmann::json{{"mean", summary.mean_us},
+                                                          {"p50", summary.p50_us},
+                                                          {"p99", summary.p99_us},
+                                                          {"max", summary.max_us}}
+                                         : nlohmann::json(nullptr)},
           {"residual_mm",
            {{"median_per_sample", summary.residual_median_mm},
             {"marker_rms_median", summary.marker_rms_median_mm},

@@ -39,9 +39,11 @@ struct ProcessSummary {
   int markers = 0;
   int matched_markers = 0;
   CleanupCounters counters;
-  /// Frames that showed too few markers to solve, and how many of them came before the
-  /// first solved one (those hold the first solved pose in the written BVH).
+  /// Frames the final solve could not solve (too few markers, or a failed solve), and
+  /// how many of them came before the first solved one (those hold the first solved
+  /// pose in the written BVH).
   int unsolved_frames = 0, frames_before_first_solve = 0;
+  bool timed = false;  ///< False for a take no longer than the K + 1 cold-start frames.
   double mean_us = 0.0, p50_us = 0.0, p99_us = 0.0, max_us = 0.0;  ///< Per-frame pipeline time.
   double retarget_p50_us = 0.0, retarget_p99_us = 0.0;  ///< Per-frame retarget time, if any.
   /// How well the solved skeleton fits the captured samples it published as observed:

@@ -428,7 +428,12 @@ ReplayReport RunSchedule(std::vector<SubjectLog>& logs, const FrameProducer& pro
   const uint64_t sent =
       SendAll(sockets.out, logs, produce, receiver ? &*receiver : nullptr, o, start);
   report.frames_sent = sent;
-  report.send_seconds = static_cast<double>(SteadyNs() - start) * 1e-9;
+  // Until the last frame went out (the end of stream), as the log has it: a clock read
+  // after SendAll returns could come after the skeletons that frame let out.
+  int64_t last_sent_ns = start;
+  for (const SubjectLog& log : logs)
+    if (!log.sent.empty()) last_sent_ns = std::max(last_sent_ns, log.sent.back().sent_ns);
+  report.send_seconds = static_cast<double>(last_sent_ns - start) * 1e-9;
   if (!receiver) return report;
   report.listened = true;
   const int64_t drain_deadline = SteadyNs() + TimeoutNs(o.drain_timeout_s);

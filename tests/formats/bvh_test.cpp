@@ -175,7 +175,7 @@ TEST(BvhTest, AFrameTimeRoundedToItsDigitsMeansTheRateItWasPrintedFrom) {
   EXPECT_NEAR(rate_for("0.008342"), 120000.0 / 1001.0, 1e-9);
   // Kept as written: too few digits to say, or no whole or NTSC rate prints this way.
   EXPECT_NEAR(rate_for("0.03"), 1.0 / 0.03, 1e-9);
-  EXPECT_NEAR(rate_for("0.007000"), 1.0 / 0.007, 1e-9);
+  EXPECT_NEAR(rate_for("0.007100"), 1.0 / 0.0071, 1e-9);
   EXPECT_NEAR(rate_for("3.33333e-2"), 1.0 / 0.0333333, 1e-9);
 }
 

@@ -207,9 +207,13 @@ TEST(C3dTest, FindsALabelUnderASubjectPrefixPaddingOrAnotherCase) {
   take.labels = {"Dan:LBWT", "Eve:LBWT"};  // two subjects: no unique answer
   EXPECT_EQ(take.FindLabel("LBWT"), -1);
   EXPECT_EQ(take.FindLabel("Eve:LBWT"), 1);
+  EXPECT_EQ(take.MatchingLabels("LBWT"), (std::vector<int>{0, 1}));
   take.labels = {"Eve:LBWT"};
   EXPECT_EQ(take.FindLabel("Dan:LBWT"), -1);  // a prefix names its subject
   EXPECT_EQ(take.FindLabel("eve:lbwt"), 0);
+  take.labels = {"LBWT", "lbwt", "LBWT"};  // repeated exactly: the file's first
+  EXPECT_EQ(take.FindLabel("LBWT"), 0);
+  EXPECT_EQ(take.MatchingLabels("LBWT"), (std::vector<int>{0, 2}));
 }
 
 // TRIAL:ACTUAL_END_FIELD counts frames past the header's 65535; a cropping tool can leave

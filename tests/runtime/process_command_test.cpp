@@ -134,7 +134,7 @@ TEST(ProcessCommandTest, RefusesATakeWithNoFramesOrNoSeenMarker) {
   expect_refused(empty, "no frames");
 }
 
-TEST(ProcessCommandTest, WarnsOfALabelGivenToTwoPoints) {
+TEST(ProcessCommandTest, WarnsOfALabelGivenToTwoPointsOrMatchingTwoSubjects) {
   const auto f = testing::MakeHumanoidFixture("walk", 1.0, 60.0);
   const std::string dir = testing::TempDir("process_duplicate");
   WriteFixtureSubject(f, dir + "/actor.toml");
@@ -155,6 +155,19 @@ TEST(ProcessCommandTest, WarnsOfALabelGivenToTwoPoints) {
                            f.take.labels[3] + "\n"),
             std::string::npos)
       << out.str();
+  // Two subjects' copies of a label: neither is this subject's, and the warning says why
+  // the marker stays missing.
+  doubled.labels[3] = "Dan:" + f.take.labels[3];
+  doubled.labels.back() = "Eve:" + f.take.labels[3];
+  WriteC3d(dir + "/take.c3d", doubled);
+  std::ostringstream ambiguous;
+  RunProcessCommand(options, ambiguous);
+  EXPECT_NE(ambiguous.str().find("match several of the take's labels, so none is used and they "
+                                 "stay missing: " +
+                                 f.take.labels[3] + " (Dan:" + f.take.labels[3] +
+                                 ", Eve:" + f.take.labels[3] + ")"),
+            std::string::npos)
+      << ambiguous.str();
 }
 
 // Offline, the frames before the subject comes into view hold its first solved pose
@@ -181,7 +194,7 @@ TEST(ProcessCommandTest, FramesBeforeTheSubjectIsSeenHoldItsFirstSolvedPose) {
   const int unsolved = kBlank - options.lookahead;
   EXPECT_EQ(summary.frames_before_first_solve, unsolved);
   EXPECT_EQ(summary.unsolved_frames, unsolved);
-  EXPECT_NE(out.str().find("warning: " + std::to_string(unsolved) + " frames show too few markers"),
+  EXPECT_NE(out.str().find("warning: " + std::to_string(unsolved) + " frames could not be solved"),
             std::string::npos)
       << out.str();
   const BvhTake solved = ReadBvh(options.output_bvh);
