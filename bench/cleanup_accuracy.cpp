@@ -355,7 +355,7 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
   }
   while (pipeline.Flush()) collect();
   Scores s = scorer.Finish();
-  if (g_explain_worst && s.worst_frame > 0 && s.worst_frame_cm > 3.0) {
+  if (g_explain_worst && s.worst_frame >= 0 && s.worst_frame_cm > 3.0) {
     std::printf("worst frame %s K=%d %.0f Hz: frame %d joint %s %.1f cm off\n", take.name.c_str(),
                 lookahead, rate_hz, s.worst_frame, skeleton->joint(s.worst_joint).name.c_str(),
                 s.worst_frame_cm);

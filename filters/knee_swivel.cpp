@@ -107,22 +107,26 @@ int KneeSwivel::Update(const Skeleton& skeleton, std::span<const Vec3> observed,
     if (leg < 0 || !(weights[m] >= kSeenWeight) || !observed[m].allFinite()) continue;
     ++(on_foot_[m] ? seen_foot_ : seen_limb_)[static_cast<size_t>(leg)];
   }
+  // Every seen leg learns before any unseen one is turned: a leg unseen from the take's
+  // first frame borrows the other's axis from that frame on (it was learned only after
+  // the unseen leg had been passed over, and a running knee stayed 30 cm behind the leg).
+  for (size_t i = 0; i < legs_.size(); ++i) {
+    if (seen_limb_[i] < 2) continue;
+    const LegChain& leg = legs_[i];
+    const Vec3 axis = BendAxis(*ws, leg, kMinBendRad);
+    if (axis.norm() == 0.0) continue;
+    state_[i].learned_sum += ws->R_WJ[static_cast<size_t>(leg.ankle)].transpose() * axis;
+    state_[i].learned_in_pelvis_sum += ws->R_WJ[static_cast<size_t>(leg.pelvis)].transpose() * axis;
+  }
   int turned = 0;
   for (size_t i = 0; i < legs_.size(); ++i) {
+    if (seen_limb_[i] > 0 || seen_foot_[i] < 2 || tolerance_rad <= 0.0) continue;
     const LegChain& leg = legs_[i];
     // A nearly straight unseen knee is still kept to its side: it bends from there.
-    const Vec3 axis = BendAxis(*ws, leg, seen_limb_[i] >= 2 ? kMinBendRad : kMinTurnBendRad);
+    const Vec3 axis = BendAxis(*ws, leg, kMinTurnBendRad);
+    if (axis.norm() == 0.0) continue;
     const Mat3& R_WA = ws->R_WJ[static_cast<size_t>(leg.ankle)];
     const Mat3& R_W_pelvis = ws->R_WJ[static_cast<size_t>(leg.pelvis)];
-    if (seen_limb_[i] >= 2) {
-      if (axis.norm() > 0.0) {
-        state_[i].learned_sum += R_WA.transpose() * axis;
-        state_[i].learned_in_pelvis_sum += R_W_pelvis.transpose() * axis;
-      }
-      continue;
-    }
-    if (seen_limb_[i] > 0 || seen_foot_[i] < 2 || tolerance_rad <= 0.0 || axis.norm() == 0.0)
-      continue;
     const Vec3 own = AxisInFoot(static_cast<int>(i));
     const Vec3 wanted_world = own.norm() > 0.0
                                   ? Vec3(R_WA * own)

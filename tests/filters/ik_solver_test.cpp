@@ -6,6 +6,7 @@
 
 #include <random>
 
+#include "filters/cleanup_options.hpp"
 #include "filters/pose_error.hpp"
 #include "filters/rotation.hpp"
 #include "formats/take_frames.hpp"
@@ -343,4 +344,37 @@ TEST_F(IkSolverTest, RobustColdStartKeepsTheBetterOfItsTwoStarts) {
 }
 
 }  // namespace
+// A cold solve with a thigh and shin unseen leaves the knee wherever the rest pose's
+// straight leg happened to bend; nothing was published yet, so the unseen-knee rule puts
+// it all the way onto the axis the foot asks for, not merely back within its tolerance
+// at the warm-start rate (a Bandai run's first frame: 29.5 -> 2.5 cm).
+TEST_F(IkSolverTest, AColdSolvesUnseenKneeIsTurnedOntoItsAxis) {
+  const CleanupOptions cleanup;
+  const IkOptions options = WithUnseenKneeRule(cleanup.final_ik, cleanup);
+  const int hip = skeleton().FindJoint("LeftUpLeg")->value;
+  const auto knee = static_cast<size_t>(skeleton().FindJoint("LeftLeg")->value);
+  KinematicsWorkspace solved(skeleton()), truth(skeleton());
+  double worst = 0.0;
+  int bent_frames = 0;
+  for (int f = 0; f < fixture_.take.num_frames; f += 5) {
+    ForwardKinematics(skeleton(), fixture_.motion[static_cast<size_t>(f)], &truth);
+    const Vec3 thigh = truth.p_WJ[knee] - truth.p_WJ[static_cast<size_t>(hip)];
+    const Vec3 shin =
+        truth.p_WJ[static_cast<size_t>(skeleton().FindJoint("LeftFoot")->value)] - truth.p_WJ[knee];
+    if (thigh.normalized().dot(shin.normalized()) > std::cos(0.6)) continue;  // 35 deg bent
+    ++bent_frames;
+    Observe(f);
+    for (int m = 0; m < markers().num_markers(); ++m)
+      if (markers().primary_joint(m) == hip || markers().primary_joint(m) == static_cast<int>(knee))
+        weights_[static_cast<size_t>(m)] = 0.0;
+    IkState state(skeleton(), markers());
+    const IkSummary summary = SolveIk(skeleton(), markers(), options, observed_, weights_, &state);
+    ASSERT_TRUE(summary.cold_start);
+    ForwardKinematics(skeleton(), state.pose(), &solved);
+    worst = std::max(worst, (solved.p_WJ[knee] - truth.p_WJ[knee]).norm());
+  }
+  ASSERT_GT(bent_frames, 5);
+  EXPECT_LT(worst, 0.03) << "over " << bent_frames << " frames";
+}
+
 }  // namespace mocapd
