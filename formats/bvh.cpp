@@ -431,8 +431,13 @@ std::string FormatBvh(const BvhTake& take) {
                                                          : DefaultChannels(sk.joint(j).type);
   };
   std::string out = "HIERARCHY\n";
-  // Recursive emit in child order; joints are stored parents-first.
+  // Recursive emit in child order; joints are stored parents-first, but not necessarily
+  // depth-first (a subject calibrated from markers lists both legs before the arms), and
+  // a reader takes the MOTION columns in the order the hierarchy lists the joints.
+  std::vector<int> file_order;
+  file_order.reserve(static_cast<size_t>(sk.num_joints()));
   auto emit = [&](auto&& self, int j, int depth) -> void {
+    file_order.push_back(j);
     const std::string indent(static_cast<size_t>(2 * depth), ' ');
     out += indent + (depth == 0 ? "ROOT " : "JOINT ") + sk.joint(j).name + "\n" + indent + "{\n";
     const Vec3 offset = static_cast<size_t>(j) < take.file_offsets.size()
@@ -473,7 +478,7 @@ std::string FormatBvh(const BvhTake& take) {
       first_value = false;
       AppendNumber(&out, v);
     };
-    for (int j = 0; j < sk.num_joints(); ++j) {
+    for (const int j : file_order) {
       const auto uj = static_cast<size_t>(j);
       const auto ch = channels_of(j);
       int axes[3], n = 0;

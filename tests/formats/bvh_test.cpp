@@ -87,6 +87,52 @@ TEST(BvhTest, HumanoidMotionRoundTripsThroughBvh) {
       ASSERT_LT((a[f][j] - b[f][j]).norm(), 1e-6) << f << " " << j;
 }
 
+// A skeleton stored parents-first but not depth-first (a subject calibrated from markers
+// lists both legs before the arms): the MOTION columns follow the hierarchy as written.
+// They followed the stored order, so a calibrated subject's solved BVH gave its left
+// leg's angles to the right arm (hands 82 cm off).
+TEST(BvhTest, ASkeletonStoredBreadthFirstRoundTripsThroughBvh) {
+  const Skeleton depth_first = MakeHumanoidSkeleton();
+  const auto motion = MakeHumanoidMotion(depth_first, HumanoidMotion::kMixed, 2.0, 30.0);
+  std::vector<int> depth(static_cast<size_t>(depth_first.num_joints()), 0), order;
+  for (int j = 1; j < depth_first.num_joints(); ++j)
+    depth[static_cast<size_t>(j)] =
+        depth[static_cast<size_t>(depth_first.joint(j).parent.value)] + 1;
+  for (int d = 0; d <= *std::max_element(depth.begin(), depth.end()); ++d)
+    for (int j = 0; j < depth_first.num_joints(); ++j)
+      if (depth[static_cast<size_t>(j)] == d) order.push_back(j);
+  std::vector<int> new_index(order.size());
+  for (size_t k = 0; k < order.size(); ++k)
+    new_index[static_cast<size_t>(order[k])] = static_cast<int>(k);
+  std::vector<Joint> joints;
+  for (const int j : order) {
+    Joint joint = depth_first.joint(j);
+    if (joint.parent.is_valid())
+      joint.parent = JointIndex(new_index[static_cast<size_t>(joint.parent.value)]);
+    joints.push_back(joint);
+  }
+  Skeleton breadth_first(std::move(joints));
+  ASSERT_NE(breadth_first.joint(5).name, depth_first.joint(5).name);  // really reordered
+  std::vector<Pose> frames;
+  for (const Pose& p : motion) {
+    Pose q;
+    for (const int j : order) {
+      q.rotation.push_back(p.rotation[static_cast<size_t>(j)]);
+      q.translation.push_back(p.translation[static_cast<size_t>(j)]);
+    }
+    frames.push_back(q);
+  }
+  const BvhTake take = MakeBvhTake(std::move(breadth_first), std::move(frames), 1.0 / 30.0, "cm");
+  const BvhTake again = ParseBvh(FormatBvh(take), "breadth-first");
+  const auto a = GlobalPositions(take), b = GlobalPositions(again);
+  for (int j = 0; j < take.skeleton.num_joints(); ++j) {
+    const int k = again.skeleton.FindJoint(take.skeleton.joint(j).name)->value;
+    for (size_t f = 0; f < a.size(); ++f)
+      ASSERT_LT((a[f][static_cast<size_t>(j)] - b[f][static_cast<size_t>(k)]).norm(), 1e-6)
+          << take.skeleton.joint(j).name << " frame " << f;
+  }
+}
+
 // Exporters often write the take's start position into the hips' OFFSET (here 4 m away
 // under a static root): the unit guess must come from the bones, not from where the
 // actor stands, or a cm file is read as mm and every solve is off by metres.
