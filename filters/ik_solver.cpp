@@ -792,17 +792,18 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
   }
   // Only a solve that turns knees needs to learn their axes (the final solve; not the
   // references, the anchor or calibration's tracking).
-  // A warm start's knee within the tolerance keeps the side the solve gave it, and turns
-  // back at a limited rate so as not to pop. A cold start's unseen knee is where the rest
-  // pose's straight leg happened to bend: no evidence to keep. It is turned onto the
-  // axis the foot asks for, all the way, as nothing was published yet to pop from.
+  // An unseen knee beyond the tolerance is turned back toward it at a limited rate, so
+  // as not to pop. On the very first solve nothing was published yet to pop from, and the
+  // knee is where the rest pose's straight leg happened to bend, no evidence to keep: it
+  // is turned onto the axis the foot asks for, all the way (a Bandai run's first frame:
+  // 29.5 -> 2.5 cm). A later cold start (after a re-sync) follows the warm rule.
+  const bool first_ever = summary.cold_start && !s.ever_solved_;
   constexpr double kOntoTheAxisRad = 1e-6;
   if (options.unseen_knee_tolerance_rad > 0.0)
     summary.knees_turned = s.knee_swivel_.Update(
         skeleton, observed, weights,
-        summary.cold_start ? kOntoTheAxisRad : options.unseen_knee_tolerance_rad,
-        summary.cold_start ? 0.0 : options.unseen_knee_max_turn_rad, &s.pose_, &s.ws_,
-        &s.previous_);
+        first_ever ? kOntoTheAxisRad : options.unseen_knee_tolerance_rad,
+        first_ever ? 0.0 : options.unseen_knee_max_turn_rad, &s.pose_, &s.ws_, &s.previous_);
   if (summary.knees_turned > 0) EvaluateMarkers(markers, s.ws_, s.predicted_);
   summary.final_cost = cost;
   double sum_sq = 0.0;
@@ -813,6 +814,7 @@ IkSummary SolveIk(const Skeleton& skeleton, const MarkerSet& markers, const IkOp
   }
   summary.rms_residual_m = std::sqrt(sum_sq / summary.markers_used);
   s.history_ = std::min(s.history_ + 1, 2);
+  s.ever_solved_ = true;
   return summary;
 }
 

@@ -119,6 +119,7 @@ class IkState {
                             IkState*, Eigen::VectorXd*);
   Pose pose_, previous_, trial_, rest_, cold_best_;
   int history_ = 0;
+  bool ever_solved_ = false;  // kept through Reset(): has any pose left this state yet
   KinematicsWorkspace ws_, trial_ws_;
   std::vector<Vec3> predicted_, trial_predicted_, rest_markers_;
   std::vector<JointBlock> blocks_;
