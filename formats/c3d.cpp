@@ -343,9 +343,15 @@ class Parser {
         }
         Require(ok, "data", "truncated frame");
         const size_t idx = static_cast<size_t>(f) * used + p;
-        // A float residual holds an integer word; negative marks an invalid sample.
-        const bool valid = residual >= 0.0f && std::isfinite(xyz[0]) && std::isfinite(xyz[1]) &&
-                           std::isfinite(xyz[2]);
+        // A float residual holds an integer word; negative marks an invalid sample. So does
+        // a marker exactly at the origin: exporters write gaps as 0, 0, 0 with residual 0,
+        // and no capture puts a marker there to the last bit (a model output, an angle or
+        // a force, may well be zero).
+        const bool at_origin =
+            xyz[0] == 0.0 && xyz[1] == 0.0 && xyz[2] == 0.0 && take.model_output_kind[p].empty();
+        take.origin_samples_missing += at_origin && residual >= 0.0f;
+        const bool valid = residual >= 0.0f && !at_origin && std::isfinite(xyz[0]) &&
+                           std::isfinite(xyz[1]) && std::isfinite(xyz[2]);
         take.residuals[idx] = valid ? residual : -1.0f;
         if (valid) take.positions[idx] = Vec3(xyz[0], xyz[1], xyz[2]) * take.metres_per_unit;
       }

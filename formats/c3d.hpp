@@ -32,6 +32,9 @@ struct C3dTake {
   double metres_per_unit = 1e-3;  ///< Scale from file units to metres.
   int first_frame = 1;
   int num_frames = 0;
+  /// Marker samples the file marked valid at exactly (0, 0, 0), read as missing (how some
+  /// exporters write a gap).
+  int64_t origin_samples_missing = 0;
   std::string processor = "Intel";  ///< Intel, DEC or MIPS (informational).
   bool float_storage = true;
   /// positions[frame * num_points() + point], metres, world frame; NaN when missing.

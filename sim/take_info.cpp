@@ -31,6 +31,7 @@ TakeInfo InspectTake(const std::string& path) {
     info.rate_hz = take.rate_hz;
     info.units = take.units;
     info.processor = take.processor;
+    info.origin_samples_missing = take.origin_samples_missing;
     for (int p = 0; p < take.num_points(); ++p) {
       PointInfo pi;
       pi.label = take.labels[static_cast<size_t>(p)];
@@ -76,6 +77,9 @@ std::string FormatTakeInfo(const TakeInfo& info) {
   out += line;
   if (info.format == "c3d") {
     out += "  processor " + info.processor + "\n";
+    if (info.origin_samples_missing > 0)
+      out += "  " + std::to_string(info.origin_samples_missing) +
+             " marker samples at exactly (0, 0, 0) read as missing (an exporter's gaps)\n";
     std::snprintf(line, sizeof(line), "  %-24s %-8s %9s %6s %12s\n", "label", "kind", "missing%",
                   "gaps", "longest gap");
     out += line;
@@ -100,6 +104,7 @@ nlohmann::json TakeInfoJson(const TakeInfo& info) {
                       {"units", info.units}};
   if (info.format == "c3d") {
     j["processor"] = info.processor;
+    j["origin_samples_missing"] = info.origin_samples_missing;
     j["points"] = nlohmann::json::array();
     for (const PointInfo& p : info.points)
       j["points"].push_back({{"label", p.label},

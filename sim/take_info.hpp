@@ -23,9 +23,10 @@ struct TakeInfo {
   int frames = 0;
   double rate_hz = 0.0;
   std::string units;
-  std::string processor;            ///< C3D only
-  std::vector<PointInfo> points;    ///< C3D only
-  std::vector<std::string> joints;  ///< BVH only: "name (type)"
+  std::string processor;               ///< C3D only
+  std::vector<PointInfo> points;       ///< C3D only
+  int64_t origin_samples_missing = 0;  ///< C3D only: samples at (0, 0, 0) read as missing
+  std::vector<std::string> joints;     ///< BVH only: "name (type)"
   int end_sites = 0;
 };
 

@@ -216,6 +216,35 @@ TEST(C3dTest, FindsALabelUnderASubjectPrefixPaddingOrAnotherCase) {
   EXPECT_EQ(take.MatchingLabels("LBWT"), (std::vector<int>{0, 2}));
 }
 
+// Exporters write a gap as (0, 0, 0) with residual 0: a marker exactly at the origin is
+// missing, not a sample there (a calibration then rejected the whole limb around it). A
+// model output (an angle) of zero stays a value.
+TEST(C3dTest, AMarkerExactlyAtTheOriginIsMissing) {
+  for (const bool float_storage : {true, false}) {
+    C3dTake take = MakeTake(3, 10);
+    take.labels.push_back("LKneeAngles");
+    take.Allocate(10);
+    for (int f = 0; f < 10; ++f)
+      for (int p = 0; p < 4; ++p) {
+        take.at(f, p) = p == 0 ? Vec3::Zero() : Vec3(0.1 * (p + 1), 0.2, 0.3);
+        take.residuals[static_cast<size_t>(f * 4 + p)] = 0.0f;
+      }
+    take.at(4, 1) = Vec3::Zero();
+    take.model_output_kind[3] = "ANGLES";
+    for (int f = 0; f < 10; ++f) take.at(f, 3) = Vec3::Zero();
+    C3dEncoding encoding;
+    encoding.integer_storage = !float_storage;
+    const C3dTake read = ParseC3d(EncodeC3d(take, encoding), "zeros.c3d");
+    EXPECT_EQ(read.origin_samples_missing, 11) << float_storage;
+    for (int f = 0; f < 10; ++f) {
+      EXPECT_FALSE(read.valid(f, 0));
+      EXPECT_EQ(read.valid(f, 1), f != 4);
+      EXPECT_TRUE(read.valid(f, 2));
+      EXPECT_TRUE(read.valid(f, 3));  // an angle of zero
+    }
+  }
+}
+
 // TRIAL:ACTUAL_END_FIELD counts frames past the header's 65535; a cropping tool can leave
 // a stale one behind, longer than the header and the data. The header's count then
 // stands (the file was refused: "file ends inside frame 601 of 5000").
