@@ -6,7 +6,8 @@
 // least-squares IK on the character (thesis Algorithm 6, here the project's LM solver,
 // whose temporal prior toward the warm start is the DLS damping) makes
 //  - end-effector points (hands, feet, toes, head) track the actor's, positions scaled
-//    by the leg-length ratio (hip to ankle along the bones) about the floor origin;
+//    by the leg-length ratio (the pelvis's standing height, or hip to ankle along the
+//    bones for a rig whose rest pose does not stand) about the floor origin;
 //  - torso and limb points track the actor's surface normals (the blend mask), through
 //    a lever point one normal_lever_m out along each normal, anchored at the target
 //    joint's origin as the actor's motion moves it (so no lag and no self-feedback);
@@ -45,7 +46,7 @@ struct RetargetMap {
   std::vector<RetargetBone> bones;
   int source_root = 0;  ///< The pelvis joints.
   int target_root = 0;
-  double source_leg_length_m = 1.0;  ///< Hip to ankle along the leg's bones.
+  double source_leg_length_m = 1.0;  ///< Pelvis standing height, or hip to ankle (bones).
   double target_leg_length_m = 1.0;
   std::array<int, 2> source_ankles{-1, -1};  ///< Per side, for contact detection.
   std::array<int, 2> target_ankles{-1, -1};  ///< Per side: where a planted foot is held.

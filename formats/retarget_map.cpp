@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <set>
 #include <stdexcept>
+#include <tuple>
 
 #include "formats/marker_layout.hpp"
 
@@ -37,12 +38,7 @@ const char* RegionName(RetargetRegion r) {
                                            : "normals (limb)";
 }
 
-// The leg's length along its bones, hip to ankle, averaged over both legs: the scale of
-// the actor's positions onto the character. Along the bones, not as a height in the rest
-// pose: a rig's rest pose need not stand (Bandai's, all rotations zero, folds its legs to
-// 6.5 cm), and its pelvis's height above the floor origin is wherever the file put it (a
-// one-frame character file: where the take starts; the same rig with its animation: its
-// OFFSET), which gave one rig two scales.
+// The leg's length along its bones, hip to ankle, averaged over both legs.
 double LegLength(const Skeleton& sk, const HumanoidRoles& roles, const char* which) {
   double total = 0.0;
   int legs = 0;
@@ -65,6 +61,55 @@ double LegLength(const Skeleton& sk, const HumanoidRoles& roles, const char* whi
     throw std::invalid_argument(std::string("retarget: the ") + which +
                                 " has no leg from a hip (thigh) down to an ankle (foot)");
   return total / legs;
+}
+
+// The pelvis's rest height above the lowest joint or End Site below it: hip drop, leg and
+// ankle height, what the pelvis stands at. Only the pelvis's own subtree counts: a joint
+// above it (Bandai's joint_Root at the floor origin) is no part of a leg, and counting it
+// made this the pelvis's height above that origin, wherever the file put it (a one-frame
+// character file: where the take starts; the same rig animated: its OFFSET).
+double StandingHeight(const Skeleton& sk, const KinematicsWorkspace& rest,
+                      std::span<const BvhEndSite> end_sites, int pelvis) {
+  std::vector<uint8_t> below(static_cast<size_t>(sk.num_joints()), 0);
+  below[static_cast<size_t>(pelvis)] = 1;
+  double lowest = rest.p_WJ[static_cast<size_t>(pelvis)].y();
+  for (int j = pelvis + 1; j < sk.num_joints(); ++j) {  // parents come before children
+    const JointIndex parent = sk.joint(j).parent;
+    if (!parent.is_valid() || !below[static_cast<size_t>(parent.value)]) continue;
+    below[static_cast<size_t>(j)] = 1;
+    lowest = std::min(lowest, rest.p_WJ[static_cast<size_t>(j)].y());
+  }
+  for (const BvhEndSite& e : end_sites)
+    if (below[static_cast<size_t>(e.parent)])
+      lowest = std::min(lowest, Vec3(rest.R_WJ[static_cast<size_t>(e.parent)] * e.offset +
+                                     rest.p_WJ[static_cast<size_t>(e.parent)])
+                                    .y());
+  return rest.p_WJ[static_cast<size_t>(pelvis)].y() - lowest;
+}
+
+// The scale of the actor's positions onto the character, as two lengths. Where both rigs
+// stand in their rest poses, the pelvis's standing height (hip drop and ankle height
+// included: the pelvis is placed at the actor's scaled by it, and with the legs alone a
+// character with proportionally longer legs stood on overstretched ones and its planted
+// feet slid 7 mm). A rest pose need not stand (Bandai's, all rotations zero, folds its
+// legs to 6.5 cm): then both are measured along the legs' bones, hip to ankle.
+std::pair<double, double> ScaleLengths(const Skeleton& source, const HumanoidRoles& source_roles,
+                                       const KinematicsWorkspace& source_rest,
+                                       std::span<const BvhEndSite> source_end_sites,
+                                       const Skeleton& target, const HumanoidRoles& target_roles,
+                                       const KinematicsWorkspace& target_rest,
+                                       std::span<const BvhEndSite> target_end_sites) {
+  const double source_legs = LegLength(source, source_roles, "actor");
+  const double target_legs = LegLength(target, target_roles, "character");
+  const double source_standing = StandingHeight(source, source_rest, source_end_sites,
+                                                source_roles.joint_of_role.at("pelvis"));
+  const double target_standing = StandingHeight(target, target_rest, target_end_sites,
+                                                target_roles.joint_of_role.at("pelvis"));
+  // Standing: the pelvis at least as high above its lowest point as the legs are long
+  // (less 10 %, for a rig whose knees are a little bent at rest).
+  if (source_standing >= 0.9 * source_legs && target_standing >= 0.9 * target_legs)
+    return {source_standing, target_standing};
+  return {source_legs, target_legs};
 }
 
 double Height(const KinematicsWorkspace& rest) {
@@ -102,8 +147,9 @@ RetargetMap MakeRetargetMap(const Skeleton& source, std::span<const BvhEndSite> 
   RetargetMap map;
   map.source_root = source_roles.joint_of_role.at("pelvis");
   map.target_root = target_roles.joint_of_role.at("pelvis");
-  map.source_leg_length_m = LegLength(source, source_roles, "actor");
-  map.target_leg_length_m = LegLength(target, target_roles, "character");
+  std::tie(map.source_leg_length_m, map.target_leg_length_m) =
+      ScaleLengths(source, source_roles, source_rest, source_end_sites, target, target_roles,
+                   target_rest, target_end_sites);
   map.source_ankles = {source_roles.joint_of_role.at("foot_l"),
                        source_roles.joint_of_role.at("foot_r")};
   map.target_ankles = {target_roles.joint_of_role.at("foot_l"),

@@ -6,12 +6,14 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <stdexcept>
 
 #include "filters/resample.hpp"
 #include "formats/bvh.hpp"
 #include "formats/c3d.hpp"
+#include "formats/marker_set.hpp"
 #include "formats/subject_file.hpp"
 #include "formats/subject_from_markers.hpp"
 
@@ -44,6 +46,16 @@ int CalibrateFromMarkersOnly(const CalibrateCommandOptions& options, std::ostrea
     out << ", " << cal.studio_markers.size() << " of the studio's own";
   out << "); " << cal.skipped.size() << " channels skipped; " << r.frames_used.size()
       << " varied poses solved in " << r.iterations << " iterations\n";
+  // The calibration takes the first point of a label; a second one is an exporter's merge
+  // or a labelling mistake the user should hear of.
+  for (size_t k = 0; k < takes.size(); ++k) {
+    std::map<std::string, int> points_of_label;
+    for (const std::string& label : takes[k].labels) ++points_of_label[BareLabel(label)];
+    for (const auto& [label, points] : points_of_label)
+      if (points > 1)
+        out << "  warning: " << options.markers_c3d[k] << ": " << points << " points are labelled "
+            << label << "; the first is used\n";
+  }
   if (!cal.set_missing.empty()) {
     out << "  the set's markers missing from the take:";
     for (const std::string& m : cal.set_missing) out << " " << m;

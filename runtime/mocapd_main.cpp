@@ -103,6 +103,10 @@ int main(int argc, char** argv) {
                    "The take's true motion (mocap-sim synth --truth-bvh): report and plot the "
                    "joint error")
       ->check(CLI::ExistingFile);
+  proc_cmd->add_option("--truth-units", proc.truth_units,
+                       "The truth BVH's length unit: mm, cm, m or in (default: guessed from its "
+                       "bones, which cannot tell in from cm; mocap-sim synth writes the truth in "
+                       "the subject's bvh_units)");
   std::vector<std::string> joint_map_args;
   proc_cmd
       ->add_option("--joint-map", joint_map_args,

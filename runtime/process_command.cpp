@@ -117,7 +117,9 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
   std::vector<std::pair<int, int>> truth_joints;  // (solved, truth)
   std::string truth_matched_by;
   if (!options.truth_bvh.empty()) {
-    truth = ReadBvh(options.truth_bvh);
+    BvhReadOptions truth_read;
+    truth_read.units = options.truth_units;
+    truth = ReadBvh(options.truth_bvh, truth_read);
     // Paired frame by frame: a truth of another length is another take (or rate).
     if (truth->num_frames() != take.num_frames)
       throw std::runtime_error(options.truth_bvh + ": " + std::to_string(truth->num_frames()) +

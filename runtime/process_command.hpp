@@ -32,6 +32,9 @@ struct ProcessCommandOptions {
   /// The take's true motion (mocap-sim synth --truth-bvh), frame for frame: the joint
   /// error over time is plotted and summarised. Empty: none.
   std::string truth_bvh;
+  /// The truth BVH's length unit (mm, cm, m, in); empty: guessed from its bones, which
+  /// cannot tell inches from centimetres.
+  std::string truth_units;
 };
 
 struct ProcessSummary {

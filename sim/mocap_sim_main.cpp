@@ -53,6 +53,10 @@ int RunSynth(const SynthOptions& o) {
     mocapd::BvhReadOptions read;
     read.units = o.bvh_units;
     source = mocapd::ReadBvh(o.bvh, read);
+    if (source.frames.empty())
+      throw std::runtime_error(o.bvh +
+                               ": the take has no frames (Frames: 0): no motion to place "
+                               "markers on");
   } else {
     const double rate = o.rate_hz > 0 ? o.rate_hz : 120.0;
     mocapd::Skeleton sk = mocapd::MakeHumanoidSkeleton();

@@ -118,6 +118,23 @@ TEST(CalibrateCommandTest, FailsWithoutWritingWhenMostMarkersDoNotFit) {
 // A capture whose labels belong to no set (here the default layout's markers renamed
 // P0, P1, ... and the world turned Z-up): the command places them by clustering, says so,
 // lists where each marker went, and writes a subject that fits them.
+// Two points under one label: the calibration takes the first, and says so.
+TEST(CalibrateCommandTest, WarnsOfALabelGivenToTwoPoints) {
+  const auto f = testing::MakeHumanoidFixture("mixed", 12.0, 60.0, 0.001);
+  const std::string dir = testing::TempDir("calibrate_duplicate");
+  C3dTake doubled = testing::WithALabelGivenTwice(f.take, 3);
+  WriteC3d(dir + "/take.c3d", doubled);
+  CalibrateCommandOptions options;
+  options.markers_c3d = {dir + "/take.c3d"};
+  options.out_subject = dir + "/actor.toml";
+  std::ostringstream out;
+  RunCalibrateCommand(options, out);
+  EXPECT_NE(out.str().find("warning: " + dir + "/take.c3d: 2 points are labelled " +
+                           f.take.labels[3] + "; the first is used"),
+            std::string::npos)
+      << out.str();
+}
+
 TEST(CalibrateCommandTest, LabelsOfNoSetAreCalibratedByClusteringAlone) {
   const auto f = testing::MakeHumanoidFixture("mixed", 12.0, 60.0, 0.001);
   const std::string dir = testing::TempDir("calibrate_clustering");

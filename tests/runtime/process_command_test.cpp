@@ -138,14 +138,7 @@ TEST(ProcessCommandTest, WarnsOfALabelGivenToTwoPointsOrMatchingTwoSubjects) {
   const auto f = testing::MakeHumanoidFixture("walk", 1.0, 60.0);
   const std::string dir = testing::TempDir("process_duplicate");
   WriteFixtureSubject(f, dir + "/actor.toml");
-  C3dTake doubled = f.take;
-  doubled.labels.push_back(f.take.labels[3]);
-  doubled.Allocate(f.take.num_frames);
-  for (int fr = 0; fr < f.take.num_frames; ++fr) {
-    for (int p = 0; p < f.take.num_points(); ++p) doubled.at(fr, p) = f.take.at(fr, p);
-    doubled.at(fr, f.take.num_points()) = f.take.at(fr, 3) + Vec3(0.3, 0.0, 0.0);
-  }
-  std::fill(doubled.residuals.begin(), doubled.residuals.end(), 0.0f);
+  C3dTake doubled = testing::WithALabelGivenTwice(f.take, 3);
   WriteC3d(dir + "/take.c3d", doubled);
   ProcessCommandOptions options = OptionsIn(dir);
   std::ostringstream out;
@@ -212,6 +205,25 @@ TEST(ProcessCommandTest, FramesBeforeTheSubjectIsSeenHoldItsFirstSolvedPose) {
 // --plot draws what the cleanup did: every marker's row with the repairs it made, the
 // solve over time, and with the truth (what mocap-sim synth --truth-bvh writes) the
 // joint error over time, reported too.
+// A truth written in inches (mocap-sim synth writes it in the subject's bvh_units) is
+// read in inches when told: from its bones alone an inch file looks like centimetres,
+// and the error against it was 127 cm.
+TEST(ProcessCommandTest, ATruthInInchesIsReadInInchesWhenTold) {
+  const auto f = testing::MakeHumanoidFixture("walk", 2.0, 120.0);
+  const std::string dir = testing::TempDir("process_truth_units");
+  WriteFixtureSubject(f, dir + "/actor.toml");
+  WriteC3d(dir + "/take.c3d", f.take);
+  WriteBvh(dir + "/truth.bvh", MakeBvhTake(*f.skeleton, f.motion, 1.0 / 120.0, "in"));
+  ProcessCommandOptions options = OptionsIn(dir);
+  options.truth_bvh = dir + "/truth.bvh";
+  std::ostringstream out;
+  EXPECT_GT(RunProcessCommand(options, out).truth_mean_cm, 10.0);  // guessed as cm
+  options.truth_units = "in";
+  EXPECT_LT(RunProcessCommand(options, out).truth_mean_cm, 1.0);
+  options.truth_units = "furlongs";
+  EXPECT_THROW(RunProcessCommand(options, out), BvhError);
+}
+
 TEST(ProcessCommandTest, PlotsShowEveryMarkerTheSolveAndTheErrorAgainstTheTruth) {
   const auto f = testing::MakeHumanoidFixture("walk", 4.0, 120.0);
   const std::string dir = testing::TempDir("process_plot");

@@ -2,6 +2,7 @@
 #include "tests/support/test_takes.hpp"
 
 #include <unistd.h>
+#include <algorithm>
 #include <filesystem>
 #include <random>
 
@@ -30,6 +31,18 @@ std::string TempDir(const std::string& name) {
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
   return dir.string();
+}
+
+C3dTake WithALabelGivenTwice(const C3dTake& take, int point) {
+  C3dTake doubled = take;
+  doubled.labels.push_back(take.labels[static_cast<size_t>(point)]);
+  doubled.Allocate(take.num_frames);
+  for (int fr = 0; fr < take.num_frames; ++fr) {
+    for (int p = 0; p < take.num_points(); ++p) doubled.at(fr, p) = take.at(fr, p);
+    doubled.at(fr, take.num_points()) = take.at(fr, point) + Vec3(0.3, 0.0, 0.0);
+  }
+  std::fill(doubled.residuals.begin(), doubled.residuals.end(), 0.0f);
+  return doubled;
 }
 
 }  // namespace mocapd::testing

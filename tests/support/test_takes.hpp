@@ -24,4 +24,8 @@ HumanoidFixture MakeHumanoidFixture(const char* motion, double seconds, double r
 /// A unique empty directory under the build tree for files a test writes.
 std::string TempDir(const std::string& name);
 
+/// The take with one more point under point's label, 30 cm beside it (every sample valid):
+/// a label given to two points.
+C3dTake WithALabelGivenTwice(const C3dTake& take, int point);
+
 }  // namespace mocapd::testing
