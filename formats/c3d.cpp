@@ -3,7 +3,6 @@
 #include "formats/c3d.hpp"
 
 #include <algorithm>
-#include <cctype>
 #include <cmath>
 #include <cstring>
 #include <fstream>

@@ -193,16 +193,15 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
             : frame.reason[m] == MaskReason::kNone            ? 12
                                                    : static_cast<uint8_t>(frame.reason[m]);
     }
-    if (frame.final_solve.status != IkStatus::kConverged &&
-        frame.final_solve.status != IkStatus::kMaxIterations) {
+    const bool solved_here = frame.final_solve.status == IkStatus::kConverged ||
+                             frame.final_solve.status == IkStatus::kMaxIterations;
+    if (!solved_here) {
       ++summary.unsolved_frames;
       if (!first_solved) ++summary.frames_before_first_solve;
     } else if (!first_solved) {
       first_solved = f;
     }
     // An unsolved frame's pose is a held one, not a fit: no residual to report.
-    const bool solved_here = frame.final_solve.status == IkStatus::kConverged ||
-                             frame.final_solve.status == IkStatus::kMaxIterations;
     for (size_t m = 0; m < observed.size() && solved_here; ++m) {
       if (frame.status[m] != MarkerStatus::kObserved) continue;
       const double r =
@@ -242,7 +241,7 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
   draw_progress(take.num_frames);
   if (options.progress) out << "\n";
 
-  if (take.num_frames > 0 && !first_solved)
+  if (!first_solved)
     throw std::runtime_error(options.input_c3d + ": no frame of " +
                              std::to_string(take.num_frames) + " shows enough of the " +
                              std::to_string(map.matched()) +
