@@ -14,6 +14,7 @@
 
 #include "filters/rotation.hpp"
 #include "formats/c3d.hpp"
+#include "formats/marker_layout.hpp"
 
 namespace mocapd {
 namespace {
@@ -418,6 +419,7 @@ BvhTake MakeBvhTake(Skeleton skeleton, std::vector<Pose> frames, double frame_ti
     take.channels.push_back(DefaultChannels(j.type));
     take.file_offsets.push_back(j.offset);
   }
+  take.end_sites = NominalLeafEndSites(skeleton);
   take.skeleton = std::move(skeleton);
   take.frames = std::move(frames);
   return take;

@@ -64,7 +64,9 @@ std::string FormatBvh(const BvhTake& take);
 /// Writes a take. Throws std::runtime_error if the file cannot be written.
 void WriteBvh(const std::string& path, const BvhTake& take);
 
-/// Builds a take around a skeleton with default channel layouts and no end sites.
+/// Builds a take around a skeleton with default channel layouts, every leaf joint closed
+/// by an End Site (NominalLeafEndSites: readers and DCC tools expect one, and draw a
+/// leaf's bone to it).
 BvhTake MakeBvhTake(Skeleton skeleton, std::vector<Pose> frames, double frame_time_s,
                     const std::string& units = "cm");
 

@@ -87,11 +87,36 @@ std::string RoleOfName(const std::string& bare) {
   return "";
 }
 
+// Roles found by joint names alone; the first joint (closest to the root) wins.
+std::map<std::string, int> RolesByName(const Skeleton& skeleton) {
+  std::map<std::string, int> joint_of_role;
+  for (int j = 0; j < skeleton.num_joints(); ++j) {
+    const auto [side, bare] = SplitSide(skeleton.joint(j).name);
+    const std::string base = RoleOfName(bare);
+    if (base.empty()) continue;
+    const bool sided = base != "pelvis" && base != "head" && base != "neck";
+    if (sided && side == 0) continue;
+    joint_of_role.emplace(sided ? base + "_" + side : base, j);
+  }
+  return joint_of_role;
+}
+
+// The rest pose's extent, for nominal end-segment lengths.
+double RestHeight(const KinematicsWorkspace& rest) {
+  double lo = 1e300, hi = -1e300;
+  for (const Vec3& p : rest.p_WJ) {
+    lo = std::min(lo, p.minCoeff());
+    hi = std::max(hi, p.maxCoeff());
+  }
+  return std::max(0.5, std::min(2.5, hi - lo));
+}
+
 }  // namespace
 
 Vec3 SegmentBoneWorld(const Skeleton& skeleton, const HumanoidRoles& roles,
                       const KinematicsWorkspace& rest, std::span<const BvhEndSite> end_sites,
-                      const std::string& role, int joint, double height) {
+                      const std::string& role, int joint, double height, bool* is_nominal) {
+  if (is_nominal != nullptr) *is_nominal = false;
   static const std::map<std::string, std::string> kNext = {
       {"clavicle", "upper_arm"}, {"upper_arm", "forearm"}, {"forearm", "hand"}, {"thigh", "shin"},
       {"shin", "foot"},          {"foot", "toe"},          {"neck", "head"}};
@@ -123,6 +148,7 @@ Vec3 SegmentBoneWorld(const Skeleton& skeleton, const HumanoidRoles& roles,
   for (const BvhEndSite& e : end_sites)
     if (e.parent == joint && e.offset.norm() > 1e-6) return rest.R_WJ[uj] * e.offset;
   // Zero-length end segment: continue the parent's bone with a nominal length.
+  if (is_nominal != nullptr) *is_nominal = true;
   const double nominal = base == "head"   ? 0.10
                          : base == "hand" ? 0.06
                          : base == "toe"  ? 0.04
@@ -215,15 +241,7 @@ std::string HumanoidRoles::Describe(const Skeleton& skeleton) const {
 
 HumanoidRoles MatchHumanoidRoles(const Skeleton& skeleton) {
   HumanoidRoles roles;
-  for (int j = 0; j < skeleton.num_joints(); ++j) {
-    const auto [side, bare] = SplitSide(skeleton.joint(j).name);
-    const std::string base = RoleOfName(bare);
-    if (base.empty()) continue;
-    const bool sided = base != "pelvis" && base != "head" && base != "neck";
-    if (sided && side == 0) continue;
-    const std::string role = sided ? base + "_" + side : base;
-    roles.joint_of_role.emplace(role, j);  // the first (closest to the root) wins
-  }
+  roles.joint_of_role = RolesByName(skeleton);
   if (!roles.joint_of_role.count("pelvis")) {
     for (int j = 0; j < skeleton.num_joints(); ++j) {
       if (skeleton.joint(j).type == JointType::kFree) {
@@ -265,13 +283,7 @@ std::vector<MarkerDefinition> PlaceMarkers(const Skeleton& skeleton, const Human
                                            std::span<const BvhEndSite> end_sites) {
   KinematicsWorkspace rest(skeleton);
   ForwardKinematics(skeleton, RestPose(skeleton), &rest);
-  // Height estimate, for nominal end-segment lengths.
-  double lo = 1e300, hi = -1e300;
-  for (const Vec3& p : rest.p_WJ) {
-    lo = std::min(lo, p.minCoeff());
-    hi = std::max(hi, p.maxCoeff());
-  }
-  const double height = std::max(0.5, std::min(2.5, hi - lo));
+  const double height = RestHeight(rest);
   std::vector<MarkerDefinition> out;
   for (const LayoutMarker& lm : layout) {
     std::string role = lm.segment;
@@ -318,6 +330,27 @@ std::vector<MarkerDefinition> PlaceMarkers(const Skeleton& skeleton, const Human
     out.push_back(def);
   }
   return out;
+}
+
+std::vector<BvhEndSite> NominalLeafEndSites(const Skeleton& skeleton) {
+  KinematicsWorkspace rest(skeleton);
+  ForwardKinematics(skeleton, RestPose(skeleton), &rest);
+  HumanoidRoles roles;
+  roles.joint_of_role = RolesByName(skeleton);
+  const double height = RestHeight(rest);
+  std::vector<uint8_t> has_child(static_cast<size_t>(skeleton.num_joints()), 0);
+  for (const Joint& j : skeleton.joints())
+    if (j.parent.is_valid()) has_child[static_cast<size_t>(j.parent.value)] = 1;
+  std::vector<BvhEndSite> sites;
+  for (int j = 0; j < skeleton.num_joints(); ++j) {
+    if (has_child[static_cast<size_t>(j)]) continue;
+    std::string role;
+    for (const auto& [r, jr] : roles.joint_of_role)
+      if (jr == j) role = r;
+    const Vec3 bone = SegmentBoneWorld(skeleton, roles, rest, {}, role, j, height);
+    sites.push_back({j, rest.R_WJ[static_cast<size_t>(j)].transpose() * bone});
+  }
+  return sites;
 }
 
 }  // namespace mocapd

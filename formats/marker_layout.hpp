@@ -47,9 +47,17 @@ HumanoidRoles MatchHumanoidRoles(const Skeleton& skeleton);
 /// The bone of a role's segment: the vector, in the rest pose's world frame, from the
 /// role's joint to where its segment ends (the next joint along the limb or spine, an End
 /// Site, or a nominal length along the parent's bone scaled by height / 1.75 m).
+/// is_nominal (if given) is set to whether it is that nominal guess.
 Vec3 SegmentBoneWorld(const Skeleton& skeleton, const HumanoidRoles& roles,
                       const KinematicsWorkspace& rest, std::span<const BvhEndSite> end_sites,
-                      const std::string& role, int joint, double height);
+                      const std::string& role, int joint, double height, bool* nominal = nullptr);
+
+/// One End Site per leaf joint (a joint with no child), continuing its segment as
+/// SegmentBoneWorld would with no End Site: the nominal length of a head, hand, toe or
+/// foot (0.08 m otherwise) scaled by the rest pose's height, along its parent's bone. A
+/// BVH closes every leaf with one, and read back these give the same marker placement as
+/// having none. Never throws: a skeleton that is no humanoid gets the 0.08 m length.
+std::vector<BvhEndSite> NominalLeafEndSites(const Skeleton& skeleton);
 
 /// Places a layout on the skeleton's rest pose. end_sites (may be empty) give bone
 /// directions for end segments. Throws std::invalid_argument naming the marker whose

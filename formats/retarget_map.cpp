@@ -63,13 +63,19 @@ double LegLength(const Skeleton& sk, const HumanoidRoles& roles, const char* whi
   return total / legs;
 }
 
-// The pelvis's rest height above the lowest joint or End Site below it: hip drop, leg and
-// ankle height, what the pelvis stands at. Only the pelvis's own subtree counts: a joint
-// above it (Bandai's joint_Root at the floor origin) is no part of a leg, and counting it
-// made this the pelvis's height above that origin, wherever the file put it (a one-frame
-// character file: where the take starts; the same rig animated: its OFFSET).
-double StandingHeight(const Skeleton& sk, const KinematicsWorkspace& rest,
-                      std::span<const BvhEndSite> end_sites, int pelvis) {
+// The pelvis's rest height above the lowest joint below it, or below a foot with no toe
+// joint its End Site: hip drop, leg and ankle height, what the pelvis stands at. Only the
+// pelvis's own subtree counts: a joint above it (Bandai's joint_Root at the floor origin)
+// is no part of a leg, and counting it made this the pelvis's height above that origin,
+// wherever the file put it (a one-frame character file: where the take starts; the same
+// rig animated: its OFFSET). A toe's End Site does not count: the ball of the foot is
+// what stands, and a tip a file (or NominalLeafEndSites, continuing the foot's slope) puts
+// lower would make one rig stand at two heights, with End Sites and without. A foot with
+// no End Site stands on the one a BVH writer gives it (NominalLeafEndSites), for the same
+// reason.
+double StandingHeight(const Skeleton& sk, const HumanoidRoles& roles,
+                      const KinematicsWorkspace& rest, std::span<const BvhEndSite> end_sites) {
+  const int pelvis = roles.joint_of_role.at("pelvis");
   std::vector<uint8_t> below(static_cast<size_t>(sk.num_joints()), 0);
   below[static_cast<size_t>(pelvis)] = 1;
   double lowest = rest.p_WJ[static_cast<size_t>(pelvis)].y();
@@ -79,11 +85,26 @@ double StandingHeight(const Skeleton& sk, const KinematicsWorkspace& rest,
     below[static_cast<size_t>(j)] = 1;
     lowest = std::min(lowest, rest.p_WJ[static_cast<size_t>(j)].y());
   }
+  auto is_foot_leaf = [&](int j) {
+    for (const char* foot : {"foot_l", "foot_r"})
+      if (const auto f = roles.joint_of_role.find(foot);
+          f != roles.joint_of_role.end() && f->second == j && below[static_cast<size_t>(j)] &&
+          sk.children(j).empty())
+        return true;
+    return false;
+  };
+  std::vector<BvhEndSite> soles;
   for (const BvhEndSite& e : end_sites)
-    if (below[static_cast<size_t>(e.parent)])
-      lowest = std::min(lowest, Vec3(rest.R_WJ[static_cast<size_t>(e.parent)] * e.offset +
-                                     rest.p_WJ[static_cast<size_t>(e.parent)])
-                                    .y());
+    if (is_foot_leaf(e.parent)) soles.push_back(e);
+  for (const BvhEndSite& nominal : NominalLeafEndSites(sk))
+    if (is_foot_leaf(nominal.parent) &&
+        std::none_of(end_sites.begin(), end_sites.end(),
+                     [&](const BvhEndSite& e) { return e.parent == nominal.parent; }))
+      soles.push_back(nominal);
+  for (const BvhEndSite& e : soles)
+    lowest = std::min(lowest, Vec3(rest.R_WJ[static_cast<size_t>(e.parent)] * e.offset +
+                                   rest.p_WJ[static_cast<size_t>(e.parent)])
+                                  .y());
   return rest.p_WJ[static_cast<size_t>(pelvis)].y() - lowest;
 }
 
@@ -101,10 +122,10 @@ std::pair<double, double> ScaleLengths(const Skeleton& source, const HumanoidRol
                                        std::span<const BvhEndSite> target_end_sites) {
   const double source_legs = LegLength(source, source_roles, "actor");
   const double target_legs = LegLength(target, target_roles, "character");
-  const double source_standing = StandingHeight(source, source_rest, source_end_sites,
-                                                source_roles.joint_of_role.at("pelvis"));
-  const double target_standing = StandingHeight(target, target_rest, target_end_sites,
-                                                target_roles.joint_of_role.at("pelvis"));
+  const double source_standing =
+      StandingHeight(source, source_roles, source_rest, source_end_sites);
+  const double target_standing =
+      StandingHeight(target, target_roles, target_rest, target_end_sites);
   // Standing: the pelvis at least as high above its lowest point as the legs are long
   // (less 10 %, for a rig whose knees are a little bent at rest).
   if (source_standing >= 0.9 * source_legs && target_standing >= 0.9 * target_legs)
@@ -167,10 +188,21 @@ RetargetMap MakeRetargetMap(const Skeleton& source, std::span<const BvhEndSite> 
     bone.role = spec.role;
     bone.source_joint = s->second;
     bone.target_joint = t->second;
+    bool source_nominal = false, target_nominal = false;
     bone.source_bone = SegmentBoneWorld(source, source_roles, source_rest, source_end_sites,
-                                        spec.role, s->second, source_height);
+                                        spec.role, s->second, source_height, &source_nominal);
     bone.target_bone = SegmentBoneWorld(target, target_roles, target_rest, target_end_sites,
-                                        spec.role, t->second, target_height);
+                                        spec.role, t->second, target_height, &target_nominal);
+    // An end segment one rig's file closes with an End Site and the other's leaves open
+    // (a subject has none, a character file has them): the open one is as long as the
+    // closed one, scaled. Its nominal length would place the end effector's surface
+    // points off the other rig's, and the IK pulls the hand or head after them (a
+    // character written with End Sites and read back stood 1.3 cm off the same rig).
+    const double scale = map.target_leg_length_m / map.source_leg_length_m;
+    if (source_nominal && !target_nominal)
+      bone.source_bone = bone.source_bone.normalized() * (bone.target_bone.norm() / scale);
+    if (target_nominal && !source_nominal)
+      bone.target_bone = bone.target_bone.normalized() * (bone.source_bone.norm() * scale);
     bone.region = spec.region;
     bone.foot_side = spec.foot_side;
     map.bones.push_back(bone);

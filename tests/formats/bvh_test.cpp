@@ -7,6 +7,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "formats/marker_layout.hpp"
 #include "sim/humanoid.hpp"
 
 namespace mocapd {
@@ -131,6 +132,48 @@ TEST(BvhTest, ASkeletonStoredBreadthFirstRoundTripsThroughBvh) {
       ASSERT_LT((a[f][static_cast<size_t>(j)] - b[f][static_cast<size_t>(k)]).norm(), 1e-6)
           << take.skeleton.joint(j).name << " frame " << f;
   }
+}
+
+// Every BVH writer closes a leaf joint with an End Site, and tools draw the leaf's bone
+// to it; ours wrote a leaf's block with none. The End Sites continue each end segment by
+// the nominal length marker placement assumes without one, so read back they place every
+// marker where the skeleton alone did.
+TEST(BvhTest, EveryLeafJointIsClosedByAnEndSiteThatKeepsMarkerPlacement) {
+  const Skeleton sk = MakeHumanoidSkeleton();
+  const BvhTake again =
+      ParseBvh(FormatBvh(MakeBvhTake(sk, {RestPose(sk)}, 1.0 / 30.0, "cm")), "written.bvh");
+  std::vector<int> children(static_cast<size_t>(sk.num_joints()), 0);
+  for (const Joint& j : sk.joints())
+    if (j.parent.is_valid()) ++children[static_cast<size_t>(j.parent.value)];
+  int leaves = 0;
+  for (int j = 0; j < sk.num_joints(); ++j) {
+    if (children[static_cast<size_t>(j)] > 0) continue;
+    ++leaves;
+    const auto site = std::find_if(again.end_sites.begin(), again.end_sites.end(),
+                                   [&](const BvhEndSite& e) { return e.parent == j; });
+    ASSERT_NE(site, again.end_sites.end()) << sk.joint(j).name << " has no End Site";
+    EXPECT_GT(site->offset.norm(), 0.02) << sk.joint(j).name;
+    EXPECT_LT(site->offset.norm(), 0.2) << sk.joint(j).name;
+  }
+  EXPECT_EQ(static_cast<int>(again.end_sites.size()), leaves);
+  const HumanoidRoles roles = MatchHumanoidRoles(sk);
+  const auto bare = PlaceMarkers(sk, roles, DefaultMarkerLayout(), {});
+  const auto with_sites = PlaceMarkers(again.skeleton, MatchHumanoidRoles(again.skeleton),
+                                       DefaultMarkerLayout(), again.end_sites);
+  ASSERT_EQ(bare.size(), with_sites.size());
+  for (size_t m = 0; m < bare.size(); ++m)
+    for (int a = 0; a < bare[m].num_attachments; ++a)
+      EXPECT_LT((bare[m].attachments[static_cast<size_t>(a)].offset -
+                 with_sites[m].attachments[static_cast<size_t>(a)].offset)
+                    .norm(),
+                1e-6)
+          << bare[m].name;
+  // A skeleton that is no humanoid still gets its End Sites.
+  const Skeleton stick({Joint{.name = "root", .parent = {}, .type = JointType::kFree},
+                        Joint{.name = "tip", .parent = JointIndex(0), .offset = Vec3(0, 0.3, 0)}});
+  EXPECT_EQ(ParseBvh(FormatBvh(MakeBvhTake(stick, {RestPose(stick)}, 1.0 / 30.0)), "stick.bvh")
+                .end_sites.size(),
+            1u);
 }
 
 // Exporters often write the take's start position into the hips' OFFSET (here 4 m away
