@@ -17,14 +17,17 @@ struct Capsule {
 };
 
 // The capsule of a bone in the rest pose's world frame. The angle around the bone is
-// measured from the world's forward axis (from the side axis for bones that point
-// forward), so both rigs -- in the same rest orientation -- agree on it.
-Capsule MakeCapsule(const Vec3& origin, const Vec3& bone, double radius_fraction) {
+// measured from the body's forward (from its left for bones that point forward), so both
+// rigs agree on it whichever way each rest pose faces. Measured from the world's axes, a
+// character facing another way, standing on +Z, or whose rest pose faces its chest and
+// hips different ways (Bandai's, all rotations zero) had its chest turned 90 degrees.
+Capsule MakeCapsule(const Vec3& origin, const Vec3& bone, double radius_fraction,
+                    const Vec3& forward, const Vec3& left) {
   Capsule c;
   c.origin = origin;
   c.length = std::max(bone.norm(), 1e-4);
   c.axis = bone / c.length;
-  Vec3 reference = std::abs(c.axis.dot(Vec3::UnitZ())) < 0.9 ? Vec3::UnitZ() : Vec3::UnitX();
+  const Vec3 reference = std::abs(c.axis.dot(forward)) < 0.9 ? forward : left;
   c.e1 = (reference - reference.dot(c.axis) * c.axis).normalized();
   c.e2 = c.axis.cross(c.e1);
   c.radius = std::clamp(radius_fraction * c.length, 0.02, 0.12);
@@ -124,9 +127,11 @@ Retargeter::Retargeter(std::shared_ptr<const Skeleton> source,
     const auto js = static_cast<size_t>(bone.source_joint),
                jt = static_cast<size_t>(bone.target_joint);
     const Capsule cs =
-        MakeCapsule(source_rest.p_WJ[js], bone.source_bone, options_.surface_radius_fraction);
+        MakeCapsule(source_rest.p_WJ[js], bone.source_bone, options_.surface_radius_fraction,
+                    bone.source_forward, bone.source_left);
     const Capsule ct =
-        MakeCapsule(target_rest.p_WJ[jt], bone.target_bone, options_.surface_radius_fraction);
+        MakeCapsule(target_rest.p_WJ[jt], bone.target_bone, options_.surface_radius_fraction,
+                    bone.target_forward, bone.target_left);
     const bool positions = bone.region == RetargetRegion::kEndEffector;
     const double weight = (positions                               ? options_.end_effector_weight
                            : bone.region == RetargetRegion::kTorso ? options_.torso_weight

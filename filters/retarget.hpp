@@ -38,6 +38,11 @@ struct RetargetBone {
   int target_joint = -1;
   Vec3 source_bone = Vec3::UnitY();  ///< Rest pose, world frame: joint origin to segment end.
   Vec3 target_bone = Vec3::UnitY();
+  /// The body's forward and left in each rig's rest pose, world frame, as this bone's half
+  /// of the body shows them: the angle around the bone is measured from them, so the two
+  /// rigs' surface points correspond wherever either rest pose faces and whichever way is up.
+  Vec3 source_forward = Vec3::UnitZ(), source_left = Vec3::UnitX();
+  Vec3 target_forward = Vec3::UnitZ(), target_left = Vec3::UnitX();
   RetargetRegion region = RetargetRegion::kLimb;
   int foot_side = -1;  ///< 0 left, 1 right for foot and toe bones (contacts); -1 otherwise.
 };

@@ -2,6 +2,8 @@
 #include "formats/retarget_map.hpp"
 
 #include <algorithm>
+#include <array>
+#include <optional>
 #include <set>
 #include <stdexcept>
 #include <tuple>
@@ -133,6 +135,53 @@ std::pair<double, double> ScaleLengths(const Skeleton& source, const HumanoidRol
   return {source_legs, target_legs};
 }
 
+// The body's forward and left in a rig's rest pose, from a left-right pair of joints and
+// the way up from one joint to another: left x up, with Y up and X left, is forward (+Z).
+// Empty where the pair or the way up is missing or they are parallel.
+std::optional<std::pair<Vec3, Vec3>> BodyAxes(const HumanoidRoles& roles,
+                                              const KinematicsWorkspace& rest,
+                                              const char* left_role, const char* right_role,
+                                              const char* low_role,
+                                              std::initializer_list<const char*> high_roles) {
+  auto at = [&](const char* role) -> std::optional<Vec3> {
+    const auto r = roles.joint_of_role.find(role);
+    if (r == roles.joint_of_role.end()) return std::nullopt;
+    return rest.p_WJ[static_cast<size_t>(r->second)];
+  };
+  const auto l = at(left_role), r = at(right_role), low = at(low_role);
+  std::optional<Vec3> high;
+  for (const char* role : high_roles)
+    if (!high) high = at(role);
+  if (!l || !r || !low || !high) return std::nullopt;
+  const Vec3 up = *high - *low;
+  if (up.norm() < 1e-6) return std::nullopt;
+  const Vec3 up_unit = up.normalized();
+  Vec3 left = *l - *r;
+  left -= left.dot(up_unit) * up_unit;
+  if (left.norm() < 1e-6) return std::nullopt;
+  left.normalize();
+  return std::pair{left.cross(up_unit), left};
+}
+
+// Forward and left for each half of a rig: the hips' (pelvis, spine, legs) and the
+// shoulders' (chest, neck, head, arms). A rig's joints need not agree on which way is
+// forward at rest (Bandai's, all rotations zero: its hips face +Z and its chest +Y), so
+// each bone takes its own half's; either half stands in for a missing other, and the
+// world's axes for both.
+std::array<std::pair<Vec3, Vec3>, 2> HalfBodyAxes(const HumanoidRoles& roles,
+                                                  const KinematicsWorkspace& rest) {
+  auto lower = BodyAxes(roles, rest, "thigh_l", "thigh_r", "pelvis", {"spine", "chest", "neck"});
+  auto upper = BodyAxes(roles, rest, "upper_arm_l", "upper_arm_r", "chest", {"neck", "head"});
+  const std::pair<Vec3, Vec3> world{Vec3::UnitZ(), Vec3::UnitX()};
+  return {lower ? *lower : upper ? *upper : world, upper ? *upper : lower ? *lower : world};
+}
+
+bool InUpperBody(const std::string& role) {
+  for (const char* prefix : {"chest", "neck", "head", "clavicle", "upper_arm", "forearm", "hand"})
+    if (role.rfind(prefix, 0) == 0) return true;
+  return false;
+}
+
 double Height(const KinematicsWorkspace& rest) {
   double lo = 1e9, hi = -1e9;
   for (const Vec3& p : rest.p_WJ) {
@@ -164,6 +213,9 @@ RetargetMap MakeRetargetMap(const Skeleton& source, std::span<const BvhEndSite> 
   ForwardKinematics(source, RestPose(source), &source_rest);
   ForwardKinematics(target, RestPose(target), &target_rest);
   const double source_height = Height(source_rest), target_height = Height(target_rest);
+
+  const auto source_axes = HalfBodyAxes(source_roles, source_rest);
+  const auto target_axes = HalfBodyAxes(target_roles, target_rest);
 
   RetargetMap map;
   map.source_root = source_roles.joint_of_role.at("pelvis");
@@ -203,6 +255,9 @@ RetargetMap MakeRetargetMap(const Skeleton& source, std::span<const BvhEndSite> 
       bone.source_bone = bone.source_bone.normalized() * (bone.target_bone.norm() / scale);
     if (target_nominal && !source_nominal)
       bone.target_bone = bone.target_bone.normalized() * (bone.source_bone.norm() * scale);
+    const size_t half = InUpperBody(spec.role) ? 1 : 0;
+    std::tie(bone.source_forward, bone.source_left) = source_axes[half];
+    std::tie(bone.target_forward, bone.target_left) = target_axes[half];
     bone.region = spec.region;
     bone.foot_side = spec.foot_side;
     map.bones.push_back(bone);

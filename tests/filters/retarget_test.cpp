@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include "formats/bvh.hpp"
+#include "formats/marker_layout.hpp"
 #include "formats/retarget_map.hpp"
 #include "sim/humanoid.hpp"
 #include "tests/support/allocation_counter.hpp"
@@ -55,6 +56,42 @@ TEST_F(RetargetTest, IdenticalRigsRetargetToTheIdentity) {
   }
   EXPECT_LT(worst, 2.0);
   EXPECT_LT(worst_root, 0.005);
+}
+
+// A character whose rest pose faces +X, or stands on +Z (as 3ds Max and Blender write
+// some rigs): its hips and shoulders turn as the actor's do. The angle around each bone
+// was measured from the world's axes, so such a character's thighs and shins came out
+// turned 86 degrees about their bones, and one facing +X its whole body.
+TEST_F(RetargetTest, ACharacterFacingAnotherWayOrStandingOnZTurnsAsTheActorDoes) {
+  const HumanoidRoles roles = MatchHumanoidRoles(*source_);
+  auto left_right = [&](const KinematicsWorkspace& ws, const char* l, const char* r) {
+    return Vec3(ws.p_WJ[static_cast<size_t>(roles.joint_of_role.at(l))] -
+                ws.p_WJ[static_cast<size_t>(roles.joint_of_role.at(r))])
+        .normalized();
+  };
+  for (const Quat& turn : {Quat(Eigen::AngleAxisd(M_PI / 2, Vec3::UnitY())),
+                           Quat(Eigen::AngleAxisd(-M_PI / 2, Vec3::UnitX()))}) {
+    std::vector<Joint> joints(source_->joints().begin(), source_->joints().end());
+    joints[0].rest_rotation = turn * joints[0].rest_rotation;
+    const auto turned = std::make_shared<const Skeleton>(std::move(joints));
+    Retargeter r(source_, turned, MakeRetargetMap(*source_, {}, *turned, {}), NoContacts());
+    KinematicsWorkspace actor(*source_), character(*turned);
+    double worst_deg = 0.0;
+    for (size_t f = 0; f < motion_.size(); ++f) {
+      ForwardKinematics(*turned, r.Retarget(motion_[f]), &character);
+      ForwardKinematics(*source_, motion_[f], &actor);
+      if (f < 5) continue;
+      for (const auto& [l, rr] : {std::pair{"thigh_l", "thigh_r"},
+                                  {"upper_arm_l", "upper_arm_r"},
+                                  {"shin_l", "shin_r"},
+                                  {"forearm_l", "forearm_r"}})
+        worst_deg = std::max(
+            worst_deg, std::acos(std::clamp(
+                           left_right(actor, l, rr).dot(left_right(character, l, rr)), -1.0, 1.0)) *
+                           180.0 / M_PI);
+    }
+    EXPECT_LT(worst_deg, 10.0) << "rest turned " << turn.coeffs().transpose();
+  }
 }
 
 // The usual character file is one frame of its T-pose: read from such a file, the
