@@ -69,6 +69,49 @@ double Smoothstep(double x) {
   return x * x * (3.0 - 2.0 * x);
 }
 
+// The character as the solve moves it. A joint no surface point tracks, between two that
+// are (a middle spine joint, a roll bone), holds its rest rotation, and so do the joints
+// above a free pelvis (a floor-level root). With no goal of their own they only traded
+// rotation with their neighbours: a Mixamo rig's Spine1 turned 165 degrees and its Spine2
+// back, and a one-frame character's root wandered under the pelvis it carried.
+std::shared_ptr<const Skeleton> SolvedCharacter(std::shared_ptr<const Skeleton> target,
+                                                const RetargetMap& map) {
+  const int n = target->num_joints();
+  if (map.target_root < 0 || map.target_root >= n) return target;  // the constructor says so
+  std::vector<uint8_t> tracked(static_cast<size_t>(n), 0), above(tracked), below(tracked);
+  for (const RetargetBone& bone : map.bones)
+    if (bone.target_joint >= 0 && bone.target_joint < n)
+      tracked[static_cast<size_t>(bone.target_joint)] = 1;
+  for (int j = 0; j < n; ++j) {  // parents come before children
+    const int parent = target->joint(j).parent.value;
+    if (parent >= 0)
+      above[static_cast<size_t>(j)] =
+          above[static_cast<size_t>(parent)] || tracked[static_cast<size_t>(parent)];
+  }
+  for (int j = n - 1; j > 0; --j) {
+    const int parent = target->joint(j).parent.value;
+    if (below[static_cast<size_t>(j)] || tracked[static_cast<size_t>(j)])
+      below[static_cast<size_t>(parent)] = 1;
+  }
+  std::vector<Joint> joints(target->joints().begin(), target->joints().end());
+  bool changed = false;
+  for (int j = 0; j < n; ++j) {
+    const auto uj = static_cast<size_t>(j);
+    if (!tracked[uj] && above[uj] && below[uj] && joints[uj].type != JointType::kFixed) {
+      joints[uj].type = JointType::kFixed;
+      changed = true;
+    }
+  }
+  if (joints[static_cast<size_t>(map.target_root)].type == JointType::kFree)
+    for (int a = joints[static_cast<size_t>(map.target_root)].parent.value; a >= 0;
+         a = joints[static_cast<size_t>(a)].parent.value)
+      if (joints[static_cast<size_t>(a)].type != JointType::kFixed) {
+        joints[static_cast<size_t>(a)].type = JointType::kFixed;
+        changed = true;
+      }
+  return changed ? std::make_shared<const Skeleton>(std::move(joints)) : target;
+}
+
 }  // namespace
 
 void RetargetOptions::Validate() const {
@@ -96,7 +139,7 @@ Retargeter::Retargeter(std::shared_ptr<const Skeleton> source,
                        std::shared_ptr<const Skeleton> target, RetargetMap map,
                        const RetargetOptions& options)
     : source_(std::move(source)),
-      target_(std::move(target)),
+      target_(SolvedCharacter(std::move(target), map)),
       map_(std::move(map)),
       options_(options),
       state_(*target_,
@@ -118,6 +161,7 @@ Retargeter::Retargeter(std::shared_ptr<const Skeleton> source,
   KinematicsWorkspace source_rest(*source_), target_rest(*target_);
   ForwardKinematics(*source_, RestPose(*source_), &source_rest);
   ForwardKinematics(*target_, RestPose(*target_), &target_rest);
+  source_root_rest_ = source_rest.R_WJ[static_cast<size_t>(map_.source_root)];
   std::vector<MarkerDefinition> defs;
   std::vector<double> region_weight;
   for (size_t b = 0; b < map_.bones.size(); ++b) {
@@ -181,12 +225,31 @@ Retargeter::Retargeter(std::shared_ptr<const Skeleton> source,
 }
 
 void Retargeter::Reset() {
+  ForgetMotion();
+  to_character_world_ = Mat3::Identity();
+  world_found_ = false;
+}
+
+void Retargeter::ForgetMotion() {
   state_.Reset();
   planted_ = {false, false};
   since_release_ = {1 << 20, 1 << 20};
   foot_correction_ = release_correction_ = lock_ = {Vec3::Zero(), Vec3::Zero()};
-  floor_ankle_y_ = 1e9;
+  floor_height_ = 1e9;
   frames_ = 0;
+}
+
+void Retargeter::FindCharacterWorld() {
+  const Mat3& pelvis = source_fk_.R_WJ[static_cast<size_t>(map_.source_root)];
+  if (pelvis.isApprox(source_root_rest_, 1e-12)) return;
+  const Vec3 up = pelvis * map_.source_hips_up;
+  Eigen::Index axis = 0;
+  up.cwiseAbs().maxCoeff(&axis);
+  const Vec3 capture_up = up[axis] > 0 ? Vec3::Unit(axis) : Vec3(-Vec3::Unit(axis));
+  to_character_world_ = Quat::FromTwoVectors(capture_up, map_.target_up).toRotationMatrix();
+  world_found_ = true;
+  // Frames at rest came before in another world: the solve starts afresh in this one.
+  if (frames_ > 0) ForgetMotion();
 }
 
 void Retargeter::ComputeGoals(bool predict) {
@@ -230,17 +293,26 @@ void Retargeter::ComputeGoals(bool predict) {
 
 const Pose& Retargeter::Retarget(const Pose& source_pose) {
   ForwardKinematics(*source_, source_pose, &source_fk_);
+  if (!world_found_) FindCharacterWorld();
+  if (!to_character_world_.isIdentity()) {
+    // Everything below happens in the character's world, the one its file stands in.
+    for (size_t j = 0; j < source_fk_.p_WJ.size(); ++j) {
+      source_fk_.p_WJ[j] = to_character_world_ * source_fk_.p_WJ[j];
+      source_fk_.R_WJ[j] = to_character_world_ * source_fk_.R_WJ[j];
+    }
+  }
+  const Vec3& up = map_.target_up;
   // Contacts: the actor's ankles against the lowest ankle height seen so far.
   std::array<bool, 2> planted_now = planted_;
   for (int side = 0; side < 2; ++side) {
     const int ankle = map_.source_ankles[static_cast<size_t>(side)];
     if (ankle < 0) continue;
     const Vec3& p = source_fk_.p_WJ[static_cast<size_t>(ankle)];
-    floor_ankle_y_ = std::min(floor_ankle_y_, p.y());
+    floor_height_ = std::min(floor_height_, p.dot(up));
     Vec3 moved = p - previous_ankle_[static_cast<size_t>(side)];
-    moved.y() = 0.0;
+    moved -= moved.dot(up) * up;
     const double speed = frames_ > 0 ? moved.norm() * options_.rate_hz : 0.0;
-    const double height = p.y() - floor_ankle_y_;
+    const double height = p.dot(up) - floor_height_;
     const bool was = planted_[static_cast<size_t>(side)];
     // Hysteresis: leaving contact needs clearly more than entering it.
     planted_now[static_cast<size_t>(side)] =
@@ -254,13 +326,13 @@ const Pose& Retargeter::Retarget(const Pose& source_pose) {
     const int ankle = map_.source_ankles[sd];
     if (ankle < 0) continue;
     Vec3 reference = scale_ * source_fk_.p_WJ[static_cast<size_t>(ankle)];
-    reference.y() = 0.0;
+    reference -= reference.dot(up) * up;
     if (planted_now[sd] && !planted_[sd]) {
       // Touch-down: the character's foot stays where it is now (horizontally).
       const int held = map_.target_ankles[sd];
       lock_[sd] = held >= 0 ? state_.kinematics().p_WJ[static_cast<size_t>(held)]
                             : Vec3(reference + foot_correction_[sd]);
-      lock_[sd].y() = 0.0;
+      lock_[sd] -= lock_[sd].dot(up) * up;
     }
     if (planted_now[sd]) {
       foot_correction_[sd] = lock_[sd] - reference;

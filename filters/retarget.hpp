@@ -55,6 +55,12 @@ struct RetargetMap {
   double target_leg_length_m = 1.0;
   std::array<int, 2> source_ankles{-1, -1};  ///< Per side, for contact detection.
   std::array<int, 2> target_ankles{-1, -1};  ///< Per side: where a planted foot is held.
+  /// The world axis the character stands on in its rest pose (+Y unless its rest pose
+  /// stands on another): its output is in its own world, whatever the actor's is.
+  Vec3 target_up = Vec3::UnitY();
+  /// The actor's way up from its hips, in the pelvis's frame: posed, it shows which world
+  /// axis the capture stands on (a Vicon capture: +Z).
+  Vec3 source_hips_up = Vec3::UnitY();
   std::string report;  ///< Human-readable: what matched what, what was left at rest.
 };
 
@@ -113,8 +119,11 @@ class Retargeter {
   std::span<const double> weights() const { return weights_; }
   /// The leg-length ratio target / source.
   double scale() const { return scale_; }
-  /// Forgets the history (contacts, warm start).
+  /// Forgets the history (contacts, warm start, the actor's world).
   void Reset();
+  /// The rotation from the actor's world into the character's, found on the first pose
+  /// not at rest (identity until then).
+  const Mat3& to_character_world() const { return to_character_world_; }
 
  private:
   struct SurfacePoint {
@@ -124,6 +133,11 @@ class Retargeter {
     int marker = -1;                                 ///< The target's virtual marker for it.
   };
   void ComputeGoals(bool predict);
+  void ForgetMotion();
+  // The actor's world into the character's: which axis the capture stands on, seen on the
+  // first pose not at rest (at rest, a live subject before its first solve, the pose says
+  // nothing of the capture).
+  void FindCharacterWorld();
 
   std::shared_ptr<const Skeleton> source_, target_;
   RetargetMap map_;
@@ -142,11 +156,14 @@ class Retargeter {
   std::array<bool, 2> planted_{false, false};
   std::array<int, 2> since_release_{1 << 20, 1 << 20};
   std::array<Vec3, 2> previous_ankle_{Vec3::Zero(), Vec3::Zero()};
-  std::array<Vec3, 2> lock_{Vec3::Zero(),
-                            Vec3::Zero()};  ///< Where a planted foot's reference stays (x, z).
+  /// Where a planted foot's reference stays (across the floor: no component along up).
+  std::array<Vec3, 2> lock_{Vec3::Zero(), Vec3::Zero()};
   std::array<Vec3, 2> foot_correction_{Vec3::Zero(), Vec3::Zero()};
   std::array<Vec3, 2> release_correction_{Vec3::Zero(), Vec3::Zero()};
-  double floor_ankle_y_ = 1e9;
+  double floor_height_ = 1e9;  ///< The actor's lowest ankle height, along target_up.
+  Mat3 to_character_world_ = Mat3::Identity();
+  bool world_found_ = false;
+  Mat3 source_root_rest_ = Mat3::Identity();  ///< The actor's pelvis at rest, world frame.
   int frames_ = 0;
   RetargetSummary summary_;
 };

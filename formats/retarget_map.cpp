@@ -23,7 +23,7 @@ struct RoleSpec {
 constexpr RoleSpec kRoles[] = {
     {"pelvis", RetargetRegion::kTorso, -1},       {"spine", RetargetRegion::kTorso, -1},
     {"chest", RetargetRegion::kTorso, -1},        {"neck", RetargetRegion::kLimb, -1},
-    {"head", RetargetRegion::kEndEffector, -1},   {"clavicle_l", RetargetRegion::kLimb, -1},
+    {"head", RetargetRegion::kTorso, -1},         {"clavicle_l", RetargetRegion::kLimb, -1},
     {"clavicle_r", RetargetRegion::kLimb, -1},    {"upper_arm_l", RetargetRegion::kLimb, -1},
     {"upper_arm_r", RetargetRegion::kLimb, -1},   {"forearm_l", RetargetRegion::kLimb, -1},
     {"forearm_r", RetargetRegion::kLimb, -1},     {"hand_l", RetargetRegion::kEndEffector, -1},
@@ -76,16 +76,17 @@ double LegLength(const Skeleton& sk, const HumanoidRoles& roles, const char* whi
 // no End Site stands on the one a BVH writer gives it (NominalLeafEndSites), for the same
 // reason.
 double StandingHeight(const Skeleton& sk, const HumanoidRoles& roles,
-                      const KinematicsWorkspace& rest, std::span<const BvhEndSite> end_sites) {
+                      const KinematicsWorkspace& rest, std::span<const BvhEndSite> end_sites,
+                      const Vec3& up) {
   const int pelvis = roles.joint_of_role.at("pelvis");
   std::vector<uint8_t> below(static_cast<size_t>(sk.num_joints()), 0);
   below[static_cast<size_t>(pelvis)] = 1;
-  double lowest = rest.p_WJ[static_cast<size_t>(pelvis)].y();
+  double lowest = rest.p_WJ[static_cast<size_t>(pelvis)].dot(up);
   for (int j = pelvis + 1; j < sk.num_joints(); ++j) {  // parents come before children
     const JointIndex parent = sk.joint(j).parent;
     if (!parent.is_valid() || !below[static_cast<size_t>(parent.value)]) continue;
     below[static_cast<size_t>(j)] = 1;
-    lowest = std::min(lowest, rest.p_WJ[static_cast<size_t>(j)].y());
+    lowest = std::min(lowest, rest.p_WJ[static_cast<size_t>(j)].dot(up));
   }
   auto is_foot_leaf = [&](int j) {
     for (const char* foot : {"foot_l", "foot_r"})
@@ -106,8 +107,8 @@ double StandingHeight(const Skeleton& sk, const HumanoidRoles& roles,
   for (const BvhEndSite& e : soles)
     lowest = std::min(lowest, Vec3(rest.R_WJ[static_cast<size_t>(e.parent)] * e.offset +
                                    rest.p_WJ[static_cast<size_t>(e.parent)])
-                                  .y());
-  return rest.p_WJ[static_cast<size_t>(pelvis)].y() - lowest;
+                                  .dot(up));
+  return rest.p_WJ[static_cast<size_t>(pelvis)].dot(up) - lowest;
 }
 
 // The scale of the actor's positions onto the character, as two lengths. Where both rigs
@@ -119,15 +120,17 @@ double StandingHeight(const Skeleton& sk, const HumanoidRoles& roles,
 std::pair<double, double> ScaleLengths(const Skeleton& source, const HumanoidRoles& source_roles,
                                        const KinematicsWorkspace& source_rest,
                                        std::span<const BvhEndSite> source_end_sites,
-                                       const Skeleton& target, const HumanoidRoles& target_roles,
+                                       const Vec3& source_up, const Skeleton& target,
+                                       const HumanoidRoles& target_roles,
                                        const KinematicsWorkspace& target_rest,
-                                       std::span<const BvhEndSite> target_end_sites) {
+                                       std::span<const BvhEndSite> target_end_sites,
+                                       const Vec3& target_up) {
   const double source_legs = LegLength(source, source_roles, "actor");
   const double target_legs = LegLength(target, target_roles, "character");
   const double source_standing =
-      StandingHeight(source, source_roles, source_rest, source_end_sites);
+      StandingHeight(source, source_roles, source_rest, source_end_sites, source_up);
   const double target_standing =
-      StandingHeight(target, target_roles, target_rest, target_end_sites);
+      StandingHeight(target, target_roles, target_rest, target_end_sites, target_up);
   // Standing: the pelvis at least as high above its lowest point as the legs are long
   // (less 10 %, for a rig whose knees are a little bent at rest).
   if (source_standing >= 0.9 * source_legs && target_standing >= 0.9 * target_legs)
@@ -176,8 +179,37 @@ std::array<std::pair<Vec3, Vec3>, 2> HalfBodyAxes(const HumanoidRoles& roles,
   return {lower ? *lower : upper ? *upper : world, upper ? *upper : lower ? *lower : world};
 }
 
+// The hips' way up in a rig's rest pose (toward the spine, neck or head), world frame.
+Vec3 HipsUp(const HumanoidRoles& roles, const KinematicsWorkspace& rest) {
+  const Vec3& pelvis = rest.p_WJ[static_cast<size_t>(roles.joint_of_role.at("pelvis"))];
+  for (const char* role : {"spine", "chest", "neck", "head"})
+    if (const auto r = roles.joint_of_role.find(role); r != roles.joint_of_role.end()) {
+      const Vec3 up = rest.p_WJ[static_cast<size_t>(r->second)] - pelvis;
+      if (up.norm() > 1e-6) return up.normalized();
+    }
+  return Vec3::UnitY();
+}
+
+// The world axis a rig stands on in its rest pose: its hips' way up, snapped to the
+// nearest axis, where both legs hang the other way from it; +Y (BVH's convention) where
+// they do not (Bandai's rest pose, all rotations zero, lays its legs along the spine).
+Vec3 RestUp(const HumanoidRoles& roles, const KinematicsWorkspace& rest) {
+  const Vec3 hips_up = HipsUp(roles, rest);
+  for (const auto& [hip, ankle] : {std::pair{"thigh_l", "foot_l"}, {"thigh_r", "foot_r"}}) {
+    const auto h = roles.joint_of_role.find(hip), a = roles.joint_of_role.find(ankle);
+    if (h == roles.joint_of_role.end() || a == roles.joint_of_role.end()) return Vec3::UnitY();
+    const Vec3 leg =
+        rest.p_WJ[static_cast<size_t>(a->second)] - rest.p_WJ[static_cast<size_t>(h->second)];
+    if (!(leg.norm() > 1e-6) || leg.normalized().dot(hips_up) > -0.8) return Vec3::UnitY();
+  }
+  Eigen::Index axis = 0;
+  hips_up.cwiseAbs().maxCoeff(&axis);
+  return hips_up[axis] > 0 ? Vec3::Unit(axis) : Vec3(-Vec3::Unit(axis));
+}
+
 bool InUpperBody(const std::string& role) {
-  for (const char* prefix : {"chest", "neck", "head", "clavicle", "upper_arm", "forearm", "hand"})
+  for (const char* prefix :
+       {"spine", "chest", "neck", "head", "clavicle", "upper_arm", "forearm", "hand"})
     if (role.rfind(prefix, 0) == 0) return true;
   return false;
 }
@@ -220,9 +252,13 @@ RetargetMap MakeRetargetMap(const Skeleton& source, std::span<const BvhEndSite> 
   RetargetMap map;
   map.source_root = source_roles.joint_of_role.at("pelvis");
   map.target_root = target_roles.joint_of_role.at("pelvis");
+  const Vec3 source_up = RestUp(source_roles, source_rest);
+  map.target_up = RestUp(target_roles, target_rest);
+  map.source_hips_up = source_rest.R_WJ[static_cast<size_t>(map.source_root)].transpose() *
+                       HipsUp(source_roles, source_rest);
   std::tie(map.source_leg_length_m, map.target_leg_length_m) =
-      ScaleLengths(source, source_roles, source_rest, source_end_sites, target, target_roles,
-                   target_rest, target_end_sites);
+      ScaleLengths(source, source_roles, source_rest, source_end_sites, source_up, target,
+                   target_roles, target_rest, target_end_sites, map.target_up);
   map.source_ankles = {source_roles.joint_of_role.at("foot_l"),
                        source_roles.joint_of_role.at("foot_r")};
   map.target_ankles = {target_roles.joint_of_role.at("foot_l"),

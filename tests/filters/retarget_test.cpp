@@ -59,39 +59,135 @@ TEST_F(RetargetTest, IdenticalRigsRetargetToTheIdentity) {
 }
 
 // A character whose rest pose faces +X, or stands on +Z (as 3ds Max and Blender write
-// some rigs): its hips and shoulders turn as the actor's do. The angle around each bone
-// was measured from the world's axes, so such a character's thighs and shins came out
-// turned 86 degrees about their bones, and one facing +X its whole body.
+// some rigs): its hips and shoulders turn as the actor's do, and it comes out in its own
+// world, standing on the axis its rest pose stands on. The angle around each bone was
+// measured from the world's axes, so such a character's thighs and shins came out turned
+// 86 degrees about their bones, and one facing +X its whole body; and a character
+// standing on +Z came out in the actor's Y-up world, lying on its back in its own.
 TEST_F(RetargetTest, ACharacterFacingAnotherWayOrStandingOnZTurnsAsTheActorDoes) {
   const HumanoidRoles roles = MatchHumanoidRoles(*source_);
-  auto left_right = [&](const KinematicsWorkspace& ws, const char* l, const char* r) {
-    return Vec3(ws.p_WJ[static_cast<size_t>(roles.joint_of_role.at(l))] -
-                ws.p_WJ[static_cast<size_t>(roles.joint_of_role.at(r))])
-        .normalized();
+  auto joint = [&](const KinematicsWorkspace& ws, const char* role) {
+    return ws.p_WJ[static_cast<size_t>(roles.joint_of_role.at(role))];
   };
-  for (const Quat& turn : {Quat(Eigen::AngleAxisd(M_PI / 2, Vec3::UnitY())),
-                           Quat(Eigen::AngleAxisd(-M_PI / 2, Vec3::UnitX()))}) {
+  auto left_right = [&](const KinematicsWorkspace& ws, const char* l, const char* r) {
+    return Vec3(joint(ws, l) - joint(ws, r)).normalized();
+  };
+  const Quat facing_x(Eigen::AngleAxisd(M_PI / 2, Vec3::UnitY()));
+  const Quat standing_on_z(Eigen::AngleAxisd(M_PI / 2, Vec3::UnitX()));
+  for (const Quat& turn : {facing_x, standing_on_z}) {
     std::vector<Joint> joints(source_->joints().begin(), source_->joints().end());
     joints[0].rest_rotation = turn * joints[0].rest_rotation;
     const auto turned = std::make_shared<const Skeleton>(std::move(joints));
     Retargeter r(source_, turned, MakeRetargetMap(*source_, {}, *turned, {}), NoContacts());
     KinematicsWorkspace actor(*source_), character(*turned);
-    double worst_deg = 0.0;
+    double worst_deg = 0.0, worst_up_deg = 0.0;
+    const Vec3 own_up = turn * Vec3::UnitY();
     for (size_t f = 0; f < motion_.size(); ++f) {
       ForwardKinematics(*turned, r.Retarget(motion_[f]), &character);
       ForwardKinematics(*source_, motion_[f], &actor);
       if (f < 5) continue;
+      const Mat3& world = r.to_character_world();
       for (const auto& [l, rr] : {std::pair{"thigh_l", "thigh_r"},
                                   {"upper_arm_l", "upper_arm_r"},
                                   {"shin_l", "shin_r"},
-                                  {"forearm_l", "forearm_r"}})
-        worst_deg = std::max(
-            worst_deg, std::acos(std::clamp(
-                           left_right(actor, l, rr).dot(left_right(character, l, rr)), -1.0, 1.0)) *
-                           180.0 / M_PI);
+                                  {"forearm_l", "forearm_r"}}) {
+        const double cosine = (world * left_right(actor, l, rr)).dot(left_right(character, l, rr));
+        worst_deg = std::max(worst_deg, std::acos(std::clamp(cosine, -1.0, 1.0)) * 180.0 / M_PI);
+      }
+      const Vec3 body = Vec3(joint(character, "head") - joint(character, "pelvis")).normalized();
+      worst_up_deg =
+          std::max(worst_up_deg, std::acos(std::clamp(body.dot(own_up), -1.0, 1.0)) * 180.0 / M_PI);
     }
     EXPECT_LT(worst_deg, 10.0) << "rest turned " << turn.coeffs().transpose();
+    EXPECT_LT(worst_up_deg, 30.0) << "rest turned " << turn.coeffs().transpose();
   }
+}
+
+// A Vicon capture stands on +Z; a character file on +Y. The character comes out standing
+// in its own world, as if the capture had stood on +Y, and the feet's contacts are found
+// along the capture's up: it came out in the capture's world (lying on its back in the
+// character's) and took a horizontal axis for the ankles' height.
+TEST_F(RetargetTest, ACaptureStandingOnZDrivesACharacterStandingOnY) {
+  const Mat3 to_z = Eigen::AngleAxisd(M_PI / 2, Vec3::UnitX()).toRotationMatrix();
+  std::vector<Pose> on_z = motion_;
+  for (Pose& p : on_z) {
+    p.rotation[0] = Quat(to_z) * p.rotation[0];
+    p.translation[0] = to_z * p.translation[0];
+  }
+  Retargeter from_z(source_, source_, MakeRetargetMap(*source_, {}, *source_, {}), NoContacts());
+  double worst_deg = 0.0, worst_root = 0.0;
+  for (size_t f = 0; f < motion_.size(); ++f) {
+    const Pose& out = from_z.Retarget(on_z[f]);
+    if (f < 5) continue;
+    worst_deg = std::max(worst_deg, MaxRotationDifferenceDeg(out, motion_[f]));
+    worst_root = std::max(worst_root, (out.translation[0] - motion_[f].translation[0]).norm());
+  }
+  EXPECT_TRUE(from_z.to_character_world().isApprox(to_z.transpose(), 1e-9));
+  EXPECT_LT(worst_deg, 2.0);
+  EXPECT_LT(worst_root, 0.005);
+  // Contacts: the same frames planted as from the capture standing on +Y.
+  Retargeter on_y_contacts(source_, source_, MakeRetargetMap(*source_, {}, *source_, {}),
+                           RetargetOptions{});
+  Retargeter on_z_contacts(source_, source_, MakeRetargetMap(*source_, {}, *source_, {}),
+                           RetargetOptions{});
+  int planted = 0, disagree = 0;
+  for (size_t f = 0; f < motion_.size(); ++f) {
+    on_y_contacts.Retarget(motion_[f]);
+    on_z_contacts.Retarget(on_z[f]);
+    for (size_t side = 0; side < 2; ++side) {
+      planted += on_y_contacts.summary().planted[side];
+      disagree += on_y_contacts.summary().planted[side] != on_z_contacts.summary().planted[side];
+    }
+  }
+  // The procedural walk skates: its few true contacts (10 side-frames here) count, and
+  // rounding at a threshold may flip a frame or two at their edges.
+  EXPECT_GE(planted, 5);
+  EXPECT_LE(disagree, planted / 4);
+}
+
+// A character with a spine joint no role names (Mixamo's Spine1, between Spine and
+// Spine2): it holds its rest rotation, and the chest and head still turn as the actor's.
+// Free and with no goal of its own, it traded rotation with its neighbours (Spine1 turned
+// 165 degrees and Spine2 back: a candy-wrapper twist on a skinned mesh); and the head,
+// tracked by its points' positions, flapped up to 50 cm a frame at its top.
+TEST_F(RetargetTest, AnUntrackedSpineJointHoldsItsRestAndTheHeadTurnsAsTheActors) {
+  std::vector<Joint> joints;
+  std::vector<int> index_of(static_cast<size_t>(source_->num_joints()));
+  for (int j = 0; j < source_->num_joints(); ++j) {
+    Joint joint = source_->joint(j);
+    if (joint.parent.is_valid())
+      joint.parent = JointIndex(index_of[static_cast<size_t>(joint.parent.value)]);
+    if (joint.name == "Chest") {
+      Joint middle{.name = "Spine1", .parent = joint.parent, .offset = joint.offset / 2};
+      joints.push_back(middle);
+      joint.parent = JointIndex(static_cast<int>(joints.size()) - 1);
+      joint.offset /= 2;
+    }
+    index_of[static_cast<size_t>(j)] = static_cast<int>(joints.size());
+    joints.push_back(joint);
+  }
+  const auto three_spines = std::make_shared<const Skeleton>(std::move(joints));
+  Retargeter r(source_, three_spines, MakeRetargetMap(*source_, {}, *three_spines, {}),
+               NoContacts());
+  const int middle = three_spines->FindJoint("Spine1")->value;
+  const int actor_head = source_->FindJoint("Head")->value;
+  const int character_head = three_spines->FindJoint("Head")->value;
+  KinematicsWorkspace character(*three_spines), actor(*source_);
+  double worst_middle_deg = 0.0, worst_head_deg = 0.0;
+  for (size_t f = 0; f < motion_.size(); ++f) {
+    const Pose& out = r.Retarget(motion_[f]);
+    if (f < 5) continue;
+    worst_middle_deg = std::max(
+        worst_middle_deg,
+        out.rotation[static_cast<size_t>(middle)].angularDistance(Quat::Identity()) * 180 / M_PI);
+    ForwardKinematics(*three_spines, out, &character);
+    ForwardKinematics(*source_, motion_[f], &actor);
+    const Quat a(actor.R_WJ[static_cast<size_t>(actor_head)]);
+    const Quat c(character.R_WJ[static_cast<size_t>(character_head)]);
+    worst_head_deg = std::max(worst_head_deg, a.angularDistance(c) * 180 / M_PI);
+  }
+  EXPECT_LT(worst_middle_deg, 1e-6);
+  EXPECT_LT(worst_head_deg, 5.0);
 }
 
 // The usual character file is one frame of its T-pose: read from such a file, the
