@@ -11,6 +11,7 @@
 #include <optional>
 
 #include <boost/algorithm/string/case_conv.hpp>
+#include <boost/algorithm/string/predicate.hpp>
 #include <boost/algorithm/string/trim.hpp>
 
 #include "formats/marker_set.hpp"
@@ -37,7 +38,7 @@ struct Parameter {
 class Parser {
  public:
   Parser(std::span<const uint8_t> bytes, const std::string& source)
-      : reader_(bytes), source_(source) {}
+      : bytes_(bytes), reader_(bytes), source_(source) {}
 
   C3dTake Parse() {
     ReadHeader();
@@ -58,13 +59,32 @@ class Parser {
     if (!ok) Fail(section, reader_.offset(), what);
   }
 
+  // Every C3D's second byte is 0x50. A file that is text says what it starts with (a BVH
+  // or TOML given where a take goes got "expected key byte 0x50, found 73").
+  std::string NotC3d(uint8_t key) const {
+    std::string what =
+        "not a C3D file: its second byte is " + std::to_string(key) + " where a C3D has 0x50 (80)";
+    const size_t n = std::min<size_t>(bytes_.size(), 16);
+    std::string start;
+    for (size_t i = 0; i < n; ++i) {
+      const auto c = static_cast<char>(bytes_[i]);
+      if (c == '\n' || c == '\r') break;
+      if (bytes_[i] < 0x20 || bytes_[i] > 0x7e) return what;
+      start += c;
+    }
+    if (!start.empty()) what += "; it is text starting \"" + start + "\"";
+    if (boost::algorithm::istarts_with(start, "HIERARCHY")) what += " (a BVH file)";
+    return what;
+  }
+
   void ReadHeader() {
+    if (bytes_.size() >= 2 && bytes_[1] != 0x50) Fail("header", 1, NotC3d(bytes_[1]));
     Require(
         reader_.size() >= kBlock, "header",
         "file is " + std::to_string(reader_.size()) + " bytes, shorter than the 512-byte header");
     uint8_t param_block = 0, key = 0;
     Require(reader_.ReadU8(&param_block) && reader_.ReadU8(&key), "header", "truncated");
-    if (key != 0x50) Fail("header", 1, "expected key byte 0x50, found " + std::to_string(key));
+    if (key != 0x50) Fail("header", 1, NotC3d(key));
     if (param_block < 1) Fail("header", 0, "parameter section block number is 0");
     param_start_ = (static_cast<size_t>(param_block) - 1) * kBlock;
     // The processor type (which fixes byte order) lives in the parameter section header.
@@ -358,6 +378,7 @@ class Parser {
     return take;
   }
 
+  std::span<const uint8_t> bytes_;
   ByteReader reader_;
   std::string source_;
   size_t param_start_ = 0;

@@ -241,6 +241,18 @@ RetargetMap MakeRetargetMap(const Skeleton& source, std::span<const BvhEndSite> 
                                   "' (for role " + role + ")");
     target_roles.joint_of_role[role] = j->value;
   }
+  // One character joint plays one role: two would pull it two ways (a joint map giving
+  // both hands one joint, or a hand the hips, was accepted without a word).
+  std::map<int, std::string> role_of_joint;
+  for (const RoleSpec& spec : kRoles) {
+    const auto t = target_roles.joint_of_role.find(spec.role);
+    if (t == target_roles.joint_of_role.end()) continue;
+    const auto [it, fresh] = role_of_joint.emplace(t->second, spec.role);
+    if (!fresh)
+      throw std::invalid_argument("retarget joint map: the character's joint '" +
+                                  target.joint(t->second).name + "' is given two roles, " +
+                                  it->second + " and " + spec.role);
+  }
   KinematicsWorkspace source_rest(source), target_rest(target);
   ForwardKinematics(source, RestPose(source), &source_rest);
   ForwardKinematics(target, RestPose(target), &target_rest);

@@ -1,10 +1,14 @@
 // Strict TOML field reading over toml++.
 #include "formats/toml_reader.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <sstream>
 #include <stdexcept>
+#include <string_view>
+
+#include <boost/algorithm/string/predicate.hpp>
 
 namespace mocapd {
 namespace {
@@ -22,12 +26,30 @@ const toml::table& EmptyTable() {
 
 }  // namespace
 
+namespace {
+
+// What a file that is not TOML looks like, for the error: a BVH or a C3D given where a
+// subject or config goes got the parser's "expected '=', saw '\n'".
+std::string NotTomlHint(const std::string& text) {
+  const std::string_view head(text.data(), std::min<size_t>(text.size(), 512));
+  if (head.find('\0') != std::string_view::npos)
+    return " (the file is binary data, not TOML text: a C3D take?)";
+  const size_t word = head.find_first_not_of(" \t\r\n\xEF\xBB\xBF");
+  if (word != std::string_view::npos &&
+      boost::algorithm::istarts_with(head.substr(word), "HIERARCHY"))
+    return " (the file is a BVH, not TOML: a subject file is written by mocapd calibrate or "
+           "mocap-sim synth --subject-out)";
+  return "";
+}
+
+}  // namespace
+
 toml::table ParseToml(const std::string& text, const std::string& source_name) {
   try {
     return toml::parse(text, source_name);
   } catch (const toml::parse_error& e) {
     throw std::runtime_error(source_name + ":" + std::to_string(e.source().begin.line) + ": " +
-                             std::string(e.description()));
+                             std::string(e.description()) + NotTomlHint(text));
   }
 }
 

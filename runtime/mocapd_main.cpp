@@ -93,8 +93,15 @@ int main(int argc, char** argv) {
       ->add_option("--retarget", proc.retarget_bvh,
                    "Also retarget onto this character (BVH: hierarchy and rest pose)")
       ->check(CLI::ExistingFile);
-  proc_cmd->add_option("--out-character-bvh", proc.output_character_bvh,
-                       "The retargeted character's motion (BVH)");
+  CLI::Option* retarget_option = proc_cmd->get_option("--retarget");
+  proc_cmd
+      ->add_option("--out-character-bvh", proc.output_character_bvh,
+                   "The retargeted character's motion (BVH; default SOLVED.character.bvh "
+                   "beside --out-bvh)")
+      ->needs(retarget_option);
+  proc_cmd->add_flag("--allow-partial", proc.allow_partial,
+                     "Solve a take that labels fewer than half the subject's markers (refused "
+                     "otherwise: most likely the wrong subject or marker set)");
   proc_cmd->add_option("--plot", proc.plot_dir,
                        "Write SVG plots to this directory: markers.svg, solve.svg (and "
                        "joint_error.svg with --truth-bvh)");
@@ -111,7 +118,8 @@ int main(int argc, char** argv) {
   proc_cmd
       ->add_option("--joint-map", joint_map_args,
                    "Retarget overrides ROLE=JOINT (e.g. hand_l=L_Wrist), comma-separated")
-      ->delimiter(',');
+      ->delimiter(',')
+      ->needs(retarget_option);
 
   std::string run_config = "config/mocapd.toml";
   std::string log_level = "info";

@@ -9,6 +9,8 @@
 #include <nlohmann/json.hpp>
 #include <optional>
 
+#include <unistd.h>
+
 #include "filters/pose_error.hpp"
 #include "formats/bvh.hpp"
 #include "formats/c3d.hpp"
@@ -73,7 +75,42 @@ void WritePlots(const ProcessCommandOptions& options, const PlotData& data,
               out);
 }
 
+// Fails before the take is solved, not after (the solved BVH written, the user waiting a
+// take's length): an output whose folder is missing or read-only, a plot folder that is a
+// file.
+void CheckOutputs(const ProcessCommandOptions& options) {
+  namespace fs = std::filesystem;
+  auto writable = [](const std::string& option, const std::string& path) {
+    if (path.empty()) return;
+    const fs::path parent = fs::absolute(path).parent_path();
+    std::error_code ec;
+    if (!fs::is_directory(parent, ec))
+      throw std::runtime_error(option + " " + path + ": the folder " + parent.string() +
+                               " does not exist");
+    if (fs::is_directory(path, ec))
+      throw std::runtime_error(option + " " + path + ": is a folder, not a file");
+    if (access(parent.c_str(), W_OK) != 0)
+      throw std::runtime_error(option + " " + path + ": cannot write in " + parent.string());
+  };
+  writable("--out-bvh", options.output_bvh);
+  writable("--out-c3d", options.output_c3d);
+  writable("--out-character-bvh", CharacterOutputPath(options));
+  writable("--report", options.report_json);
+  std::error_code ec;
+  if (!options.plot_dir.empty() && fs::exists(options.plot_dir, ec) &&
+      !fs::is_directory(options.plot_dir, ec))
+    throw std::runtime_error("--plot " + options.plot_dir + ": is a file, not a folder");
+}
+
 }  // namespace
+
+std::string CharacterOutputPath(const ProcessCommandOptions& options) {
+  if (options.retarget_bvh.empty()) return "";
+  if (!options.output_character_bvh.empty()) return options.output_character_bvh;
+  // Beside the solved BVH, never into the character asset's folder.
+  std::filesystem::path path(options.output_bvh);
+  return (path.parent_path() / (path.stem().string() + ".character.bvh")).string();
+}
 
 ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostream& out) {
   const SubjectModel subject = ReadSubjectModel(options.subject);
@@ -92,6 +129,32 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
   warn(map.ambiguous(),
        "match several of the take's labels, so none is used and they stay missing");
   warn(map.duplicated(), "label more than one point of the take; the first point is used for");
+  // Half the subject's markers is what the solves need to start on their own
+  // (cold_start_min_fraction). Fewer is most likely the wrong subject or marker set: 4 of
+  // 59 labels matched, 93 % of the samples came out unrecoverable, and the fit of the 4
+  // looked excellent.
+  if (2 * map.matched() < markers.num_markers() && !options.allow_partial)
+    throw std::runtime_error(
+        options.input_c3d + ": only " + std::to_string(map.matched()) + " of the subject's " +
+        std::to_string(markers.num_markers()) + " markers (" + options.subject +
+        ") are labelled in the take: is it this subject's take, with its marker set? "
+        "(--allow-partial solves it anyway)");
+  CheckOutputs(options);
+  // The character is read and matched before the take is solved, so a bad one costs no
+  // solve and leaves no half-written output.
+  std::optional<BvhTake> character;
+  std::shared_ptr<const Skeleton> target;
+  std::optional<RetargetMap> joints;
+  if (!options.retarget_bvh.empty()) {
+    character = ReadBvh(options.retarget_bvh);
+    target = std::make_shared<const Skeleton>(character->skeleton);
+    try {
+      joints =
+          MakeRetargetMap(*subject.skeleton, {}, *target, character->end_sites, options.joint_map);
+    } catch (const std::invalid_argument& e) {
+      throw std::runtime_error(options.retarget_bvh + ": " + e.what());
+    }
+  }
 
   CleanupOptions cleanup;
   cleanup.rate_hz = take.rate_hz;
@@ -308,23 +371,13 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
     WriteC3d(options.output_c3d, cleaned);
     out << "wrote " << options.output_c3d << "\n";
   }
-  if (!options.retarget_bvh.empty()) {
+  if (character) {
     // The written frames in order, one at a time as the live path feeds the retargeter
     // (the frames before the subject is seen hold its first solved pose here).
-    BvhTake character = ReadBvh(options.retarget_bvh);
-    auto target = std::make_shared<const Skeleton>(character.skeleton);
-    const RetargetMap joints = [&] {
-      try {
-        return MakeRetargetMap(*subject.skeleton, {}, *target, character.end_sites,
-                               options.joint_map);
-      } catch (const std::invalid_argument& e) {
-        throw std::runtime_error(options.retarget_bvh + ": " + e.what());
-      }
-    }();
-    out << joints.report;
+    out << joints->report;
     RetargetOptions retarget_options;
     retarget_options.rate_hz = take.rate_hz;
-    Retargeter retargeter(subject.skeleton, target, joints, retarget_options);
+    Retargeter retargeter(subject.skeleton, target, *joints, retarget_options);
     std::vector<Pose> motion;
     motion.reserve(bvh.frames.size());
     std::vector<double> retarget_us;
@@ -337,14 +390,12 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
     }
     summary.retarget_p50_us = Quantile(retarget_us, 0.5);
     summary.retarget_p99_us = Quantile(retarget_us, 0.99);
-    character.frames = std::move(motion);
-    character.frame_time_s = 1.0 / take.rate_hz;
-    const std::string path = options.output_character_bvh.empty()
-                                 ? options.retarget_bvh + ".retargeted.bvh"
-                                 : options.output_character_bvh;
-    WriteBvh(path, character);
-    out << "wrote " << path << " (the character, " << character.frames.size() << " frames, "
-        << character.units << "; retarget p50 " << summary.retarget_p50_us << " us, p99 "
+    character->frames = std::move(motion);
+    character->frame_time_s = 1.0 / take.rate_hz;
+    const std::string path = CharacterOutputPath(options);
+    WriteBvh(path, *character);
+    out << "wrote " << path << " (the character, " << character->frames.size() << " frames, "
+        << character->units << "; retarget p50 " << summary.retarget_p50_us << " us, p99 "
         << summary.retarget_p99_us << " us per frame)\n";
   }
 

@@ -35,7 +35,14 @@ struct ProcessCommandOptions {
   /// The truth BVH's length unit (mm, cm, m, in); empty: guessed from its bones, which
   /// cannot tell inches from centimetres.
   std::string truth_units;
+  /// Solve a take that labels fewer than half the subject's markers (refused otherwise:
+  /// most likely the wrong subject or marker set).
+  bool allow_partial = false;
 };
+
+/// Where the retargeted character is written: output_character_bvh, or beside the solved
+/// BVH as SOLVED.character.bvh. Empty without retarget_bvh.
+std::string CharacterOutputPath(const ProcessCommandOptions& options);
 
 struct ProcessSummary {
   int frames = 0;

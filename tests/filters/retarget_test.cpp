@@ -287,6 +287,11 @@ TEST_F(RetargetTest, TheMapReportsWhatMatchedAndRefusesUnknownOverrides) {
                std::invalid_argument);
   EXPECT_THROW(MakeRetargetMap(*source_, {}, *source_, {}, {{"tail", "Hips"}}),
                std::invalid_argument);
+  // One joint, two roles: both hands on one joint, or a hand on the hips.
+  EXPECT_THROW(MakeRetargetMap(*source_, {}, *source_, {}, {{"hand_r", "LeftHand"}}),
+               std::invalid_argument);
+  EXPECT_THROW(MakeRetargetMap(*source_, {}, *source_, {}, {{"hand_l", "Hips"}}),
+               std::invalid_argument);
 }
 
 TEST_F(RetargetTest, ARetargetedFrameAllocatesNothing) {

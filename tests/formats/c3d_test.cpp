@@ -172,7 +172,18 @@ TEST(C3dTest, BadHeaderKeyIsReported) {
     ParseC3d(bytes, "x.c3d");
     FAIL();
   } catch (const C3dError& e) {
-    EXPECT_NE(std::string(e.what()).find("header section, byte 1: expected key byte 0x50"),
+    EXPECT_NE(std::string(e.what()).find("header section, byte 1: not a C3D file: its second "
+                                         "byte is 81 where a C3D has 0x50"),
+              std::string::npos)
+        << e.what();
+  }
+  // A text file (a BVH given where a take goes) says what it starts with.
+  const std::string bvh = "HIERARCHY\nROOT Hips\n";
+  try {
+    ParseC3d(std::span(reinterpret_cast<const uint8_t*>(bvh.data()), bvh.size()), "take.bvh");
+    FAIL();
+  } catch (const C3dError& e) {
+    EXPECT_NE(std::string(e.what()).find("it is text starting \"HIERARCHY\" (a BVH file)"),
               std::string::npos)
         << e.what();
   }

@@ -71,5 +71,18 @@ TEST(TomlReaderTest, SyntaxErrorsAndMissingFilesNameTheFile) {
             "/nonexistent/x.toml: cannot open for reading");
 }
 
+// A BVH or a C3D given where a subject or config goes says so; the parser alone said
+// "expected '=', saw '\n'".
+TEST(TomlReaderTest, AFileThatIsNotTomlSaysWhatItLooksLike) {
+  EXPECT_NE(ErrorOf([] {
+              (void)ParseToml("HIERARCHY\nROOT Hips\n{\n", "actor.bvh");
+            }).find("(the file is a BVH, not TOML"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([] {
+              (void)ParseToml(std::string("\x02\x50\0\0", 4), "take.c3d");
+            }).find("(the file is binary data, not TOML text"),
+            std::string::npos);
+}
+
 }  // namespace
 }  // namespace mocapd

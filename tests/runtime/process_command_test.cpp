@@ -107,6 +107,71 @@ TEST(ProcessCommandTest, RefusesATakeWithoutTheSubjectsMarkers) {
   EXPECT_THROW(RunProcessCommand(options, out), std::invalid_argument);
 }
 
+// Fewer than half the subject's markers labelled in the take is most likely the wrong
+// subject or marker set: refused unless asked for (4 of 59 matched solved with exit 0, 93 %
+// of the samples unrecoverable and the 4's fit looking excellent).
+TEST(ProcessCommandTest, RefusesATakeLabellingFewerThanHalfTheSubjectsMarkers) {
+  const auto f = testing::MakeHumanoidFixture("walk", 1.0, 60.0);
+  const std::string dir = testing::TempDir("process_partial");
+  WriteFixtureSubject(f, dir + "/actor.toml");
+  C3dTake partial = f.take;
+  const int kept = static_cast<int>(partial.labels.size()) * 2 / 5;
+  for (size_t p = static_cast<size_t>(kept); p < partial.labels.size(); ++p)
+    partial.labels[p] = "OTHER" + std::to_string(p);
+  WriteC3d(dir + "/take.c3d", partial);
+  ProcessCommandOptions options = OptionsIn(dir);
+  std::ostringstream out;
+  try {
+    RunProcessCommand(options, out);
+    ADD_FAILURE() << "a take labelling " << kept << " markers was solved";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("only " + std::to_string(kept) + " of the subject's " +
+                                         std::to_string(f.markers->num_markers()) + " markers"),
+              std::string::npos)
+        << e.what();
+    EXPECT_NE(std::string(e.what()).find("--allow-partial"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(std::filesystem::exists(options.output_bvh));
+  options.allow_partial = true;
+  RunProcessCommand(options, out);
+  EXPECT_TRUE(std::filesystem::exists(options.output_bvh));
+}
+
+// An output that cannot be written and a character that cannot be used fail before the
+// take is solved: they failed after it, the solved BVH already written.
+TEST(ProcessCommandTest, AnUnwritableOutputOrAnUnusableCharacterFailsBeforeSolving) {
+  const auto f = testing::MakeHumanoidFixture("walk", 1.0, 60.0);
+  const std::string dir = testing::TempDir("process_outputs");
+  WriteFixtureSubject(f, dir + "/actor.toml");
+  WriteC3d(dir + "/take.c3d", f.take);
+  const auto expect_refused = [&](const ProcessCommandOptions& options, const std::string& why) {
+    std::ostringstream out;
+    try {
+      RunProcessCommand(options, out);
+      ADD_FAILURE() << "expected an error containing: " << why;
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find(why), std::string::npos) << e.what();
+    }
+    EXPECT_FALSE(std::filesystem::exists(options.output_bvh));
+  };
+  ProcessCommandOptions no_folder = OptionsIn(dir);
+  no_folder.output_c3d = dir + "/missing/cleaned.c3d";
+  expect_refused(no_folder, "--out-c3d " + dir + "/missing/cleaned.c3d: the folder");
+  ProcessCommandOptions plot_file = OptionsIn(dir);
+  plot_file.plot_dir = dir + "/take.c3d";
+  expect_refused(plot_file, "is a file, not a folder");
+  const Skeleton stick({Joint{.name = "root", .parent = {}, .type = JointType::kFree},
+                        Joint{.name = "tip", .parent = JointIndex(0), .offset = Vec3(0, 0.3, 0)}});
+  WriteBvh(dir + "/stick.bvh", MakeBvhTake(stick, {RestPose(stick)}, 1.0 / 30.0));
+  ProcessCommandOptions stick_character = OptionsIn(dir);
+  stick_character.retarget_bvh = dir + "/stick.bvh";
+  expect_refused(stick_character, dir + "/stick.bvh: not a recognisable humanoid");
+  // The character's motion goes beside the solved BVH unless told otherwise.
+  ProcessCommandOptions beside = OptionsIn(dir, "solved.bvh");
+  beside.retarget_bvh = dir + "/character.bvh";
+  EXPECT_EQ(CharacterOutputPath(beside), dir + "/solved.character.bvh");
+}
+
 // A take the subject cannot be solved from at all gets an error naming the file, never a
 // rest-pose BVH reported as a success.
 TEST(ProcessCommandTest, RefusesATakeWithNoFramesOrNoSeenMarker) {
