@@ -38,6 +38,20 @@ ProcessCommandOptions OptionsIn(const std::string& dir, const std::string& out_b
   return options;
 }
 
+// The command fails with an error containing why (and names, if given) and writes no BVH.
+void ExpectRefusedWritingNothing(const ProcessCommandOptions& options, const std::string& why,
+                                 const std::string& names = "") {
+  std::ostringstream out;
+  try {
+    RunProcessCommand(options, out);
+    ADD_FAILURE() << "expected an error containing: " << why;
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find(why), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find(names), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(std::filesystem::exists(options.output_bvh));
+}
+
 TEST(ProcessCommandTest, CleansATakeAndWritesAlignedBvhCleanedC3dAndReport) {
   const auto f = testing::MakeHumanoidFixture("mixed", 6.0, 120.0);
   const std::string dir = testing::TempDir("process");
@@ -144,15 +158,8 @@ TEST(ProcessCommandTest, AnUnwritableOutputOrAnUnusableCharacterFailsBeforeSolvi
   const std::string dir = testing::TempDir("process_outputs");
   WriteFixtureSubject(f, dir + "/actor.toml");
   WriteC3d(dir + "/take.c3d", f.take);
-  const auto expect_refused = [&](const ProcessCommandOptions& options, const std::string& why) {
-    std::ostringstream out;
-    try {
-      RunProcessCommand(options, out);
-      ADD_FAILURE() << "expected an error containing: " << why;
-    } catch (const std::runtime_error& e) {
-      EXPECT_NE(std::string(e.what()).find(why), std::string::npos) << e.what();
-    }
-    EXPECT_FALSE(std::filesystem::exists(options.output_bvh));
+  const auto expect_refused = [](const ProcessCommandOptions& options, const std::string& why) {
+    ExpectRefusedWritingNothing(options, why);
   };
   ProcessCommandOptions no_folder = OptionsIn(dir);
   no_folder.output_c3d = dir + "/missing/cleaned.c3d";
@@ -181,15 +188,7 @@ TEST(ProcessCommandTest, RefusesATakeWithNoFramesOrNoSeenMarker) {
   ProcessCommandOptions options = OptionsIn(dir);
   const auto expect_refused = [&](const C3dTake& take, const std::string& why) {
     WriteC3d(options.input_c3d, take);
-    std::ostringstream out;
-    try {
-      RunProcessCommand(options, out);
-      ADD_FAILURE() << "expected an error containing: " << why;
-    } catch (const std::runtime_error& e) {
-      EXPECT_NE(std::string(e.what()).find(why), std::string::npos) << e.what();
-      EXPECT_NE(std::string(e.what()).find("take.c3d"), std::string::npos) << e.what();
-    }
-    EXPECT_FALSE(std::filesystem::exists(options.output_bvh));
+    ExpectRefusedWritingNothing(options, why, "take.c3d");
   };
   C3dTake unseen = f.take;
   unseen.Allocate(f.take.num_frames);  // every sample missing
