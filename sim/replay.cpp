@@ -240,6 +240,7 @@ ReplayReport RunReplay(const ReplaySource& source, const ReplayOptions& o) {
   ReplayReport report = replay::RunSchedule(logs, produce, setup, o);
   report.source = source.description;
   report.rate_hz = rate;
+  report.capture_rate_hz = source.rate_hz;
   return report;
 }
 
@@ -371,6 +372,7 @@ ReplayReport RunGraphReplay(const GraphReplaySource& source, double seconds, dou
   ReplayReport report = replay::RunSchedule(logs, produce, setup, o);
   report.source = source.description;
   report.rate_hz = send_rate;
+  report.capture_rate_hz = rate_hz;
   return report;
 }
 
@@ -444,6 +446,7 @@ ReplayReport RunRecordingReplay(const Recording& recording, const std::string& d
   ReplayReport report = replay::RunSchedule(logs, produce, setup, o);
   report.source = description;
   report.rate_hz = rate_hz;
+  report.capture_rate_hz = rate_hz;
   return report;
 }
 

@@ -51,6 +51,7 @@ LatencySummary SummariseLatencies(std::vector<double> ms) {
 nlohmann::json ReplayReport::ToJson() const {
   nlohmann::json j = {{"source", source},
                       {"rate_hz", rate_hz},
+                      {"capture_rate_hz", capture_rate_hz},
                       {"subjects", subjects},
                       {"lookahead_frames", lookahead},
                       {"frames_sent", frames_sent},
@@ -103,8 +104,16 @@ std::string ReplayReport::FormatTable() const {
     return std::string(b);
   };
   s << "replay: " << source << "\n";
-  row("subjects x rate", std::to_string(subjects) + " x " + num(rate_hz, 0) +
-                             " Hz, lookahead K = " + std::to_string(lookahead));
+  // Paced at another rate than captured, the frames still say the capture's: a 120 Hz
+  // take sent at --rate 240 is played twice as fast, not resampled.
+  const bool repaced = capture_rate_hz > 0 && rate_hz > 0 &&
+                       std::abs(rate_hz - capture_rate_hz) > 1e-6 * capture_rate_hz;
+  row("subjects x rate",
+      std::to_string(subjects) + " x " + num(repaced ? capture_rate_hz : rate_hz, 0) + " Hz" +
+          (repaced ? " (sent at " + num(rate_hz, 0) + " frames/s, " +
+                         num(rate_hz / capture_rate_hz, 2) + "x the take's rate, not resampled)"
+                   : "") +
+          ", lookahead K = " + std::to_string(lookahead));
   if (!listened) {
     row("frames sent",
         std::to_string(frames_sent) + " (the daemon's output was not measured: --from \"\")");

@@ -21,7 +21,8 @@ struct LatencySummary {
 
 struct ReplayReport {
   std::string source;
-  double rate_hz = 0.0;
+  double rate_hz = 0.0;          ///< Frames sent per second (the pacing).
+  double capture_rate_hz = 0.0;  ///< The rate the frames say they were captured at.
   int subjects = 0;
   bool listened = false;     ///< The daemon's output was measured (--from given).
   int lookahead = 0;         ///< K, from the daemon's subject description.

@@ -85,5 +85,22 @@ TEST(ReplayReportTest, TheTailIsInTheJsonAndTheTable) {
       << table;
 }
 
+// A take sent at another rate than it was captured at is played faster or slower, not
+// resampled (its frames still say the capture's rate): the summary printed "1 x 240 Hz"
+// for a 120 Hz C3D sent at --rate 240.
+TEST(ReplayReportTest, ATakeSentAtAnotherRateSaysItIsNotResampled) {
+  ReplayReport report;
+  report.subjects = 1;
+  report.rate_hz = 240;
+  report.capture_rate_hz = 120;
+  EXPECT_NE(report.FormatTable().find(
+                "1 x 120 Hz (sent at 240 frames/s, 2.00x the take's rate, not resampled)"),
+            std::string::npos)
+      << report.FormatTable();
+  EXPECT_EQ(report.ToJson()["capture_rate_hz"], 120.0);
+  report.rate_hz = 120;
+  EXPECT_EQ(report.FormatTable().find("not resampled"), std::string::npos);
+}
+
 }  // namespace
 }  // namespace mocapd
