@@ -239,14 +239,38 @@ void Retargeter::ForgetMotion() {
   frames_ = 0;
 }
 
-void Retargeter::FindCharacterWorld() {
-  const Mat3& pelvis = source_fk_.R_WJ[static_cast<size_t>(map_.source_root)];
-  if (pelvis.isApprox(source_root_rest_, 1e-12)) return;
-  const Vec3 up = pelvis * map_.source_hips_up;
+Mat3 CaptureToTargetWorld(const RetargetMap& map, const KinematicsWorkspace& source_posed) {
+  const Vec3 up = source_posed.R_WJ[static_cast<size_t>(map.source_root)] * map.source_hips_up;
   Eigen::Index axis = 0;
   up.cwiseAbs().maxCoeff(&axis);
   const Vec3 capture_up = up[axis] > 0 ? Vec3::Unit(axis) : Vec3(-Vec3::Unit(axis));
-  to_character_world_ = Quat::FromTwoVectors(capture_up, map_.target_up).toRotationMatrix();
+  return Quat::FromTwoVectors(capture_up, map.target_up).toRotationMatrix();
+}
+
+void TurnPoseWorld(const Skeleton& skeleton, const Mat3& world, Pose* pose) {
+  if (world.isIdentity()) return;
+  const Quat turn(world);
+  if (skeleton.joint(0).type != JointType::kFixed) {
+    pose->rotation[0] = (turn * pose->rotation[0]).normalized();
+    pose->translation[0] = world * pose->translation[0];
+    return;
+  }
+  // A fixed root (Bandai's joint_Root at the floor origin) stays: the joints it carries
+  // turn about the world's origin, as seen through it.
+  const Quat root = pose->rotation[0];
+  const Vec3 at = pose->translation[0];
+  for (int j : skeleton.children(0)) {
+    const auto uj = static_cast<size_t>(j);
+    pose->rotation[uj] = (root.conjugate() * turn * root * pose->rotation[uj]).normalized();
+    pose->translation[uj] =
+        root.conjugate() * (world * Vec3(at + root * pose->translation[uj]) - at);
+  }
+}
+
+void Retargeter::FindCharacterWorld() {
+  const Mat3& pelvis = source_fk_.R_WJ[static_cast<size_t>(map_.source_root)];
+  if (pelvis.isApprox(source_root_rest_, 1e-12)) return;
+  to_character_world_ = CaptureToTargetWorld(map_, source_fk_);
   world_found_ = true;
   // Frames at rest came before in another world: the solve starts afresh in this one.
   if (frames_ > 0) ForgetMotion();

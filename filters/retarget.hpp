@@ -64,6 +64,17 @@ struct RetargetMap {
   std::string report;  ///< Human-readable: what matched what, what was left at rest.
 };
 
+/// The rotation from the world a posed actor stands in into a rig's: the actor's hips'
+/// way up (map.source_hips_up turned by its pelvis, map.source_root, in source_posed),
+/// snapped to the nearest axis, onto map.target_up, by the least rotation. A Vicon
+/// capture stands on +Z, a BVH rig on +Y.
+Mat3 CaptureToTargetWorld(const RetargetMap& map, const KinematicsWorkspace& source_posed);
+
+/// Turns a posed skeleton's world by `world` (positions and orientations both): the root,
+/// or where the root is fixed the joints it carries. For writing a solve in the world its
+/// rig's rest pose stands in.
+void TurnPoseWorld(const Skeleton& skeleton, const Mat3& world, Pose* pose);
+
 struct RetargetOptions {
   double rate_hz = 120.0;
   int points_per_bone = 8;                ///< Kept by farthest-point sampling (of 32 candidates).

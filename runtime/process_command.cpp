@@ -362,6 +362,30 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
     summary.max_us = worst;
   }
 
+  // The solve is written in the world its subject's rest pose stands in (+Y for a subject
+  // calibrated from markers, as BVH readers expect), not the capture's: a Vicon capture
+  // stands on +Z, and its solve lay on its back in a tool reading the BVH. The cleaned C3D
+  // keeps the capture's world.
+  Mat3 upright = Mat3::Identity();
+  Vec3 rest_up = Vec3::UnitY();
+  try {
+    const RetargetMap own = MakeRetargetMap(*subject.skeleton, {}, *subject.skeleton, {});
+    KinematicsWorkspace first(*subject.skeleton);
+    ForwardKinematics(*subject.skeleton, poses[static_cast<size_t>(*first_solved)], &first);
+    upright = CaptureToTargetWorld(own, first);
+    rest_up = own.target_up;
+  } catch (const std::invalid_argument&) {
+    // No humanoid: its world is the capture's.
+  }
+  if (!upright.isIdentity()) {
+    for (Pose& pose : poses) TurnPoseWorld(*subject.skeleton, upright, &pose);
+    const Vec3 capture_up = upright.transpose() * rest_up;
+    Eigen::Index axis = 0;
+    capture_up.cwiseAbs().maxCoeff(&axis);
+    out << "the capture stands on " << (capture_up[axis] > 0 ? "+" : "-") << "xyz"[axis]
+        << ": the solve is written turned to stand as its subject's rest pose does\n";
+  }
+  summary.solve_turned = !upright.isIdentity();
   BvhTake bvh =
       MakeBvhTake(*subject.skeleton, std::move(poses), 1.0 / take.rate_hz, subject.bvh_units);
   WriteBvh(options.output_bvh, bvh);
@@ -477,6 +501,7 @@ nlohmann::json ProcessSummaryJson(const ProcessSummary& summary,
           {"swaps_relabelled", c.swaps_relabelled},
           {"unrecoverable_samples", c.unrecoverable},
           {"unsolved_frames", summary.unsolved_frames},
+          {"solve_turned_to_rest_up", summary.solve_turned},
           {"frames_before_first_solve", summary.frames_before_first_solve},
           {"per_frame_us", summary.timed ? nlohmann::json{{"mean", summary.mean_us},
                                                           {"p50", summary.p50_us},

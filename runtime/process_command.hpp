@@ -45,6 +45,9 @@ struct ProcessCommandOptions {
 std::string CharacterOutputPath(const ProcessCommandOptions& options);
 
 struct ProcessSummary {
+  /// The solve was written turned from the capture's world into the one its subject's rest
+  /// pose stands in (a Z-up capture, a Y-up subject).
+  bool solve_turned = false;
   int frames = 0;
   int markers = 0;
   int matched_markers = 0;

@@ -190,6 +190,38 @@ TEST_F(RetargetTest, AnUntrackedSpineJointHoldsItsRestAndTheHeadTurnsAsTheActors
   EXPECT_LT(worst_head_deg, 5.0);
 }
 
+// Turning a posed skeleton's world turns every joint, whether the root moves or is a
+// fixed floor-level root carrying the pelvis (Bandai's joint_Root).
+TEST_F(RetargetTest, TurningAPoseTurnsEveryJointEvenUnderAFixedRoot) {
+  std::vector<Joint> joints = {Joint{.name = "joint_Root",
+                                     .parent = {},
+                                     .offset = Vec3(0.1, 0, 0.2),
+                                     .rest_rotation = Quat(Eigen::AngleAxisd(0.3, Vec3::UnitY())),
+                                     .type = JointType::kFixed}};
+  for (const Joint& j : source_->joints()) {
+    Joint joint = j;
+    joint.parent = JointIndex(j.parent.is_valid() ? j.parent.value + 1 : 0);
+    joints.push_back(joint);
+  }
+  const Skeleton rooted(std::move(joints));
+  const Mat3 world = Eigen::AngleAxisd(-M_PI / 2, Vec3::UnitX()).toRotationMatrix();
+  for (const Skeleton* sk : {source_.get(), &rooted}) {
+    Pose pose = RestPose(*sk);
+    const size_t pelvis = sk == &rooted ? 1 : 0;
+    pose.translation[pelvis] += Vec3(0.3, 0.05, -0.4);
+    pose.rotation[pelvis] = Quat(Eigen::AngleAxisd(0.7, Vec3(1, 2, 3).normalized()));
+    KinematicsWorkspace before(*sk), after(*sk);
+    ForwardKinematics(*sk, pose, &before);
+    TurnPoseWorld(*sk, world, &pose);
+    ForwardKinematics(*sk, pose, &after);
+    for (int j = sk == &rooted ? 1 : 0; j < sk->num_joints(); ++j) {
+      const auto uj = static_cast<size_t>(j);
+      EXPECT_LT((after.p_WJ[uj] - world * before.p_WJ[uj]).norm(), 1e-9) << sk->joint(j).name;
+      EXPECT_TRUE(after.R_WJ[uj].isApprox(world * before.R_WJ[uj], 1e-9)) << sk->joint(j).name;
+    }
+  }
+}
+
 // The usual character file is one frame of its T-pose: read from such a file, the
 // character's root must still translate with the actor's (it stood 2.3 m off).
 TEST_F(RetargetTest, ACharacterFromAOneFrameFileFollowsTheRoot) {

@@ -121,6 +121,37 @@ TEST(ProcessCommandTest, RefusesATakeWithoutTheSubjectsMarkers) {
   EXPECT_THROW(RunProcessCommand(options, out), std::invalid_argument);
 }
 
+// A Vicon capture stands on +Z; its solve is written standing as the subject's rest pose
+// does (+Y, as BVH readers expect), so it matches the motion captured on +Y. It was written
+// in the capture's world, lying on its back in a tool reading the BVH.
+TEST(ProcessCommandTest, ACaptureStandingOnZIsWrittenStandingAsTheSubjectsRestPoseDoes) {
+  const auto f = testing::MakeHumanoidFixture("walk", 2.0, 60.0);
+  const std::string dir = testing::TempDir("process_z_up");
+  WriteFixtureSubject(f, dir + "/actor.toml");
+  const Mat3 to_z = Eigen::AngleAxisd(M_PI / 2, Vec3::UnitX()).toRotationMatrix();
+  C3dTake on_z = f.take;
+  for (int fr = 0; fr < on_z.num_frames; ++fr)
+    for (int p = 0; p < on_z.num_points(); ++p)
+      if (on_z.valid(fr, p)) on_z.at(fr, p) = to_z * on_z.at(fr, p);
+  WriteC3d(dir + "/take.c3d", on_z);
+  ProcessCommandOptions options = OptionsIn(dir);
+  std::ostringstream out;
+  EXPECT_TRUE(RunProcessCommand(options, out).solve_turned);
+  EXPECT_NE(out.str().find("the capture stands on +z"), std::string::npos) << out.str();
+  const BvhTake solved = ReadBvh(options.output_bvh);
+  PoseErrorAccumulator errors(solved.skeleton);
+  KinematicsWorkspace truth(*f.skeleton), est(solved.skeleton);
+  for (int fr = 0; fr < solved.num_frames(); ++fr) {
+    ForwardKinematics(*f.skeleton, f.motion[static_cast<size_t>(fr)], &truth);
+    ForwardKinematics(solved.skeleton, solved.frames[static_cast<size_t>(fr)], &est);
+    errors.Add(truth, est);
+  }
+  EXPECT_LT(errors.mean_position_error_m(), 0.01);
+  // The same capture on +Y is written as it is.
+  WriteC3d(dir + "/take.c3d", f.take);
+  EXPECT_FALSE(RunProcessCommand(options, out).solve_turned);
+}
+
 // Fewer than half the subject's markers labelled in the take is most likely the wrong
 // subject or marker set: refused unless asked for (4 of 59 matched solved with exit 0, 93 %
 // of the samples unrecoverable and the 4's fit looking excellent).
