@@ -38,6 +38,19 @@ ProcessCommandOptions OptionsIn(const std::string& dir, const std::string& out_b
   return options;
 }
 
+// The solved BVH's mean joint position error against the fixture's true motion, frame for
+// frame.
+double MeanJointErrorM(const testing::HumanoidFixture& f, const BvhTake& solved) {
+  PoseErrorAccumulator errors(solved.skeleton);
+  KinematicsWorkspace truth(*f.skeleton), est(solved.skeleton);
+  for (int fr = 0; fr < solved.num_frames(); ++fr) {
+    ForwardKinematics(*f.skeleton, f.motion[static_cast<size_t>(fr)], &truth);
+    ForwardKinematics(solved.skeleton, solved.frames[static_cast<size_t>(fr)], &est);
+    errors.Add(truth, est);
+  }
+  return errors.mean_position_error_m();
+}
+
 // The command fails with an error containing why (and names, if given) and writes no BVH.
 void ExpectRefusedWritingNothing(const ProcessCommandOptions& options, const std::string& why,
                                  const std::string& names = "") {
@@ -73,14 +86,7 @@ TEST(ProcessCommandTest, CleansATakeAndWritesAlignedBvhCleanedC3dAndReport) {
   const BvhTake solved = ReadBvh(dir + "/solved.bvh");
   ASSERT_EQ(solved.num_frames(), f.take.num_frames);
   EXPECT_NEAR(solved.rate_hz(), 120.0, 1e-6);
-  PoseErrorAccumulator errors(solved.skeleton);
-  KinematicsWorkspace truth(*f.skeleton), est(solved.skeleton);
-  for (int fr = 0; fr < solved.num_frames(); ++fr) {
-    ForwardKinematics(*f.skeleton, f.motion[static_cast<size_t>(fr)], &truth);
-    ForwardKinematics(solved.skeleton, solved.frames[static_cast<size_t>(fr)], &est);
-    errors.Add(truth, est);
-  }
-  EXPECT_LT(errors.mean_position_error_m(), 0.01);
+  EXPECT_LT(MeanJointErrorM(f, solved), 0.01);
 
   // Samples the pipeline left alone are the input's bit for bit (no float round trip
   // through metres); the ones it repaired moved for real.
@@ -139,14 +145,7 @@ TEST(ProcessCommandTest, ACaptureStandingOnZIsWrittenStandingAsTheSubjectsRestPo
   EXPECT_TRUE(RunProcessCommand(options, out).solve_turned);
   EXPECT_NE(out.str().find("the capture stands on +z"), std::string::npos) << out.str();
   const BvhTake solved = ReadBvh(options.output_bvh);
-  PoseErrorAccumulator errors(solved.skeleton);
-  KinematicsWorkspace truth(*f.skeleton), est(solved.skeleton);
-  for (int fr = 0; fr < solved.num_frames(); ++fr) {
-    ForwardKinematics(*f.skeleton, f.motion[static_cast<size_t>(fr)], &truth);
-    ForwardKinematics(solved.skeleton, solved.frames[static_cast<size_t>(fr)], &est);
-    errors.Add(truth, est);
-  }
-  EXPECT_LT(errors.mean_position_error_m(), 0.01);
+  EXPECT_LT(MeanJointErrorM(f, solved), 0.01);
   // The same capture on +Y is written as it is.
   WriteC3d(dir + "/take.c3d", f.take);
   EXPECT_FALSE(RunProcessCommand(options, out).solve_turned);
