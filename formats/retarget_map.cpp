@@ -214,11 +214,14 @@ bool InUpperBody(const std::string& role) {
   return false;
 }
 
-double Height(const KinematicsWorkspace& rest) {
+// The rest pose's extent along the way it stands, for nominal end-segment lengths (along
+// +Y, a rig standing on +Z measured its width, and its hands and head came out another
+// length than the same rig's standing on +Y).
+double Height(const KinematicsWorkspace& rest, const Vec3& up) {
   double lo = 1e9, hi = -1e9;
   for (const Vec3& p : rest.p_WJ) {
-    lo = std::min(lo, p.y());
-    hi = std::max(hi, p.y());
+    lo = std::min(lo, p.dot(up));
+    hi = std::max(hi, p.dot(up));
   }
   return std::clamp(hi - lo, 0.5, 2.5);
 }
@@ -256,8 +259,6 @@ RetargetMap MakeRetargetMap(const Skeleton& source, std::span<const BvhEndSite> 
   KinematicsWorkspace source_rest(source), target_rest(target);
   ForwardKinematics(source, RestPose(source), &source_rest);
   ForwardKinematics(target, RestPose(target), &target_rest);
-  const double source_height = Height(source_rest), target_height = Height(target_rest);
-
   const auto source_axes = HalfBodyAxes(source_roles, source_rest);
   const auto target_axes = HalfBodyAxes(target_roles, target_rest);
 
@@ -268,6 +269,8 @@ RetargetMap MakeRetargetMap(const Skeleton& source, std::span<const BvhEndSite> 
   map.target_up = RestUp(target_roles, target_rest);
   map.source_hips_up = source_rest.R_WJ[static_cast<size_t>(map.source_root)].transpose() *
                        HipsUp(source_roles, source_rest);
+  const double source_height = Height(source_rest, source_up);
+  const double target_height = Height(target_rest, map.target_up);
   std::tie(map.source_leg_length_m, map.target_leg_length_m) =
       ScaleLengths(source, source_roles, source_rest, source_end_sites, source_up, target,
                    target_roles, target_rest, target_end_sites, map.target_up);
