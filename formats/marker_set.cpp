@@ -236,7 +236,7 @@ MarkerSetMatch RecognizeMarkerSet(std::span<const MarkerSetDefinition> sets,
   for (const MarkerSetDefinition& set : sets) {
     MarkerSetMatch m = MatchMarkerSet(set, labels);
     const double share = m.required > 0 ? static_cast<double>(m.required_found) / m.required : 0.0;
-    if (share < 0.6) continue;
+    if (share < kMarkerSetMinRequiredShare) continue;
     if (best.set == nullptr || share > best_share + 1e-9 ||
         (share > best_share - 1e-9 && m.matched > best.matched)) {
       best = std::move(m);

@@ -78,8 +78,11 @@ struct MarkerSetMatch {
 };
 /// Matches labels against one set.
 MarkerSetMatch MatchMarkerSet(const MarkerSetDefinition& set, std::span<const std::string> labels);
+/// The share of a set's required markers the labels must hold for the set to explain them.
+inline constexpr double kMarkerSetMinRequiredShare = 0.6;
 /// Picks the set that best explains the labels: the largest share of its required
-/// markers present (at least 60 %), ties to the larger set. set == nullptr if none.
+/// markers present (at least kMarkerSetMinRequiredShare), ties to the larger set.
+/// set == nullptr if none.
 MarkerSetMatch RecognizeMarkerSet(std::span<const MarkerSetDefinition> sets,
                                   std::span<const std::string> labels);
 

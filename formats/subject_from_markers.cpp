@@ -207,6 +207,29 @@ MarkersOnlyCalibration CalibrateFromMarkers(std::span<const C3dTake> takes,
     chosen = FindMarkerSet(options.marker_set);
     match = MatchMarkerSet(chosen, markers);
     match.set = &chosen;
+    // A named set the labels do not explain is the wrong set: it was used anyway, CMU's
+    // 41 markers read as Plug-in Gait's (every pelvis and tibia marker missing) gave a
+    // 67 cm thigh and 34-39 cm clavicles with exit 0.
+    const auto share = [](const MarkerSetMatch& m) {
+      return m.required > 0 ? static_cast<double>(m.required_found) / m.required : 0.0;
+    };
+    const MarkerSetMatch recognised = RecognizeMarkerSet(BuiltInMarkerSets(), markers);
+    if (recognised.set != nullptr && recognised.set->name != chosen.name &&
+        share(recognised) > share(match) + 1e-9)
+      throw std::runtime_error(
+          "calibrate: the take's labels fit marker set '" + recognised.set->name + "' (" +
+          std::to_string(recognised.required_found) + " of its " +
+          std::to_string(recognised.required) + " markers) better than '" + chosen.name + "' (" +
+          std::to_string(match.required_found) + " of " + std::to_string(match.required) +
+          "): --marker-set " + recognised.set->name + " or auto");
+    if (match.required_found < kMarkerSetMinRequiredShare * match.required)
+      throw std::runtime_error(
+          "calibrate: the take holds " + std::to_string(match.required_found) + " of the " +
+          std::to_string(match.required) + " markers marker set '" + chosen.name +
+          "' requires (at least " +
+          std::to_string(static_cast<int>(std::lround(kMarkerSetMinRequiredShare * 100))) +
+          " % are needed): is it the take's set? --marker-set auto recognises the set the "
+          "labels fit; none places every marker by the body's shape");
   }
   const bool clustered = match.set == nullptr;
   if (clustered && options.marker_set != "auto" && options.marker_set != "none")

@@ -334,6 +334,17 @@ TEST_F(SubjectFromMarkersTest, BadInputIsAClearErrorAndCalibratesNothing) {
   EXPECT_NE(error_of(few).find("too few to place by clustering"), std::string::npos);
   EXPECT_NE(error_of(few).find("Nothing written"), std::string::npos);
   EXPECT_NE(error_of(take_, "no-such-set").find("unknown marker set"), std::string::npos);
+  // A named set the labels fit worse than another built-in set is refused, naming the
+  // better one (CMU's 41 markers forced as Plug-in Gait: a 67 cm thigh, exit 0); so is a
+  // named set they hold too little of.
+  EXPECT_NE(error_of(take_, "cmu-41").find("fit marker set 'plug-in-gait-full'"), std::string::npos)
+      << error_of(take_, "cmu-41");
+  C3dTake a_third = take_;
+  for (size_t p = a_third.labels.size() / 3; p < a_third.labels.size(); ++p)
+    a_third.labels[p] = "X" + std::to_string(p);
+  EXPECT_NE(error_of(a_third, "plug-in-gait-full").find("markers marker set 'plug-in-gait-full'"),
+            std::string::npos)
+      << error_of(a_third, "plug-in-gait-full");
 }
 
 }  // namespace
