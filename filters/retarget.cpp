@@ -273,7 +273,8 @@ void Retargeter::FindCharacterWorld() {
   to_character_world_ = CaptureToTargetWorld(map_, source_fk_);
   world_found_ = true;
   // Frames at rest came before in another world: the solve starts afresh in this one.
-  if (frames_ > 0) ForgetMotion();
+  // In the same world it carries on (a restart from rest mid-take would be a jump).
+  if (frames_ > 0 && !to_character_world_.isIdentity()) ForgetMotion();
 }
 
 void Retargeter::ComputeGoals(bool predict) {

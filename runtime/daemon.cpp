@@ -312,6 +312,7 @@ struct Daemon::DataPlane final : OutputSink {
       const auto rejecting = r.rejecting();
       s.rejecting_input = rejecting.has_value();
       if (rejecting) s.rejecting_reason = *rejecting;
+      s.mismatched_rate_hz = r.mismatched_rate_hz();
       s.model_suspect = r.model_suspect();
       s.model_distance_mm = r.model_distance_m() * 1e3;
       s.worker = index;
@@ -1000,8 +1001,8 @@ void Daemon::Run(bool handle_signals) {
                 "at frame {}",
                 s.name, s.counters.last_frame_number);
           if (s.rejecting_input && (before == nullptr || !before->rejecting_input))
-            spdlog::warn("subject '{}': every frame dropped as {} for over 0.5 s", s.name,
-                         to_string(s.rejecting_reason));
+            spdlog::warn("subject '{}': every frame dropped as {} for over 0.5 s{}", s.name,
+                         to_string(s.rejecting_reason), RejectionDetail(s));
           if (s.model_suspect && (before == nullptr || !before->model_suspect))
             spdlog::warn(
                 "subject '{}': model suspect: the received markers sit {:.0f} mm (median) from "

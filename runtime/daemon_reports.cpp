@@ -289,6 +289,15 @@ std::string FormatSubjectsJson(const DaemonStats& stats) {
   return subjects.dump(2) + "\n";
 }
 
+std::string RejectionDetail(const SubjectStats& s) {
+  if (!s.rejecting_input || s.rejecting_reason != DropReason::kRateMismatch) return "";
+  char detail[160];
+  std::snprintf(detail, sizeof(detail),
+                ": the frames say %g Hz, the subject is configured for %g Hz (rate_hz)",
+                s.mismatched_rate_hz, s.rate_hz);
+  return detail;
+}
+
 std::string FormatHealthJson(const DaemonStats& stats, bool data_plane_alive) {
   nlohmann::json subjects = nlohmann::json::object();
   nlohmann::json problems = nlohmann::json::array();
@@ -298,7 +307,7 @@ std::string FormatHealthJson(const DaemonStats& stats, bool data_plane_alive) {
       problems.push_back("subject '" + s.name + "': input stalled");
     if (s.rejecting_input)
       problems.push_back("subject '" + s.name + "': every frame dropped (" +
-                         to_string(s.rejecting_reason) + ")");
+                         to_string(s.rejecting_reason) + ")" + RejectionDetail(s));
     if (s.model_suspect) {
       char line[160];
       std::snprintf(line, sizeof(line),

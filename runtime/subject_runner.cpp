@@ -187,7 +187,10 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
   };
   if (frame.model_hash != marker_hash_ || frame.positions.size() != missing_.size())
     return drop(DropReason::kModelMismatch);
-  if (std::abs(frame.rate_hz - rate_hz_) > 1e-3 * rate_hz_) return drop(DropReason::kRateMismatch);
+  if (std::abs(frame.rate_hz - rate_hz_) > 1e-3 * rate_hz_) {
+    mismatched_rate_hz_ = frame.rate_hz;
+    return drop(DropReason::kRateMismatch);
+  }
 
   // A v2 sender says when its capture restarted: frame numbers of another session are not
   // comparable, whatever their values.

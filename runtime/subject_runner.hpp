@@ -126,6 +126,8 @@ class SubjectRunner {
   /// suspect.
   double model_distance_m() const { return model_distance_m_; }
   bool model_suspect() const { return model_suspect_; }
+  /// The rate the last frame dropped as rate_mismatch said it was captured at (0: none).
+  double mismatched_rate_hz() const { return mismatched_rate_hz_; }
   int64_t last_receive_ns() const { return last_receive_ns_; }
   const SubjectCounters& counters() const { return counters_; }
   const CleanupCounters& cleanup_counters() const { return pipeline_->counters(); }
@@ -179,6 +181,7 @@ class SubjectRunner {
   uint64_t marker_hash_ = 0;
   uint64_t skeleton_hash_ = 0;
   double rate_hz_ = 0.0;
+  double mismatched_rate_hz_ = 0.0;
   int max_gap_frames_ = 0;
   int restart_backjump_frames_ = 0;
   bool publish_cleaned_ = true;

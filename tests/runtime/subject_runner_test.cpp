@@ -7,6 +7,7 @@
 
 #include "formats/marker_layout.hpp"
 #include "formats/take_frames.hpp"
+#include "runtime/daemon.hpp"
 #include "runtime/live_view.hpp"
 #include "sim/humanoid.hpp"
 #include "sim/humanoid_subject.hpp"
@@ -164,6 +165,16 @@ TEST_F(SubjectRunnerTest, FramesForAnotherModelOrRateAreNeverApplied) {
   protocol::MarkerFrameMessage rate = Frame(0, 0, 0);
   rate.rate_hz = 240.0f;
   EXPECT_EQ(runner.Accept(rate, 0, sink_), DropReason::kRateMismatch);
+  // The warning and /health say which rate came against which was configured (they gave
+  // the reason's name alone).
+  EXPECT_DOUBLE_EQ(runner.mismatched_rate_hz(), 240.0);
+  SubjectStats stats;
+  stats.rejecting_input = true;
+  stats.rejecting_reason = DropReason::kRateMismatch;
+  stats.mismatched_rate_hz = runner.mismatched_rate_hz();
+  stats.rate_hz = 120.0;
+  EXPECT_EQ(RejectionDetail(stats),
+            ": the frames say 240 Hz, the subject is configured for 120 Hz (rate_hz)");
   runner.Flush(sink_);
   EXPECT_TRUE(sink_.skeletons.empty());
   EXPECT_EQ(runner.counters().dropped_total(), 3u);
