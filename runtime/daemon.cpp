@@ -313,6 +313,7 @@ struct Daemon::DataPlane final : OutputSink {
       s.rejecting_input = rejecting.has_value();
       if (rejecting) s.rejecting_reason = *rejecting;
       s.mismatched_rate_hz = r.mismatched_rate_hz();
+      s.character = r.character_info();
       s.model_suspect = r.model_suspect();
       s.model_distance_mm = r.model_distance_m() * 1e3;
       s.worker = index;
@@ -818,6 +819,11 @@ void LogStartup(const DaemonConfig& c, int http_port) {
         s.live.enabled ? "calibrated live (" + s.live.marker_set + "; the subject goes to " +
                              s.live.out_path + ")"
                        : "model " + s.model_path);
+    // The character it drives, and how it matched: the operator saw none of it.
+    if (s.character)
+      spdlog::info("    drives character {} ({} joints, {} bones matched, scale {:.3f})",
+                   s.character_path, s.character->num_joints(), s.character_map.bones.size(),
+                   s.character_map.target_leg_length_m / s.character_map.source_leg_length_m);
   }
   if (http_port > 0) {
     spdlog::info(

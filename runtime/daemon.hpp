@@ -45,11 +45,12 @@ struct SubjectStats {
   uint64_t skeleton_hash = 0;
   bool rejecting_input = false;                          ///< Every recent frame dropped...
   DropReason rejecting_reason = DropReason::kMalformed;  ///< ...the last one for this.
-  double mismatched_rate_hz = 0.0;  ///< The last rate_mismatch frame's rate (0: none).
-  bool model_suspect = false;       ///< Received samples persistently far from the model.
-  double model_distance_mm = 0.0;   ///< Median sample-to-model distance, over about a second.
-  int worker = 0;                   ///< The data-plane thread that solves it.
-  int config_rank = 0;              ///< Its place in the config's subject list.
+  double mismatched_rate_hz = 0.0;         ///< The last rate_mismatch frame's rate (0: none).
+  std::optional<CharacterInfo> character;  ///< The character it drives, if any.
+  bool model_suspect = false;              ///< Received samples persistently far from the model.
+  double model_distance_mm = 0.0;  ///< Median sample-to-model distance, over about a second.
+  int worker = 0;                  ///< The data-plane thread that solves it.
+  int config_rank = 0;             ///< Its place in the config's subject list.
   /// A live-calibrated subject's progress (filled from the calibration, not the worker).
   std::optional<LiveCalibrationStatus> calibration;
 };

@@ -284,6 +284,12 @@ std::string FormatSubjectsJson(const DaemonStats& stats) {
   for (const SubjectStats& s : stats.subjects) {
     nlohmann::json subject = SubjectJson(s);
     if (s.calibration) subject["calibration"] = CalibrationJson(*s.calibration);
+    if (s.character)
+      subject["character"] = {{"file", s.character->file},
+                              {"joints", s.character->joints},
+                              {"bones_matched", s.character->bones_matched},
+                              {"scale", s.character->scale},
+                              {"stands_on", s.character->stands_on}};
     subjects.push_back(std::move(subject));
   }
   return subjects.dump(2) + "\n";

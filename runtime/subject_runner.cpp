@@ -115,6 +115,7 @@ SubjectRunner::SubjectRunner(const SubjectConfig& config, const DaemonConfig& da
   if (config.character) {
     retargeter_ = std::make_unique<Retargeter>(config.model.skeleton, config.character,
                                                config.character_map, config.retarget);
+    character_path_ = config.character_path;
     const Skeleton& c = *config.character;
     character_topic_ = Topic("character", config.name);
     character_message_.subject = name_;
@@ -163,6 +164,18 @@ void SubjectRunner::AttachLiveCalibration(std::shared_ptr<LiveCalibration> calib
     } nowhere;  // nothing was published yet
     Install(live_->Build(std::move(*calibrated)), nowhere);
   }
+}
+
+std::optional<CharacterInfo> SubjectRunner::character_info() const {
+  if (!retargeter_) return std::nullopt;
+  const Vec3& up = retargeter_->map().target_up;
+  Eigen::Index axis = 0;
+  up.cwiseAbs().maxCoeff(&axis);
+  return CharacterInfo{.file = character_path_,
+                       .joints = retargeter_->target().num_joints(),
+                       .bones_matched = static_cast<int>(retargeter_->map().bones.size()),
+                       .scale = retargeter_->scale(),
+                       .stands_on = std::string(up[axis] > 0 ? "+" : "-") + "xyz"[axis]};
 }
 
 uint64_t SubjectRunner::pending() const { return static_cast<uint64_t>(pushed_ - published_); }

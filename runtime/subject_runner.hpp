@@ -80,6 +80,15 @@ struct SubjectCounters {
   uint64_t dropped_total() const;
 };
 
+/// What a subject's character is and how it matched the actor, for /subjects.
+struct CharacterInfo {
+  std::string file;
+  int joints = 0;
+  int bones_matched = 0;  ///< Roles found on both rigs (of 21).
+  double scale = 1.0;     ///< The leg-length ratio, character over actor.
+  std::string stands_on;  ///< The axis its rest pose stands on, e.g. "+y".
+};
+
 class SubjectRunner {
  public:
   /// Copies what it needs from the configs; they need not outlive the runner.
@@ -126,6 +135,8 @@ class SubjectRunner {
   /// suspect.
   double model_distance_m() const { return model_distance_m_; }
   bool model_suspect() const { return model_suspect_; }
+  /// The character it drives (empty: none), for /subjects.
+  std::optional<CharacterInfo> character_info() const;
   /// The rate the last frame dropped as rate_mismatch said it was captured at (0: none).
   double mismatched_rate_hz() const { return mismatched_rate_hz_; }
   int64_t last_receive_ns() const { return last_receive_ns_; }
@@ -182,6 +193,7 @@ class SubjectRunner {
   uint64_t skeleton_hash_ = 0;
   double rate_hz_ = 0.0;
   double mismatched_rate_hz_ = 0.0;
+  std::string character_path_;
   int max_gap_frames_ = 0;
   int restart_backjump_frames_ = 0;
   bool publish_cleaned_ = true;

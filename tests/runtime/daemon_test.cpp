@@ -681,6 +681,15 @@ TEST(DaemonTest, ARetargetedCharacterIsPublishedBesideTheActor) {
   ASSERT_TRUE(WaitForStats(*daemon, [&](const DaemonStats& st) {
     return st.messages_in == static_cast<uint64_t>(f.take.num_frames);
   }));
+  // /subjects shows the character and how it matched the actor (it showed none of it).
+  const DaemonStats stats = daemon->Stats();
+  ASSERT_TRUE(stats.subjects[0].character.has_value());
+  EXPECT_EQ(stats.subjects[0].character->joints, s.character->num_joints());
+  EXPECT_EQ(stats.subjects[0].character->bones_matched,
+            static_cast<int>(s.character_map.bones.size()));
+  EXPECT_NEAR(stats.subjects[0].character->scale, 1.2, 1e-3);
+  EXPECT_EQ(stats.subjects[0].character->stands_on, "+y");
+  EXPECT_NE(FormatSubjectsJson(stats).find("\"bones_matched\""), std::string::npos);
   daemon.Stop();
   ASSERT_TRUE(sub.WaitFor([&] {
     const auto frames = static_cast<size_t>(f.take.num_frames);
