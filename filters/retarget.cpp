@@ -239,12 +239,21 @@ void Retargeter::ForgetMotion() {
   frames_ = 0;
 }
 
+Vec3 NearestAxis(const Vec3& direction) {
+  Eigen::Index axis = 0;
+  direction.cwiseAbs().maxCoeff(&axis);
+  return direction[axis] > 0 ? Vec3::Unit(axis) : Vec3(-Vec3::Unit(axis));
+}
+
+std::string AxisName(const Vec3& direction) {
+  Eigen::Index axis = 0;
+  direction.cwiseAbs().maxCoeff(&axis);
+  return std::string(direction[axis] > 0 ? "+" : "-") + "xyz"[axis];
+}
+
 Mat3 CaptureToTargetWorld(const RetargetMap& map, const KinematicsWorkspace& source_posed) {
   const Vec3 up = source_posed.R_WJ[static_cast<size_t>(map.source_root)] * map.source_hips_up;
-  Eigen::Index axis = 0;
-  up.cwiseAbs().maxCoeff(&axis);
-  const Vec3 capture_up = up[axis] > 0 ? Vec3::Unit(axis) : Vec3(-Vec3::Unit(axis));
-  return Quat::FromTwoVectors(capture_up, map.target_up).toRotationMatrix();
+  return Quat::FromTwoVectors(NearestAxis(up), map.target_up).toRotationMatrix();
 }
 
 void TurnPoseWorld(const Skeleton& skeleton, const Mat3& world, Pose* pose) {

@@ -64,6 +64,11 @@ struct RetargetMap {
   std::string report;  ///< Human-readable: what matched what, what was left at rest.
 };
 
+/// The world axis nearest a direction, signed (+Z for a capture's slightly tilted up).
+Vec3 NearestAxis(const Vec3& direction);
+/// An axis as "+x", "-z"...: the nearest axis to `direction`.
+std::string AxisName(const Vec3& direction);
+
 /// The rotation from the world a posed actor stands in into a rig's: the actor's hips'
 /// way up (map.source_hips_up turned by its pelvis, map.source_root, in source_posed),
 /// snapped to the nearest axis, onto map.target_up, by the least rotation. A Vicon

@@ -202,9 +202,7 @@ Vec3 RestUp(const HumanoidRoles& roles, const KinematicsWorkspace& rest) {
         rest.p_WJ[static_cast<size_t>(a->second)] - rest.p_WJ[static_cast<size_t>(h->second)];
     if (!(leg.norm() > 1e-6) || leg.normalized().dot(hips_up) > -0.8) return Vec3::UnitY();
   }
-  Eigen::Index axis = 0;
-  hips_up.cwiseAbs().maxCoeff(&axis);
-  return hips_up[axis] > 0 ? Vec3::Unit(axis) : Vec3(-Vec3::Unit(axis));
+  return NearestAxis(hips_up);
 }
 
 bool InUpperBody(const std::string& role) {

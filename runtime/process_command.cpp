@@ -379,10 +379,7 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
   }
   if (!upright.isIdentity()) {
     for (Pose& pose : poses) TurnPoseWorld(*subject.skeleton, upright, &pose);
-    const Vec3 capture_up = upright.transpose() * rest_up;
-    Eigen::Index axis = 0;
-    capture_up.cwiseAbs().maxCoeff(&axis);
-    out << "the capture stands on " << (capture_up[axis] > 0 ? "+" : "-") << "xyz"[axis]
+    out << "the capture stands on " << AxisName(upright.transpose() * rest_up)
         << ": the solve is written turned to stand as its subject's rest pose does\n";
   }
   summary.solve_turned = !upright.isIdentity();

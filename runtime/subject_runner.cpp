@@ -168,14 +168,11 @@ void SubjectRunner::AttachLiveCalibration(std::shared_ptr<LiveCalibration> calib
 
 std::optional<CharacterInfo> SubjectRunner::character_info() const {
   if (!retargeter_) return std::nullopt;
-  const Vec3& up = retargeter_->map().target_up;
-  Eigen::Index axis = 0;
-  up.cwiseAbs().maxCoeff(&axis);
   return CharacterInfo{.file = character_path_,
                        .joints = retargeter_->target().num_joints(),
                        .bones_matched = static_cast<int>(retargeter_->map().bones.size()),
                        .scale = retargeter_->scale(),
-                       .stands_on = std::string(up[axis] > 0 ? "+" : "-") + "xyz"[axis]};
+                       .stands_on = AxisName(retargeter_->map().target_up)};
 }
 
 uint64_t SubjectRunner::pending() const { return static_cast<uint64_t>(pushed_ - published_); }
