@@ -6,7 +6,9 @@
 // per case the error of the anatomical joint centres (hips, knees, ankles, shoulders,
 // elbows, wrists) of the solved skeleton against the truth, matched by role (median, p95,
 // max over joint-frames), the worst bone-length error (thigh, shin, upper arm, forearm),
-// the hip's error and the method the report gives it, and the calibration's time.
+// the hip's error and the method the report gives it, the neck's and head's centres (no
+// marker rides the link between them), how far the trunk's joints sit beside the midline
+// in the calibrated rest pose, and the calibration's time.
 // Usage: calibration_accuracy [--set NAME]... [--wobble-mm W]... [TAKE.bvh ...]
 // MOCAPD_BENCH_ROLES=1 also prints each centre's median / p95 and each bone's length.
 #include <algorithm>
@@ -32,6 +34,9 @@ namespace {
 const char* kCentres[] = {"thigh_l",   "thigh_r",   "shin_l",      "shin_r",
                           "foot_l",    "foot_r",    "upper_arm_l", "upper_arm_r",
                           "forearm_l", "forearm_r", "hand_l",      "hand_r"};
+// The trunk's joints whose place is anatomical in any rig (the base of the neck, the base
+// of the skull); reported on their own, not in the centres' figures above.
+const char* kTrunkCentres[] = {"neck", "head"};
 const char* kBones[] = {"shin_l",    "shin_r",    "foot_l", "foot_r",
                         "forearm_l", "forearm_r", "hand_l", "hand_r"};
 
@@ -50,6 +55,8 @@ struct Outcome {
   std::string hip_method;
   double seconds = 0.0;
   double residual_mm = 0.0;
+  std::vector<double> trunk_errors;  // neck and head centres, per frame, m
+  double worst_midline_m = 0.0;
   std::string failure;
 };
 
@@ -103,8 +110,19 @@ Outcome Run(const Case& c, const MarkerSetDefinition& set, double wobble_m) {
       o.by_role[role].push_back(e);
       if (std::string(role).rfind("thigh", 0) == 0) hip.push_back(e);
     }
+    for (const char* role : kTrunkCentres) {
+      const auto t = static_cast<size_t>(truth_roles.joint_of_role.at(role));
+      const auto s = static_cast<size_t>(sk.FindJoint(role)->value);
+      o.trunk_errors.push_back((solved.p_WJ[s] - truth.p_WJ[t]).norm());
+      o.by_role[role].push_back(o.trunk_errors.back());
+    }
   }
   o.hip_median_m = Quant(hip, 0.5);
+  // How far a joint of the trunk (no mirror image) sits beside its parent's midline plane:
+  // a body has its spine, neck and head on it.
+  for (int j = 1; j < sk.num_joints(); ++j)
+    if (MirrorRole(sk.joint(j).name).empty())
+      o.worst_midline_m = std::max(o.worst_midline_m, std::abs(sk.joint(j).offset.x()));
   o.hip_method = cal.solve.joints[static_cast<size_t>(sk.FindJoint("thigh_l")->value)].method;
   // Bone lengths: the distance from a joint's parent centre to its own, both skeletons.
   KinematicsWorkspace truth_rest(c.skeleton);
@@ -164,22 +182,26 @@ int main(int argc, char** argv) {
   }
   std::printf(
       "| take | set | wobble (mm) | centres median / p95 / max (mm) | worst bone (%%) | hip median "
-      "(mm), method | residual median (mm) | time (s) |\n");
-  std::printf("|---|---|---|---|---|---|---|---|\n");
+      "(mm), method | neck & head median / max (mm) | trunk off midline (mm) | "
+      "residual median (mm) | time (s) |\n");
+  std::printf("|---|---|---|---|---|---|---|---|---|---|\n");
   for (const std::string& set_name : sets) {
     const MarkerSetDefinition set = FindMarkerSet(set_name);
     for (double wobble : wobbles) {
       for (const Case& c : cases) {
         const Outcome o = Run(c, set, wobble);
         if (!o.failure.empty()) {
-          std::printf("| %s | %s | %.0f | failed: %s | | | | |\n", c.name.c_str(), set_name.c_str(),
-                      wobble * 1e3, o.failure.c_str());
+          std::printf("| %s | %s | %.0f | failed: %s | | | | | | |\n", c.name.c_str(),
+                      set_name.c_str(), wobble * 1e3, o.failure.c_str());
           continue;
         }
-        std::printf("| %s | %s | %.0f | %.1f / %.1f / %.1f | %.1f | %.1f, %s | %.1f | %.2f |\n",
-                    c.name.c_str(), set_name.c_str(), wobble * 1e3, Quant(o.errors, 0.5) * 1e3,
-                    Quant(o.errors, 0.95) * 1e3, Quant(o.errors, 1.0) * 1e3, o.worst_bone_percent,
-                    o.hip_median_m * 1e3, o.hip_method.c_str(), o.residual_mm, o.seconds);
+        std::printf(
+            "| %s | %s | %.0f | %.1f / %.1f / %.1f | %.1f | %.1f, %s | %.1f / %.1f | %.1f | %.1f | "
+            "%.2f |\n",
+            c.name.c_str(), set_name.c_str(), wobble * 1e3, Quant(o.errors, 0.5) * 1e3,
+            Quant(o.errors, 0.95) * 1e3, Quant(o.errors, 1.0) * 1e3, o.worst_bone_percent,
+            o.hip_median_m * 1e3, o.hip_method.c_str(), Quant(o.trunk_errors, 0.5) * 1e3,
+            Quant(o.trunk_errors, 1.0) * 1e3, o.worst_midline_m * 1e3, o.residual_mm, o.seconds);
         if (std::getenv("MOCAPD_BENCH_ROLES")) {
           for (const auto& [role, e] : o.by_role)
             std::printf("    %s %.1f / %.1f mm\n", role.c_str(), Quant(e, 0.5) * 1e3,

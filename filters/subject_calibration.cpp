@@ -608,6 +608,59 @@ SubjectCalibrationResult CalibrateSubject(const CalibrationTemplate& tmpl,
     r.uncertainty_m = std::sqrt(1.0 / (1.0 / worst_data_var + 1.0 / prior_var));
     result.joints.push_back(r);
   }
+  // A segment that fewer than two known markers ride (a spine or neck link between two
+  // marked segments, a clavicle with one marker) has no frame of its own: the fit is the
+  // same whichever way it is turned, the poses turning the other way, and the adjustment
+  // leaves it wherever it wandered. A chest offset 20 deg off in the spine's frame fitted
+  // as well as the template's, and the rest pose showed a bent spine and a tilted head,
+  // which a BVH reader and a retargeted character copy. Each such segment is turned,
+  // with everything it carries, to the template's way round; no joint moves in any pose.
+  std::vector<int> known_markers(static_cast<size_t>(J), 0);
+  for (int m = 0; m < M; ++m)
+    if (!unknown(static_cast<size_t>(m)))
+      ++known_markers[static_cast<size_t>(
+          tmpl.markers[static_cast<size_t>(m)].attachments[0].joint)];
+  bool turned = false;
+  for (int segment = 1; segment < J; ++segment) {
+    if (known_markers[static_cast<size_t>(segment)] >= 2) continue;
+    // Wahba's problem: the rotation that best turns what the segment carries onto the
+    // template's (one vector: the least rotation).
+    std::vector<std::pair<Vec3, Vec3>> carried;  // (fitted, template)
+    for (int k = 1; k < J; ++k)
+      if (base.joint(k).parent.value == segment)
+        carried.emplace_back(joint_offset[static_cast<size_t>(k)],
+                             joint_prior[static_cast<size_t>(k)]);
+    for (int m = 0; m < M; ++m)
+      if (!unknown(static_cast<size_t>(m)) &&
+          tmpl.markers[static_cast<size_t>(m)].attachments[0].joint == segment)
+        carried.emplace_back(marker_offset[static_cast<size_t>(m)],
+                             marker_prior[static_cast<size_t>(m)]);
+    if (carried.empty()) continue;
+    Mat3 turn = Mat3::Identity();
+    if (carried.size() == 1) {
+      turn = Quat::FromTwoVectors(carried[0].first, carried[0].second).toRotationMatrix();
+    } else {
+      Mat3 correlation = Mat3::Zero();
+      for (const auto& [fitted, templ] : carried) correlation += templ * fitted.transpose();
+      const Eigen::JacobiSVD<Mat3> svd(correlation, Eigen::ComputeFullU | Eigen::ComputeFullV);
+      Mat3 D = Mat3::Identity();
+      if ((svd.matrixU() * svd.matrixV().transpose()).determinant() < 0.0) D(2, 2) = -1.0;
+      turn = svd.matrixU() * D * svd.matrixV().transpose();
+    }
+    for (int k = 1; k < J; ++k)
+      if (base.joint(k).parent.value == segment)
+        joint_offset[static_cast<size_t>(k)] = turn * joint_offset[static_cast<size_t>(k)];
+    for (int m = 0; m < M; ++m)
+      if (tmpl.markers[static_cast<size_t>(m)].attachments[0].joint == segment)
+        marker_offset[static_cast<size_t>(m)] = turn * marker_offset[static_cast<size_t>(m)];
+    turned = true;
+  }
+  if (turned) {
+    const Model straightened = MakeModel(base, joint_offset, tmpl.markers, marker_offset);
+    result.skeleton = *straightened.skeleton;
+    result.markers = std::vector<MarkerDefinition>(straightened.markers->markers().begin(),
+                                                   straightened.markers->markers().end());
+  }
   return result;
 }
 
