@@ -103,7 +103,10 @@ struct RetargetOptions {
   double contact_speed_m_s = 0.15;
   int release_frames = 8;             ///< A lifted foot eases from its lock back onto tracking.
   double contact_weight_gain = 10.0;  ///< A planted foot's points weigh this much more.
-  int first_frame_passes = 20;        ///< Re-anchoring solves on the first frame (after a reset).
+  /// Re-anchoring solves on the first frame (after a reset), at most...
+  int first_frame_passes = 200;
+  /// ...stopping once a pass moves no joint more than this.
+  double first_frame_settled_m = 1e-4;
   /// Throws std::invalid_argument naming the field.
   void Validate() const;
 };
@@ -167,6 +170,7 @@ class Retargeter {
   KinematicsWorkspace source_fk_;
   std::vector<Vec3> goals_;
   std::vector<Vec3> source_origin_before_;  ///< The actor's joint origins last frame.
+  std::vector<Vec3> settle_before_;         ///< The character's joints before a settling pass.
   std::vector<double> weights_, base_weights_;
   // Contacts per side.
   std::array<bool, 2> planted_{false, false};
