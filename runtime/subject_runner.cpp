@@ -117,6 +117,9 @@ SubjectRunner::SubjectRunner(const SubjectConfig& config, const DaemonConfig& da
                                                config.character_map, config.retarget);
     character_path_ = config.character_path;
     const Skeleton& c = *config.character;
+    character_fade_.Resize(c);
+    last_character_ = RestPose(c);
+    character_kinematics_.emplace(c);
     character_topic_ = Topic("character", config.name);
     character_message_.subject = name_;
     character_message_.model_hash = protocol::SkeletonHash(c);
@@ -154,8 +157,7 @@ void SubjectRunner::AttachLiveCalibration(std::shared_ptr<LiveCalibration> calib
   // and solves. In seconds, so any rate swaps alike.
   const int lookahead = pipeline_->options().lookahead;
   warm_frames_ = std::max(lookahead + 2, static_cast<int>(std::lround(0.5 * rate_hz_)));
-  blend_pose_ = RestPose(*skeleton_);
-  fade_correction_.assign(blend_pose_.rotation.size(), Vec3::Zero());
+  actor_fade_.Resize(*skeleton_);
   // Calibrated already (a reload rebuilt this subject's runner): start from that subject.
   if (std::optional<SubjectModel> calibrated = live_->CalibratedModel()) {
     class Nowhere : public OutputSink {
@@ -291,6 +293,7 @@ void SubjectRunner::AdoptSubject(LiveSwap& incoming) {
   std::swap(skeleton_, incoming.model.skeleton);
   std::swap(markers_, incoming.model.markers);
   if (incoming.retargeter) std::swap(retargeter_, incoming.retargeter);
+  published_character_ = nullptr;  // may be the outgoing retargeter's
   std::swap(description_, incoming.description);
   skeleton_hash_ = description_.skeleton_hash;
   skeleton_message_.model_hash = skeleton_hash_;
@@ -304,32 +307,47 @@ void SubjectRunner::Install(std::unique_ptr<LiveSwap> subject, OutputSink& sink)
   PublishDescription(sink);
 }
 
-void SubjectRunner::SwitchModel(OutputSink& sink) {
-  AdoptSubject(*swap_);
-  std::swap(frame_base_, shadow_base_);
-  // The fade: at this frame each joint's new rotation is corrected back to the old one's
-  // (new * C = old), and the correction, fixed from here on, decays to nothing. Not a
-  // slerp between the two solves as they go on: two rotations near 180 degrees apart
-  // would have their shortest path flip sides mid-fade (seen: a forearm turning 167
-  // degrees in one frame on CMU 01_01). The fade lasts a quarter of a second, or as long
-  // as undoing the largest correction at kFadeDegPerSecond takes: the template and the
-  // calibrated subject can disagree on a segment's twist by 100 degrees and more.
-  double differ_deg = 0.0;
-  const Pose& from = swap_->pipeline->output().pose;
-  const Pose& to = pipeline_->output().pose;
+void SubjectRunner::PoseFade::Resize(const Skeleton& skeleton) {
+  blended_ = RestPose(skeleton);
+  correction_.assign(blended_.rotation.size(), Vec3::Zero());
+}
+
+void SubjectRunner::PoseFade::Start(const Pose& from, const Pose& to, double rate_hz) {
+  differ_deg_ = 0.0;
   for (size_t j = 0; j < from.rotation.size(); ++j) {
     Quat c = to.rotation[j].conjugate() * from.rotation[j];
     if (c.w() < 0) c.coeffs() = -c.coeffs();  // the short way: at most 180 degrees
     const Eigen::AngleAxisd turn(c.normalized());
-    fade_correction_[j] = turn.angle() * turn.axis();
-    differ_deg = std::max(differ_deg, turn.angle() * 180.0 / M_PI);
+    correction_[j] = turn.angle() * turn.axis();
+    differ_deg_ = std::max(differ_deg_, turn.angle() * 180.0 / M_PI);
   }
-  fade_root_offset_ = from.translation[0] - to.translation[0];
-  constexpr double kFadeDegPerSecond = 60.0;
-  blend_frames_ = static_cast<int>(std::clamp(
-      std::ceil(std::max(0.25, differ_deg / kFadeDegPerSecond) * rate_hz_), 1.0, 3.0 * rate_hz_));
-  fade_left_ = blend_frames_;
-  fade_differ_deg_ = differ_deg;
+  root_offset_ = from.translation[0] - to.translation[0];
+  frames_ = static_cast<int>(std::clamp(
+      std::ceil(std::max(0.25, differ_deg_ / kDegPerSecond) * rate_hz), 1.0, 3.0 * rate_hz));
+  left_ = frames_;
+}
+
+const Pose& SubjectRunner::PoseFade::Next(const Pose& current) {
+  const double share = left_ / (frames_ + 1.0);  // of the correction still applied
+  --left_;
+  for (size_t j = 0; j < blended_.rotation.size(); ++j) {
+    const Vec3 c = share * correction_[j];
+    const double angle = c.norm();
+    blended_.rotation[j] =
+        angle > 0 ? Quat(current.rotation[j] * Quat(Eigen::AngleAxisd(angle, c / angle)))
+                  : current.rotation[j];
+    blended_.translation[j] = current.translation[j];
+  }
+  blended_.translation[0] = current.translation[0] + share * root_offset_;
+  return blended_;
+}
+
+void SubjectRunner::SwitchModel(OutputSink& sink) {
+  AdoptSubject(*swap_);
+  std::swap(frame_base_, shadow_base_);
+  actor_fade_.Start(swap_->pipeline->output().pose, pipeline_->output().pose, rate_hz_);
+  // The character's fade starts from its last published frame, at the next one.
+  character_fade_pending_ = retargeter_ != nullptr && published_ > 0;
   ++swaps_;
   // The outgoing subject is not needed for the fade: back to the calibration thread.
   EndSwap();
@@ -346,7 +364,10 @@ void SubjectRunner::EndSwap() {
 void SubjectRunner::ResetPipelines() {
   pipeline_->Reset();
   frame_base_ = 0;
-  fade_left_ = 0;  // a new stream: nothing to fade from
+  // A new stream: nothing to fade from.
+  actor_fade_.Stop();
+  character_fade_.Stop();
+  character_fade_pending_ = false;
   if (!swap_) return;
   // A restart while warming: the incoming subject warms up again on the new stream.
   swap_->pipeline->Reset();
@@ -415,21 +436,7 @@ void SubjectRunner::Publish(int64_t trigger_receive_ns, OutputSink& sink) {
       swap_->pipeline->output().frame + shadow_base_ == index)
     SwitchModel(sink);
   const CleanFrame& out = pipeline_->output();
-  const Pose* pose = &out.pose;
-  if (fade_left_ > 0) {
-    const double share = fade_left_ / (blend_frames_ + 1.0);  // of the correction still applied
-    --fade_left_;
-    for (size_t j = 0; j < blend_pose_.rotation.size(); ++j) {
-      const Vec3 c = share * fade_correction_[j];
-      const double angle = c.norm();
-      blend_pose_.rotation[j] =
-          angle > 0 ? Quat(out.pose.rotation[j] * Quat(Eigen::AngleAxisd(angle, c / angle)))
-                    : out.pose.rotation[j];
-      blend_pose_.translation[j] = out.pose.translation[j];
-    }
-    blend_pose_.translation[0] = out.pose.translation[0] + share * fade_root_offset_;
-    pose = &blend_pose_;
-  }
+  const Pose* pose = actor_fade_.active() ? &actor_fade_.Next(out.pose) : &out.pose;
   const Stamp& stamp = stamps_[static_cast<size_t>(index) % stamps_.size()];
   ++published_;
   if (stamp.inserted) {
@@ -483,7 +490,23 @@ void SubjectRunner::Publish(int64_t trigger_receive_ns, OutputSink& sink) {
     sink.Send(cleaned_topic_, buffer_);
   }
   if (retargeter_) {
-    const Pose& character = retargeter_->Retarget(*pose);
+    const Pose* character_pose = &retargeter_->Retarget(out.pose);
+    if (character_fade_pending_) {
+      character_fade_.Start(last_character_, *character_pose, rate_hz_);
+      character_fade_pending_ = false;
+    }
+    const KinematicsWorkspace* character_kinematics = &retargeter_->kinematics();
+    if (character_fade_.active()) {
+      character_pose = &character_fade_.Next(*character_pose);
+      ForwardKinematics(retargeter_->target(), *character_pose, &*character_kinematics_);
+      character_kinematics = &*character_kinematics_;
+    }
+    const Pose& character = *character_pose;
+    published_character_ = character_kinematics;
+    std::copy(character.rotation.begin(), character.rotation.end(),
+              last_character_.rotation.begin());
+    std::copy(character.translation.begin(), character.translation.end(),
+              last_character_.translation.begin());
     protocol::SkeletonFrameMessage& c = character_message_;
     c.stream = stamp.stream;
     c.frame_number = stamp.frame_number;
@@ -497,7 +520,7 @@ void SubjectRunner::Publish(int64_t trigger_receive_ns, OutputSink& sink) {
     c.root_translation = character.translation[0];
     for (size_t j = 0; j < c.rotations.size(); ++j) c.rotations[j] = character.rotation[j];
     if (publish_globals_) {
-      const KinematicsWorkspace& k = retargeter_->kinematics();
+      const KinematicsWorkspace& k = *character_kinematics;
       for (size_t j = 0; j < c.rotations.size(); ++j) {
         c.global_rotations[j] = Quat(k.R_WJ[j]);
         c.global_positions[j] = k.p_WJ[j];
@@ -531,8 +554,8 @@ void SubjectRunner::ShowLive(const CleanFrame& out, int64_t index, const Stamp& 
     v->reason[m] = static_cast<uint8_t>(out.reason[m]);
   }
   std::copy(kinematics_.p_WJ.begin(), kinematics_.p_WJ.end(), v->joints.begin());
-  if (retargeter_)
-    std::copy(retargeter_->kinematics().p_WJ.begin(), retargeter_->kinematics().p_WJ.end(),
+  if (published_character_ != nullptr)
+    std::copy(published_character_->p_WJ.begin(), published_character_->p_WJ.end(),
               v->character_joints.begin());
   live_view_->EndWrite();
 }
@@ -556,7 +579,7 @@ bool SubjectRunner::CheckStall(int64_t now_ns, int64_t timeout_ns, OutputSink& s
 // corruption of a minority (swaps, spikes, glitches) does not move it.
 void SubjectRunner::UpdateModelDistance(int64_t frame) {
   // A fade's poses are neither subject's solve: they fit neither model.
-  if (fade_left_ > 0) return;
+  if (actor_fade_.active()) return;
   const size_t count = missing_.size();
   const Vec3* received = received_.data() + static_cast<size_t>(frame) % stamps_.size() * count;
   distances_.clear();

@@ -157,13 +157,43 @@ class SubjectRunner {
   int swaps() const { return swaps_; }
   bool swapping() const { return swap_ != nullptr; }
   /// The swapped-in subject's poses are still being faded in.
-  bool fading() const { return fade_left_ > 0; }
+  bool fading() const { return actor_fade_.active(); }
   /// The last swap: how far the subjects' joints differed when it began, and its fade.
-  double fade_differ_deg() const { return fade_differ_deg_; }
-  double fade_seconds() const { return blend_frames_ / rate_hz_; }
+  double fade_differ_deg() const { return actor_fade_.differ_deg(); }
+  double fade_seconds() const { return actor_fade_.frames() / rate_hz_; }
+  /// The same for the character the subject drives.
+  bool character_fading() const { return character_fade_.active(); }
+  double character_fade_differ_deg() const { return character_fade_.differ_deg(); }
   ~SubjectRunner();
 
  private:
+  // A fade from one solve onto another: at its start each joint's new rotation is
+  // corrected back to the old one's (new * C = old) and the root moved back onto the old
+  // one's, and that correction, fixed from then on, decays to nothing. Not a slerp between
+  // the two solves as they go on: two rotations near 180 degrees apart would have their
+  // shortest path flip sides mid-fade (seen: a forearm turning 167 degrees in one frame on
+  // CMU 01_01). It lasts a quarter of a second, or as long as undoing the largest
+  // correction at kDegPerSecond takes: the template and the calibrated subject can
+  // disagree on a segment's twist by 100 degrees and more.
+  class PoseFade {
+   public:
+    static constexpr double kDegPerSecond = 60.0;
+    void Resize(const Skeleton& skeleton);  // allocates
+    void Start(const Pose& from, const Pose& to, double rate_hz);
+    void Stop() { left_ = 0; }
+    bool active() const { return left_ > 0; }
+    int frames() const { return frames_; }
+    double differ_deg() const { return differ_deg_; }
+    /// The next frame of the fade applied to `current`; needs active().
+    const Pose& Next(const Pose& current);
+
+   private:
+    std::vector<Vec3> correction_;  // per joint, new * exp(c) = old at the start
+    Vec3 root_offset_ = Vec3::Zero();
+    int frames_ = 0, left_ = 0;
+    double differ_deg_ = 0.0;
+    Pose blended_;
+  };
   struct Stamp {
     uint64_t frame_number = 0;
     uint64_t capture_ns = 0;
@@ -242,13 +272,20 @@ class SubjectRunner {
   int64_t shadow_base_ = 0;              ///< Frames pushed before the shadow pipeline's first.
   int64_t shadow_outputs_ = 0;
   bool shadow_has_output_ = false;  ///< The last push gave the shadow an output.
-  int warm_frames_ = 0, blend_frames_ = 0;
-  int fade_left_ = 0;                  ///< Frames of the fade still to publish.
-  std::vector<Vec3> fade_correction_;  ///< Per joint, new * exp(c) = old at the switch.
-  Vec3 fade_root_offset_ = Vec3::Zero();
+  int warm_frames_ = 0;
   int swaps_ = 0;
-  double fade_differ_deg_ = 0.0;  ///< The last swap's largest joint difference at its start.
-  Pose blend_pose_;
+  PoseFade actor_fade_;  ///< The published skeleton, from the outgoing subject's solve.
+  // The character, from what the outgoing subject's retargeter last published: the
+  // incoming retargeter, warmed on the incoming subject's own solves, goes on from them,
+  // and its output fades in from the last character frame the stage saw. (Retargeting the
+  // actor's faded pose instead threw a CMU actor's character hand 20 cm at the swap: the
+  // new subject's bones are not the old one's.)
+  PoseFade character_fade_;
+  bool character_fade_pending_ = false;  ///< Start it at the next published frame.
+  Pose last_character_;                  ///< The last character pose published.
+  std::optional<KinematicsWorkspace> character_kinematics_;  ///< Of the faded character pose.
+  /// The character's joints as last published (the retargeter's, or the fade's).
+  const KinematicsWorkspace* published_character_ = nullptr;
   std::string calibration_topic_;
   std::string skeleton_topic_, cleaned_topic_, description_topic_, status_topic_;
 };

@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <random>
 
+#include "formats/bvh.hpp"
 #include "formats/subject_from_markers.hpp"
 #include "runtime/subject_runner.hpp"
 #include "sim/humanoid.hpp"
@@ -27,6 +28,13 @@ class RecordingSink : public OutputSink {
       protocol::SkeletonFrameMessage m;
       ASSERT_EQ(protocol::DecodeSkeletonFrame(message, &m), protocol::DecodeStatus::kOk);
       skeletons.push_back(m);
+    } else if (protocol::MessageType type;
+               topic.starts_with("character/") &&
+               protocol::PeekType(message, &type) == protocol::DecodeStatus::kOk &&
+               type == protocol::MessageType::kSkeletonFrame) {
+      protocol::SkeletonFrameMessage m;
+      ASSERT_EQ(protocol::DecodeSkeletonFrame(message, &m), protocol::DecodeStatus::kOk);
+      characters.push_back(m);
     } else if (topic.starts_with("subject/")) {
       protocol::SubjectDescriptionMessage m;
       ASSERT_EQ(protocol::DecodeSubjectDescription(message, &m), protocol::DecodeStatus::kOk);
@@ -38,7 +46,7 @@ class RecordingSink : public OutputSink {
       calibrations.push_back(m);
     }
   }
-  std::vector<protocol::SkeletonFrameMessage> skeletons;
+  std::vector<protocol::SkeletonFrameMessage> skeletons, characters;
   std::vector<protocol::SubjectDescriptionMessage> descriptions;
   std::vector<size_t> description_at;  ///< Skeletons published before each description.
   std::vector<protocol::CalibrationStatusMessage> calibrations;
@@ -103,6 +111,13 @@ class LiveCalibrationTest : public ::testing::Test {
     std::shared_ptr<LiveCalibration> calibration;
     SubjectRunner runner;
   };
+
+  // A character file beside the config; the subject line that drives it.
+  std::string WriteCharacter(const Skeleton& character) const {
+    WriteBvh((dir_ / "char.bvh").string(),
+             MakeBvhTake(character, {RestPose(character)}, 1.0 / 30.0, "cm"));
+    return "character = \"char.bvh\"\n";
+  }
 
   std::filesystem::path dir_;
   Skeleton truth_;
@@ -211,8 +226,62 @@ TEST_F(
   EXPECT_EQ(sink.calibrations.back().skeleton_hash, sink.skeletons.back().model_hash);
 }
 
+// The character a live subject drives comes through the swap as smoothly as it moved
+// before: it was retargeted from the faded actor pose by the incoming subject's
+// retargeter, and the new subject's bones threw a CMU actor's character hand 20 cm in one
+// frame.
+TEST_F(LiveCalibrationTest, TheCharacterComesThroughTheSwapWithNoPop) {
+  const Skeleton character = MakeHumanoidSkeleton(1.9);
+  LiveSubject live(*this, "calibration_min_s = 12\n" + WriteCharacter(character));
+  RecordingSink sink;
+  for (int f = 0; f < take_.num_frames; ++f) {
+    ASSERT_FALSE(live.runner.Accept(Frame(live.subject, f), 0, sink).has_value()) << f;
+    if (f % static_cast<int>(kRate) == 0) {
+      live.calibration->Collect();
+      (void)live.calibration->Refine();
+    }
+  }
+  live.runner.EndOfStream(sink);
+  ASSERT_EQ(live.runner.swaps(), 1);
+  ASSERT_EQ(sink.characters.size(), sink.skeletons.size());
+  ASSERT_EQ(sink.description_at.size(), 2u);
+  const size_t swap = sink.description_at[1];
+
+  // The character's largest joint move per frame, from its own rest offsets.
+  KinematicsWorkspace before(character), after(character);
+  Pose pose = RestPose(character);
+  auto place = [&](size_t f, KinematicsWorkspace* k) {
+    const protocol::SkeletonFrameMessage& m = sink.characters[f];
+    pose.translation[0] = m.root_translation;
+    for (size_t j = 0; j < m.rotations.size(); ++j) pose.rotation[j] = m.rotations[j];
+    ForwardKinematics(character, pose, k);
+  };
+  auto move = [&](size_t f) {
+    place(f - 1, &before);
+    place(f, &after);
+    double worst = 0.0;
+    for (size_t j = 0; j < after.p_WJ.size(); ++j)
+      worst = std::max(worst, (after.p_WJ[j] - before.p_WJ[j]).norm());
+    return worst;
+  };
+  double natural = 0.0, across = 0.0;
+  for (size_t f = swap - static_cast<size_t>(kRate); f < swap; ++f)
+    natural = std::max(natural, move(f));
+  // Through the longest fade there is (3 s).
+  const size_t end = std::min(sink.characters.size(), swap + static_cast<size_t>(3 * kRate));
+  for (size_t f = swap; f < end; ++f) across = std::max(across, move(f));
+  EXPECT_LT(across, natural + 0.01)
+      << "natural motion " << natural << " m per frame; " << live.runner.character_fade_differ_deg()
+      << " deg apart at the swap";
+  std::printf(
+      "character: largest joint move %.1f cm per frame across the swap, %.1f cm in the "
+      "second before\n",
+      across * 100.0, natural * 100.0);
+}
+
 TEST_F(LiveCalibrationTest, TheDataPlaneAllocatesNothingWhileCollectingSwappingAndCrossFading) {
-  LiveSubject live(*this, "calibration_min_s = 12\n");
+  // With a character: its retargeter swaps and fades too.
+  LiveSubject live(*this, "calibration_min_s = 12\n" + WriteCharacter(MakeHumanoidSkeleton(1.9)));
   const SubjectConfig& subject = live.subject;
   SubjectRunner& runner = live.runner;
   LiveCalibration* calibration = live.calibration.get();
