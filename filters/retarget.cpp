@@ -133,8 +133,8 @@ void RetargetOptions::Validate() const {
           ">= 0");
   require(release_frames >= 1, "release_frames", ">= 1");
   require(contact_weight_gain >= 1, "contact_weight_gain", ">= 1");
-  require(first_frame_passes >= 0 && first_frame_passes <= 10000, "first_frame_passes",
-          "in [0, 10000]");
+  require(first_frame_passes >= 0 && first_frame_passes <= 1000, "first_frame_passes",
+          "in [0, 1000]");
   require(first_frame_settled_m >= 0 && std::isfinite(first_frame_settled_m),
           "first_frame_settled_m", ">= 0");
 }
@@ -395,6 +395,10 @@ const Pose& Retargeter::Retarget(const Pose& source_pose) {
     // re-anchor on each solution until no joint moves (once, not per frame). The anchors
     // converge slowly where a limb must turn far from its rest: a fixed 20 passes left a
     // forearm 15 cm off that the next frames eased in, a slide the stage saw at start.
+    // The passes converge geometrically, so the distance still to go is estimated from
+    // the last two steps (step x r / (1 - r)): a small step of a slow convergence is not
+    // yet settled.
+    double last_moved = kNaN;
     for (int pass = 0; pass < options_.first_frame_passes; ++pass) {
       std::copy(state_.kinematics().p_WJ.begin(), state_.kinematics().p_WJ.end(),
                 settle_before_.begin());
@@ -403,7 +407,12 @@ const Pose& Retargeter::Retarget(const Pose& source_pose) {
       double moved = 0.0;
       for (size_t j = 0; j < settle_before_.size(); ++j)
         moved = std::max(moved, (state_.kinematics().p_WJ[j] - settle_before_[j]).norm());
-      if (moved < options_.first_frame_settled_m) break;
+      const double rate = moved / last_moved;  // NaN on the first pass
+      const double to_go = rate < 1.0 ? moved * rate / (1.0 - rate) : kNaN;
+      if (moved < options_.first_frame_settled_m &&
+          (pass == 0 || to_go < options_.first_frame_settled_m))
+        break;
+      last_moved = moved;
     }
   }
   summary_.planted = planted_;

@@ -608,9 +608,9 @@ SubjectCalibrationResult CalibrateSubject(const CalibrationTemplate& tmpl,
     r.uncertainty_m = std::sqrt(1.0 / (1.0 / worst_data_var + 1.0 / prior_var));
     result.joints.push_back(r);
   }
-  // A segment that fewer than two known markers ride (a spine or neck link between two
-  // marked segments, a clavicle with one marker) has no frame of its own: the fit is the
-  // same whichever way it is turned, the poses turning the other way, and the adjustment
+  // A segment with joints below it that fewer than two known markers ride (a spine or
+  // neck link between two marked segments, a clavicle with one marker) has no frame of its own: the
+  // fit is the same whichever way it is turned, the poses turning the other way, and the adjustment
   // leaves it wherever it wandered. A chest offset 20 deg off in the spine's frame fitted
   // as well as the template's, and the rest pose showed a bent spine and a tilted head,
   // which a BVH reader and a retargeted character copy. Each such segment is turned,
@@ -622,7 +622,12 @@ SubjectCalibrationResult CalibrateSubject(const CalibrationTemplate& tmpl,
           tmpl.markers[static_cast<size_t>(m)].attachments[0].joint)];
   bool turned = false;
   for (int segment = 1; segment < J; ++segment) {
-    if (known_markers[static_cast<size_t>(segment)] >= 2) continue;
+    // An end segment (a hand with one finger marker, a toe) is left as it is: what it
+    // points along is its end site, fixed in its frame and not turned with it.
+    bool has_child = false;
+    for (int k = segment + 1; k < J; ++k)
+      has_child = has_child || base.joint(k).parent.value == segment;
+    if (known_markers[static_cast<size_t>(segment)] >= 2 || !has_child) continue;
     // Wahba's problem: the rotation that best turns what the segment carries onto the
     // template's (one vector: the least rotation).
     std::vector<std::pair<Vec3, Vec3>> carried;  // (fitted, template)

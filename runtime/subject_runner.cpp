@@ -310,6 +310,7 @@ void SubjectRunner::Install(std::unique_ptr<LiveSwap> subject, OutputSink& sink)
 void SubjectRunner::PoseFade::Resize(const Skeleton& skeleton) {
   blended_ = RestPose(skeleton);
   correction_.assign(blended_.rotation.size(), Vec3::Zero());
+  offset_.assign(blended_.translation.size(), Vec3::Zero());
 }
 
 void SubjectRunner::PoseFade::Start(const Pose& from, const Pose& to, double rate_hz) {
@@ -321,7 +322,8 @@ void SubjectRunner::PoseFade::Start(const Pose& from, const Pose& to, double rat
     correction_[j] = turn.angle() * turn.axis();
     differ_deg_ = std::max(differ_deg_, turn.angle() * 180.0 / M_PI);
   }
-  root_offset_ = from.translation[0] - to.translation[0];
+  for (size_t j = 0; j < from.translation.size(); ++j)
+    offset_[j] = from.translation[j] - to.translation[j];
   frames_ = static_cast<int>(std::clamp(
       std::ceil(std::max(0.25, differ_deg_ / kDegPerSecond) * rate_hz), 1.0, 3.0 * rate_hz));
   left_ = frames_;
@@ -336,9 +338,9 @@ const Pose& SubjectRunner::PoseFade::Next(const Pose& current) {
     blended_.rotation[j] =
         angle > 0 ? Quat(current.rotation[j] * Quat(Eigen::AngleAxisd(angle, c / angle)))
                   : current.rotation[j];
-    blended_.translation[j] = current.translation[j];
   }
-  blended_.translation[0] = current.translation[0] + share * root_offset_;
+  for (size_t j = 0; j < blended_.translation.size(); ++j)
+    blended_.translation[j] = current.translation[j] + share * offset_[j];
   return blended_;
 }
 
@@ -368,6 +370,7 @@ void SubjectRunner::ResetPipelines() {
   actor_fade_.Stop();
   character_fade_.Stop();
   character_fade_pending_ = false;
+  shadow_retargeted_ = -1;
   if (!swap_) return;
   // A restart while warming: the incoming subject warms up again on the new stream.
   swap_->pipeline->Reset();
@@ -408,7 +411,10 @@ void SubjectRunner::Push(std::span<const Vec3> positions, const Stamp& stamp, in
     shadow_has_output_ = swap_->pipeline->Push(positions);
     if (shadow_has_output_) {
       ++shadow_outputs_;
-      if (swap_->retargeter) (void)swap_->retargeter->Retarget(swap_->pipeline->output().pose);
+      if (swap_->retargeter) {
+        (void)swap_->retargeter->Retarget(swap_->pipeline->output().pose);
+        shadow_retargeted_ = swap_->pipeline->output().frame + shadow_base_;
+      }
     }
   }
   if (pipeline_->Push(positions)) Publish(receive_ns, sink);
@@ -431,7 +437,7 @@ void SubjectRunner::Flush(OutputSink& sink) {
 void SubjectRunner::Publish(int64_t trigger_receive_ns, OutputSink& sink) {
   const int64_t index = pipeline_->output().frame + frame_base_;
   // A swap: once the incoming subject has solved long enough in the shadow, it becomes the
-  // published one, the correction back to the outgoing one's pose fading over blend_frames_.
+  // published one, the correction back to the outgoing one's pose fading (PoseFade).
   if (swap_ && shadow_outputs_ >= warm_frames_ && shadow_has_output_ &&
       swap_->pipeline->output().frame + shadow_base_ == index)
     SwitchModel(sink);
@@ -490,7 +496,10 @@ void SubjectRunner::Publish(int64_t trigger_receive_ns, OutputSink& sink) {
     sink.Send(cleaned_topic_, buffer_);
   }
   if (retargeter_) {
-    const Pose* character_pose = &retargeter_->Retarget(out.pose);
+    // The first frame after a swap may have been retargeted in the shadow already.
+    const Pose* character_pose = character_fade_pending_ && shadow_retargeted_ == index
+                                     ? &retargeter_->pose()
+                                     : &retargeter_->Retarget(out.pose);
     if (character_fade_pending_) {
       character_fade_.Start(last_character_, *character_pose, rate_hz_);
       character_fade_pending_ = false;

@@ -168,8 +168,9 @@ class SubjectRunner {
 
  private:
   // A fade from one solve onto another: at its start each joint's new rotation is
-  // corrected back to the old one's (new * C = old) and the root moved back onto the old
-  // one's, and that correction, fixed from then on, decays to nothing. Not a slerp between
+  // corrected back to the old one's (new * C = old) and each translated joint (the root,
+  // a character's free hips under a fixed root) moved back onto the old one's, and that
+  // correction, fixed from then on, decays to nothing. Not a slerp between
   // the two solves as they go on: two rotations near 180 degrees apart would have their
   // shortest path flip sides mid-fade (seen: a forearm turning 167 degrees in one frame on
   // CMU 01_01). It lasts a quarter of a second, or as long as undoing the largest
@@ -189,7 +190,7 @@ class SubjectRunner {
 
    private:
     std::vector<Vec3> correction_;  // per joint, new * exp(c) = old at the start
-    Vec3 root_offset_ = Vec3::Zero();
+    std::vector<Vec3> offset_;      // per joint, old - new translation at the start
     int frames_ = 0, left_ = 0;
     double differ_deg_ = 0.0;
     Pose blended_;
@@ -282,7 +283,11 @@ class SubjectRunner {
   // new subject's bones are not the old one's.)
   PoseFade character_fade_;
   bool character_fade_pending_ = false;  ///< Start it at the next published frame.
-  Pose last_character_;                  ///< The last character pose published.
+  /// The shadow's last retargeted frame (its pipeline's numbering; -1: none): the frame a
+  /// swap publishes first was retargeted by the incoming retargeter already, and solving
+  /// it again would see the feet stand still for a frame.
+  int64_t shadow_retargeted_ = -1;
+  Pose last_character_;                                      ///< The last character pose published.
   std::optional<KinematicsWorkspace> character_kinematics_;  ///< Of the faded character pose.
   /// The character's joints as last published (the retargeter's, or the fade's).
   const KinematicsWorkspace* published_character_ = nullptr;

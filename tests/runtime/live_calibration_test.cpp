@@ -75,13 +75,16 @@ class LiveCalibrationTest : public ::testing::Test {
   }
   ~LiveCalibrationTest() override { std::filesystem::remove_all(dir_); }
 
-  DaemonConfig Config(const std::string& subject_lines) const {
-    return ParseDaemonConfig(
-        "format_version = 1\n[[subject]]\nname = \"actor1\"\nrate_hz = 60\n" + subject_lines,
-        "live.toml", dir_.string());
+  // tables: what goes before the subject ("[output]\n...").
+  DaemonConfig Config(const std::string& subject_lines, const std::string& tables = "") const {
+    return ParseDaemonConfig("format_version = 1\n" + tables +
+                                 "[[subject]]\nname = \"actor1\"\nrate_hz = 60\n" + subject_lines,
+                             "live.toml", dir_.string());
   }
 
-  protocol::MarkerFrameMessage Frame(const SubjectConfig& subject, int f) const {
+  // shift: where the capture stands, from the take's origin.
+  protocol::MarkerFrameMessage Frame(const SubjectConfig& subject, int f,
+                                     const Vec3& shift = Vec3::Zero()) const {
     protocol::MarkerFrameMessage m;
     m.subject = "actor1";
     m.model_hash = protocol::MarkerSetHash(*subject.model.markers);
@@ -90,7 +93,7 @@ class LiveCalibrationTest : public ::testing::Test {
     for (const std::string& label : subject.live.labels) {
       const int p = take_.FindLabel(label);
       const bool valid = p >= 0 && take_.valid(f, p);
-      m.positions.push_back(valid ? take_.at(f, p) : Vec3::Constant(kNaN));
+      m.positions.push_back(valid ? Vec3(take_.at(f, p) + shift) : Vec3::Constant(kNaN));
       m.valid.push_back(valid);
     }
     return m;
@@ -98,8 +101,9 @@ class LiveCalibrationTest : public ::testing::Test {
 
   // A live subject's runner with its calibration, as a daemon's worker holds them.
   struct LiveSubject {
-    LiveSubject(const LiveCalibrationTest& test, const std::string& lines)
-        : config(test.Config("calibrate = \"live\"\nmarker_set = \"cmu-41\"\n" + lines)),
+    LiveSubject(const LiveCalibrationTest& test, const std::string& lines,
+                const std::string& tables = "")
+        : config(test.Config("calibrate = \"live\"\nmarker_set = \"cmu-41\"\n" + lines, tables)),
           subject(config.subjects[0]),
           calibration(board.Attach(subject, config)),
           runner(subject, config) {
@@ -231,11 +235,22 @@ TEST_F(
 // retargeter, and the new subject's bones threw a CMU actor's character hand 20 cm in one
 // frame.
 TEST_F(LiveCalibrationTest, TheCharacterComesThroughTheSwapWithNoPop) {
-  const Skeleton character = MakeHumanoidSkeleton(1.9);
-  LiveSubject live(*this, "calibration_min_s = 12\n" + WriteCharacter(character));
+  // A character as Bandai's files are: a fixed root at the floor, the hips free below it
+  // (their translation is on the wire only in the global block).
+  std::vector<Joint> joints{Joint{.name = "Reference", .parent = {}, .type = JointType::kFree}};
+  const Skeleton humanoid = MakeHumanoidSkeleton(1.9);
+  for (Joint j : humanoid.joints()) {
+    j.parent = j.parent.is_valid() ? JointIndex(j.parent.value + 1) : JointIndex(0);
+    joints.push_back(j);
+  }
+  LiveSubject live(*this, "calibration_min_s = 12\n" + WriteCharacter(Skeleton(std::move(joints))),
+                   "[output]\nglobal_transforms = true\n");
   RecordingSink sink;
+  // Away from the origin, which the character is scaled about: the new subject's scale
+  // moves it there.
+  const Vec3 away(3.0, 0.0, 2.0);
   for (int f = 0; f < take_.num_frames; ++f) {
-    ASSERT_FALSE(live.runner.Accept(Frame(live.subject, f), 0, sink).has_value()) << f;
+    ASSERT_FALSE(live.runner.Accept(Frame(live.subject, f, away), 0, sink).has_value()) << f;
     if (f % static_cast<int>(kRate) == 0) {
       live.calibration->Collect();
       (void)live.calibration->Refine();
@@ -247,23 +262,15 @@ TEST_F(LiveCalibrationTest, TheCharacterComesThroughTheSwapWithNoPop) {
   ASSERT_EQ(sink.description_at.size(), 2u);
   const size_t swap = sink.description_at[1];
 
-  // The character's largest joint move per frame, from its own rest offsets.
-  KinematicsWorkspace before(character), after(character);
-  Pose pose = RestPose(character);
-  auto place = [&](size_t f, KinematicsWorkspace* k) {
-    const protocol::SkeletonFrameMessage& m = sink.characters[f];
-    pose.translation[0] = m.root_translation;
-    for (size_t j = 0; j < m.rotations.size(); ++j) pose.rotation[j] = m.rotations[j];
-    ForwardKinematics(character, pose, k);
-  };
+  // The character's largest joint move per frame.
   auto move = [&](size_t f) {
-    place(f - 1, &before);
-    place(f, &after);
+    const auto& a = sink.characters[f - 1].global_positions;
+    const auto& b = sink.characters[f].global_positions;
     double worst = 0.0;
-    for (size_t j = 0; j < after.p_WJ.size(); ++j)
-      worst = std::max(worst, (after.p_WJ[j] - before.p_WJ[j]).norm());
+    for (size_t j = 0; j < a.size(); ++j) worst = std::max(worst, (b[j] - a[j]).norm());
     return worst;
   };
+  ASSERT_FALSE(sink.characters[swap].global_positions.empty());
   double natural = 0.0, across = 0.0;
   for (size_t f = swap - static_cast<size_t>(kRate); f < swap; ++f)
     natural = std::max(natural, move(f));
