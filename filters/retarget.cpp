@@ -180,14 +180,38 @@ Retargeter::Retargeter(std::shared_ptr<const Skeleton> source,
     const Capsule ct =
         MakeCapsule(target_rest.p_WJ[jt], bone.target_bone, options_.surface_radius_fraction,
                     bone.target_forward, bone.target_left);
-    const bool positions = bone.region == RetargetRegion::kEndEffector;
-    const double weight = (positions                               ? options_.end_effector_weight
-                           : bone.region == RetargetRegion::kTorso ? options_.torso_weight
-                                                                   : options_.limb_weight) /
-                          options_.points_per_bone;
+    const bool end_effector = bone.region == RetargetRegion::kEndEffector;
+    const double bone_weight = end_effector ? options_.end_effector_weight
+                               : bone.region == RetargetRegion::kTorso ? options_.torso_weight
+                                                                       : options_.limb_weight;
+    const double weight = bone_weight / options_.points_per_bone;
+    // A hand goes where the actor's goes, scaled, from its joint origin (the wrist), and
+    // its surface points turn it about that origin as the actor's turns, as a limb's do.
+    // Tracking its surface points' positions let a character whose shoulders sit elsewhere
+    // than the actor's, scaled, spin its hand 30-55 degrees a frame about its axis: the
+    // twist its points could not hold against their position error, on every character
+    // a CMU actor drove. Feet and toes keep their surface points' positions: turned about
+    // their origins the same way, the knees swung aside (the knee's swivel off the
+    // actor's, Bandai onto Mixamo: median 8 -> 24 degrees).
+    const bool hand = end_effector && bone.foot_side < 0;
+    if (hand) {
+      SurfacePoint p;
+      p.bone = static_cast<int>(b);
+      p.position = true;
+      p.source_offset = p.source_normal = p.source_axis = Vec3::Zero();
+      p.marker = static_cast<int>(defs.size());
+      MarkerDefinition def;
+      def.name = bone.role + "_origin";
+      def.attachments[0] = {bone.target_joint, 1.0, Vec3::Zero()};
+      defs.push_back(def);
+      region_weight.push_back(bone_weight);
+      points_.push_back(p);
+    }
+    const bool positions = end_effector && !hand;
     for (int k : FarthestPoints(cs, options_.points_per_bone)) {
       SurfacePoint p;
       p.bone = static_cast<int>(b);
+      p.position = positions;
       p.source_offset = source_rest.R_WJ[js].transpose() * (CandidatePoint(cs, k) - cs.origin);
       p.source_normal = source_rest.R_WJ[js].transpose() * CandidateNormal(cs, k);
       p.source_axis = source_rest.R_WJ[js].transpose() * cs.axis;
@@ -298,7 +322,7 @@ void Retargeter::ComputeGoals(bool predict) {
     const auto js = static_cast<size_t>(bone.source_joint);
     const Vec3 source_point = source_fk_.R_WJ[js] * p.source_offset + source_fk_.p_WJ[js];
     Vec3& goal = goals_[static_cast<size_t>(p.marker)];
-    if (bone.region == RetargetRegion::kEndEffector) {
+    if (p.position) {
       const Vec3 tracked = scale_ * source_point;
       // A foot in contact keeps its horizontal place: every point of that foot moves by
       // the same correction, so the foot still rolls heel to toe but does not slide.

@@ -153,6 +153,9 @@ class Retargeter {
     Vec3 source_offset, source_normal, source_axis;  ///< In the source joint's frame.
     double target_along_m = 0.0;                     ///< How far along the target bone.
     int marker = -1;                                 ///< The target's virtual marker for it.
+    /// Tracked at the actor's point's scaled position (a foot's or toe's surface point, a
+    /// hand's joint origin); otherwise a lever point that turns the bone as the actor's.
+    bool position = false;
   };
   void ComputeGoals(bool predict);
   void ForgetMotion();

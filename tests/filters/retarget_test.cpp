@@ -343,6 +343,40 @@ TEST_F(RetargetTest, APlantedFootDoesNotSlide) {
   EXPECT_LT(worst_slide, 0.004);
 }
 
+// A character whose shoulders sit lower than the actor's, scaled (a short torso): its
+// hands reach the actor's places from elsewhere, and turn no faster than the actor's do.
+TEST_F(RetargetTest, AHandReachingFromOtherShouldersTurnsNoFasterThanTheActors) {
+  std::vector<Joint> joints(source_->joints().begin(), source_->joints().end());
+  for (Joint& j : joints)
+    if (j.name == "Spine" || j.name == "Chest" || j.name == "Neck") j.offset *= 0.5;
+  const auto short_torso = std::make_shared<const Skeleton>(std::move(joints));
+  Retargeter r(source_, short_torso, MakeRetargetMap(*source_, {}, *short_torso, {}),
+               RetargetOptions{});
+  const std::vector<Pose> mixed = MakeHumanoidMotion(*source_, HumanoidMotion::kMixed, 20.0, 60.0);
+  KinematicsWorkspace actor(*source_), actor_before(*source_), character_before(*short_torso);
+  double worst_actor = 0.0, worst_character = 0.0;
+  for (size_t f = 0; f < mixed.size(); ++f) {
+    ForwardKinematics(*short_torso, r.pose(), &character_before);
+    r.Retarget(mixed[f]);
+    ForwardKinematics(*source_, mixed[f], &actor);
+    for (const char* hand : {"LeftHand", "RightHand"}) {
+      const auto a = static_cast<size_t>(source_->FindJoint(hand)->value);
+      const auto c = static_cast<size_t>(short_torso->FindJoint(hand)->value);
+      if (f >= 10) {
+        worst_actor =
+            std::max(worst_actor, Quat(actor.R_WJ[a]).angularDistance(Quat(actor_before.R_WJ[a])));
+        worst_character =
+            std::max(worst_character,
+                     Quat(r.kinematics().R_WJ[c]).angularDistance(Quat(character_before.R_WJ[c])));
+      }
+    }
+    actor_before = actor;
+  }
+  // On the old surface-point positions: 29.4 degrees a frame against the actor's 4.0.
+  EXPECT_LT(worst_character, worst_actor + 5.0 * M_PI / 180.0)
+      << "actor " << worst_actor * 180 / M_PI << " deg a frame";
+}
+
 TEST_F(RetargetTest, TheMapReportsWhatMatchedAndRefusesUnknownOverrides) {
   const RetargetMap map = MakeRetargetMap(*source_, {}, *source_, {});
   EXPECT_NE(map.report.find("hand_l: LeftHand -> LeftHand (position)"), std::string::npos)
