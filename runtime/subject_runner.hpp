@@ -164,6 +164,7 @@ class SubjectRunner {
   /// The same for the character the subject drives.
   bool character_fading() const { return character_fade_.active(); }
   double character_fade_differ_deg() const { return character_fade_.differ_deg(); }
+  double character_fade_seconds() const { return character_fade_.frames() / rate_hz_; }
   ~SubjectRunner();
 
  private:

@@ -274,8 +274,10 @@ TEST_F(LiveCalibrationTest, TheCharacterComesThroughTheSwapWithNoPop) {
   double natural = 0.0, across = 0.0;
   for (size_t f = swap - static_cast<size_t>(kRate); f < swap; ++f)
     natural = std::max(natural, move(f));
-  // Through the longest fade there is (3 s).
-  const size_t end = std::min(sink.characters.size(), swap + static_cast<size_t>(3 * kRate));
+  // Through the character's fade, and a frame after it.
+  const size_t end = std::min(
+      sink.characters.size(),
+      swap + static_cast<size_t>(std::lround(live.runner.character_fade_seconds() * kRate)) + 2);
   for (size_t f = swap; f < end; ++f) across = std::max(across, move(f));
   EXPECT_LT(across, natural + 0.01)
       << "natural motion " << natural << " m per frame; " << live.runner.character_fade_differ_deg()
