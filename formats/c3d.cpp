@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <fstream>
 #include <iterator>
@@ -263,6 +264,17 @@ class Parser {
     take.rate_hz = Number("POINT:RATE").value_or(header_rate_);
     if (!(take.rate_hz > 0.0) || !std::isfinite(take.rate_hz))
       Fail("parameters", 0, "POINT:RATE is " + std::to_string(take.rate_hz) + ", expected > 0");
+    // Some exporters rewrite one and not the other (a take resampled, or cut from a
+    // longer one): the parameter is the one the standard calls authoritative, but a take
+    // played at the wrong one runs fast or slow, so a person should hear of it.
+    if (header_rate_ > 0.0f && std::isfinite(header_rate_) &&
+        std::abs(header_rate_ - take.rate_hz) > 0.005 * take.rate_hz) {
+      char note[160];
+      std::snprintf(note, sizeof(note),
+                    "the header's frame rate is %.6g Hz, POINT:RATE %.6g Hz: POINT:RATE is used",
+                    static_cast<double>(header_rate_), take.rate_hz);
+      take.notes.emplace_back(note);
+    }
     const auto units = Strings("POINT:UNITS");
     take.units = units.empty() || units[0].empty() ? "mm" : units[0];
     try {

@@ -35,6 +35,9 @@ struct C3dTake {
   /// Marker samples the file marked valid at exactly (0, 0, 0), read as missing (how some
   /// exporters write a gap).
   int64_t origin_samples_missing = 0;
+  /// What the reader found the file disagreeing with itself about, and which it believed
+  /// (the header's rate against POINT:RATE), for a person to see.
+  std::vector<std::string> notes;
   std::string processor = "Intel";  ///< Intel, DEC or MIPS (informational).
   bool float_storage = true;
   /// positions[frame * num_points() + point], metres, world frame; NaN when missing.

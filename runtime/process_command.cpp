@@ -117,6 +117,8 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
   C3dTake take = ReadC3d(options.input_c3d);
   if (take.num_frames == 0)
     throw std::runtime_error(options.input_c3d + ": the take has no frames: nothing to process");
+  for (const std::string& note : take.notes)
+    out << "note: " << options.input_c3d << ": " << note << "\n";
   const MarkerSet& markers = *subject.markers;
   const TakeMarkerMap map(markers, take);
   auto warn = [&out](const std::vector<std::string>& names, const char* what) {

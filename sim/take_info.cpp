@@ -32,6 +32,7 @@ TakeInfo InspectTake(const std::string& path) {
     info.units = take.units;
     info.processor = take.processor;
     info.origin_samples_missing = take.origin_samples_missing;
+    info.notes = take.notes;
     for (int p = 0; p < take.num_points(); ++p) {
       PointInfo pi;
       pi.label = take.labels[static_cast<size_t>(p)];
@@ -77,6 +78,7 @@ std::string FormatTakeInfo(const TakeInfo& info) {
   out += line;
   if (info.format == "c3d") {
     out += "  processor " + info.processor + "\n";
+    for (const std::string& note : info.notes) out += "  note    " + note + "\n";
     if (info.origin_samples_missing > 0)
       out += "  " + std::to_string(info.origin_samples_missing) +
              " marker samples at exactly (0, 0, 0) read as missing (an exporter's gaps)\n";
@@ -105,6 +107,7 @@ nlohmann::json TakeInfoJson(const TakeInfo& info) {
   if (info.format == "c3d") {
     j["processor"] = info.processor;
     j["origin_samples_missing"] = info.origin_samples_missing;
+    j["notes"] = info.notes;
     j["points"] = nlohmann::json::array();
     for (const PointInfo& p : info.points)
       j["points"].push_back({{"label", p.label},

@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cstring>
 #include <random>
 
 namespace mocapd {
@@ -254,6 +255,23 @@ TEST(C3dTest, AMarkerExactlyAtTheOriginIsMissing) {
       EXPECT_TRUE(read.valid(f, 3));  // an angle of zero
     }
   }
+}
+
+// An exporter that rewrote POINT:RATE and not the header (or the other way round): the
+// parameter is used, and the reader says so rather than leaving a take that plays fast
+// or slow unexplained.
+TEST(C3dTest, AHeaderRateThatDisagreesWithPointRateIsNoted) {
+  C3dTake take = MakeTake(3, 10);
+  take.rate_hz = 120.0;
+  std::vector<uint8_t> bytes = EncodeC3d(take);
+  EXPECT_TRUE(ParseC3d(bytes, "same.c3d").notes.empty());
+  const float header_rate = 100.0f;  // Intel: a little-endian float at byte 20
+  std::memcpy(&bytes[20], &header_rate, sizeof(header_rate));
+  const C3dTake read = ParseC3d(bytes, "rates.c3d");
+  EXPECT_EQ(read.rate_hz, 120.0);
+  ASSERT_EQ(read.notes.size(), 1u);
+  EXPECT_NE(read.notes[0].find("100 Hz"), std::string::npos) << read.notes[0];
+  EXPECT_NE(read.notes[0].find("POINT:RATE 120 Hz"), std::string::npos) << read.notes[0];
 }
 
 // TRIAL:ACTUAL_END_FIELD counts frames past the header's 65535; a cropping tool can leave
