@@ -609,12 +609,14 @@ SubjectCalibrationResult CalibrateSubject(const CalibrationTemplate& tmpl,
     result.joints.push_back(r);
   }
   // A segment with joints below it that fewer than two known markers ride (a spine or
-  // neck link between two marked segments, a clavicle with one marker) has no frame of its own: the
-  // fit is the same whichever way it is turned, the poses turning the other way, and the adjustment
-  // leaves it wherever it wandered. A chest offset 20 deg off in the spine's frame fitted
-  // as well as the template's, and the rest pose showed a bent spine and a tilted head,
-  // which a BVH reader and a retargeted character copy. Each such segment is turned,
-  // with everything it carries, to the template's way round; no joint moves in any pose.
+  // neck link between two marked segments, a clavicle with one marker) has no frame of its
+  // own: the fit is the same whichever way it is turned, the poses turning the other way,
+  // and the adjustment leaves it wherever it wandered. A chest offset 20 deg off in the
+  // spine's frame fitted as well as the template's, and the rest pose showed a bent spine
+  // and a tilted head, which a BVH reader and a retargeted character copy. Each such
+  // segment is turned, with everything it carries, to the template's way round; no joint
+  // moves in any pose. An end segment (a hand with one finger marker, a toe) is left as it
+  // is: what it points along is its end site, fixed in its frame and not turned with it.
   std::vector<int> known_markers(static_cast<size_t>(J), 0);
   for (int m = 0; m < M; ++m)
     if (!unknown(static_cast<size_t>(m)))
@@ -622,12 +624,7 @@ SubjectCalibrationResult CalibrateSubject(const CalibrationTemplate& tmpl,
           tmpl.markers[static_cast<size_t>(m)].attachments[0].joint)];
   bool turned = false;
   for (int segment = 1; segment < J; ++segment) {
-    // An end segment (a hand with one finger marker, a toe) is left as it is: what it
-    // points along is its end site, fixed in its frame and not turned with it.
-    bool has_child = false;
-    for (int k = segment + 1; k < J; ++k)
-      has_child = has_child || base.joint(k).parent.value == segment;
-    if (known_markers[static_cast<size_t>(segment)] >= 2 || !has_child) continue;
+    if (known_markers[static_cast<size_t>(segment)] >= 2) continue;
     // Wahba's problem: the rotation that best turns what the segment carries onto the
     // template's (one vector: the least rotation).
     std::vector<std::pair<Vec3, Vec3>> carried;  // (fitted, template)
@@ -635,12 +632,12 @@ SubjectCalibrationResult CalibrateSubject(const CalibrationTemplate& tmpl,
       if (base.joint(k).parent.value == segment)
         carried.emplace_back(joint_offset[static_cast<size_t>(k)],
                              joint_prior[static_cast<size_t>(k)]);
+    if (carried.empty()) continue;  // an end segment
     for (int m = 0; m < M; ++m)
       if (!unknown(static_cast<size_t>(m)) &&
           tmpl.markers[static_cast<size_t>(m)].attachments[0].joint == segment)
         carried.emplace_back(marker_offset[static_cast<size_t>(m)],
                              marker_prior[static_cast<size_t>(m)]);
-    if (carried.empty()) continue;
     Mat3 turn = Mat3::Identity();
     if (carried.size() == 1) {
       turn = Quat::FromTwoVectors(carried[0].first, carried[0].second).toRotationMatrix();
