@@ -72,6 +72,9 @@ const std::array kFields = {
     F{"fill_weight_growth_per_s", nullptr, "fill_weight_growth_per_s", kNone, 0, 1e6,
       &O::fill_weight_growth_per_s},
     F{"data_catchup_mps", nullptr, "data_catchup_mps", kNone, 0, 1e3, &O::data_catchup_mps},
+    F{"data_catchup_time_s", nullptr, "data_catchup_time_ms", kMs, 0, 1e6, &O::data_catchup_time_s},
+    F{"data_catchup_max_mps", nullptr, "data_catchup_max_mps", kNone, 0, 1e3,
+      &O::data_catchup_max_mps},
     F{"data_motion_acceleration_mps2", nullptr, "data_motion_acceleration_mps2", kNone, 1e-3, 1e7,
       &O::data_motion_acceleration_mps2},
     F{"fill_anchor_speed_mps", nullptr, "fill_anchor_speed_mps", kNone, 0, 1e3,
@@ -178,6 +181,9 @@ CleanupFrameRules FrameRules(const CleanupOptions& o) {
       o.fill_weight_growth_per_s > 0.0 ? std::exp(o.fill_weight_growth_per_s * dt) : 1.0;
   r.marker_jump_m = o.glitch_speed_mps / rate;
   r.data_catchup_m = o.data_catchup_mps / rate;
+  r.data_catchup_share =
+      o.data_catchup_time_s > 0.0 ? 1.0 - std::exp(-dt / o.data_catchup_time_s) : 0.0;
+  r.data_catchup_max_m = o.data_catchup_max_mps / rate;
   r.data_motion_acceleration_m = o.data_motion_acceleration_mps2 / (rate * rate);
   r.fill_anchor_radius_m = o.fill_anchor_speed_mps / rate;
   r.unseen_limb_turn_rad = o.unseen_limb_turn_radps / rate;

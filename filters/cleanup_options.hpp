@@ -122,10 +122,18 @@ struct CleanupOptions {
   /// frame (0: no limit).
   double fill_weight_growth_per_s = 48.66;
   /// A captured sample is fitted through a target that starts at the skeleton's marker,
-  /// moves with the sample's own motion and closes on it at most this fast (0: the sample
+  /// moves with the sample's own motion and closes on it at this speed (0: the sample
   /// itself, its weight ramped like a fill's): a sample that comes back away from the
-  /// skeleton is reached without a pop.
+  /// skeleton is reached without a pop...
   double data_catchup_mps = 0.6;
+  /// ...or, when further off, by the share of the distance this time constant closes in
+  /// a frame (0: data_catchup_mps alone)...
+  double data_catchup_time_s = 0.05;
+  /// ...but never faster than this (at or below data_catchup_mps: that speed alone). A
+  /// limb hidden whole comes back 10-20 cm from its clean markers; at 0.6 m/s it stayed
+  /// that far off for a quarter of a second and more, at this speed it closes in about
+  /// 0.1 s, still under what reads as a pop (a joint outrunning the truth by 2.4 m/s).
+  double data_catchup_max_mps = 1.5;
   /// The sample's motion that the catch-up target follows accelerates at most this much
   /// (216 m/s^2 is past a punch): a swap or pop the detectors missed is a jump, not motion.
   double data_motion_acceleration_mps2 = 216.0;
@@ -224,6 +232,8 @@ struct CleanupFrameRules {
   double fill_weight_ramp;                    ///< Factor per frame (<= 1: no limit).
   double marker_jump_m;                       ///< Per frame (glitch_speed_mps).
   double data_catchup_m;                      ///< Per frame.
+  double data_catchup_share;                  ///< Share of the distance closed per frame.
+  double data_catchup_max_m;                  ///< Per frame.
   double data_motion_acceleration_m;          ///< Change of the per-frame motion, per frame.
   double fill_anchor_radius_m;                ///< Per frame.
   double unseen_limb_turn_rad;                ///< Per frame.

@@ -44,7 +44,8 @@ void FinalSolve::Solve(CleanFrame* frame, CleanupCounters* counters,
     // the detectors missed is not taken for motion) and closes on the sample by at most
     // data_catchup_m per frame. A sample the skeleton already fits is its own target; one
     // that returns away from where the skeleton had it is reached without a pop, and at
-    // full weight.
+    // full weight: a few mm a frame, or a share of the distance per frame when far off
+    // (data_catchup_time_s), capped by data_catchup_max_mps.
     Vec3 solve_x = x;
     const bool eased = data && catchup > 0.0 && final_.has_solution();
     track.catching_up = false;
@@ -60,8 +61,11 @@ void FinalSolve::Solve(CleanFrame* frame, CleanupCounters* counters,
                                                rules_.data_motion_acceleration_m);
       track.data_motion = motion;
       const Vec3 from = final_.predicted_markers()[m] + motion;
-      if ((x - from).norm() > catchup) {
-        solve_x = from + ClampNorm(Vec3(x - from), catchup);
+      const double gap = (x - from).norm();
+      const double step =
+          std::max(catchup, std::min(gap * rules_.data_catchup_share, rules_.data_catchup_max_m));
+      if (gap > step) {
+        solve_x = from + ClampNorm(Vec3(x - from), step);
         track.catching_up = true;
       }
     } else if (data) {

@@ -59,7 +59,7 @@ TEST(CleanupOptionsTest, EveryOptionIsInTheTableOnceWithItsDefaultInBounds) {
     EXPECT_GE(value, f.min * f.to_si) << f.name;
     EXPECT_LE(value, f.max * f.to_si) << f.name;
   }
-  EXPECT_EQ(names.size(), 49u);  // a new option must be added to the table (and this count)
+  EXPECT_EQ(names.size(), 51u);  // a new option must be added to the table (and this count)
 }
 
 TEST(CleanupOptionsTest, EveryPerFrameRuleMeansTheSameSpeedOrTimeAtEveryRate) {
@@ -74,6 +74,9 @@ TEST(CleanupOptionsTest, EveryPerFrameRuleMeansTheSameSpeedOrTimeAtEveryRate) {
               1e-12);
   EXPECT_NEAR(per_second(s.fill_anchor_radius_m, 60), slow.fill_anchor_speed_mps, 1e-12);
   EXPECT_NEAR(per_second(s.data_catchup_m, 60), per_second(f.data_catchup_m, 240), 1e-12);
+  EXPECT_NEAR(per_second(s.data_catchup_max_m, 60), per_second(f.data_catchup_max_m, 240), 1e-12);
+  // A share closed per frame: after one 60 Hz frame as much is left as after four at 240.
+  EXPECT_NEAR(1.0 - s.data_catchup_share, std::pow(1.0 - f.data_catchup_share, 4), 1e-12);
   EXPECT_NEAR(per_second(s.unseen_limb_turn_rad, 60), per_second(f.unseen_limb_turn_rad, 240),
               1e-12);
   EXPECT_NEAR(per_second(s.unseen_limb_turn_rad, 60), slow.unseen_limb_turn_radps, 1e-12);

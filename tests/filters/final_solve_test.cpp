@@ -103,6 +103,27 @@ TEST_F(FinalSolveTest, ForearmThatBentWhileOccludedIsCaughtUpWithoutAPop) {
   }
 }
 
+TEST_F(FinalSolveTest, AHandBackFarFromTheSkeletonIsReachedInAFractionOfASecond) {
+  // K = 0, the elbow bent 90 degrees while the forearm and hand were occluded: their
+  // markers come back about 30 cm from the skeleton's. At a fixed 0.6 m/s the hand stays
+  // tens of cm off for half a second; closing a share of the distance each frame (at most
+  // data_catchup_max_mps) it is within 5 cm in a quarter of a second, with no pop.
+  const std::vector<Pose> bent = BendElbowWhileForearmIsOccluded();
+  auto run = [&](double time_constant) {
+    CleanupOptions options;
+    options.lookahead = 0;
+    options.data_catchup_time_s = time_constant;
+    return Run(options);
+  };
+  const auto closed = run(CleanupOptions{}.data_catchup_time_s);
+  const auto fixed_speed = run(0.0);
+  const int quarter_second_later = 420 + 30;
+  EXPECT_GT(WorstJointError(fixed_speed, bent, "LeftHand", 420, 421), 0.2);  // how far back it came
+  EXPECT_LT(WorstJointError(closed, bent, "LeftHand", quarter_second_later, 480), 0.05);
+  EXPECT_GT(WorstJointError(fixed_speed, bent, "LeftHand", quarter_second_later, 480), 0.1);
+  EXPECT_LT(WorstExtraJointStep(closed, bent, "LeftHand", 400, 520), 0.02);  // no pop
+}
+
 TEST_F(FinalSolveTest, ForearmOccludedThroughABendIsLedToItsReturningMarkers) {
   // K = 12. The elbow bends 90 degrees while the forearm and hand are occluded. Once the
   // lookahead sees the markers come back, their fills are interpolations of real data on
