@@ -129,6 +129,9 @@ void RetargetOptions::Validate() const {
           "weights", ">= 0");
   require(damping >= 0 && std::isfinite(damping), "damping", ">= 0");
   require(max_iterations >= 1 && max_iterations <= 100, "max_iterations", "in [1, 100]");
+  require(prediction_velocity_gain >= 0 && prediction_velocity_gain <= 1,
+          "prediction_velocity_gain", "in [0, 1]");
+  require(hand_reach_share >= 0 && hand_reach_share <= 1, "hand_reach_share", "in [0, 1]");
   require(contact_height_m >= 0 && contact_speed_m_s >= 0, "contact_height_m / contact_speed_m_s",
           ">= 0");
   require(release_frames >= 1, "release_frames", ">= 1");
@@ -199,6 +202,23 @@ Retargeter::Retargeter(std::shared_ptr<const Skeleton> source,
       p.bone = static_cast<int>(b);
       p.position = true;
       p.source_offset = p.source_normal = p.source_axis = Vec3::Zero();
+      // The arm's lengths, shoulder to wrist along the rest pose's straight line: a rest
+      // pose with a bent elbow gives a shorter arm on that rig, as its reach is.
+      const size_t underscore = bone.role.find('_');  // "hand_l": "_l"
+      const std::string side = underscore == std::string::npos ? "" : bone.role.substr(underscore);
+      for (const RetargetBone& upper : map_.bones) {
+        if (upper.role != "upper_arm" + side) continue;
+        const double source_arm =
+            (source_rest.p_WJ[js] - source_rest.p_WJ[static_cast<size_t>(upper.source_joint)])
+                .norm();
+        const double target_arm =
+            (target_rest.p_WJ[jt] - target_rest.p_WJ[static_cast<size_t>(upper.target_joint)])
+                .norm();
+        if (!(source_arm > 1e-6 && target_arm > 1e-6)) break;
+        p.shoulder_source = upper.source_joint;
+        p.shoulder_target = upper.target_joint;
+        p.arm_ratio = target_arm / source_arm;
+      }
       p.marker = static_cast<int>(defs.size());
       MarkerDefinition def;
       def.name = bone.role + "_origin";
@@ -247,6 +267,7 @@ Retargeter::Retargeter(std::shared_ptr<const Skeleton> source,
   ik_.max_iterations = options_.max_iterations;
   ik_.temporal_weight = options_.damping * options_.damping;
   ik_.min_markers = 1;
+  ik_.prediction_velocity_gain = options_.prediction_velocity_gain;
   settle_ik_ = ik_;
   settle_ik_.max_iterations = 10;
   settle_ik_.temporal_weight = 0.0;
@@ -323,7 +344,20 @@ void Retargeter::ComputeGoals(bool predict) {
     const Vec3 source_point = source_fk_.R_WJ[js] * p.source_offset + source_fk_.p_WJ[js];
     Vec3& goal = goals_[static_cast<size_t>(p.marker)];
     if (p.position) {
-      const Vec3 tracked = scale_ * source_point;
+      Vec3 tracked = scale_ * source_point;
+      const double reach_share = options_.hand_reach_share;
+      if (p.shoulder_source >= 0 && reach_share > 0.0) {
+        // The character's shoulder as the lever anchors take a joint: last solution's,
+        // moved by the actor's own scaled motion since.
+        const auto ss = static_cast<size_t>(p.shoulder_source),
+                   st = static_cast<size_t>(p.shoulder_target);
+        const Vec3 shoulder =
+            warm.p_WJ[st] + (predict
+                                 ? Vec3(scale_ * (source_fk_.p_WJ[ss] - source_origin_before_[ss]))
+                                 : Vec3::Zero());
+        const Vec3 reach = shoulder + p.arm_ratio * (source_point - source_fk_.p_WJ[ss]);
+        tracked = (1.0 - reach_share) * tracked + reach_share * reach;
+      }
       // A foot in contact keeps its horizontal place: every point of that foot moves by
       // the same correction, so the foot still rolls heel to toe but does not slide.
       goal = bone.foot_side < 0

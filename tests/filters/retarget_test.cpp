@@ -5,6 +5,8 @@
 
 #include <gtest/gtest.h>
 
+#include <random>
+
 #include "formats/bvh.hpp"
 #include "formats/marker_layout.hpp"
 #include "formats/marker_set.hpp"
@@ -54,7 +56,9 @@ TEST_F(RetargetTest, IdenticalRigsRetargetToTheIdentity) {
     worst = std::max(worst, MaxRotationDifferenceDeg(out, motion_[f]));
     worst_root = std::max(worst_root, (out.translation[0] - motion_[f].translation[0]).norm());
   }
-  EXPECT_LT(worst, 2.0);
+  // The solve's pull toward its last pose (RetargetOptions::prediction_velocity_gain 0)
+  // lags the fastest joint: 2.8 deg.
+  EXPECT_LT(worst, 3.2);
   EXPECT_LT(worst_root, 0.005);
 }
 
@@ -156,7 +160,7 @@ TEST_F(RetargetTest, ACaptureStandingOnZDrivesACharacterStandingOnY) {
     worst_root = std::max(worst_root, (out.translation[0] - motion_[f].translation[0]).norm());
   }
   EXPECT_TRUE(from_z.to_character_world().isApprox(to_z.transpose(), 1e-9));
-  EXPECT_LT(worst_deg, 2.0);
+  EXPECT_LT(worst_deg, 3.2);  // the lag, as in IdenticalRigsRetargetToTheIdentity
   EXPECT_LT(worst_root, 0.005);
   // Contacts: the same frames planted as from the capture standing on +Y.
   Retargeter on_y_contacts(source_, source_, MakeRetargetMap(*source_, {}, *source_, {}),
@@ -307,7 +311,7 @@ TEST_F(RetargetTest, AUniformlyScaledRigGetsTheSameJointAngles) {
     worst_root =
         std::max(worst_root, (out.translation[0] - 1.25 * motion_[f].translation[0]).norm());
   }
-  EXPECT_LT(worst, 2.0);
+  EXPECT_LT(worst, 3.2);  // the lag of the pull toward the last pose, as above: 2.8 deg
   EXPECT_LT(worst_root, 0.01);
 }
 
@@ -375,6 +379,87 @@ TEST_F(RetargetTest, AHandReachingFromOtherShouldersTurnsNoFasterThanTheActors) 
   // On the old surface-point positions: 29.4 degrees a frame against the actor's 4.0.
   EXPECT_LT(worst_character, worst_actor + 5.0 * M_PI / 180.0)
       << "actor " << worst_actor * 180 / M_PI << " deg a frame";
+}
+
+// The same short torso: the actor's hand, scaled, is nearer the character's lower
+// shoulder than the actor's own arm reaches, so reaching it the character must bend an
+// elbow the actor keeps straighter, and a bent elbow's swivel is left to the arm's weak
+// lever points (the CMU actor's characters flipped an upper arm 25 degrees a frame).
+// Half the hand's goal is the actor's reach from the character's own shoulder: the
+// elbow bends nearer the actor's.
+TEST_F(RetargetTest, AnArmFromLowerShouldersBendsAsTheActorsDoes) {
+  std::vector<Joint> joints(source_->joints().begin(), source_->joints().end());
+  for (Joint& j : joints)
+    if (j.name == "Spine" || j.name == "Chest" || j.name == "Neck") j.offset *= 0.5;
+  const auto short_torso = std::make_shared<const Skeleton>(std::move(joints));
+  const std::vector<Pose> mixed = MakeHumanoidMotion(*source_, HumanoidMotion::kMixed, 20.0, 60.0);
+  auto elbow_bend = [](const Skeleton& rig, const KinematicsWorkspace& posed, const char* hand) {
+    const int wrist = rig.FindJoint(hand)->value;
+    const int elbow = rig.joint(wrist).parent.value, shoulder = rig.joint(elbow).parent.value;
+    const Vec3 upper =
+        posed.p_WJ[static_cast<size_t>(elbow)] - posed.p_WJ[static_cast<size_t>(shoulder)];
+    const Vec3 lower =
+        posed.p_WJ[static_cast<size_t>(wrist)] - posed.p_WJ[static_cast<size_t>(elbow)];
+    return std::atan2(upper.cross(lower).norm(), upper.dot(lower));
+  };
+  auto worst_bend_difference = [&](double reach_share) {
+    RetargetOptions options;
+    options.hand_reach_share = reach_share;
+    Retargeter r(source_, short_torso, MakeRetargetMap(*source_, {}, *short_torso, {}), options);
+    KinematicsWorkspace actor(*source_);
+    double worst = 0.0;
+    for (size_t f = 0; f < mixed.size(); ++f) {
+      r.Retarget(mixed[f]);
+      ForwardKinematics(*source_, mixed[f], &actor);
+      for (const char* hand : {"LeftHand", "RightHand"})
+        worst = std::max(worst, std::abs(elbow_bend(*short_torso, r.kinematics(), hand) -
+                                         elbow_bend(*source_, actor, hand)));
+    }
+    return worst * 180 / M_PI;
+  };
+  const double halfway = worst_bend_difference(RetargetOptions{}.hand_reach_share);
+  const double scaled_only = worst_bend_difference(0.0);
+  // Measured: 45 deg at half, 93 scaled alone, 1.7 on the reach alone.
+  EXPECT_LT(halfway, 0.7 * scaled_only);
+  EXPECT_LT(worst_bend_difference(1.0), 5.0);
+}
+
+// A character whose feet are built otherwise than the actor's (a toe twice as long, a
+// foot shorter): no placement of its toe meets all of the actor's toe points, scaled, so
+// its toe has two near-equal placements. With the solve's own velocity carried into the
+// next frame it swung between them: here 35 degrees every frame while the actor stood
+// still (on the CMU actor, Mixamo's toe turned 8-30 degrees a frame on a planted foot).
+// Pulled toward its last pose, it stays, and a one-frame twitch of the actor's toe
+// (0.1 rad) moves it out and back once.
+TEST_F(RetargetTest, AWeaklyHeldToeStaysWhereTheActorsStays) {
+  std::vector<Joint> joints(source_->joints().begin(), source_->joints().end());
+  for (Joint& j : joints) {
+    if (j.name.find("ToeBase") != std::string::npos) j.offset *= 2.0;
+    if (j.name.find("Foot") != std::string::npos) j.offset *= 0.6;
+  }
+  const auto rig = std::make_shared<const Skeleton>(std::move(joints));
+  const auto actor_toe = static_cast<size_t>(source_->FindJoint("LeftToeBase")->value);
+  std::vector<Pose> still(90, motion_[0]);
+  still[40].rotation[actor_toe] =
+      (still[40].rotation[actor_toe] * Quat(Eigen::AngleAxisd(0.1, Vec3::UnitX()))).normalized();
+  auto toe_travel_deg = [&](double gain) {
+    RetargetOptions options;
+    options.prediction_velocity_gain = gain;
+    Retargeter r(source_, rig, MakeRetargetMap(*source_, {}, *rig, {}), options);
+    KinematicsWorkspace before(*rig);
+    const auto toe = static_cast<size_t>(rig->FindJoint("LeftToeBase")->value);
+    double travelled = 0.0;
+    for (size_t f = 0; f < still.size(); ++f) {
+      ForwardKinematics(*rig, r.pose(), &before);
+      r.Retarget(still[f]);
+      if (f >= 10)
+        travelled += Quat(r.kinematics().R_WJ[toe]).angularDistance(Quat(before.R_WJ[toe]));
+    }
+    return travelled * 180 / M_PI;
+  };
+  // Measured: 2800 deg at gain 1, 1500 at 0.25.
+  EXPECT_LT(toe_travel_deg(RetargetOptions{}.prediction_velocity_gain), 3 * 5.73);
+  EXPECT_GT(toe_travel_deg(1.0), 100.0);
 }
 
 TEST_F(RetargetTest, TheMapReportsWhatMatchedAndRefusesUnknownOverrides) {
