@@ -699,6 +699,12 @@ void Daemon::ApplyReload(DaemonConfig config) {
   // Every worker's part is built before any is posted: a reload applies everywhere or
   // nowhere.
   std::vector<std::unique_ptr<DataPlane::PendingReload>> parts;
+  // What the reload does to each subject, for the log: an operator editing one subject
+  // sees which lookaheads restart.
+  std::string kept, rebuilt, added;
+  auto list = [](std::string* names, const std::string& name) {
+    *names += (names->empty() ? "" : ", ") + name;
+  };
   for (size_t i = 0; i < planes_.size(); ++i) {
     auto pending = std::make_unique<DataPlane::PendingReload>();
     pending->config = WorkerConfig(config, static_cast<int>(i));
@@ -709,6 +715,7 @@ void Daemon::ApplyReload(DaemonConfig config) {
       const SubjectConfig* before = old.FindSubject(s.name);
       const bool unchanged = before != nullptr && SubjectFingerprint(*before, old) ==
                                                       SubjectFingerprint(s, pending->config);
+      list(unchanged ? &kept : before != nullptr ? &rebuilt : &added, s.name);
       pending->runners.push_back(
           MakeRunner(s, pending->config, unchanged ? nullptr : view_board_.get(), *calibrations_));
     }
@@ -725,10 +732,16 @@ void Daemon::ApplyReload(DaemonConfig config) {
     plane.pending_reload = std::move(parts[i]);
     plane.has_pending_reload.store(true, std::memory_order_release);
   }
-  std::string names;
-  for (const SubjectConfig& s : config.subjects) names += (names.empty() ? "" : ", ") + s.name;
-  spdlog::info("reload: applying {} ({} subjects: {})", config.source, config.subjects.size(),
-               names);
+  std::string removed;
+  for (const SubjectConfig& s : old.subjects)
+    if (config.FindSubject(s.name) == nullptr) list(&removed, s.name);
+  spdlog::info("reload: applying {} ({} subjects)", config.source, config.subjects.size());
+  if (!kept.empty())
+    spdlog::info("reload: kept as they run (lookahead and timing carry on): {}", kept);
+  if (!rebuilt.empty())
+    spdlog::info("reload: rebuilt (lookahead flushed, solves start afresh): {}", rebuilt);
+  if (!added.empty()) spdlog::info("reload: added: {}", added);
+  if (!removed.empty()) spdlog::info("reload: removed (lookahead flushed): {}", removed);
   control_->config = std::move(config);
 }
 

@@ -143,6 +143,9 @@ std::string FormatPrometheusMetrics(const DaemonStats& stats) {
                            "Whole frames that jumped further than a body moves, taken as missing");
   auto& resyncs = counter("mocapd_capture_resyncs_total",
                           "Whole-frame jumps that persisted, taken as a re-synchronisation");
+  auto& character_published =
+      counter("mocapd_character_frames_published_total",
+              "Retargeted character frames published, by subject and character file");
   auto& calibration_state =
       gauge("mocapd_live_calibration_state",
             "Live calibration: 0 waiting, 1 collecting, 2 calibrated, 3 failed");
@@ -188,6 +191,9 @@ std::string FormatPrometheusMetrics(const DaemonStats& stats) {
     std::vector<double> buckets(s.counters.processing.counts.begin(),
                                 s.counters.processing.counts.end());
     latency.Add(subject, bounds).ObserveMultiple(buckets, s.counters.processing.sum_s);
+    if (s.character)
+      character_published.Add({{"subject", s.name}, {"character", s.character->file}})
+          .Increment(static_cast<double>(s.counters.character_frames_published));
     if (const auto& c = s.calibration) {
       calibration_state.Add(subject).Set(static_cast<double>(c->state));
       calibration_collected.Add(subject).Set(c->collected_s);
@@ -289,7 +295,8 @@ std::string FormatSubjectsJson(const DaemonStats& stats) {
                               {"joints", s.character->joints},
                               {"bones_matched", s.character->bones_matched},
                               {"scale", s.character->scale},
-                              {"stands_on", s.character->stands_on}};
+                              {"stands_on", s.character->stands_on},
+                              {"frames_published", s.counters.character_frames_published}};
     subjects.push_back(std::move(subject));
   }
   return subjects.dump(2) + "\n";

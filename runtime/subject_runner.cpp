@@ -537,6 +537,7 @@ void SubjectRunner::Publish(int64_t trigger_receive_ns, OutputSink& sink) {
     }
     protocol::EncodeSkeletonFrame(c, &buffer_);
     sink.Send(character_topic_, buffer_);
+    ++counters_.character_frames_published;
   }
   if (live_view_ && live_view_->Watched()) ShowLive(out, index, stamp, publish_ns);
   if (trigger_receive_ns >= 0)

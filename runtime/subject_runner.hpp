@@ -74,6 +74,8 @@ struct SubjectCounters {
   uint64_t session_changes = 0;  ///< Restarts a v2 sender announced with a new session id.
   uint64_t stalls = 0;           ///< Times the watchdog saw the input stall.
   uint64_t ends_of_stream = 0;  ///< End-of-stream messages (not frames: outside the frame balance).
+  /// Character frames sent: one per published frame while the subject drives a character.
+  uint64_t character_frames_published = 0;
   LatencyHistogram processing;  ///< Receive of the frame that completed a publication -> its send.
   uint64_t last_frame_number = 0;
   protocol::StreamInfo last_stream;  ///< The last accepted frame's session, rate and timecode.

@@ -75,6 +75,7 @@ def main(mocapd, mocap_sim, config_dir, work):
         text = d.read_log()
         print(text)
     assert "reload failed, keeping the running config" in text and "bogus_field" in text, "the broken reload was not reported"
+    assert "reload: kept as they run (lookahead and timing carry on): actor1" in text, "the reload did not say what it did to the subject"
     assert "every frame accounted for" in text
     print("daemon process test passed")
 

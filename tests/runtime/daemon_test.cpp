@@ -695,6 +695,14 @@ TEST(DaemonTest, ARetargetedCharacterIsPublishedBesideTheActor) {
     const auto frames = static_cast<size_t>(f.take.num_frames);
     return sub.characters["actor1"].size() == frames && sub.skeletons["actor1"].size() == frames;
   }));
+  // Counted for /metrics and /subjects (they showed no character frames).
+  const DaemonStats after = daemon->Stats();
+  EXPECT_EQ(after.subjects[0].counters.character_frames_published,
+            static_cast<uint64_t>(f.take.num_frames));
+  EXPECT_NE(FormatPrometheusMetrics(after).find("mocapd_character_frames_published_total{"),
+            std::string::npos);
+  EXPECT_EQ(nlohmann::json::parse(FormatSubjectsJson(after))[0]["character"]["frames_published"],
+            f.take.num_frames);
   std::lock_guard lock(sub.mutex);
   const auto& characters = sub.characters["actor1"];
   const auto& actors = sub.skeletons["actor1"];
