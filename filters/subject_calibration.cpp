@@ -544,6 +544,21 @@ SubjectCalibrationResult CalibrateSubject(const CalibrationTemplate& tmpl,
   for (int j = J - 1; j > 0; --j)
     markers_below[static_cast<size_t>(base.joint(j).parent.value)] +=
         markers_below[static_cast<size_t>(j)];
+  // A segment with joints below it that fewer than two known markers ride (an unmarked
+  // spine or neck link, a one-marker clavicle) has no pose of its own in the solves: its
+  // turn is whatever the chain's solve left it. The joints at either end of it are placed
+  // by the motion only together, along the chain; their SCoRE sigmas measure that gauge,
+  // not them (CMU's neck came out 34 cm long at 0.6 mm "functional").
+  std::vector<int> known_markers(static_cast<size_t>(J), 0);
+  for (int m = 0; m < M; ++m)
+    if (!unknown(static_cast<size_t>(m)))
+      ++known_markers[static_cast<size_t>(
+          tmpl.markers[static_cast<size_t>(m)].attachments[0].joint)];
+  std::vector<uint8_t> unmarked_link(static_cast<size_t>(J), 0);
+  for (int j = 1; j < J; ++j) {
+    const auto parent = static_cast<size_t>(base.joint(j).parent.value);
+    if (parent != 0 && known_markers[parent] < 2) unmarked_link[parent] = 1;
+  }
   std::vector<Mat3> relative;
   for (int j = 0; j < J; ++j) {
     JointCalibrationReport r;
@@ -602,6 +617,7 @@ SubjectCalibrationResult CalibrateSubject(const CalibrationTemplate& tmpl,
     r.method = r.directions_covered == 3  ? "functional"
                : r.directions_covered > 0 ? "functional+prior"
                                           : "prior";
+    if (r.directions_covered > 0 && (unmarked_link[up] || unmarked_link[uj])) r.method = "chain";
     // The result's own uncertainty: motion and prior combined, in its worst direction.
     const double prior_var = joint_sigma[uj] * joint_sigma[uj];
     const double worst_data_var = r.data_sigma_m[2] * r.data_sigma_m[2];
@@ -617,11 +633,6 @@ SubjectCalibrationResult CalibrateSubject(const CalibrationTemplate& tmpl,
   // segment is turned, with everything it carries, to the template's way round; no joint
   // moves in any pose. An end segment (a hand with one finger marker, a toe) is left as it
   // is: what it points along is its end site, fixed in its frame and not turned with it.
-  std::vector<int> known_markers(static_cast<size_t>(J), 0);
-  for (int m = 0; m < M; ++m)
-    if (!unknown(static_cast<size_t>(m)))
-      ++known_markers[static_cast<size_t>(
-          tmpl.markers[static_cast<size_t>(m)].attachments[0].joint)];
   bool turned = false;
   for (int segment = 1; segment < J; ++segment) {
     if (known_markers[static_cast<size_t>(segment)] >= 2) continue;

@@ -79,7 +79,10 @@ struct CalibrationTemplate {
 
 struct JointCalibrationReport {
   std::string name;
-  std::string method;  ///< "functional", "functional+prior", "prior", "fixed"
+  /// "functional", "functional+prior", "prior", "fixed", or "chain": beside a segment
+  /// fewer than two known markers ride, placed by the motion only with the chain's other
+  /// joints (directions_covered and the sigmas are the chain's).
+  std::string method;
   /// The centre's standard deviation from the motion alone along its three principal
   /// directions, smallest first (metres; large where the motion did not excite it).
   Vec3 data_sigma_m = Vec3::Zero();

@@ -116,6 +116,11 @@ int CalibrateFromMarkersOnly(const CalibrateCommandOptions& options, std::ostrea
     }
     joints.push_back(jj);
   }
+  if (std::any_of(r.joints.begin(), r.joints.end(),
+                  [](const JointCalibrationReport& jr) { return jr.method == "chain"; }))
+    out << "chain: beside a segment fewer than two markers ride (an unmarked spine or neck "
+           "link, a one-marker clavicle): the motion places such joints only together, not "
+           "each on its own, so their bones' lengths may be far off while the chain fits\n";
   nlohmann::json markers = nlohmann::json::array();
   std::vector<double> rms;
   for (size_t m = 0; m < cal.markers.size(); ++m) {
