@@ -41,11 +41,11 @@ void FinalSolve::Solve(CleanFrame* frame, CleanupCounters* counters,
     // The final solve never takes a captured sample at one bound: it fits a target that
     // starts where the skeleton had the marker last frame, moves with the sample's own
     // motion (changing by at most data_motion_acceleration_m per frame, so a swap or pop
-    // the detectors missed is not taken for motion) and closes on the sample by at most
-    // data_catchup_m per frame. A sample the skeleton already fits is its own target; one
-    // that returns away from where the skeleton had it is reached without a pop, and at
-    // full weight: a few mm a frame, or a share of the distance per frame when far off
-    // (data_catchup_time_s), capped by data_catchup_max_mps.
+    // the detectors missed is not taken for motion) and closes on the sample by
+    // data_catchup_m per frame, or when far off by the share of the distance
+    // data_catchup_time_s closes in a frame, never more than data_catchup_max_m. A sample
+    // the skeleton already fits is its own target; one that returns away from where the
+    // skeleton had it is reached without a pop, and at full weight.
     Vec3 solve_x = x;
     const bool eased = data && catchup > 0.0 && final_.has_solution();
     track.catching_up = false;

@@ -3,8 +3,9 @@
 // move the skeleton beyond real motion:
 //  - a captured sample is fitted through a target that starts where the skeleton had the
 //    marker last frame, follows the sample's own (acceleration-limited) motion and closes
-//    on it at a few mm per frame, so a sample that returns away from the skeleton (after
-//    a gap, a swap, a repair whose end the lookahead did not see) is reached, not jumped to;
+//    on it at a few mm per frame, or a share of the distance when far off (at most
+//    1.5 m/s), so a sample that returns away from the skeleton (after a gap, a swap, a
+//    repair whose end the lookahead did not see) is reached, not jumped to;
 //  - a repaired sample weighs by where it came from (interpolated between known ends:
 //    much; extrapolated from one side: little), its weight grows gradually, and it may
 //    pull the skeleton only a few mm from the anchor: the pose the trusted samples alone

@@ -23,6 +23,13 @@ class FinalSolveTest : public CleanupFixture {
            {"LKNE", "LSHN1", "LSHN2", "LFOT1", "LFOT2", "LFOT3", "LTOE1", "LTOE2"})
         Sample(f, Marker(name)) = Vec3::Constant(kNaN);
   }
+  // The take solved at K = 0 (no lookahead) with one catch-up option set.
+  std::vector<CleanFrame> RunWithoutLookahead(double CleanupOptions::*option, double value) {
+    CleanupOptions options;
+    options.lookahead = 0;
+    options.*option = value;
+    return Run(options);
+  }
 };
 
 TEST_F(FinalSolveTest, AFillGainsFinalSolveWeightGradually) {
@@ -86,10 +93,8 @@ TEST_F(FinalSolveTest, ForearmThatBentWhileOccludedIsCaughtUpWithoutAPop) {
   // over several frames, not in a jump.
   const std::vector<Pose> bent = BendElbowWhileForearmIsOccluded();
   auto worst_extra_hand_step = [&](double catchup) {
-    CleanupOptions options;
-    options.lookahead = 0;
-    options.data_catchup_mps = catchup;
-    return WorstExtraJointStep(Run(options), bent, "LeftHand", 400, 520);
+    return WorstExtraJointStep(RunWithoutLookahead(&CleanupOptions::data_catchup_mps, catchup),
+                               bent, "LeftHand", 400, 520);
   };
   EXPECT_LT(worst_extra_hand_step(CleanupOptions{}.data_catchup_mps), 0.02);
   EXPECT_GT(worst_extra_hand_step(0.0), 0.03);  // the weight ramp alone: measured 0.22 m
@@ -109,14 +114,9 @@ TEST_F(FinalSolveTest, AHandBackFarFromTheSkeletonIsReachedInAFractionOfASecond)
   // tens of cm off for half a second; closing a share of the distance each frame (at most
   // data_catchup_max_mps) it is within 5 cm in a quarter of a second, with no pop.
   const std::vector<Pose> bent = BendElbowWhileForearmIsOccluded();
-  auto run = [&](double time_constant) {
-    CleanupOptions options;
-    options.lookahead = 0;
-    options.data_catchup_time_s = time_constant;
-    return Run(options);
-  };
-  const auto closed = run(CleanupOptions{}.data_catchup_time_s);
-  const auto fixed_speed = run(0.0);
+  const auto closed = RunWithoutLookahead(&CleanupOptions::data_catchup_time_s,
+                                          CleanupOptions{}.data_catchup_time_s);
+  const auto fixed_speed = RunWithoutLookahead(&CleanupOptions::data_catchup_time_s, 0.0);
   const int quarter_second_later = 420 + 30;
   EXPECT_GT(WorstJointError(fixed_speed, bent, "LeftHand", 420, 421), 0.2);  // how far back it came
   EXPECT_LT(WorstJointError(closed, bent, "LeftHand", quarter_second_later, 480), 0.05);
