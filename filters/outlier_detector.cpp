@@ -29,6 +29,8 @@ OutlierDetector::OutlierDetector(const Skeleton& skeleton, const MarkerSet& mark
   const auto m = static_cast<size_t>(markers_.num_markers());
   tracks_.assign(m, FreshTrack());
   swap_partner_.assign(m, -1);
+  continuity_partner_.assign(m, -1);
+  previous_continuity_partner_.assign(m, -1);
   markers_of_joint_.assign(static_cast<size_t>(skeleton_.num_joints()), {});
   for (int i = 0; i < markers_.num_markers(); ++i) {
     const MarkerDefinition& d = markers_.marker(i);
@@ -72,6 +74,8 @@ OutlierDetector::Track OutlierDetector::FreshTrack() const {
 void OutlierDetector::Reset() {
   std::fill(tracks_.begin(), tracks_.end(), FreshTrack());
   std::fill(swap_partner_.begin(), swap_partner_.end(), -1);
+  std::fill(continuity_partner_.begin(), continuity_partner_.end(), -1);
+  continuity_frame_ = -1;
   std::fill(distance_at_rest_.begin(), distance_at_rest_.end(), std::array<double, 2>{kNaN, kNaN});
   naive_.Reset();
   naive_fresh_ = false;
@@ -378,6 +382,12 @@ void OutlierDetector::RelabelSwaps(CleanupWindow& window, int64_t t, CleanupCoun
   // is relabelled. A swap the reference can absorb (two of three markers on a segment)
   // is still a jump in both trajectories.
   const bool has_two_before = t > 1 && window.at(t - 2).frame == t - 2;
+  // Last frame's continuity relabels, kept for this frame's search (a swap apart).
+  continuity_partner_.swap(previous_continuity_partner_);
+  if (continuity_frame_ != t - 1)
+    std::fill(previous_continuity_partner_.begin(), previous_continuity_partner_.end(), -1);
+  std::fill(continuity_partner_.begin(), continuity_partner_.end(), -1);
+  continuity_frame_ = t;
   if (has_previous && has_two_before) {
     const WindowFrame& prev2 = window.at(t - 2);
     // Only markers whose last two samples were fine can be predicted; gathering them and
@@ -396,8 +406,16 @@ void OutlierDetector::RelabelSwaps(CleanupWindow& window, int64_t t, CleanupCoun
       if (s.relabelled[i]) continue;
       const Vec3 predicted_i = 2.0 * prev.raw[i] - prev2.raw[i];
       for (size_t b = a + 1; b < n; ++b) {
-        if ((candidate_previous_[a] - candidate_previous_[b]).squaredNorm() > search_sq) continue;
         const auto j = static_cast<size_t>(swap_candidates_[b]);
+        // A pair relabelled last frame is judged again however far apart its markers
+        // have moved since: markers swap where they pass close, and move apart with the
+        // swap still on (a walk's swing toe swapped with the planted foot's marker as it
+        // passed, relabelled while within the search, then carried under the wrong
+        // label once 15 cm apart: the robust solve followed it, rejected the foot's clean
+        // markers, and the foot was published 18 cm off).
+        if ((candidate_previous_[a] - candidate_previous_[b]).squaredNorm() > search_sq &&
+            previous_continuity_partner_[i] != static_cast<int>(j))
+          continue;
         if (s.relabelled[j]) continue;
         const Vec3 predicted_j = 2.0 * prev.raw[j] - prev2.raw[j];
         const double straight = (s.raw[i] - predicted_i).norm() + (s.raw[j] - predicted_j).norm();
@@ -410,6 +428,14 @@ void OutlierDetector::RelabelSwaps(CleanupWindow& window, int64_t t, CleanupCoun
             (s.raw[i] - prev.reference[i]).norm() + (s.raw[j] - prev.reference[j]).norm())
           continue;
         Relabel(s, i, j, counters);
+        // Only across segments, as with the residual test's remembered swaps: within one,
+        // the layout judges the pair afresh each frame, and a head's markers sit 15 cm
+        // apart, so a wrong exchange carried on turned a head 14 cm off for 0.4 s.
+        if (markers_.primary_joint(static_cast<int>(i)) !=
+            markers_.primary_joint(static_cast<int>(j))) {
+          continuity_partner_[i] = static_cast<int>(j);
+          continuity_partner_[j] = static_cast<int>(i);
+        }
         break;
       }
     }

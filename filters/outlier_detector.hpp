@@ -103,6 +103,10 @@ class OutlierDetector {
   bool naive_fresh_ = false;     // Y's warm start is the previous frame's solution
   std::vector<Track> tracks_;
   std::vector<int> swap_partner_;  // per marker: the label its samples are carried under, or -1
+  // Per marker, the partner the continuity test relabelled it with in frame
+  // continuity_frame_ (-1: none), and in the frame before that.
+  std::vector<int> continuity_partner_, previous_continuity_partner_;
+  int64_t continuity_frame_ = -1;
   std::vector<std::pair<int, int>> rigid_pairs_;   // markers rigidly on one joint...
   std::vector<double> rigid_distance_;             // ...and their distance in the model
   std::vector<std::vector<int>> pairs_of_marker_;  // indices into rigid_pairs_
