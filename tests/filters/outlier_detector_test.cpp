@@ -42,6 +42,26 @@ class OutlierDetectorTest : public CleanupFixture {
     o.worst_toe = WorstJointError(out, "RightToeBase", from, to);
     return o;
   }
+
+  // RHND2 and RTHI1 swap from the first frame the hand passes within 12 cm of the hip
+  // (humanoid, about frame 206) until frame_to(start), the hand's other markers occluded
+  // meanwhile (so no other hand marker tells the robust solve where the hand is). Returns
+  // the first frame of the swap and the frame after its last, or -1s if they never pass.
+  template <typename To>
+  std::pair<int, int> SwapAHandMarkerWithTheThighAsThePass(To frame_to) {
+    const int a = Marker("RHND2"), b = Marker("RTHI1");
+    int start = -1;
+    for (int f = 50; f < 800 && start < 0; ++f)
+      if ((Truth(f, a) - Truth(f, b)).norm() < 0.12) start = f;
+    if (start < 0) return {-1, -1};
+    const int to = frame_to(start);
+    if (to < 0) return {-1, -1};
+    for (int f = start; f < to; ++f) {
+      std::swap(Sample(f, a), Sample(f, b));
+      for (const char* name : {"RHND1", "RHND3"}) Sample(f, Marker(name)) = Vec3::Constant(kNaN);
+    }
+    return {start, to};
+  }
 };
 
 TEST_F(OutlierDetectorTest, ResidualDetectorCatchesAPop) {
@@ -224,22 +244,14 @@ TEST_F(OutlierDetectorTest, ASwapThatMovesApartFromWhereItStartedStaysRelabelled
   // planted foot's as the feet passed, the foot's own markers occluded: the robust solve
   // followed the planted foot, rejected the toe's clean marker, and the foot was
   // published 18 cm off). Here a hand marker swaps with a thigh marker as the hand
-  // passes the hip (12 cm), its hand's other markers occluded, and the hand swings 22 cm
-  // away.
+  // passes the hip (12 cm), and the hand swings 22 cm away.
   const int a = Marker("RHND2"), b = Marker("RTHI1");
-  const int hand[] = {Marker("RHND1"), Marker("RHND3")};
-  int start = -1, apart = -1;
-  for (int f = 50; f < 800 && start < 0; ++f)
-    if ((Truth(f, a) - Truth(f, b)).norm() < 0.12) start = f;
+  const auto [start, to] = SwapAHandMarkerWithTheThighAsThePass([&](int from) {
+    for (int f = from; f < from + 120; ++f)
+      if ((Truth(f, a) - Truth(f, b)).norm() > 0.22) return f + 30;
+    return -1;
+  });
   ASSERT_GE(start, 0);
-  for (int f = start; f < start + 120 && apart < 0; ++f)
-    if ((Truth(f, a) - Truth(f, b)).norm() > 0.22) apart = f;
-  ASSERT_GE(apart, 0);
-  const int to = apart + 30;
-  for (int f = start; f < to; ++f) {
-    std::swap(Sample(f, a), Sample(f, b));
-    for (int m : hand) Sample(f, m) = Vec3::Constant(kNaN);
-  }
   const auto out = Run(CleanupOptions{});
   int right = 0;
   for (int f = start; f < to; ++f)
@@ -258,17 +270,13 @@ TEST_F(OutlierDetectorTest, ASwapStaysRelabelledThroughARejectedSampleOfOneOfIts
   // (a sword's two forearms in Bandai slash, the hand occluded: a forearm 12 cm off for
   // 0.5 s).
   const int a = Marker("RHND2"), b = Marker("RTHI1");
-  const int hand[] = {Marker("RHND1"), Marker("RHND3")};
-  int start = -1;
-  for (int f = 50; f < 800 && start < 0; ++f)
-    if ((Truth(f, a) - Truth(f, b)).norm() < 0.12) start = f;
+  int spike = -1;
+  const auto [start, to] = SwapAHandMarkerWithTheThighAsThePass([&](int from) {
+    spike = from + 12;
+    Sample(spike, b) += Vec3(0.04, 0.0, 0.0);  // swapped with the rest, so under a's label
+    return from + 60;
+  });
   ASSERT_GE(start, 0);
-  const int spike = start + 12, to = start + 60;
-  Sample(spike, b) += Vec3(0.04, 0.0, 0.0);
-  for (int f = start; f < to; ++f) {
-    std::swap(Sample(f, a), Sample(f, b));
-    for (int m : hand) Sample(f, m) = Vec3::Constant(kNaN);
-  }
   const auto out = Run(CleanupOptions{});
   int right = 0;
   for (int f = start; f < to; ++f)
