@@ -270,7 +270,10 @@ Retargeter::Retargeter(std::shared_ptr<const Skeleton> source,
   ik_.prediction_velocity_gain = options_.prediction_velocity_gain;
   settle_ik_ = ik_;
   settle_ik_.max_iterations = 10;
-  settle_ik_.temporal_weight = 0.0;
+  // The settling keeps the solve's pull toward its last pose: each pass re-centres it, so
+  // it slows nothing that the data holds, and a weakly held joint (a long toe on a short
+  // foot) ends where the next frames' solve leaves it. Without it the toe settled 12 deg
+  // from there and eased back over five frames.
   settle_ik_.predict_constant_velocity = false;
 }
 
@@ -411,11 +414,13 @@ const Pose& Retargeter::Retarget(const Pose& source_pose) {
     const double speed = frames_ > 0 ? moved.norm() * options_.rate_hz : 0.0;
     const double height = p.dot(up) - floor_height_;
     const bool was = planted_[static_cast<size_t>(side)];
-    // Hysteresis: leaving contact needs clearly more than entering it.
+    // Hysteresis: leaving contact needs clearly more than entering it. The first frame,
+    // with no speed yet, may plant a foot on the floor: settled unplanted, the first pose
+    // moved when the second frame planted the foot and weighted it (hips 7 deg, a foot
+    // 11 deg in one frame at a take's start).
     planted_now[static_cast<size_t>(side)] =
         was ? height < 1.5 * options_.contact_height_m && speed < 1.5 * options_.contact_speed_m_s
-            : height < options_.contact_height_m && speed < options_.contact_speed_m_s &&
-                  frames_ > 0;
+            : height < options_.contact_height_m && speed < options_.contact_speed_m_s;
     previous_ankle_[static_cast<size_t>(side)] = p;
   }
   for (int side = 0; side < 2; ++side) {
@@ -425,8 +430,9 @@ const Pose& Retargeter::Retarget(const Pose& source_pose) {
     Vec3 reference = scale_ * source_fk_.p_WJ[static_cast<size_t>(ankle)];
     reference -= reference.dot(up) * up;
     if (planted_now[sd] && !planted_[sd]) {
-      // Touch-down: the character's foot stays where it is now (horizontally).
-      const int held = map_.target_ankles[sd];
+      // Touch-down: the character's foot stays where it is now (horizontally); on the
+      // first frame, before any solution, where the actor's scaled ankle is.
+      const int held = frames_ > 0 ? map_.target_ankles[sd] : -1;
       lock_[sd] = held >= 0 ? state_.kinematics().p_WJ[static_cast<size_t>(held)]
                             : Vec3(reference + foot_correction_[sd]);
       lock_[sd] -= lock_[sd].dot(up) * up;
