@@ -314,11 +314,16 @@ void OutlierDetector::RelabelSwaps(CleanupWindow& window, int64_t t, CleanupCoun
   // after a frame the layout missed is continuous as captured.)
   const bool has_two_before = t > 1 && window.at(t - 2).frame == t - 2;
   const WindowFrame& before_prev = window.at(t - 2 >= 0 ? t - 2 : 0);
+  // Not with relabelling off (the previous frame's swapped samples stay as captured, only
+  // masked: predicted from, the swap would look continuous from its second frame), nor
+  // across a re-sync or before a reference (nothing to expect a sample at).
+  const bool can_expect =
+      options_.relabel_swaps && has_previous && !s.resync && prev.reference_solved;
+  const bool expect_on_motion = has_two_before && !prev.resync;
   auto layout_breaks_continuity = [&](size_t i, size_t j) {
-    if (!has_previous) return false;
-    const Vec3 predicted_i = ExpectedSample(prev, before_prev, has_two_before, i);
-    const Vec3 predicted_j = ExpectedSample(prev, before_prev, has_two_before, j);
-    if (!predicted_i.allFinite() || !predicted_j.allFinite()) return false;
+    if (!can_expect) return false;
+    const Vec3 predicted_i = ExpectedSample(prev, before_prev, expect_on_motion, i);
+    const Vec3 predicted_j = ExpectedSample(prev, before_prev, expect_on_motion, j);
     const double straight = (s.raw[i] - predicted_i).norm() + (s.raw[j] - predicted_j).norm();
     const double crossed = (s.raw[j] - predicted_i).norm() + (s.raw[i] - predicted_j).norm();
     return crossed > straight + options_.swap_margin_m;

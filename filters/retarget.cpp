@@ -413,7 +413,9 @@ const Pose& Retargeter::Retarget(const Pose& source_pose) {
     moved -= moved.dot(up) * up;
     const double speed = frames_ > 0 ? moved.norm() * options_.rate_hz : 0.0;
     const double height = p.dot(up) - floor_height_;
-    const bool was = planted_[static_cast<size_t>(side)];
+    // A foot planted on the first frame, with no speed then, is judged again on the
+    // second as one touching down.
+    const bool was = planted_[static_cast<size_t>(side)] && frames_ != 1;
     // Hysteresis: leaving contact needs clearly more than entering it. The first frame,
     // with no speed yet, may plant a foot on the floor: settled unplanted, the first pose
     // moved when the second frame planted the foot and weighted it (hips 7 deg, a foot
