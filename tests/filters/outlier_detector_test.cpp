@@ -43,6 +43,24 @@ class OutlierDetectorTest : public CleanupFixture {
     return o;
   }
 
+  // Markers a and b swapped for frames 300-359, run with relabel_swaps off: how many of
+  // the 120 samples came out filled for the swap (none may be published as captured).
+  int SamplesFilledForASwapWithRelabellingOff(int a, int b) {
+    for (int f = 300; f < 360; ++f) std::swap(Sample(f, a), Sample(f, b));
+    CleanupOptions options;
+    options.relabel_swaps = false;
+    const auto out = Run(options);
+    int filled = 0;
+    for (int f = 300; f < 360; ++f)
+      for (int m : {a, b}) {
+        const CleanFrame& frame = out[static_cast<size_t>(f)];
+        EXPECT_NE(frame.markers[static_cast<size_t>(m)], Sample(f, m)) << f;  // never published
+        filled += frame.status[static_cast<size_t>(m)] == MarkerStatus::kRepaired &&
+                  frame.reason[static_cast<size_t>(m)] == MaskReason::kSwap;
+      }
+    return filled;
+  }
+
   // RHND2 and RTHI1 swap from the first frame the hand passes within 12 cm of the hip
   // (humanoid, about frame 206) until frame_to(start), the hand's other markers occluded
   // meanwhile (so no other hand marker tells the robust solve where the hand is). Returns
@@ -141,20 +159,8 @@ TEST_F(OutlierDetectorTest, SwapOnOneSegmentIsRelabelledExactly) {
 TEST_F(OutlierDetectorTest, WithRelabellingOffASwapIsFilledNotExchanged) {
   // relabel_swaps = false asks for both samples of a swap to be filled; the layout test,
   // which relabelled regardless, now marks them instead.
-  const int a = Marker("LHND1"), b = Marker("LHND2");
-  for (int f = 300; f < 360; ++f) std::swap(Sample(f, a), Sample(f, b));
-  CleanupOptions options;
-  options.relabel_swaps = false;
-  const auto out = Run(options);
-  int filled = 0;
-  for (int f = 300; f < 360; ++f)
-    for (int m : {a, b}) {
-      const CleanFrame& frame = out[static_cast<size_t>(f)];
-      EXPECT_NE(frame.markers[static_cast<size_t>(m)], Sample(f, m)) << f;  // never published
-      filled += frame.status[static_cast<size_t>(m)] == MarkerStatus::kRepaired &&
-                frame.reason[static_cast<size_t>(m)] == MaskReason::kSwap;
-    }
-  EXPECT_GE(filled, 2 * 60 * 9 / 10);
+  EXPECT_GE(SamplesFilledForASwapWithRelabellingOff(Marker("LHND1"), Marker("LHND2")),
+            2 * 60 * 9 / 10);
   EXPECT_EQ(counters_.swaps_relabelled, 0);
 }
 
@@ -164,18 +170,8 @@ TEST_F(OutlierDetectorTest, WithRelabellingOffAHeadSwapIsFilledThroughout) {
   // as captured, so judged on them the swap would look like motion from its second frame.
   // (The layout test then stands aside with relabelling off; the residual test catches
   // such a pair too, so this held before as well.)
-  const int a = Marker("HED2"), b = Marker("HED3");
-  for (int f = 300; f < 360; ++f) std::swap(Sample(f, a), Sample(f, b));
-  CleanupOptions options;
-  options.relabel_swaps = false;
-  const auto out = Run(options);
-  int filled = 0;
-  for (int f = 300; f < 360; ++f)
-    for (int m : {a, b})
-      filled +=
-          out[static_cast<size_t>(f)].status[static_cast<size_t>(m)] == MarkerStatus::kRepaired &&
-          out[static_cast<size_t>(f)].reason[static_cast<size_t>(m)] == MaskReason::kSwap;
-  EXPECT_GE(filled, 2 * 60 * 9 / 10);
+  EXPECT_GE(SamplesFilledForASwapWithRelabellingOff(Marker("HED2"), Marker("HED3")),
+            2 * 60 * 9 / 10);
 }
 
 TEST_F(OutlierDetectorTest, SwapAcrossSegmentsIsCaughtByContinuity) {
