@@ -72,7 +72,6 @@ OutlierDetector::OutlierDetector(const Skeleton& skeleton, const MarkerSet& mark
   marker_flags_.assign(m, 0);
   swap_candidates_.reserve(m);
   candidate_previous_.assign(m, Vec3::Zero());
-  candidate_fine_.assign(m, 0);
 }
 
 OutlierDetector::Track OutlierDetector::FreshTrack() const {
@@ -424,17 +423,15 @@ void OutlierDetector::RelabelSwaps(CleanupWindow& window, int64_t t, CleanupCoun
   if (has_previous && has_two_before) {
     const WindowFrame& prev2 = window.at(t - 2);
     // Only markers whose last two samples were fine can be predicted; gathering them and
-    // their positions first keeps the pair search to a tight loop over few markers. A
-    // marker relabelled last frame stays a candidate, for its partner only, whatever its
-    // last samples' masks: its relabelled samples are captured ones, and a reference that
-    // rejected one (a sword's two forearms, the hand occluded) stopped the relabelling
-    // and let the swap through as captured, the forearm 12 cm off for 0.5 s.
+    // their positions first keeps the pair search to a tight loop over few markers.
+    // (A marker relabelled last frame was kept a candidate for its partner whatever its
+    // masks, for a sword's two forearm markers whose relabelling stopped when the
+    // reference rejected one relabelled sample: in the soak's actors it carried a frozen
+    // marker and a swapped one on as a pair instead, feet and hands 6-9 cm off.)
     swap_candidates_.clear();
     for (size_t i = 0; i < m_count; ++i) {
-      const bool fine = prev.mask[i] == MaskReason::kNone && prev2.mask[i] == MaskReason::kNone;
-      const bool carried = previous_continuity_partner_[i] >= 0 && prev.valid[i] && prev2.valid[i];
-      if (!s.valid[i] || (!fine && !carried)) continue;
-      candidate_fine_[swap_candidates_.size()] = fine ? 1 : 0;
+      if (!s.valid[i] || prev.mask[i] != MaskReason::kNone || prev2.mask[i] != MaskReason::kNone)
+        continue;
       swap_candidates_.push_back(static_cast<int>(i));
       candidate_previous_[swap_candidates_.size() - 1] = prev.raw[i];
     }
@@ -452,10 +449,8 @@ void OutlierDetector::RelabelSwaps(CleanupWindow& window, int64_t t, CleanupCoun
         // passed, relabelled while within the search, then carried under the wrong
         // label once 15 cm apart: the robust solve followed it, rejected the foot's clean
         // markers, and the foot was published 18 cm off).
-        const bool carried_pair = previous_continuity_partner_[i] == static_cast<int>(j);
-        if (!carried_pair &&
-            ((candidate_previous_[a] - candidate_previous_[b]).squaredNorm() > search_sq ||
-             !candidate_fine_[a] || !candidate_fine_[b]))
+        if ((candidate_previous_[a] - candidate_previous_[b]).squaredNorm() > search_sq &&
+            previous_continuity_partner_[i] != static_cast<int>(j))
           continue;
         if (s.relabelled[j]) continue;
         const Vec3 predicted_j = 2.0 * prev.raw[j] - prev2.raw[j];

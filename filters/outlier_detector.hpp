@@ -122,7 +122,6 @@ class OutlierDetector {
   std::vector<int>
       swap_candidates_;  // RelabelSwaps scratch: markers predictable from fine samples...
   std::vector<Vec3> candidate_previous_;  // ...and their previous positions, packed
-  std::vector<uint8_t> candidate_fine_;   // ...and 1 if their last two samples were unmasked
 };
 
 }  // namespace mocapd
