@@ -409,17 +409,16 @@ void OutlierDetector::RelabelSwaps(CleanupWindow& window, int64_t t, CleanupCoun
     Relabel(s, static_cast<size_t>(rigid_pairs_[best].first),
             static_cast<size_t>(rigid_pairs_[best].second), counters);
   }
-  // Across segments, trajectory
-  // continuity decides most of them: each marker's sample is compared with its own
-  // constant-velocity prediction, and a pair whose crossed assignment fits clearly better
-  // is relabelled. A swap the reference can absorb (two of three markers on a segment)
-  // is still a jump in both trajectories.
-  // Last frame's continuity relabels, kept for this frame's search (a swap apart).
+  // Last frame's continuity relabels, kept for this frame's search (see below).
   continuity_partner_.swap(previous_continuity_partner_);
   if (continuity_frame_ != t - 1)
     std::fill(previous_continuity_partner_.begin(), previous_continuity_partner_.end(), -1);
   std::fill(continuity_partner_.begin(), continuity_partner_.end(), -1);
   continuity_frame_ = t;
+  // Across segments, trajectory continuity decides most of them: each marker's sample is
+  // compared with its own constant-velocity prediction, and a pair whose crossed
+  // assignment fits clearly better is relabelled. A swap the reference can absorb (two
+  // of three markers on a segment) is still a jump in both trajectories.
   if (has_previous && has_two_before) {
     const WindowFrame& prev2 = window.at(t - 2);
     // Only markers whose last two samples were fine can be predicted; gathering them and

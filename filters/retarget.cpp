@@ -413,13 +413,12 @@ const Pose& Retargeter::Retarget(const Pose& source_pose) {
     moved -= moved.dot(up) * up;
     const double speed = frames_ > 0 ? moved.norm() * options_.rate_hz : 0.0;
     const double height = p.dot(up) - floor_height_;
-    // A foot planted on the first frame, with no speed then, is judged again on the
-    // second as one touching down.
-    const bool was = planted_[static_cast<size_t>(side)] && frames_ != 1;
     // Hysteresis: leaving contact needs clearly more than entering it. The first frame,
-    // with no speed yet, may plant a foot on the floor: settled unplanted, the first pose
-    // moved when the second frame planted the foot and weighted it (hips 7 deg, a foot
-    // 11 deg in one frame at a take's start).
+    // with no speed yet, may plant a foot on the floor (settled unplanted, the first pose
+    // moved when the second frame planted the foot and weighted it: hips 7 deg, a foot
+    // 11 deg in one frame at a take's start); the second judges that plant again as a
+    // touch-down, now that the foot's speed is known.
+    const bool was = planted_[static_cast<size_t>(side)] && frames_ != 1;
     planted_now[static_cast<size_t>(side)] =
         was ? height < 1.5 * options_.contact_height_m && speed < 1.5 * options_.contact_speed_m_s
             : height < options_.contact_height_m && speed < options_.contact_speed_m_s;
