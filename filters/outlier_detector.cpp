@@ -409,8 +409,8 @@ void OutlierDetector::RelabelSwaps(CleanupWindow& window, int64_t t, CleanupCoun
     const double gain = layout_gain(k, &witnesses);
     if (gain <= 0.0) {
       if (witnesses > 0) layout_fitted_frame_[k] = t;
-    } else if (layout_fitted_frame_[k] == t - 1 && fitted_its_reference(i) &&
-               fitted_its_reference(j) && layout_breaks_continuity(i, j)) {
+    } else if (layout_fitted_frame_[k] == t - 1 && layout_breaks_continuity(i, j) &&
+               fitted_its_reference(i) && fitted_its_reference(j)) {
       layout_fitted_frame_[k] = t;  // the labels stand as they were
     } else {
       Relabel(s, i, j, counters);
@@ -725,13 +725,16 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
   for (size_t m = 0; m < m_count; ++m) {
     Track& track = tracks_[m];
     if (!s.valid[m]) {
-      // The still run goes on through a gap: a marker back where it stood (within the
-      // still radius of its anchor) has not moved, however long it was gone, and a stuck
+      // The still run goes on through a gap of up to frozen_backdate_s: a marker back
+      // where it stood (within the still radius of its anchor) has not moved, and a stuck
       // one back from a two-frame gap would otherwise wait frozen_s again while the robust
-      // solve followed it and rejected its clean neighbours (a foot 7 cm off). Whether it
-      // is frozen is judged afresh on its return: a verdict kept through the gap held
-      // clean still markers out longer (the humanoid's heavy 60 / 120 Hz 1.88 / 1.72 ->
-      // 1.90 / 1.74 deg).
+      // solve followed it and rejected its clean neighbours (a foot 6.4 cm off). After a
+      // longer gap what the run recorded (its reference, its partners' distances) is too
+      // old to judge by: as far back as a frozen verdict is carried, and no further (at
+      // frozen_s instead, the soak's actor4 lost its gain: frames over 6 cm 192 -> 230).
+      // Whether it is frozen is judged afresh on its return: a verdict
+      // kept through the gap held clean still markers out longer (the humanoid's heavy
+      // 60 / 120 Hz 1.88 / 1.72 -> 1.90 / 1.74 deg).
       track.frozen = false;
       track.off_joint = false;
       continue;
@@ -767,7 +770,9 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
     }
     // Frozen: at rest (within a radius, so jitter is not motion) while the reference
     // moves away; the run starts over wherever the marker leaves the radius.
-    if (track.still_since < 0 ||
+    const bool back_after_long_gap = t - track.last_seen - 1 > rules_.frozen_backdate_frames;
+    track.last_seen = t;
+    if (track.still_since < 0 || back_after_long_gap ||
         (s.raw[m] - track.still_anchor).norm() > options_.frozen_radius_m) {
       track.still_since = t;
       for (int k : pairs_of_marker_[m]) DistanceAtRest(static_cast<size_t>(k), m) = kNaN;

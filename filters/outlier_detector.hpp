@@ -57,6 +57,7 @@ class OutlierDetector {
     double residual_scale = 0.0;           // running robust residual scale, metres
     int residual_run = 0;                  // consecutive residual outliers
     int64_t still_since = -1;              // first frame of the current still run (-1: none)
+    int64_t last_seen = -1;                // the last frame with a sample
     Vec3 still_anchor = Vec3::Zero();      // where the marker came to rest ...
     Vec3 still_reference = Vec3::Zero();   // ... and its reference then
     bool frozen = false;                   // excluded from Y^ while it stays put
