@@ -732,9 +732,9 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
       // longer gap what the run recorded (its reference, its partners' distances) is too
       // old to judge by: as far back as a frozen verdict is carried, and no further (at
       // frozen_s instead, the soak's actor4 lost its gain: frames over 6 cm 192 -> 230).
-      // Whether it is frozen is judged afresh on its return: a verdict
-      // kept through the gap held clean still markers out longer (the humanoid's heavy
-      // 60 / 120 Hz 1.88 / 1.72 -> 1.90 / 1.74 deg).
+      // Whether it is frozen is judged afresh on its return: a verdict kept through the
+      // gap held clean still markers out longer (the humanoid's heavy 60 / 120 Hz
+      // 1.88 / 1.72 -> 1.90 / 1.74 deg).
       track.frozen = false;
       track.off_joint = false;
       continue;
@@ -769,7 +769,8 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
       track.residual_scale += alpha * (r - track.residual_scale);
     }
     // Frozen: at rest (within a radius, so jitter is not motion) while the reference
-    // moves away; the run starts over wherever the marker leaves the radius.
+    // moves away; the run starts over wherever the marker leaves the radius, and when it
+    // comes back from a gap longer than frozen_backdate_s (see above).
     const bool back_after_long_gap = t - track.last_seen - 1 > rules_.frozen_backdate_frames;
     track.last_seen = t;
     if (track.still_since < 0 || back_after_long_gap ||

@@ -115,7 +115,8 @@ class OutlierDetector {
   // run, taken when the frozen rule first looks at the pair in that run (NaN: not yet).
   std::vector<std::array<double, 2>> distance_at_rest_;
   // Per rigid pair on a segment of fewer than four markers present, the last frame whose
-  // layout had a witness and fitted the pair as labelled (-1: none).
+  // layout had a witness and found no exchange clearly better (within swap_margin_m), or
+  // whose exchange the continuity veto turned down (-1: none).
   std::vector<int64_t> layout_fitted_frame_;
   std::vector<std::vector<int>> markers_of_joint_;
   std::vector<double> weights_;
