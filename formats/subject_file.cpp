@@ -13,6 +13,18 @@
 namespace mocapd {
 namespace {
 
+// No offset of a capture subject reaches a kilometre: past that the file is not in metres,
+// and a chain of such offsets overflows to infinity in the solves.
+constexpr double kMaxOffsetM = 1000.0;
+
+// An offset field, refused beyond kMaxOffsetM.
+Vec3 Offset(TomlTable& t, const std::string& key, bool required) {
+  const Vec3 v = t.Vector3(key, required);
+  if (!(v.cwiseAbs().maxCoeff() <= kMaxOffsetM))
+    t.Fail(t.Find(key), key, "beyond 1000 m (a subject file is in metres)");
+  return v;
+}
+
 std::string Num(double v) {
   char buf[40];
   std::snprintf(buf, sizeof(buf), "%.9g", std::abs(v) < 1e-15 ? 0.0 : v);
@@ -90,18 +102,18 @@ SubjectModel ParseSubjectModel(const std::string& text, const std::string& sourc
              : type == "hinge" ? JointType::kHinge
              : type == "ball"  ? JointType::kBall
                                : JointType::kFree;
-    j.offset = t.Vector3("offset", /*required=*/true);
+    j.offset = Offset(t, "offset", /*required=*/true);
     j.hinge_axis = t.Vector3("hinge_axis", /*required=*/false, Vec3::UnitX());
     if (j.type == JointType::kHinge) {
-      if (j.hinge_axis.norm() < 1e-9)
-        t.Fail(t.Find("hinge_axis"), "hinge_axis", "must be non-zero");
+      if (!(j.hinge_axis.norm() >= 1e-9 && std::isfinite(j.hinge_axis.norm())))
+        t.Fail(t.Find("hinge_axis"), "hinge_axis", "must be non-zero and finite in length");
       j.hinge_axis.normalize();
     }
     const std::vector<double> q = t.Numbers("rest_rotation", 4, /*required=*/false);
     if (!q.empty()) {
       j.rest_rotation = Quat(q[0], q[1], q[2], q[3]);
-      if (j.rest_rotation.norm() < 1e-9)
-        t.Fail(t.Find("rest_rotation"), "rest_rotation", "must be non-zero");
+      if (!(j.rest_rotation.norm() >= 1e-9 && std::isfinite(j.rest_rotation.norm())))
+        t.Fail(t.Find("rest_rotation"), "rest_rotation", "must be non-zero and finite in length");
       j.rest_rotation.normalize();
     }
     if (const auto limit = t.OptionalNumber("max_angle_deg", 1e-9, 1e12))
@@ -132,13 +144,13 @@ SubjectModel ParseSubjectModel(const std::string& text, const std::string& sourc
     const auto j = sk.FindJoint(joint);
     if (!j) t.Fail(t.Find("joint"), "joint", "unknown joint '" + joint + "'");
     d.attachments[0].joint = j->value;
-    d.attachments[0].offset = t.Vector3("offset", /*required=*/true);
+    d.attachments[0].offset = Offset(t, "offset", /*required=*/true);
     const double parent_weight = t.Number("parent_weight", 0.0, 0.0, 0.999999);
     const int parent = sk.joint(d.attachments[0].joint).parent.value;
     if (parent_weight > 0.0 && parent < 0)
       t.Fail(t.Find("parent_weight"), "parent_weight",
              "the root joint has no parent to blend with");
-    const Vec3 parent_offset = t.Vector3("parent_offset", /*required=*/parent_weight > 0.0);
+    const Vec3 parent_offset = Offset(t, "parent_offset", /*required=*/parent_weight > 0.0);
     if (parent_weight > 0.0) {
       d.num_attachments = 2;
       d.attachments[0].weight = 1.0 - parent_weight;

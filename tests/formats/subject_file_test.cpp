@@ -67,6 +67,18 @@ TEST(SubjectFileTest, BadFilesNameTheLineAndField) {
                   "0.5\nparent_offset = [0,0,0]\n",
               "has no parent");
   ExpectError(head + marker + marker, "'m' is repeated");
+  // Finite but absurd: chained, such offsets overflow the solves to infinity, and a
+  // quaternion this long normalised to zero.
+  ExpectError(
+      head + "[[joint]]\nname = \"a\"\nparent = \"root\"\noffset = [0, 1e308, 0]\n" + marker,
+      "s.toml:9: field 'joint[1].offset': beyond 1000 m");
+  ExpectError(head + "[[marker]]\nname = \"m\"\njoint = \"root\"\noffset = [0, 0, -2e3]\n",
+              "field 'marker[0].offset': beyond 1000 m");
+  ExpectError(head +
+                  "[[joint]]\nname = \"a\"\nparent = \"root\"\noffset = [0, 1, 0]\n"
+                  "rest_rotation = [1e200, 1e200, 0, 0]\n" +
+                  marker,
+              "field 'joint[1].rest_rotation': must be non-zero and finite");
   ExpectError("format_version = 1\n[[joint]\n", "s.toml:2");
 }
 
