@@ -589,8 +589,8 @@ TEST_F(OutlierDetectorTest, APairThatFittedKeepsItsLabelsWhenItsOnlyWitnessMirro
   // between LFOT1 and LFOT2, so its distances to them are each other's. The foot's only
   // witness then says the two clean markers are exchanged, while both stay where their
   // motion puts them and fitted their reference and the layout the frame before. Without
-  // the rule they were exchanged every frame: 111 of the 120 clean samples published
-  // 3 cm off, none as observed.
+  // the rule they were exchanged: 111 of the 120 clean samples published 3 cm off, none
+  // as observed.
   const int f1 = Marker("LFOT1"), f2 = Marker("LFOT2"), f3 = Marker("LFOT3");
   const int from = 400, to = 460;
   for (int f = from; f < to; ++f) {

@@ -26,8 +26,9 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   (void)mocapd::FormatSubjectModel(subject);
   const mocapd::Skeleton& skeleton = *subject.skeleton;
   const mocapd::MarkerSet& markers = *subject.markers;
-  // A model this large is valid but would only slow the search down.
-  if (skeleton.num_joints() > 80 || markers.num_markers() > 200) return 0;
+  // A model this large is valid but would only slow the search down (a solve's cost grows
+  // with the cube of the degrees of freedom).
+  if (skeleton.num_joints() > 40 || markers.num_markers() > 100) return 0;
   mocapd::CleanupPipeline pipeline(subject.skeleton, subject.markers, mocapd::CleanupOptions{});
   mocapd::KinematicsWorkspace ws(skeleton);
   const mocapd::Pose rest = mocapd::RestPose(skeleton);
