@@ -25,6 +25,9 @@ Vec3 Offset(TomlTable& t, const std::string& key, bool required) {
   return v;
 }
 
+// A direction or rotation's length that normalises to a unit one (NaN fails too).
+bool UsableLength(double length) { return length >= 1e-9 && std::isfinite(length); }
+
 std::string Num(double v) {
   char buf[40];
   std::snprintf(buf, sizeof(buf), "%.9g", std::abs(v) < 1e-15 ? 0.0 : v);
@@ -105,14 +108,14 @@ SubjectModel ParseSubjectModel(const std::string& text, const std::string& sourc
     j.offset = Offset(t, "offset", /*required=*/true);
     j.hinge_axis = t.Vector3("hinge_axis", /*required=*/false, Vec3::UnitX());
     if (j.type == JointType::kHinge) {
-      if (!(j.hinge_axis.norm() >= 1e-9 && std::isfinite(j.hinge_axis.norm())))
+      if (!UsableLength(j.hinge_axis.norm()))
         t.Fail(t.Find("hinge_axis"), "hinge_axis", "must be non-zero and finite in length");
       j.hinge_axis.normalize();
     }
     const std::vector<double> q = t.Numbers("rest_rotation", 4, /*required=*/false);
     if (!q.empty()) {
       j.rest_rotation = Quat(q[0], q[1], q[2], q[3]);
-      if (!(j.rest_rotation.norm() >= 1e-9 && std::isfinite(j.rest_rotation.norm())))
+      if (!UsableLength(j.rest_rotation.norm()))
         t.Fail(t.Find("rest_rotation"), "rest_rotation", "must be non-zero and finite in length");
       j.rest_rotation.normalize();
     }

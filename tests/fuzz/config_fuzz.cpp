@@ -3,7 +3,6 @@
 // Any input must parse or throw std::runtime_error naming where it went wrong.
 #include <cstddef>
 #include <cstdint>
-#include <cstdlib>
 #include <stdexcept>
 #include <string>
 
