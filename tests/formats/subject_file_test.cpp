@@ -79,6 +79,15 @@ TEST(SubjectFileTest, BadFilesNameTheLineAndField) {
                   "rest_rotation = [1e200, 1e200, 0, 0]\n" +
                   marker,
               "field 'joint[1].rest_rotation': must be non-zero and finite");
+  // A hinge about a zero axis, or one whose length overflows, has no direction to turn about.
+  const std::string hinge =
+      "[[joint]]\nname = \"a\"\nparent = \"root\"\ntype = \"hinge\"\noffset = [0, 1, 0]\n";
+  ExpectError(head + hinge + "hinge_axis = [0, 0, 0]\n" + marker,
+              "s.toml:11: field 'joint[1].hinge_axis': must be non-zero and finite");
+  ExpectError(head + hinge + "hinge_axis = [1e200, 1e200, 0]\n" + marker,
+              "s.toml:11: field 'joint[1].hinge_axis': must be non-zero and finite");
+  ExpectError(head + hinge + "hinge_axis = [nan, 0, 1]\n" + marker,
+              "s.toml:11: field 'joint[1].hinge_axis'");
   ExpectError("format_version = 1\n[[joint]\n", "s.toml:2");
 }
 
