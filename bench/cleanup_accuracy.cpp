@@ -15,7 +15,8 @@
 // reasons, weights, poses): a change meant to alter no arithmetic must keep it.
 // MOCAPD_EXPLAIN_BACK=N shows N frames before each pop (default 4); MOCAPD_EXP_<FIELD>
 // variables override a few options for experiments (see RunPipeline); MOCAPD_TAIL_CM=X lists
-// the frames more than X cm off.
+// the frames more than X cm off; MOCAPD_SPLIT=1 prints, under each row of ours, the mean
+// joint error on clean segments and on the rest.
 #include <algorithm>
 #include <cctype>
 #include <cerrno>
@@ -65,6 +66,22 @@ struct Scores {
   double clean_worst_frame_cm = -1, clean_p999_frame_cm = -1;
   int clean_worst_frame = -1, clean_worst_joint = -1;
   uint64_t digest = 0;  ///< FNV-1a over every published frame (--digest)
+  /// Joint position error (cm) summed over the joint-frames whose segment is clean, and
+  /// over the rest (MOCAPD_SPLIT): where a mean's difference between rates comes from.
+  struct Sum {
+    double total = 0;
+    long count = 0;
+    void Add(double v) {
+      total += v;
+      ++count;
+    }
+    void Add(const Sum& o) {
+      total += o.total;
+      count += o.count;
+    }
+    double mean() const { return count > 0 ? total / static_cast<double>(count) : 0.0; }
+  };
+  Sum clean_joint_error, other_joint_error;
 };
 
 // MOCAPD_TAIL_CM=X lists every frame whose worst joint is more than X cm off (the tail
@@ -148,6 +165,7 @@ class Scorer {
         }
         const bool clean = clean_frame < clean_segments_.size() && clean_segments_[clean_frame][j];
         any_clean = any_clean || clean;
+        (clean ? s.clean_joint_error : s.other_joint_error).Add(error * 100);
         if (clean && error > clean_worst) {
           clean_worst = error;
           if (error * 100 > s.clean_worst_frame_cm) {
@@ -304,6 +322,24 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
                 static_cast<std::remove_reference_t<decltype(options.*member)>>(std::atof(v));
           },
           f.member);
+  }
+  // MOCAPD_EXP_TEMPORAL_RATE_POWER=p scales the final and anchor solves' temporal weight
+  // by (rate / 120 Hz)^p.
+  if (const char* v = std::getenv("MOCAPD_EXP_TEMPORAL_RATE_POWER")) {
+    const double scale = std::pow(rate_hz / 120.0, std::atof(v));
+    options.final_ik.temporal_weight *= scale;
+    options.anchor_ik.temporal_weight *= scale;
+  }
+  // MOCAPD_EXP_GAIN_RATE=1 takes the IK prediction gains as given per 120 Hz frame: the
+  // velocity then decays at the same rate per second at any capture rate.
+  if (std::getenv("MOCAPD_EXP_GAIN_RATE")) {
+    const double e = 120.0 / rate_hz;
+    options.final_ik.prediction_velocity_gain =
+        std::pow(options.final_ik.prediction_velocity_gain, e);
+    options.anchor_ik.prediction_velocity_gain =
+        std::pow(options.anchor_ik.prediction_velocity_gain, e);
+    options.robust_ik.prediction_velocity_gain =
+        std::pow(options.robust_ik.prediction_velocity_gain, e);
   }
   CleanupPipeline pipeline(skeleton, take.markers, options);
   Scorer scorer(*skeleton, take.motion, rate_hz,
@@ -695,6 +731,8 @@ int Run(int argc, char** argv) {
           mean.p999_frame_cm = std::max(mean.p999_frame_cm, s.p999_frame_cm);
           mean.clean_worst_frame_cm = std::max(mean.clean_worst_frame_cm, s.clean_worst_frame_cm);
           mean.clean_p999_frame_cm = std::max(mean.clean_p999_frame_cm, s.clean_p999_frame_cm);
+          mean.clean_joint_error.Add(s.clean_joint_error);
+          mean.other_joint_error.Add(s.other_joint_error);
         }
         const bool ours = std::string(method).rfind("mocapd", 0) == 0;
         char rmse[32] = "-", timing[48] = "-", clean[48] = "-";
@@ -709,6 +747,13 @@ int Run(int argc, char** argv) {
                     severity_name.c_str(), rate, method, mean.pos_cm, mean.rot_deg, rmse,
                     mean.worst_frame_cm, mean.p999_frame_cm, mean.jerk_ratio, mean.pops, timing,
                     clean);
+        if (ours && std::getenv("MOCAPD_SPLIT"))
+          std::printf(
+              "split %s %.0f %s: clean segments %.3f cm over %ld joint-frames, the rest "
+              "%.3f cm over %ld\n",
+              severity_name.c_str(), rate, method, mean.clean_joint_error.mean(),
+              mean.clean_joint_error.count, mean.other_joint_error.mean(),
+              mean.other_joint_error.count);
         if (g_digest && ours)
           std::printf("digest %s %.0f %s: %016llx\n", severity_name.c_str(), rate, method,
                       static_cast<unsigned long long>(digest));
