@@ -154,15 +154,17 @@ struct CleanupOptions {
   /// orientation for as long as it is unseen.
   double unseen_limb_turn_radps = 1.0;
   /// An interpolated sample (filled between known ends: the lookahead sees its marker
-  /// return) on a limb with no trusted sample on it or below may pull the skeleton this
-  /// fast from the anchor instead of fill_anchor_speed_mps. The anchor only holds a guess
-  /// for that limb, and the interpolation leads to the data the limb is about to come
-  /// back to: a forearm occluded through a fast move otherwise came back 40 cm from its
-  /// clean markers and took 0.7 s to close on them. 1 m/s is 1.7 cm a frame at 60 Hz,
-  /// under what reads as a pop. A limb with a trusted sample keeps the slower speed: its
-  /// anchor is data (applied to every interpolated sample, the humanoid's 60 Hz heavy
-  /// mean rose 2.21 -> 2.30 deg); so does every fill in a frame whose trusted samples are
-  /// too few to solve. Equal to fill_anchor_speed_mps: off; no effect without an anchor
+  /// return) on a segment with no trusted sample of its own may pull the skeleton this
+  /// fast from the anchor instead of fill_anchor_speed_mps. The anchor only guesses that
+  /// segment, and the interpolation leads to the data it is about to come back to: a
+  /// forearm occluded through a fast move otherwise came back 40 cm from its clean
+  /// markers and took 0.7 s to close on them. Per segment, not per limb: a seen foot
+  /// fixes where a hidden shin ends, not how the knee swivels (a knee 5-7 cm off while
+  /// its shin's fills were 0.7-2.6 cm off). 1 m/s is 1.7 cm a frame at 60 Hz, under what
+  /// reads as a pop. A segment with a trusted sample keeps the slower speed: its anchor
+  /// is data (applied to every interpolated sample, the humanoid's 60 Hz heavy mean rose
+  /// 2.21 -> 2.30 deg); so does every fill in a frame whose trusted samples are too few
+  /// to solve. Equal to fill_anchor_speed_mps: off; no effect without an anchor
   /// (fill_anchor_speed_mps 0).
   double unseen_limb_interpolation_speed_mps = 1.0;
   /// In the final solve, a leg with nothing seen on its thigh or shin but its foot seen

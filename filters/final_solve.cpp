@@ -20,6 +20,7 @@ FinalSolve::FinalSolve(const Skeleton& skeleton, const MarkerSet& markers,
   anchor_weights_.assign(m, 0.0);
   solve_targets_.assign(m, Vec3::Constant(kNaN));
   limb_seen_.assign(static_cast<size_t>(skeleton_.num_joints()), 0);
+  segment_seen_ = limb_seen_;
   held_pose_ = RestPose(skeleton_);
   held_markers_.assign(m, Vec3::Zero());
 }
@@ -100,11 +101,11 @@ void FinalSolve::Solve(CleanFrame* frame, CleanupCounters* counters,
 
 // Where the skeleton goes on the samples it can trust alone (captured, fitted, full
 // weight): the anchor. A repaired sample may pull the skeleton at most
-// fill_anchor_speed_mps times a frame's time from it (an interpolation on a limb nothing
-// trusted sees: unseen_limb_interpolation_speed_mps). A fill is a guess, and a guess may
-// jump (its reference re-acquiring a segment, an interpolation bending onto a returning
-// track); the anchor moves only with real data, so how fast a guess can take the skeleton
-// is bounded.
+// fill_anchor_speed_mps times a frame's time from it (an interpolation on a segment with
+// no trusted sample of its own: unseen_limb_interpolation_speed_mps). A fill is a guess,
+// and a guess may jump (its reference re-acquiring a segment, an interpolation bending
+// onto a returning track); the anchor moves only with real data, so how fast a guess can
+// take the skeleton is bounded.
 void FinalSolve::AnchorRepairs(const CleanFrame& frame, CleanupCounters* counters) {
   const size_t m_count = tracks_.size();
   for (size_t m = 0; m < m_count; ++m)
@@ -129,23 +130,28 @@ void FinalSolve::AnchorRepairs(const CleanFrame& frame, CleanupCounters* counter
     // through a 10-frame dropout and then caught up at data_catchup_mps: a hand 23 cm
     // behind its markers for 0.3 s (CMU 01_01).
     if (!solved && frame.source[m] == SampleSource::kInterpolated) continue;
-    // An interpolation on a limb the anchor can only guess leads it to where its markers
-    // come back; elsewhere the anchor is data, and a fill only nudges it.
+    // An interpolation on a segment the anchor can only guess leads it to where its
+    // markers come back; elsewhere the anchor is data, and a fill only nudges it. Per
+    // segment, not per limb: a seen foot places the end of a hidden shin but not its
+    // swivel, and held to the anchor a knee stayed 5-7 cm off for 10 frames while its
+    // shin's fills were 0.7-2.6 cm off (kick 60 Hz medium, bench/README.md).
     const bool leads_unseen_limb =
         solved && frame.source[m] == SampleSource::kInterpolated &&
-        !limb_seen_[static_cast<size_t>(markers_.primary_joint(static_cast<int>(m)))];
+        !segment_seen_[static_cast<size_t>(markers_.primary_joint(static_cast<int>(m)))];
     const double radius =
         leads_unseen_limb ? rules_.unseen_limb_interpolation_radius_m : rules_.fill_anchor_radius_m;
     solve_targets_[m] = anchor[m] + ClampNorm(Vec3(solve_targets_[m] - anchor[m]), radius);
   }
 }
 
-// limb_seen_[j]: a trusted sample (anchor_weights_) on joint j or below it.
+// segment_seen_[j]: a trusted sample (anchor_weights_) on joint j itself; limb_seen_[j]:
+// on joint j or below it.
 void FinalSolve::MarkSeenLimbs() {
-  std::fill(limb_seen_.begin(), limb_seen_.end(), 0);
+  std::fill(segment_seen_.begin(), segment_seen_.end(), 0);
   for (int m = 0; m < markers_.num_markers(); ++m)
     if (anchor_weights_[static_cast<size_t>(m)] > 0.0)
-      limb_seen_[static_cast<size_t>(markers_.primary_joint(m))] = 1;
+      segment_seen_[static_cast<size_t>(markers_.primary_joint(m))] = 1;
+  std::copy(segment_seen_.begin(), segment_seen_.end(), limb_seen_.begin());
   for (int j = skeleton_.num_joints() - 1; j > 0; --j)  // parents come first: children fold in
     if (limb_seen_[static_cast<size_t>(j)])
       limb_seen_[static_cast<size_t>(skeleton_.joint(j).parent.value)] = 1;

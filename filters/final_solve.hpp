@@ -63,9 +63,10 @@ class FinalSolve {
   IkState final_, anchor_;
   std::vector<Track> tracks_;
   std::vector<double> weights_, anchor_weights_;
-  std::vector<Vec3> solve_targets_;  // what the solve fits: X-, captured samples eased in
-  std::vector<uint8_t> limb_seen_;   // per joint: a trusted sample on it or below
-  Pose held_pose_;                   // the anchor with its unseen limbs held (turned slowly)...
+  std::vector<Vec3> solve_targets_;    // what the solve fits: X-, captured samples eased in
+  std::vector<uint8_t> segment_seen_;  // per joint: a trusted sample on it
+  std::vector<uint8_t> limb_seen_;     // per joint: a trusted sample on it or below
+  Pose held_pose_;                     // the anchor with its unseen limbs held (turned slowly)...
   KinematicsWorkspace held_kinematics_;
   std::vector<Vec3> held_markers_;  // ...and its markers
 };
