@@ -333,13 +333,8 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
   // MOCAPD_EXP_GAIN_RATE=1 takes the IK prediction gains as given per 120 Hz frame: the
   // velocity then decays at the same rate per second at any capture rate.
   if (std::getenv("MOCAPD_EXP_GAIN_RATE")) {
-    const double e = 120.0 / rate_hz;
-    options.final_ik.prediction_velocity_gain =
-        std::pow(options.final_ik.prediction_velocity_gain, e);
-    options.anchor_ik.prediction_velocity_gain =
-        std::pow(options.anchor_ik.prediction_velocity_gain, e);
-    options.robust_ik.prediction_velocity_gain =
-        std::pow(options.robust_ik.prediction_velocity_gain, e);
+    for (IkOptions* ik : {&options.final_ik, &options.anchor_ik, &options.robust_ik})
+      ik->prediction_velocity_gain = std::pow(ik->prediction_velocity_gain, 120.0 / rate_hz);
   }
   CleanupPipeline pipeline(skeleton, take.markers, options);
   Scorer scorer(*skeleton, take.motion, rate_hz,
