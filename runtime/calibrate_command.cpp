@@ -14,6 +14,7 @@
 #include "formats/bvh.hpp"
 #include "formats/c3d.hpp"
 #include "formats/marker_set.hpp"
+#include "formats/output_paths.hpp"
 #include "formats/subject_file.hpp"
 #include "formats/subject_from_markers.hpp"
 
@@ -197,6 +198,13 @@ int CalibrateFromMarkersOnly(const CalibrateCommandOptions& options, std::ostrea
 
 int RunCalibrateCommand(const CalibrateCommandOptions& options, std::ostream& out) {
   if (options.markers_c3d.empty()) throw std::runtime_error("calibrate: no --markers take given");
+  std::vector<NamedPath> inputs = {{"--skeleton", options.skeleton_bvh}};
+  for (const std::string& take : options.markers_c3d) inputs.push_back({"--markers", take});
+  // A set name (auto, cmu-41) is no file; a set file is an input like any other.
+  if (std::filesystem::is_regular_file(options.marker_set))
+    inputs.push_back({"--marker-set", options.marker_set});
+  const NamedPath outputs[] = {{"--out", options.out_subject}, {"--report", options.report_json}};
+  RefuseOutputsOverInputs(inputs, outputs);
   if (options.skeleton_bvh.empty()) return CalibrateFromMarkersOnly(options, out);
   if (options.markers_c3d.size() != 1)
     throw std::runtime_error(

@@ -15,6 +15,7 @@
 #include "formats/bvh.hpp"
 #include "formats/c3d.hpp"
 #include "formats/marker_layout.hpp"
+#include "formats/output_paths.hpp"
 #include "formats/retarget_map.hpp"
 #include "formats/subject_file.hpp"
 #include "formats/svg_plot.hpp"
@@ -113,6 +114,15 @@ std::string CharacterOutputPath(const ProcessCommandOptions& options) {
 }
 
 ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostream& out) {
+  const NamedPath inputs[] = {{"--subject", options.subject},
+                              {"--in", options.input_c3d},
+                              {"--retarget", options.retarget_bvh},
+                              {"--truth-bvh", options.truth_bvh}};
+  const NamedPath outputs[] = {{"--out-bvh", options.output_bvh},
+                               {"--out-c3d", options.output_c3d},
+                               {"--out-character-bvh", CharacterOutputPath(options)},
+                               {"--report", options.report_json}};
+  RefuseOutputsOverInputs(inputs, outputs);
   const SubjectModel subject = ReadSubjectModel(options.subject);
   C3dTake take = ReadC3d(options.input_c3d);
   if (take.num_frames == 0)

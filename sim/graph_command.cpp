@@ -9,6 +9,7 @@
 #include <optional>
 
 #include "formats/bvh.hpp"
+#include "formats/output_paths.hpp"
 #include "formats/subject_file.hpp"
 #include "sim/graph_match.hpp"
 #include "sim/graph_planner.hpp"
@@ -134,6 +135,11 @@ void WriteJson(const std::string& path, const nlohmann::json& j) {
 
 int GraphCommands::Run() {
   State& s = *state_;
+  std::vector<NamedPath> inputs = {{"--graph", s.graph_path}, {"QUERY", s.query}};
+  for (const std::string& take : s.takes) inputs.push_back({"TAKES", take});
+  const NamedPath outputs[] = {
+      {"--out", s.out}, {"--subject-out", s.subject_out}, {"--path-out", s.path_out}};
+  RefuseOutputsOverInputs(inputs, outputs);
   if (s.build->parsed()) {
     const MotionLibrary lib = LoadMotionLibrary(s.takes, s.rate_hz, s.units);
     GraphBuildReport report;

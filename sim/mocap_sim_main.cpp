@@ -9,6 +9,7 @@
 #include <atomic>
 #include <csignal>
 #include <exception>
+#include <filesystem>
 #include <fstream>
 #include <iostream>
 #include <nlohmann/json.hpp>
@@ -18,6 +19,7 @@
 #include "formats/c3d.hpp"
 #include "formats/marker_layout.hpp"
 #include "formats/marker_set.hpp"
+#include "formats/output_paths.hpp"
 #include "formats/subject_file.hpp"
 #include "sim/corruption.hpp"
 #include "sim/graph_command.hpp"
@@ -47,7 +49,19 @@ struct SynthOptions {
   std::string truth_mask;
 };
 
+// A marker-set name (cmu-41) is no file; a set file is an input like any other.
+std::string MarkerSetFile(const std::string& set) {
+  return std::filesystem::is_regular_file(set) ? set : "";
+}
+
 int RunSynth(const SynthOptions& o) {
+  const mocapd::NamedPath inputs[] = {
+      {"--bvh", o.bvh}, {"--layout", o.layout}, {"--marker-set", MarkerSetFile(o.marker_set)}};
+  const mocapd::NamedPath outputs[] = {{"--out", o.out},
+                                       {"--subject-out", o.subject_out},
+                                       {"--truth-bvh", o.truth_bvh},
+                                       {"--truth", o.truth_mask}};
+  mocapd::RefuseOutputsOverInputs(inputs, outputs);
   mocapd::BvhTake source;
   if (!o.bvh.empty()) {
     mocapd::BvhReadOptions read;
@@ -141,6 +155,14 @@ struct ReplayCommand {
 std::atomic<bool> g_stop{false};
 
 int RunReplayCommand(ReplayCommand& c) {
+  const mocapd::NamedPath inputs[] = {{"TAKE", c.take},
+                                      {"--graph", c.graph},
+                                      {"--subject", c.subject},
+                                      {"--marker-set", MarkerSetFile(c.marker_set)},
+                                      {"--curve-key", c.options.curve_key_file},
+                                      {"--curve-server-key", c.options.curve_server_key_file}};
+  const mocapd::NamedPath outputs[] = {{"--report", c.report}, {"--plot", c.plot}};
+  mocapd::RefuseOutputsOverInputs(inputs, outputs);
   mocapd::ReplaySource source;
   if (!c.take.empty() + !c.humanoid.empty() + !c.graph.empty() > 1)
     throw std::invalid_argument("replay: give one of a TAKE file, --humanoid or --graph");

@@ -115,6 +115,31 @@ TEST(CalibrateCommandTest, FailsWithoutWritingWhenMostMarkersDoNotFit) {
   EXPECT_FALSE(std::filesystem::exists(dir + "/out.toml"));
 }
 
+TEST(CalibrateCommandTest, AnOutputOverATakeIsRefusedAndTheTakeKept) {
+  const auto f = testing::MakeHumanoidFixture("walk", 1.0, 60.0);
+  const std::string dir = testing::TempDir("calibrate_overwrite");
+  WriteC3d(dir + "/take.c3d", f.take);
+  WriteC3d(dir + "/other.c3d", f.take);
+  const auto size_before = std::filesystem::file_size(dir + "/other.c3d");
+  CalibrateCommandOptions options;
+  options.markers_c3d = {dir + "/take.c3d", dir + "/other.c3d"};
+  options.out_subject = dir + "/other.c3d";
+  std::ostringstream out;
+  try {
+    RunCalibrateCommand(options, out);
+    FAIL() << out.str();
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("--out " + dir +
+                                         "/other.c3d: is the same file as "
+                                         "--markers " +
+                                         dir + "/other.c3d"),
+              std::string::npos)
+        << e.what();
+  }
+  EXPECT_EQ(std::filesystem::file_size(dir + "/other.c3d"), size_before);
+  EXPECT_NO_THROW(ReadC3d(dir + "/other.c3d"));
+}
+
 // A capture whose labels belong to no set (here the default layout's markers renamed
 // P0, P1, ... and the world turned Z-up): the command places them by clustering, says so,
 // lists where each marker went, and writes a subject that fits them.

@@ -209,6 +209,31 @@ TEST(ProcessCommandTest, AnUnwritableOutputOrAnUnusableCharacterFailsBeforeSolvi
   EXPECT_EQ(CharacterOutputPath(beside), dir + "/solved.character.bvh");
 }
 
+TEST(ProcessCommandTest, AnOutputOverTheTakeOrAnotherOutputIsRefusedAndTheTakeKept) {
+  // A mistyped --out-c3d once replaced the raw capture with its cleaned copy, exit 0.
+  const auto f = testing::MakeHumanoidFixture("walk", 1.0, 60.0);
+  const std::string dir = testing::TempDir("process_overwrite");
+  WriteFixtureSubject(f, dir + "/actor.toml");
+  WriteC3d(dir + "/take.c3d", f.take);
+  const auto bytes = [](const std::string& path) {
+    std::ifstream file(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(file), {});
+  };
+  const std::string raw = bytes(dir + "/take.c3d");
+  ProcessCommandOptions over_take = OptionsIn(dir);
+  over_take.output_c3d = dir + "/take.c3d";
+  ExpectRefusedWritingNothing(over_take,
+                              "--out-c3d " + dir + "/take.c3d: is the same file as --in");
+  ProcessCommandOptions report_over_subject = OptionsIn(dir);
+  report_over_subject.report_json = dir + "/./actor.toml";
+  ExpectRefusedWritingNothing(report_over_subject, "is the same file as --subject");
+  ProcessCommandOptions two_outputs = OptionsIn(dir, "both.bvh");
+  two_outputs.output_c3d = dir + "/both.bvh";
+  ExpectRefusedWritingNothing(two_outputs, "is the same file as --out-bvh");
+  EXPECT_EQ(bytes(dir + "/take.c3d"), raw);
+  EXPECT_FALSE(std::filesystem::exists(dir + "/both.bvh"));
+}
+
 // A take the subject cannot be solved from at all gets an error naming the file, never a
 // rest-pose BVH reported as a success.
 TEST(ProcessCommandTest, RefusesATakeWithNoFramesOrNoSeenMarker) {

@@ -1,0 +1,44 @@
+// Output paths checked against a command's inputs and other outputs (output_paths.hpp).
+#include "formats/output_paths.hpp"
+
+#include <filesystem>
+#include <stdexcept>
+
+namespace mocapd {
+namespace {
+
+bool SameFile(const std::string& a, const std::string& b) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  // Both exist: the file system says (a hard link has another name, the same file).
+  if (fs::exists(a, ec) && fs::exists(b, ec)) {
+    const bool same = fs::equivalent(a, b, ec);
+    if (!ec) return same;
+  }
+  const fs::path ca = fs::weakly_canonical(fs::absolute(a), ec);
+  if (ec) return false;
+  const fs::path cb = fs::weakly_canonical(fs::absolute(b), ec);
+  return !ec && ca == cb;
+}
+
+}  // namespace
+
+void RefuseOutputsOverInputs(std::span<const NamedPath> inputs,
+                             std::span<const NamedPath> outputs) {
+  for (size_t o = 0; o < outputs.size(); ++o) {
+    const NamedPath& out = outputs[o];
+    if (out.path.empty()) continue;
+    for (const NamedPath& in : inputs)
+      if (!in.path.empty() && SameFile(out.path, in.path))
+        throw std::runtime_error(out.option + " " + out.path + ": is the same file as " +
+                                 in.option + " " + in.path +
+                                 "; an input is never overwritten: write elsewhere");
+    for (size_t e = 0; e < o; ++e)
+      if (!outputs[e].path.empty() && SameFile(out.path, outputs[e].path))
+        throw std::runtime_error(out.option + " " + out.path + ": is the same file as " +
+                                 outputs[e].option + " " + outputs[e].path +
+                                 "; each output needs a file of its own");
+  }
+}
+
+}  // namespace mocapd

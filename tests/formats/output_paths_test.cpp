@@ -1,0 +1,73 @@
+// Tests for the refusal of an output that names an input or another output.
+#include "formats/output_paths.hpp"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <stdexcept>
+#include <string>
+
+#include "tests/support/test_takes.hpp"
+
+namespace mocapd {
+namespace {
+
+// The error RefuseOutputsOverInputs throws, or "" when it accepts.
+std::string Refusal(std::initializer_list<NamedPath> inputs,
+                    std::initializer_list<NamedPath> outputs) {
+  try {
+    RefuseOutputsOverInputs(std::span(inputs.begin(), inputs.size()),
+                            std::span(outputs.begin(), outputs.size()));
+  } catch (const std::runtime_error& e) {
+    return e.what();
+  }
+  return "";
+}
+
+class OutputPathsTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = testing::TempDir("output_paths");
+    std::ofstream(dir_ + "/take.c3d") << "raw";
+  }
+  std::string dir_;
+};
+
+TEST_F(OutputPathsTest, AnOutputNamingAnInputIsRefusedNamingBothOptions) {
+  const std::string take = dir_ + "/take.c3d";
+  EXPECT_EQ(Refusal({{"--in", take}}, {{"--out-c3d", take}}),
+            "--out-c3d " + take + ": is the same file as --in " + take +
+                "; an input is never overwritten: write elsewhere");
+  // The same file by another spelling: "." and "..", a relative path, a symbolic link.
+  EXPECT_NE(Refusal({{"--in", take}}, {{"--out", dir_ + "/./sub/../take.c3d"}}), "");
+  const std::string relative =
+      std::filesystem::relative(take, std::filesystem::current_path()).string();
+  EXPECT_NE(Refusal({{"--in", relative}}, {{"--out", take}}), "");
+  std::filesystem::remove(dir_ + "/link.c3d");
+  std::filesystem::create_symlink(take, dir_ + "/link.c3d");
+  EXPECT_NE(Refusal({{"--in", take}}, {{"--out", dir_ + "/link.c3d"}}), "");
+  // A hard link is the same file under another name.
+  std::filesystem::remove(dir_ + "/hard.c3d");
+  std::filesystem::create_hard_link(take, dir_ + "/hard.c3d");
+  EXPECT_NE(Refusal({{"--in", take}}, {{"--out", dir_ + "/hard.c3d"}}), "");
+}
+
+TEST_F(OutputPathsTest, TwoOutputsNamingOneFileAreRefused) {
+  const std::string out = dir_ + "/solved.bvh";  // need not exist yet
+  EXPECT_EQ(Refusal({}, {{"--out-bvh", out}, {"--out-c3d", out}}),
+            "--out-c3d " + out + ": is the same file as --out-bvh " + out +
+                "; each output needs a file of its own");
+}
+
+TEST_F(OutputPathsTest, DistinctFilesAndOptionsNotGivenAreAccepted) {
+  EXPECT_EQ(Refusal({{"--in", dir_ + "/take.c3d"}, {"--retarget", ""}},
+                    {{"--out-bvh", dir_ + "/solved.bvh"},
+                     {"--out-c3d", dir_ + "/cleaned.c3d"},
+                     {"--report", ""},
+                     {"--plot", ""}}),
+            "");
+}
+
+}  // namespace
+}  // namespace mocapd
