@@ -328,9 +328,10 @@ class Parser {
     const size_t frame_bytes = (used * 4 + analog_values) * value_size;
     const size_t available = data_start <= reader_.size() ? reader_.size() - data_start : 0;
     // TRIAL counts past 65535 frames, where the header cannot; but a cropping tool can
-    // leave it behind, longer than the header and the data: trusted over the header only
-    // when the header is capped or the data holds that many frames.
-    if (trial_frames > frames && (header_last_ == 65535 || frames <= 0 || frame_bytes == 0 ||
+    // leave it behind, longer than the header and the data (even when they count none):
+    // trusted over the header only when the header is capped or the data holds that many
+    // frames.
+    if (trial_frames > frames && (header_last_ == 65535 || frame_bytes == 0 ||
                                   static_cast<size_t>(trial_frames) <= available / frame_bytes))
       frames = trial_frames;
     if (frames < 0) frames = 0;

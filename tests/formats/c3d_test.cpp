@@ -295,6 +295,30 @@ TEST(C3dTest, AStaleTrialRangeLongerThanTheDataLeavesTheHeadersCount) {
   EXPECT_LT((read.at(19, 2) - take.at(19, 2)).norm(), 1e-6);
 }
 
+// A take cropped to nothing: the header and POINT:FRAMES say zero frames, but the TRIAL
+// range of the take it came from stayed behind. Trusted because the header counted
+// nothing, it made an empty take a truncated one ("file ends inside frame 21 of 5000").
+TEST(C3dTest, AnEmptyTakeWithAStaleTrialRangeReadsAsEmpty) {
+  const C3dTake take = MakeTake(3, 20);
+  std::vector<uint8_t> bytes = EncodeC3d(take);
+  const auto value_after = [&](const std::string& name) {
+    const auto at = std::search(bytes.begin(), bytes.end(), name.begin(), name.end());
+    EXPECT_NE(at, bytes.end()) << name;
+    return static_cast<size_t>(at - bytes.begin()) + name.size() + 2 + 1 + 1;
+  };
+  const size_t trial_end = value_after("ACTUAL_END_FIELD") + 1;  // its one dimension
+  bytes[trial_end] = 5000 & 0xff;
+  bytes[trial_end + 1] = 5000 >> 8;
+  const size_t point_frames = value_after("FRAMES");
+  ASSERT_EQ(bytes[point_frames] + 256 * bytes[point_frames + 1], 20);
+  bytes[point_frames] = bytes[point_frames + 1] = 0;
+  // Header word 5, the last frame: one before the first (word 4).
+  const int last = take.first_frame - 1;
+  bytes[8] = static_cast<uint8_t>(last & 0xff);
+  bytes[9] = static_cast<uint8_t>(last >> 8);
+  EXPECT_EQ(ParseC3d(bytes, "empty.c3d").num_frames, 0);
+}
+
 TEST(C3dTest, MetresPerUnitKnowsTheUsualUnits) {
   EXPECT_DOUBLE_EQ(MetresPerUnit("mm"), 1e-3);
   EXPECT_DOUBLE_EQ(MetresPerUnit("M "), 1.0);
