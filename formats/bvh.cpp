@@ -85,6 +85,10 @@ class Tokens {
     return "'" + (token.size() > 40 ? token.substr(0, 40) + "..." : token) + "'";
   }
   [[noreturn]] void Fail(const std::string& what) const { FailAt(line(), what); }
+  // At the token just read (not the next one, which may be lines further on).
+  [[noreturn]] void FailAtLast(const std::string& what) const {
+    FailAt(pos_ > 0 ? tokens_[pos_ - 1].line : line(), what);
+  }
   [[noreturn]] void FailAt(int at, const std::string& what) const {
     throw BvhError(source_ + ":" + std::to_string(at) + ": " + what);
   }
@@ -161,7 +165,7 @@ void ParseJoint(Tokens& t, int parent, std::vector<RawJoint>* joints,
       t.Expect("}");
       end_sites->push_back({index, offset});
     } else {
-      t.Fail("expected JOINT, End Site or '}', found " + Tokens::Shown(word));
+      t.FailAtLast("expected JOINT, End Site or '}', found " + Tokens::Shown(word));
     }
   }
 }
@@ -248,21 +252,34 @@ BvhTake ParseBvh(const std::string& text, const std::string& source_name,
   t.Expect("Time:");
   const std::string frame_time_text = t.Peek();
   const double frame_time = ExactFrameTime(t.Number("the frame time"), frame_time_text);
-  if (!(frame_time > 0.0)) t.Fail("frame time must be > 0");
+  if (!(frame_time > 0.0)) t.FailAtLast("frame time must be > 0");
 
   size_t total_channels = 0;
   for (const RawJoint& j : raw) total_channels += j.channels.size();
   std::vector<double> values(num_frames * total_channels);
+  // The first row that breaks one frame per line. A row a value short or long shows only
+  // at the end of the file, as a truncated last frame or data after it; the row itself
+  // is what the user has to find.
+  std::string first_odd_row;
   for (size_t f = 0; f < num_frames; ++f) {
+    const int row_line = t.line();
     for (size_t c = 0; c < total_channels; ++c) {
       if (t.done())
         t.Fail("frame " + std::to_string(f + 1) + " of " + std::to_string(num_frames) +
-               " is truncated: expected " + std::to_string(total_channels) + " values");
+               " is truncated: expected " + std::to_string(total_channels) + " values" +
+               first_odd_row);
+      if (first_odd_row.empty() && t.line() != row_line)
+        first_odd_row = "; frame " + std::to_string(f + 1) + " (line " + std::to_string(row_line) +
+                        ") has " + std::to_string(c) + " on its line";
       values[f * total_channels + c] = t.Number("a channel value");
     }
+    if (first_odd_row.empty() && !t.done() && t.line() == row_line)
+      first_odd_row = "; frame " + std::to_string(f + 1) + " (line " + std::to_string(row_line) +
+                      ") has more than " + std::to_string(total_channels) + " on its line";
   }
   if (!t.done())
-    t.Fail("unexpected data after frame " + std::to_string(num_frames) + ": '" + t.Peek() + "'");
+    t.Fail("unexpected data after frame " + std::to_string(num_frames) + ": '" + t.Peek() + "'" +
+           first_odd_row);
 
   BvhTake take;
   take.units = options.units.empty() ? GuessUnits(raw) : options.units;

@@ -300,13 +300,25 @@ TEST(BvhTest, MalformedFilesGetErrorsNamingTheLine) {
   ExpectError("HIERARCHY\nROOT a\n{\nOFFSET 0 x 0\n}\n", "bad.bvh:4: expected a number");
   std::string truncated = good.substr(0, good.rfind("20 89"));
   ExpectError(truncated, "frame 3 of 3 is truncated");
+  // A row a value short or long is named by its frame and line, not only the file's end.
+  std::string short_row = good;
+  short_row.erase(short_row.find(" 10 80 -170"), 4);
+  ExpectError(short_row,
+              "bad.bvh:36: frame 3 of 3 is truncated: expected 24 values; frame 1 (line 34) "
+              "has 23 on its line");
+  std::string long_row = good;
+  long_row.insert(long_row.find(" 15 85 175"), " 9");
+  ExpectError(long_row,
+              "bad.bvh:36: unexpected data after frame 3: '160'; frame 2 (line 35) has more "
+              "than 24 on its line");
+  // An error on the last token of a line names that line, not the next token's.
   std::string zero_time = good;
   zero_time.replace(zero_time.find("0.0333333"), 9, "0");
-  ExpectError(zero_time, "frame time must be > 0");
+  ExpectError(zero_time, "bad.bvh:33: frame time must be > 0");
   ExpectError(good + " 7", "unexpected data after frame 3");
   std::string unclosed = good.substr(0, good.find("MOTION"));
   unclosed.erase(unclosed.rfind('}'));
-  ExpectError(unclosed + "MOTION\n", "expected JOINT, End Site or '}'");
+  ExpectError(unclosed + "MOTION\nFrames: 3\n", "bad.bvh:30: expected JOINT, End Site or '}'");
   // A C3D given as a BVH: named as binary, its bytes never printed.
   ExpectError(std::string("\x02\x50\x3b\x00\x01", 5) + "\x90\xff junk",
               "bad.bvh:1: expected 'HIERARCHY', found binary data (is this a BVH file?)");
