@@ -471,7 +471,7 @@ void SubjectRunner::Publish(int64_t trigger_receive_ns, OutputSink& sink) {
   s.root_translation = pose->translation[0];
   for (size_t j = 0; j < s.rotations.size(); ++j) s.rotations[j] = pose->rotation[j];
   ForwardKinematics(*skeleton_, *pose, &kinematics_);
-  UpdateModelDistance(index);
+  UpdateModelDistance(index, out);
   if (publish_globals_) {
     for (size_t j = 0; j < s.rotations.size(); ++j) {
       s.global_rotations[j] = Quat(kinematics_.R_WJ[j]);
@@ -586,15 +586,18 @@ bool SubjectRunner::CheckStall(int64_t now_ns, int64_t timeout_ns, OutputSink& s
 // Every received sample counts, not only those the cleanup kept: the cleanup keeps the
 // samples that fit, so a model that fits badly shows as samples thrown away rather than as
 // large residuals of the kept ones. The median stays with the majority of samples, so
-// corruption of a minority (swaps, spikes, glitches) does not move it.
-void SubjectRunner::UpdateModelDistance(int64_t frame) {
+// corruption of a minority (swaps, spikes) does not move it. What the ingest gates took
+// as missing (beyond the capture volume, a whole frame that jumped) is no position at all:
+// counted, one frame 1 km off held the subject "model suspect" for 5 s, its distance
+// decaying from 13 m.
+void SubjectRunner::UpdateModelDistance(int64_t frame, const CleanFrame& out) {
   // A fade's poses are neither subject's solve: they fit neither model.
   if (actor_fade_.active()) return;
   const size_t count = missing_.size();
   const Vec3* received = received_.data() + static_cast<size_t>(frame) % stamps_.size() * count;
   distances_.clear();
   for (size_t m = 0; m < count; ++m) {
-    if (!received[m].allFinite()) continue;
+    if (!received[m].allFinite() || out.reason[m] == MaskReason::kMissing) continue;
     const double d =
         (received[m] - EvaluateMarker(markers_->marker(static_cast<int>(m)), kinematics_)).norm();
     if (std::isfinite(d)) distances_.push_back(d);

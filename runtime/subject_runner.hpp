@@ -207,7 +207,7 @@ class SubjectRunner {
   void Push(std::span<const Vec3> positions, const Stamp& stamp, int64_t receive_ns,
             OutputSink& sink);
   void Publish(int64_t trigger_receive_ns, OutputSink& sink);
-  void UpdateModelDistance(int64_t frame);
+  void UpdateModelDistance(int64_t frame, const CleanFrame& out);
   void Resynchronise(OutputSink& sink);
   void ShowLive(const CleanFrame& out, int64_t index, const Stamp& stamp, uint64_t publish_ns);
   void ScaleTemplate(std::span<const Vec3> positions, OutputSink& sink);

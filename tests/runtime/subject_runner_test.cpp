@@ -432,6 +432,25 @@ TEST_F(SubjectRunnerTest, AModelAtTheWrongScaleIsFlaggedSuspect) {
   EXPECT_EQ(sink_.statuses.back().problems, protocol::kProblemModelSuspect);
 }
 
+// One frame whose every marker reads 10 m or 1 km off (a broken frame), or 1e30: the ingest
+// gates take it as missing, and the model's fit must not count it. Counted, the subject
+// was "model suspect" for 5 s with a distance of 13 m (or 1e28 mm) decaying.
+TEST_F(SubjectRunnerTest, AGlitchFrameDoesNotMakeTheModelSuspect) {
+  for (const double glitch : {10.0, 1000.0, 1e30}) {
+    SubjectRunner runner(subject_, daemon_);
+    double worst = 0.0;
+    for (int f = 0; f < 240; ++f) {
+      protocol::MarkerFrameMessage m = Frame(f, static_cast<uint64_t>(f), 0);
+      if (f == 120)
+        for (Vec3& p : m.positions) p += Vec3::Constant(glitch);
+      EXPECT_FALSE(runner.Accept(m, 0, sink_).has_value());
+      worst = std::max(worst, runner.model_distance_m());
+      EXPECT_FALSE(runner.model_suspect()) << glitch << " frame " << f;
+    }
+    EXPECT_LT(worst, 0.005) << glitch;
+  }
+}
+
 TEST_F(SubjectRunnerTest, SteadyStateAcceptAllocatesNothing) {
   SubjectRunner runner(subject_, daemon_);
   for (int f = 0; f < 40; ++f) ASSERT_FALSE(runner.Accept(Frame(f, f, 0), 0, sink_).has_value());
