@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <map>
 #include <set>
 #include <stdexcept>
@@ -157,11 +158,61 @@ std::string MirrorRole(const std::string& role) {
   return "";
 }
 
-MarkersOnlyCalibration CalibrateFromMarkers(std::span<const C3dTake> takes,
+namespace {
+
+// The takes with the samples no body gives taken as missing (MarkersOnlyOptions'
+// capture_volume_m and glitch_speed_mps), counted in `out`.
+std::vector<C3dTake> WithoutImpossibleSamples(std::span<const C3dTake> takes,
+                                              const MarkersOnlyOptions& options,
+                                              MarkersOnlyCalibration* out) {
+  std::vector<C3dTake> gated(takes.begin(), takes.end());
+  for (C3dTake& take : gated) {
+    const int points = take.num_points();
+    const auto drop = [&](int f, int p) {
+      take.at(f, p) = Vec3::Constant(std::numeric_limits<double>::quiet_NaN());
+      take.residuals[static_cast<size_t>(f) * static_cast<size_t>(points) +
+                     static_cast<size_t>(p)] = -1.0f;
+    };
+    for (int f = 0; f < take.num_frames; ++f)
+      for (int p = 0; p < points; ++p)
+        if (take.valid(f, p) && take.is_marker(p) &&
+            !(take.at(f, p).cwiseAbs().maxCoeff() <= options.capture_volume_m)) {
+          drop(f, p);
+          ++out->samples_out_of_volume;
+        }
+    if (take.rate_hz <= 0.0) continue;
+    const double jump_m = options.glitch_speed_mps / take.rate_hz;
+    // The median distance of the markers seen in both frames, or 0 with none.
+    std::vector<double> distances;
+    const auto median_move = [&](int a, int b) {
+      distances.clear();
+      for (int p = 0; p < points; ++p)
+        if (take.is_marker(p) && take.valid(a, p) && take.valid(b, p))
+          distances.push_back((take.at(a, p) - take.at(b, p)).norm());
+      return distances.empty() ? 0.0 : Median(distances);
+    };
+    std::vector<int> glitches;
+    for (int f = 1; f + 1 < take.num_frames; ++f)
+      if (median_move(f, f - 1) > jump_m && median_move(f, f + 1) > jump_m &&
+          median_move(f - 1, f + 1) <= 2.0 * jump_m)
+        glitches.push_back(f);
+    for (const int f : glitches)
+      for (int p = 0; p < points; ++p)
+        if (take.valid(f, p)) drop(f, p);
+    out->glitch_frames += static_cast<int>(glitches.size());
+  }
+  return gated;
+}
+
+}  // namespace
+
+MarkersOnlyCalibration CalibrateFromMarkers(std::span<const C3dTake> raw_takes,
                                             const MarkersOnlyOptions& options,
                                             const std::string& subject_name) {
-  if (takes.empty()) throw std::runtime_error("calibrate: no marker take given");
+  if (raw_takes.empty()) throw std::runtime_error("calibrate: no marker take given");
   MarkersOnlyCalibration out;
+  const std::vector<C3dTake> gated = WithoutImpossibleSamples(raw_takes, options, &out);
+  const std::span<const C3dTake> takes = gated;
   // The labels of every take, with how often each is seen and whether any file calls it
   // a model output.
   std::vector<std::string> labels;

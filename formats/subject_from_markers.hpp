@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "filters/cleanup_options.hpp"
 #include "filters/subject_calibration.hpp"
 #include "formats/c3d.hpp"
 #include "formats/marker_set.hpp"
@@ -30,6 +31,13 @@ struct MarkersOnlyOptions {
   /// calibration re-run without them).
   double max_marker_rms_m = 0.03;
   SubjectCalibrationOptions solve;
+  /// Samples no body gives are left out, as the live cleanup's ingest gates leave them
+  /// out: beyond this from the origin along any axis (1e30, an exporter's sentinel)...
+  double capture_volume_m = CleanupOptions{}.capture_volume_m;
+  /// ...and every sample of a frame whose markers (their median) jumped faster than this
+  /// from both neighbouring frames (a broken frame between good ones). One such frame
+  /// failed a calibration, and one 1 km off made 11 cm bone-length errors with exit 0.
+  double glitch_speed_mps = CleanupOptions{}.glitch_speed_mps;
 };
 
 struct ChannelNote {
@@ -69,6 +77,8 @@ struct MarkersOnlyCalibration {
   std::optional<ClusterSummary> clusters;   ///< Set when no set matched (marker_set none).
   std::string clustered_because;            ///< Why clustering placed the markers.
   int frames_total = 0;
+  int64_t samples_out_of_volume = 0;  ///< Left out: beyond options.capture_volume_m.
+  int glitch_frames = 0;              ///< Left out whole: a jump no body makes.
 };
 
 /// Calibrates a subject from one or more takes of the same actor (the same labels,

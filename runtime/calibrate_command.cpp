@@ -47,6 +47,10 @@ int CalibrateFromMarkersOnly(const CalibrateCommandOptions& options, std::ostrea
     out << ", " << cal.studio_markers.size() << " of the studio's own";
   out << "); " << cal.skipped.size() << " channels skipped; " << r.frames_used.size()
       << " varied poses solved in " << r.iterations << " iterations\n";
+  if (cal.samples_out_of_volume > 0 || cal.glitch_frames > 0)
+    out << "  left out as no body's: " << cal.samples_out_of_volume
+        << " samples beyond the capture volume (" << mo.capture_volume_m << " m along an axis), "
+        << cal.glitch_frames << " frames whose markers all jumped away and back\n";
   // The calibration takes the first point of a label; a second one is an exporter's merge
   // or a labelling mistake the user should hear of.
   for (size_t k = 0; k < takes.size(); ++k) {
@@ -157,6 +161,8 @@ int CalibrateFromMarkersOnly(const CalibrateCommandOptions& options, std::ostrea
   if (!options.report_json.empty()) {
     nlohmann::json report = {{"takes", options.markers_c3d},
                              {"frames", cal.frames_total},
+                             {"samples_out_of_volume", cal.samples_out_of_volume},
+                             {"glitch_frames", cal.glitch_frames},
                              {"marker_set", cal.marker_set},
                              {"set_markers_missing", cal.set_missing},
                              {"studio_markers", cal.studio_markers},

@@ -104,6 +104,32 @@ TEST_F(SubjectFromMarkersTest, RangeOfMotionGivesJointCentresThatFollowTheTruth)
   EXPECT_LT(cal.solve.median_residual_m, 0.006);
 }
 
+// Frames no body gives: one whose markers all read 1e30 (or 1 km off), one whose markers
+// all jumped 10 m and back. Counted, the first failed the calibration ("only 0 of 41
+// markers fit") and the second moved bones by 11 cm with exit 0; left out, the joint
+// centres follow the truth as closely as without them.
+TEST_F(SubjectFromMarkersTest, FramesNoBodyGivesAreLeftOutAndCounted) {
+  const double clean_median = [&] {
+    const std::vector<double> errors = LimbCentreErrors(Calibrate(), take_);
+    return errors[errors.size() / 2];
+  }();
+  const C3dTake clean = take_;
+  for (int p = 0; p < take_.num_points(); ++p) {
+    take_.at(200, p) = Vec3::Constant(1e30);
+    take_.at(300, p) += Vec3(10.0, 0.0, 0.0);
+  }
+  const MarkersOnlyCalibration cal = Calibrate();
+  EXPECT_EQ(cal.samples_out_of_volume, take_.num_points());
+  EXPECT_EQ(cal.glitch_frames, 1);
+  const std::vector<double> errors = LimbCentreErrors(cal, clean);
+  EXPECT_LT(errors[errors.size() / 2], clean_median + 0.002) << clean_median;
+  // A jump that stays (the capture's world moved) is motion, not a glitch.
+  take_ = clean;
+  for (int f = 300; f < take_.num_frames; ++f)
+    for (int p = 0; p < take_.num_points(); ++p) take_.at(f, p) += Vec3(10.0, 0.0, 0.0);
+  EXPECT_EQ(Calibrate().glitch_frames, 0);
+}
+
 // No marker rides the spine or the neck link of Plug-in Gait: the fit is the same
 // whichever way such a segment is turned, and the adjustment left each wherever it
 // wandered, so the rest pose (what a BVH reader and a retargeted character see) showed a
