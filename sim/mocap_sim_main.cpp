@@ -21,6 +21,7 @@
 #include "formats/marker_set.hpp"
 #include "formats/output_paths.hpp"
 #include "formats/subject_file.hpp"
+#include "formats/take_frames.hpp"
 #include "sim/corruption.hpp"
 #include "sim/graph_command.hpp"
 #include "sim/humanoid.hpp"
@@ -189,6 +190,16 @@ int RunReplayCommand(ReplayCommand& c) {
     source = mocapd::BvhReplaySource(c.take, c.synth_rate_hz, c.bvh_units);
   } else {
     source = mocapd::C3dReplaySource(c.take, c.subject, c.marker_set);
+    // As `mocapd process` refuses it: most likely the wrong subject or marker set, and
+    // the daemon would clean frames of mostly missing markers without a word.
+    const mocapd::TakeMarkerMap map(*source.markers, source.take);
+    const int subject_markers = source.markers->num_markers();
+    if (2 * map.matched() < subject_markers)
+      std::cout << "warning: only " << map.matched() << " of the subject's " << subject_markers
+                << " markers (" << (c.subject.empty() ? "the built-in humanoid" : c.subject)
+                << ") are labelled in " << c.take
+                << "; the rest stay missing in every frame: is --subject (or --marker-set) "
+                   "the take's?\n";
   }
   if (c.rate == "realtime")
     c.options.rate_hz = 0.0;

@@ -109,3 +109,18 @@ execute_process(COMMAND ${MOCAP_SIM} info ${WORK_DIR}/broken.c3d RESULT_VARIABLE
 if(NOT rc EQUAL 1 OR NOT err MATCHES "header section")
   message(FATAL_ERROR "broken C3D: rc=${rc} err=${err}")
 endif()
+# An output naming an input is refused before anything is written: the input survives.
+file(SHA256 ${WORK_DIR}/walk.bvh walk_before)
+execute_process(COMMAND ${MOCAP_SIM} synth --bvh ${WORK_DIR}/walk.bvh --out ${WORK_DIR}/./walk.bvh
+                RESULT_VARIABLE rc ERROR_VARIABLE err)
+file(SHA256 ${WORK_DIR}/walk.bvh walk_after)
+if(NOT rc EQUAL 1 OR NOT err MATCHES "is the same file as --bvh" OR NOT walk_before STREQUAL walk_after)
+  message(FATAL_ERROR "synth over its own BVH: rc=${rc} err=${err}")
+endif()
+# A replay whose labels are mostly not the subject's (a Plug-in Gait take against the
+# built-in humanoid) says so before it sends; with no daemon it then fails to connect.
+execute_process(COMMAND ${MOCAP_SIM} replay ${WORK_DIR}/rom.c3d --connect-timeout 1 --to tcp://127.0.0.1:1
+                RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+if(NOT out MATCHES "warning: only [0-9]+ of the subject's 59 markers \\(the built-in humanoid\\)")
+  message(FATAL_ERROR "replay of another set's take gave no warning: rc=${rc}\n${out}\n${err}")
+endif()
