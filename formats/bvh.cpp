@@ -14,6 +14,7 @@
 
 #include "filters/rotation.hpp"
 #include "formats/c3d.hpp"
+#include "formats/file_paths.hpp"
 #include "formats/marker_layout.hpp"
 
 namespace mocapd {
@@ -375,11 +376,7 @@ BvhTake ParseBvh(const std::string& text, const std::string& source_name,
 }
 
 BvhTake ReadBvh(const std::string& path, const BvhReadOptions& options) {
-  std::ifstream in(path);
-  if (!in) throw std::runtime_error(path + ": cannot open for reading");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ParseBvh(ss.str(), path, options);
+  return ParseBvh(ReadWholeFile(path), path, options);
 }
 
 namespace {

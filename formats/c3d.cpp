@@ -15,6 +15,7 @@
 #include <boost/algorithm/string/predicate.hpp>
 #include <boost/algorithm/string/trim.hpp>
 
+#include "formats/file_paths.hpp"
 #include "formats/marker_set.hpp"
 #include "protocol/byte_io.hpp"
 
@@ -258,12 +259,13 @@ class Parser {
     const auto used = static_cast<size_t>(points < 0 ? points + 65536 : points);
     const double scale = Number("POINT:SCALE").value_or(header_scale_);
     if (!std::isfinite(scale) || scale == 0.0)
-      Fail("parameters", 0,
+      Fail("parameters", Find("POINT:SCALE") ? Find("POINT:SCALE")->offset : 0,
            "POINT:SCALE is " + std::to_string(scale) + ", expected a non-zero number");
     take.float_storage = scale < 0.0;
     take.rate_hz = Number("POINT:RATE").value_or(header_rate_);
     if (!(take.rate_hz > 0.0) || !std::isfinite(take.rate_hz))
-      Fail("parameters", 0, "POINT:RATE is " + std::to_string(take.rate_hz) + ", expected > 0");
+      Fail("parameters", Find("POINT:RATE") ? Find("POINT:RATE")->offset : 0,
+           "POINT:RATE is " + std::to_string(take.rate_hz) + ", expected > 0");
     // Some exporters rewrite one and not the other (a take resampled, or cut from a
     // longer one): the parameter is the one the standard calls authoritative, but a take
     // played at the wrong one runs fast or slow, so a person should hear of it.
@@ -520,11 +522,8 @@ C3dTake ParseC3d(std::span<const uint8_t> bytes, const std::string& source_name)
 }
 
 C3dTake ReadC3d(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw std::runtime_error(path + ": cannot open for reading");
-  const std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)),
-                                   std::istreambuf_iterator<char>());
-  return ParseC3d(bytes, path);
+  const std::string bytes = ReadWholeFile(path);
+  return ParseC3d(std::span(reinterpret_cast<const uint8_t*>(bytes.data()), bytes.size()), path);
 }
 
 std::vector<uint8_t> EncodeC3d(const C3dTake& take, const C3dEncoding& encoding) {

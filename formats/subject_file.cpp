@@ -2,6 +2,7 @@
 #include "formats/subject_file.hpp"
 
 #include "formats/c3d.hpp"
+#include "formats/file_paths.hpp"
 #include "formats/toml_reader.hpp"
 
 #include <cmath>
@@ -173,11 +174,7 @@ SubjectModel ParseSubjectModel(const std::string& text, const std::string& sourc
 }
 
 SubjectModel ReadSubjectModel(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw std::runtime_error(path + ": cannot open for reading");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ParseSubjectModel(ss.str(), path);
+  return ParseSubjectModel(ReadWholeFile(path), path);
 }
 
 std::string FormatSubjectModel(const SubjectModel& model) {

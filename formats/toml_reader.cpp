@@ -10,6 +10,8 @@
 
 #include <boost/algorithm/string/predicate.hpp>
 
+#include "formats/file_paths.hpp"
+
 namespace mocapd {
 namespace {
 
@@ -53,13 +55,7 @@ toml::table ParseToml(const std::string& text, const std::string& source_name) {
   }
 }
 
-toml::table ReadTomlFile(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw std::runtime_error(path + ": cannot open for reading");
-  std::ostringstream text;
-  text << in.rdbuf();
-  return ParseToml(text.str(), path);
-}
+toml::table ReadTomlFile(const std::string& path) { return ParseToml(ReadWholeFile(path), path); }
 
 TomlTable::TomlTable(const toml::table& table, std::string path, std::string source)
     : table_(table), path_(std::move(path)), source_(std::move(source)) {}

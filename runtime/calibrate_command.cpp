@@ -13,8 +13,8 @@
 #include "filters/resample.hpp"
 #include "formats/bvh.hpp"
 #include "formats/c3d.hpp"
+#include "formats/file_paths.hpp"
 #include "formats/marker_set.hpp"
-#include "formats/output_paths.hpp"
 #include "formats/subject_file.hpp"
 #include "formats/subject_from_markers.hpp"
 
@@ -28,10 +28,21 @@ std::string Fixed(double v, int decimals) {
   return b;
 }
 
+// A take with no frames names itself: "the takes hold no markers" hid which file of
+// several was empty, and that it had its labels.
+C3dTake ReadTakeWithFrames(const std::string& path) {
+  C3dTake take = ReadC3d(path);
+  if (take.num_frames == 0)
+    throw std::runtime_error(path + ": the take has no frames (" +
+                             std::to_string(take.num_points()) +
+                             " points labelled): nothing to calibrate from");
+  return take;
+}
+
 // The calibration from markers alone: summary on the terminal, JSON report, subject file.
 int CalibrateFromMarkersOnly(const CalibrateCommandOptions& options, std::ostream& out) {
   std::vector<C3dTake> takes;
-  for (const std::string& path : options.markers_c3d) takes.push_back(ReadC3d(path));
+  for (const std::string& path : options.markers_c3d) takes.push_back(ReadTakeWithFrames(path));
   MarkersOnlyOptions mo;
   mo.marker_set = options.marker_set;
   const std::string name = options.subject_name.empty()
@@ -218,7 +229,7 @@ int RunCalibrateCommand(const CalibrateCommandOptions& options, std::ostream& ou
   BvhReadOptions bvh_options;
   bvh_options.units = options.bvh_units;
   const BvhTake bvh = ReadBvh(options.skeleton_bvh, bvh_options);
-  const C3dTake c3d = ReadC3d(options.markers_c3d.front());
+  const C3dTake c3d = ReadTakeWithFrames(options.markers_c3d.front());
   std::vector<Pose> motion = bvh.frames;
   // The same rate as two files print it: a C3D stores 119.88 Hz as a float of its
   // decimal digits, a BVH reads as 120000/1001 Hz; 1e-6 apart, no reason to resample.
@@ -236,6 +247,12 @@ int RunCalibrateCommand(const CalibrateCommandOptions& options, std::ostream& ou
                              " has " + std::to_string(c3d.num_frames) +
                              ": they are not the same take");
 
+  // Every marker would be rejected for it, and the summary would blame the skeleton.
+  if (frames < options.calibration.min_frames)
+    throw std::runtime_error("calibrate: the take has " + std::to_string(frames) +
+                             " frames; a marker's placement needs at least " +
+                             std::to_string(options.calibration.min_frames) +
+                             " (poses it is seen in). No subject written");
   std::vector<KinematicsWorkspace> fk(static_cast<size_t>(frames),
                                       KinematicsWorkspace(bvh.skeleton));
   for (int f = 0; f < frames; ++f)

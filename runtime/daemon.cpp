@@ -825,7 +825,7 @@ void LogStartup(const DaemonConfig& c, int http_port) {
   for (const SubjectConfig& s : c.subjects) {
     const double budget_ms = 1e3 / s.rate_hz;
     spdlog::info(
-        "  subject '{}': {} markers, {} joints, {:.0f} Hz, lookahead K={} ({:.1f} ms delay), frame "
+        "  subject '{}': {} markers, {} joints, {:g} Hz, lookahead K={} ({:.1f} ms delay), frame "
         "budget {:.2f} ms, {}",
         s.name, s.model.markers->num_markers(), s.model.skeleton->num_joints(), s.rate_hz,
         s.cleanup.lookahead, s.cleanup.lookahead * budget_ms, budget_ms,

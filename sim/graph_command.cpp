@@ -9,7 +9,7 @@
 #include <optional>
 
 #include "formats/bvh.hpp"
-#include "formats/output_paths.hpp"
+#include "formats/file_paths.hpp"
 #include "formats/subject_file.hpp"
 #include "sim/graph_match.hpp"
 #include "sim/graph_planner.hpp"

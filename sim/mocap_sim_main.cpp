@@ -17,9 +17,9 @@
 
 #include "formats/bvh.hpp"
 #include "formats/c3d.hpp"
+#include "formats/file_paths.hpp"
 #include "formats/marker_layout.hpp"
 #include "formats/marker_set.hpp"
-#include "formats/output_paths.hpp"
 #include "formats/subject_file.hpp"
 #include "formats/take_frames.hpp"
 #include "sim/corruption.hpp"

@@ -103,14 +103,20 @@ std::string ReplayReport::FormatTable() const {
     std::snprintf(b, sizeof(b), "%.*f", decimals, v);
     return std::string(b);
   };
+  // A rate as a person writes it: 120, 119.88 (an NTSC rate read as 120 is another rate).
+  auto rate = [](double hz) {
+    char b[40];
+    std::snprintf(b, sizeof(b), "%.6g", hz);
+    return std::string(b);
+  };
   s << "replay: " << source << "\n";
   // Paced at another rate than captured, the frames still say the capture's: a 120 Hz
   // take sent at --rate 240 is played twice as fast, not resampled.
   const bool repaced = capture_rate_hz > 0 && rate_hz > 0 &&
                        std::abs(rate_hz - capture_rate_hz) > 1e-6 * capture_rate_hz;
   row("subjects x rate",
-      std::to_string(subjects) + " x " + num(repaced ? capture_rate_hz : rate_hz, 0) + " Hz" +
-          (repaced ? " (sent at " + num(rate_hz, 0) + " frames/s, " +
+      std::to_string(subjects) + " x " + rate(repaced ? capture_rate_hz : rate_hz) + " Hz" +
+          (repaced ? " (sent at " + rate(rate_hz) + " frames/s, " +
                          num(rate_hz / capture_rate_hz, 2) + "x the take's rate, not resampled)"
                    : "") +
           ", lookahead K = " + std::to_string(lookahead));

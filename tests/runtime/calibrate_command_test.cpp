@@ -140,6 +140,47 @@ TEST(CalibrateCommandTest, AnOutputOverATakeIsRefusedAndTheTakeKept) {
   EXPECT_NO_THROW(ReadC3d(dir + "/other.c3d"));
 }
 
+// A take with no frames is named (of several, which), and one too short to place a marker
+// says so instead of blaming the skeleton ("is it the same take, in the units guessed?").
+TEST(CalibrateCommandTest, ATakeWithNoOrTooFewFramesIsNamedAsSuch) {
+  const auto f = testing::MakeHumanoidFixture("walk", 1.0, 60.0);
+  const std::string dir = testing::TempDir("calibrate_short");
+  C3dTake empty = f.take;
+  empty.Allocate(0);
+  WriteC3d(dir + "/empty.c3d", empty);
+  WriteC3d(dir + "/take.c3d", f.take);
+  const auto error_of = [&](const CalibrateCommandOptions& options) {
+    std::ostringstream out;
+    try {
+      RunCalibrateCommand(options, out);
+    } catch (const std::runtime_error& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  CalibrateCommandOptions markers_only;
+  markers_only.markers_c3d = {dir + "/take.c3d", dir + "/empty.c3d"};
+  markers_only.out_subject = dir + "/out.toml";
+  EXPECT_EQ(error_of(markers_only), dir + "/empty.c3d: the take has no frames (" +
+                                        std::to_string(empty.num_points()) +
+                                        " points labelled): nothing to calibrate from");
+  const std::vector<Pose> first(f.motion.begin(), f.motion.begin() + 1);
+  WriteBvh(dir + "/one.bvh", MakeBvhTake(*f.skeleton, first, 1.0 / 60.0, "cm"));
+  C3dTake one = f.take;
+  one.num_frames = 1;
+  one.positions.resize(one.labels.size());
+  one.residuals.resize(one.labels.size());
+  WriteC3d(dir + "/one.c3d", one);
+  CalibrateCommandOptions with_skeleton;
+  with_skeleton.skeleton_bvh = dir + "/one.bvh";
+  with_skeleton.markers_c3d = {dir + "/one.c3d"};
+  with_skeleton.out_subject = dir + "/out.toml";
+  EXPECT_NE(error_of(with_skeleton).find("the take has 1 frames; a marker's placement needs"),
+            std::string::npos)
+      << error_of(with_skeleton);
+  EXPECT_FALSE(std::filesystem::exists(dir + "/out.toml"));
+}
+
 // A capture whose labels belong to no set (here the default layout's markers renamed
 // P0, P1, ... and the world turned Z-up): the command places them by clustering, says so,
 // lists where each marker went, and writes a subject that fits them.

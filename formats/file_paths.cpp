@@ -1,7 +1,10 @@
-// Output paths checked against a command's inputs and other outputs (output_paths.hpp).
-#include "formats/output_paths.hpp"
+// Whole files read, and output paths checked against a command's inputs and other
+// outputs (file_paths.hpp).
+#include "formats/file_paths.hpp"
 
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <stdexcept>
 
 namespace mocapd {
@@ -22,6 +25,17 @@ bool SameFile(const std::string& a, const std::string& b) {
 }
 
 }  // namespace
+
+std::string ReadWholeFile(const std::string& path) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec))
+    throw std::runtime_error(path + ": is a folder, not a file");
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw std::runtime_error(path + ": cannot open for reading");
+  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (in.bad()) throw std::runtime_error(path + ": read failed");
+  return bytes;
+}
 
 void RefuseOutputsOverInputs(std::span<const NamedPath> inputs,
                              std::span<const NamedPath> outputs) {

@@ -1,5 +1,5 @@
 // Tests for the refusal of an output that names an input or another output.
-#include "formats/output_paths.hpp"
+#include "formats/file_paths.hpp"
 
 #include <gtest/gtest.h>
 
@@ -28,11 +28,24 @@ std::string Refusal(std::initializer_list<NamedPath> inputs,
 class OutputPathsTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = testing::TempDir("output_paths");
+    dir_ = testing::TempDir("file_paths");
     std::ofstream(dir_ + "/take.c3d") << "raw";
   }
   std::string dir_;
 };
+
+TEST_F(OutputPathsTest, AWholeFileIsReadAndAFolderOrAMissingFileNamed) {
+  EXPECT_EQ(ReadWholeFile(dir_ + "/take.c3d"), "raw");
+  // A folder opens on Linux and reads as nothing: `model = "/tmp"` in a config was
+  // reported as a subject file missing its format_version.
+  try {
+    ReadWholeFile(dir_);
+    ADD_FAILURE() << "a folder was read";
+  } catch (const std::runtime_error& e) {
+    EXPECT_EQ(std::string(e.what()), dir_ + ": is a folder, not a file");
+  }
+  EXPECT_THROW(ReadWholeFile(dir_ + "/missing.c3d"), std::runtime_error);
+}
 
 TEST_F(OutputPathsTest, AnOutputNamingAnInputIsRefusedNamingBothOptions) {
   const std::string take = dir_ + "/take.c3d";
