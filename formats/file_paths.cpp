@@ -4,15 +4,20 @@
 
 #include <filesystem>
 #include <fstream>
-#include <iterator>
+#include <sstream>
 #include <stdexcept>
 
 namespace mocapd {
 namespace {
 
+// Only files: two outputs to /dev/null (or a terminal) are a way to discard them.
 bool SameFile(const std::string& a, const std::string& b) {
   namespace fs = std::filesystem;
   std::error_code ec;
+  const auto device = [&ec](const std::string& p) {
+    return fs::exists(p, ec) && !fs::is_regular_file(p, ec) && !fs::is_directory(p, ec);
+  };
+  if (device(a) || device(b)) return false;
   // Both exist: the file system says (a hard link has another name, the same file).
   if (fs::exists(a, ec) && fs::exists(b, ec)) {
     const bool same = fs::equivalent(a, b, ec);
@@ -32,9 +37,10 @@ std::string ReadWholeFile(const std::string& path) {
     throw std::runtime_error(path + ": is a folder, not a file");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw std::runtime_error(path + ": cannot open for reading");
-  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  if (in.bad()) throw std::runtime_error(path + ": read failed");
-  return bytes;
+  std::ostringstream bytes;
+  // An empty file leaves failbit set here; only badbit is a read that failed.
+  if (!(bytes << in.rdbuf()) && in.bad()) throw std::runtime_error(path + ": read failed");
+  return std::move(bytes).str();
 }
 
 void RefuseOutputsOverInputs(std::span<const NamedPath> inputs,

@@ -175,21 +175,25 @@ std::vector<C3dTake> WithoutImpossibleSamples(std::span<const C3dTake> takes,
     };
     for (int f = 0; f < take.num_frames; ++f)
       for (int p = 0; p < points; ++p)
-        if (take.valid(f, p) && take.is_marker(p) &&
-            !(take.at(f, p).cwiseAbs().maxCoeff() <= options.capture_volume_m)) {
-          drop(f, p);
-          ++out->samples_out_of_volume;
+        if (take.valid(f, p) && take.is_marker(p)) {
+          if (!take.at(f, p).allFinite()) {
+            drop(f, p);  // missing, as the live gate takes it: not a position to count
+          } else if (take.at(f, p).cwiseAbs().maxCoeff() > options.capture_volume_m) {
+            drop(f, p);
+            ++out->samples_out_of_volume;
+          }
         }
     if (take.rate_hz <= 0.0) continue;
     const double jump_m = options.glitch_speed_mps / take.rate_hz;
-    // The median distance of the markers seen in both frames, or 0 with none.
+    // The median distance of the markers seen in both frames, or 0 with fewer than three
+    // (as the live gate: one or two mislabelled markers are no frame's jump).
     std::vector<double> distances;
     const auto median_move = [&](int a, int b) {
       distances.clear();
       for (int p = 0; p < points; ++p)
         if (take.is_marker(p) && take.valid(a, p) && take.valid(b, p))
           distances.push_back((take.at(a, p) - take.at(b, p)).norm());
-      return distances.empty() ? 0.0 : Median(distances);
+      return distances.size() < 3 ? 0.0 : Median(distances);
     };
     std::vector<int> glitches;
     for (int f = 1; f + 1 < take.num_frames; ++f)

@@ -118,10 +118,13 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
                               {"--in", options.input_c3d},
                               {"--retarget", options.retarget_bvh},
                               {"--truth-bvh", options.truth_bvh}};
-  const NamedPath outputs[] = {{"--out-bvh", options.output_bvh},
-                               {"--out-c3d", options.output_c3d},
-                               {"--out-character-bvh", CharacterOutputPath(options)},
-                               {"--report", options.report_json}};
+  const NamedPath outputs[] = {
+      {"--out-bvh", options.output_bvh},
+      {"--out-c3d", options.output_c3d},
+      {options.output_character_bvh.empty() ? "--out-character-bvh (derived from --out-bvh)"
+                                            : "--out-character-bvh",
+       CharacterOutputPath(options)},
+      {"--report", options.report_json}};
   RefuseOutputsOverInputs(inputs, outputs);
   const SubjectModel subject = ReadSubjectModel(options.subject);
   C3dTake take = ReadC3d(options.input_c3d);

@@ -586,10 +586,11 @@ bool SubjectRunner::CheckStall(int64_t now_ns, int64_t timeout_ns, OutputSink& s
 // Every received sample counts, not only those the cleanup kept: the cleanup keeps the
 // samples that fit, so a model that fits badly shows as samples thrown away rather than as
 // large residuals of the kept ones. The median stays with the majority of samples, so
-// corruption of a minority (swaps, spikes) does not move it. What the ingest gates took
-// as missing (beyond the capture volume, a whole frame that jumped) is no position at all:
-// counted, one frame 1 km off held the subject "model suspect" for 5 s, its distance
-// decaying from 13 m.
+// corruption of a minority (swaps, spikes) does not move it. A received sample whose
+// label the cleanup holds as missing is left out: what the ingest gates took as no
+// position at all (beyond the capture volume, a whole frame that jumped; counted, one
+// frame 1 km off held the subject "model suspect" for 5 s, its distance decaying from
+// 13 m), and a sample the swap detector moved onto another, missing label.
 void SubjectRunner::UpdateModelDistance(int64_t frame, const CleanFrame& out) {
   // A fade's poses are neither subject's solve: they fit neither model.
   if (actor_fade_.active()) return;

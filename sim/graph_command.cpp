@@ -137,6 +137,10 @@ int GraphCommands::Run() {
   State& s = *state_;
   std::vector<NamedPath> inputs = {{"--graph", s.graph_path}, {"QUERY", s.query}};
   for (const std::string& take : s.takes) inputs.push_back({"TAKES", take});
+  // synth and match read every take the graph names: a source take is an input too.
+  if (!s.build->parsed())
+    for (const GraphTakeRef& take : ReadMotionGraph(s.graph_path).takes)
+      inputs.push_back({"--graph " + s.graph_path + "'s take", take.path});
   const NamedPath outputs[] = {
       {"--out", s.out}, {"--subject-out", s.subject_out}, {"--path-out", s.path_out}};
   RefuseOutputsOverInputs(inputs, outputs);

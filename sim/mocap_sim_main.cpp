@@ -156,12 +156,12 @@ struct ReplayCommand {
 std::atomic<bool> g_stop{false};
 
 int RunReplayCommand(ReplayCommand& c) {
-  const mocapd::NamedPath inputs[] = {{"TAKE", c.take},
-                                      {"--graph", c.graph},
-                                      {"--subject", c.subject},
-                                      {"--marker-set", MarkerSetFile(c.marker_set)},
-                                      {"--curve-key", c.options.curve_key_file},
-                                      {"--curve-server-key", c.options.curve_server_key_file}};
+  std::vector<mocapd::NamedPath> inputs = {{"TAKE", c.take},
+                                           {"--graph", c.graph},
+                                           {"--subject", c.subject},
+                                           {"--marker-set", MarkerSetFile(c.marker_set)},
+                                           {"--curve-key", c.options.curve_key_file},
+                                           {"--curve-server-key", c.options.curve_server_key_file}};
   const mocapd::NamedPath outputs[] = {{"--report", c.report}, {"--plot", c.plot}};
   mocapd::RefuseOutputsOverInputs(inputs, outputs);
   mocapd::ReplaySource source;
@@ -172,6 +172,10 @@ int RunReplayCommand(ReplayCommand& c) {
     if (c.options.loops != 1)
       throw std::invalid_argument("replay: a graph stream never loops; --seconds sets its length");
     graph_source = mocapd::GraphSource(c.graph);
+    // The takes the graph names are read as it plays: inputs too.
+    for (const mocapd::GraphTakeRef& take : graph_source.graph->takes)
+      inputs.push_back({"--graph " + c.graph + "'s take", take.path});
+    mocapd::RefuseOutputsOverInputs(inputs, outputs);
   }
   const bool recording = !c.take.empty() && mocapd::IsRecordingFile(c.take);
   if (recording) {
@@ -196,7 +200,10 @@ int RunReplayCommand(ReplayCommand& c) {
     const int subject_markers = source.markers->num_markers();
     if (2 * map.matched() < subject_markers)
       std::cout << "warning: only " << map.matched() << " of the subject's " << subject_markers
-                << " markers (" << (c.subject.empty() ? "the built-in humanoid" : c.subject)
+                << " markers ("
+                << (!c.marker_set.empty() ? "marker set " + c.marker_set
+                    : c.subject.empty()   ? std::string("the built-in humanoid")
+                                          : c.subject)
                 << ") are labelled in " << c.take
                 << "; the rest stay missing in every frame: is --subject (or --marker-set) "
                    "the take's?\n";

@@ -124,3 +124,11 @@ execute_process(COMMAND ${MOCAP_SIM} replay ${WORK_DIR}/rom.c3d --connect-timeou
 if(NOT out MATCHES "warning: only [0-9]+ of the subject's 59 markers \\(the built-in humanoid\\)")
   message(FATAL_ERROR "replay of another set's take gave no warning: rc=${rc}\n${out}\n${err}")
 endif()
+# A motion graph's source takes are inputs of graph synth / match too.
+run(${MOCAP_SIM} graph build ${WORK_DIR}/walk.bvh --out ${WORK_DIR}/walk_graph.json)
+execute_process(COMMAND ${MOCAP_SIM} graph synth --graph ${WORK_DIR}/walk_graph.json --distance 1 --time 2
+                        --out ${WORK_DIR}/walk.bvh RESULT_VARIABLE rc ERROR_VARIABLE err)
+file(SHA256 ${WORK_DIR}/walk.bvh walk_after_graph)
+if(NOT rc EQUAL 1 OR NOT err MATCHES "'s take" OR NOT walk_before STREQUAL walk_after_graph)
+  message(FATAL_ERROR "graph synth over its own take: rc=${rc} err=${err}")
+endif()
