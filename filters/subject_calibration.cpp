@@ -113,6 +113,7 @@ void SubjectCalibrationOptions::Validate() const {
   require(min_valid_fraction > 0.0 && min_valid_fraction <= 1.0,
           "min_valid_fraction: expected (0, 1]");
   require(iterations >= 1, "iterations: expected >= 1");
+  require(interleaved_solves >= 1, "interleaved_solves: expected >= 1");
   require(converged_m > 0.0, "converged_m: expected > 0");
   require(huber_m > 0.0, "huber_m: expected > 0");
   require(joint_prior_sigma_m > 0.0 && marker_prior_sigma_m > 0.0 && symmetry_sigma_m > 0.0,
@@ -120,10 +121,18 @@ void SubjectCalibrationOptions::Validate() const {
   require(covered_sigma_m > 0.0, "covered_sigma_m: expected > 0");
 }
 
-SubjectCalibrationResult CalibrateSubject(const CalibrationTemplate& tmpl,
-                                          std::span<const Vec3> observed, int frames,
-                                          const SubjectCalibrationOptions& options) {
-  options.Validate();
+namespace {
+
+// Where a solve starts from instead of the template: the joint and marker offsets of
+// earlier solves, averaged. The bundle adjustment is then skipped: the solve only tracks
+// the take with them and reports.
+struct FixedStructure {
+  std::vector<Vec3> joint_offset, marker_offset;
+};
+
+SubjectCalibrationResult SolveOnce(const CalibrationTemplate& tmpl, std::span<const Vec3> observed,
+                                   int frames, const SubjectCalibrationOptions& options,
+                                   const FixedStructure* fixed) {
   const Skeleton& base = tmpl.skeleton;
   const int J = base.num_joints();
   const int M = static_cast<int>(tmpl.markers.size());
@@ -179,7 +188,7 @@ SubjectCalibrationResult CalibrateSubject(const CalibrationTemplate& tmpl,
         (uj < tmpl.joint_prior.size() ? tmpl.joint_prior[uj] : base.joint(j).offset) * scale;
     if (uj < tmpl.joint_prior_sigma_m.size() && tmpl.joint_prior_sigma_m[uj] > 0.0)
       joint_sigma[uj] = tmpl.joint_prior_sigma_m[uj];
-    joint_offset[uj] = base.joint(j).offset * scale;
+    joint_offset[uj] = fixed != nullptr ? fixed->joint_offset[uj] : base.joint(j).offset * scale;
   }
   std::vector<Vec3> marker_offset(uM), marker_prior(uM);
   std::vector<double> marker_sigma(uM, options.marker_prior_sigma_m);
@@ -191,6 +200,7 @@ SubjectCalibrationResult CalibrateSubject(const CalibrationTemplate& tmpl,
     if (m < tmpl.marker_prior_sigma_m.size() && tmpl.marker_prior_sigma_m[m] > 0.0)
       marker_sigma[m] = tmpl.marker_prior_sigma_m[m];
     if (unknown(m)) marker_sigma[m] = 1.0;  // effectively none: the data place it
+    if (fixed != nullptr) marker_offset[m] = fixed->marker_offset[m];
   }
 
   // Poses: IK over the whole take, warm-started frame to frame from a cold start.
@@ -221,7 +231,7 @@ SubjectCalibrationResult CalibrateSubject(const CalibrationTemplate& tmpl,
   if (tracked.size() < 10)
     throw std::invalid_argument("calibration: the template could not be solved on the take");
   // Markers of unknown offset: the mean of where the tracked poses put them on their joint.
-  {
+  if (fixed == nullptr) {
     KinematicsWorkspace fk(*model.skeleton);
     std::vector<Vec3> sum(uM, Vec3::Zero());
     std::vector<int> count(uM, 0);
@@ -404,7 +414,8 @@ SubjectCalibrationResult CalibrateSubject(const CalibrationTemplate& tmpl,
   std::vector<Matrix> frame_A_ps(selected.size());
   std::vector<Eigen::LDLT<Matrix>> frame_solver(selected.size());
   std::vector<Vector> frame_b(selected.size());
-  for (int iteration = 0; iteration < options.iterations; ++iteration) {
+  const int iterations = fixed != nullptr ? 0 : options.iterations;
+  for (int iteration = 0; iteration < iterations; ++iteration) {
     result.iterations = iteration + 1;
     const double s2 = sigma_noise * sigma_noise;
     Matrix S = Matrix::Zero(n, n);
@@ -673,6 +684,64 @@ SubjectCalibrationResult CalibrateSubject(const CalibrationTemplate& tmpl,
     result.skeleton = *straightened.skeleton;
     result.markers = std::vector<MarkerDefinition>(straightened.markers->markers().begin(),
                                                    straightened.markers->markers().end());
+  }
+  return result;
+}
+
+}  // namespace
+
+SubjectCalibrationResult CalibrateSubject(const CalibrationTemplate& tmpl,
+                                          std::span<const Vec3> observed, int frames,
+                                          const SubjectCalibrationOptions& options) {
+  options.Validate();
+  SubjectCalibrationResult whole = SolveOnce(tmpl, observed, frames, options, nullptr);
+  // Only a take with more frames than a solve's poses has frames to spare for the others.
+  const int subsets = std::min(options.interleaved_solves, frames / options.max_frames);
+  if (subsets < 2) return whole;
+  const int J = whole.skeleton.num_joints();
+  const size_t M = tmpl.markers.size();
+  std::vector<std::vector<Vec3>> joint_solves, marker_solves;
+  auto keep = [&](const SubjectCalibrationResult& r) {
+    std::vector<Vec3> joints(static_cast<size_t>(J)), markers(M);
+    for (int j = 0; j < J; ++j) joints[static_cast<size_t>(j)] = r.skeleton.joint(j).offset;
+    for (size_t m = 0; m < M; ++m) markers[m] = r.markers[m].attachments[0].offset;
+    joint_solves.push_back(std::move(joints));
+    marker_solves.push_back(std::move(markers));
+  };
+  keep(whole);
+  std::vector<Vec3> subset;
+  for (int first = 0; first < subsets; ++first) {
+    subset.clear();
+    int subset_frames = 0;
+    for (int f = first; f < frames; f += subsets, ++subset_frames)
+      subset.insert(subset.end(), observed.begin() + static_cast<std::ptrdiff_t>(f * M),
+                    observed.begin() + static_cast<std::ptrdiff_t>((f + 1) * M));
+    try {
+      keep(SolveOnce(tmpl, subset, subset_frames, options, nullptr));
+    } catch (const std::invalid_argument&) {
+      // Too few usable frames in this subset: the others carry the mean.
+    }
+  }
+  const auto n = static_cast<double>(joint_solves.size());
+  FixedStructure mean{std::vector<Vec3>(static_cast<size_t>(J), Vec3::Zero()),
+                      std::vector<Vec3>(M, Vec3::Zero())};
+  for (size_t k = 0; k < joint_solves.size(); ++k) {
+    for (size_t j = 0; j < static_cast<size_t>(J); ++j)
+      mean.joint_offset[j] += joint_solves[k][j] / n;
+    for (size_t m = 0; m < M; ++m) mean.marker_offset[m] += marker_solves[k][m] / n;
+  }
+  SubjectCalibrationResult result = SolveOnce(tmpl, observed, frames, options, &mean);
+  result.iterations = whole.iterations;
+  result.solves = static_cast<int>(joint_solves.size());
+  for (int j = 1; j < J; ++j) {
+    const auto uj = static_cast<size_t>(j);
+    double sum_sq = 0.0;
+    for (const std::vector<Vec3>& solve : joint_solves)
+      sum_sq += (solve[uj] - mean.joint_offset[uj]).squaredNorm();
+    JointCalibrationReport& r = result.joints[uj];
+    r.solves_sigma_m = std::sqrt(sum_sq / std::max(1.0, n - 1.0));
+    // The mean of n solves varies about 1/sqrt(n) as much as one solve does.
+    r.uncertainty_m = std::max(r.uncertainty_m, r.solves_sigma_m / std::sqrt(n));
   }
   return result;
 }

@@ -57,7 +57,11 @@ int CalibrateFromMarkersOnly(const CalibrateCommandOptions& options, std::ostrea
   if (!cal.studio_markers.empty())
     out << ", " << cal.studio_markers.size() << " of the studio's own";
   out << "); " << cal.skipped.size() << " channels skipped; " << r.frames_used.size()
-      << " varied poses solved in " << r.iterations << " iterations\n";
+      << " varied poses solved in " << r.iterations << " iterations";
+  if (r.solves > 1)
+    out << "; the mean of " << r.solves << " solves (the whole take and " << r.solves - 1
+        << " interleaved subsets of its frames)";
+  out << "\n";
   if (cal.samples_out_of_volume > 0 || cal.glitch_frames > 0)
     out << "  left out as no body's: " << cal.samples_out_of_volume
         << " samples beyond the capture volume (" << mo.capture_volume_m << " m along an axis), "
@@ -93,8 +97,8 @@ int CalibrateFromMarkersOnly(const CalibrateCommandOptions& options, std::ostrea
         << (cal.clusters->turned_round ? "; turned round to face the way the take walks" : "")
         << "; segments below\n";
   char line[256];
-  std::snprintf(line, sizeof(line), "%-12s %-17s %26s %11s %9s %8s\n", "joint", "method",
-                "motion-only sigma (mm)", "uncert. mm", "bone mm", "L/R %");
+  std::snprintf(line, sizeof(line), "%-12s %-17s %26s %10s %11s %9s %8s\n", "joint", "method",
+                "motion-only sigma (mm)", "solves mm", "uncert. mm", "bone mm", "L/R %");
   out << line;
   nlohmann::json joints = nlohmann::json::array();
   for (int j = 0; j < sk.num_joints(); ++j) {
@@ -111,8 +115,9 @@ int CalibrateFromMarkersOnly(const CalibrateCommandOptions& options, std::ostrea
                                    ? "-"
                                    : sigma(jr.data_sigma_m[0]) + " / " + sigma(jr.data_sigma_m[1]) +
                                          " / " + sigma(jr.data_sigma_m[2]);
-    std::snprintf(line, sizeof(line), "%-12s %-17s %26s %11s %9s %8s\n", jr.name.c_str(),
+    std::snprintf(line, sizeof(line), "%-12s %-17s %26s %10s %11s %9s %8s\n", jr.name.c_str(),
                   jr.method.c_str(), sigmas.c_str(),
+                  j == 0 || r.solves < 2 ? "-" : Fixed(jr.solves_sigma_m * 1e3, 1).c_str(),
                   j == 0 ? "-" : Fixed(jr.uncertainty_m * 1e3, 1).c_str(),
                   j == 0 ? "-" : Fixed(jr.bone_length_m * 1e3, 1).c_str(),
                   std::isfinite(asymmetry) ? Fixed(asymmetry, 1).c_str() : "-");
@@ -125,6 +130,7 @@ int CalibrateFromMarkersOnly(const CalibrateCommandOptions& options, std::ostrea
       jj["rotation_range_deg"] = {jr.rotation_spread_deg[0], jr.rotation_spread_deg[1],
                                   jr.rotation_spread_deg[2]};
       jj["uncertainty_mm"] = jr.uncertainty_m * 1e3;
+      if (r.solves > 1) jj["solves_sigma_mm"] = jr.solves_sigma_m * 1e3;
       jj["bone_length_mm"] = jr.bone_length_m * 1e3;
       jj["centre_in_parent_mm"] = {sk.joint(j).offset.x() * 1e3, sk.joint(j).offset.y() * 1e3,
                                    sk.joint(j).offset.z() * 1e3};
@@ -180,6 +186,7 @@ int CalibrateFromMarkersOnly(const CalibrateCommandOptions& options, std::ostrea
                              {"hip_prior_from_pelvis_regression", cal.hip_regression},
                              {"poses_solved", r.frames_used.size()},
                              {"iterations", r.iterations},
+                             {"solves", r.solves},
                              {"median_residual_mm", r.median_residual_m * 1e3},
                              {"rms_residual_mm", r.rms_m * 1e3},
                              {"joints", joints},
