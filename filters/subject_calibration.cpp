@@ -113,7 +113,8 @@ void SubjectCalibrationOptions::Validate() const {
   require(min_valid_fraction > 0.0 && min_valid_fraction <= 1.0,
           "min_valid_fraction: expected (0, 1]");
   require(iterations >= 1, "iterations: expected >= 1");
-  require(interleaved_solves >= 1, "interleaved_solves: expected >= 1");
+  require(interleaved_solves >= 1 && interleaved_solves <= kMaxInterleavedSolves,
+          "interleaved_solves: expected 1 to 16");
   require(converged_m > 0.0, "converged_m: expected > 0");
   require(huber_m > 0.0, "huber_m: expected > 0");
   require(joint_prior_sigma_m > 0.0 && marker_prior_sigma_m > 0.0 && symmetry_sigma_m > 0.0,

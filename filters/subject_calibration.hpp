@@ -31,6 +31,9 @@
 
 namespace mocapd {
 
+// Beyond this each subset holds too few frames apart to be a solve of its own.
+inline constexpr int kMaxInterleavedSolves = 16;
+
 struct SubjectCalibrationOptions {
   int max_frames = 160;  ///< Poses solved in the bundle adjustment (a varied subset).
   /// The take is solved whole and again on this many interleaved subsets of its frames
@@ -38,7 +41,7 @@ struct SubjectCalibrationOptions {
   /// One solve lands wherever the adjustment stopped along what the motion barely
   /// determines (a spine, a one-marker clavicle): leaving one frame of CMU 01_01 out moved
   /// bones by up to 35 mm. Fewer subsets when the take has fewer than max_frames frames
-  /// per subset; 1: one solve.
+  /// per subset; 1: one solve. At most kMaxInterleavedSolves.
   int interleaved_solves = 4;
   double min_valid_fraction = 0.6;     ///< A frame needs this share of its markers to be used.
   int iterations = 15;                 ///< Alternations of poses and structure at most...

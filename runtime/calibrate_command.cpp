@@ -45,6 +45,7 @@ int CalibrateFromMarkersOnly(const CalibrateCommandOptions& options, std::ostrea
   for (const std::string& path : options.markers_c3d) takes.push_back(ReadTakeWithFrames(path));
   MarkersOnlyOptions mo;
   mo.marker_set = options.marker_set;
+  mo.solve.interleaved_solves = options.interleaved_solves;
   const std::string name = options.subject_name.empty()
                                ? std::filesystem::path(options.out_subject).stem().string()
                                : options.subject_name;

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "filters/calibration.hpp"
+#include "filters/subject_calibration.hpp"
 
 namespace mocapd {
 
@@ -21,6 +22,8 @@ struct CalibrateCommandOptions {
   CalibrationOptions calibration;
   std::string marker_set = "auto";  ///< Markers alone: a set name, a set file, or auto.
   std::string report_json;          ///< Markers alone: the report as JSON (empty: none).
+  /// Markers alone: interleaved subsets averaged with the whole take's solve (1: one solve).
+  int interleaved_solves = SubjectCalibrationOptions{}.interleaved_solves;
 };
 
 /// Runs the calibration, prints a per-marker report to out and writes the subject file.

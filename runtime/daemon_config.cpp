@@ -123,7 +123,7 @@ std::string SubjectFingerprint(const SubjectConfig& s, const DaemonConfig& c) {
     << s.retarget.release_frames << ' ' << s.retarget.points_per_bone;
   if (s.live.enabled) {
     f << "\nlive " << s.live.marker_set << ' ' << s.live.out_path << ' ' << s.live.min_seconds
-      << ' ' << s.live.max_seconds;
+      << ' ' << s.live.max_seconds << ' ' << s.live.interleaved_solves;
     for (const std::string& label : s.live.labels) f << ' ' << label;
   }
   return f.str();
@@ -366,9 +366,11 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
     // At most what a live calibration keeps (LiveCalibration::kMaxKeptSeconds).
     s.live.min_seconds = t.Number("calibration_min_s", s.live.min_seconds, 1, 120);
     s.live.max_seconds = t.Number("calibration_max_s", s.live.max_seconds, 1, 36000);
+    s.live.interleaved_solves =
+        t.Integer("calibration_subsets", s.live.interleaved_solves, 1, kMaxInterleavedSolves);
     if (!s.live.enabled)
-      for (const char* key :
-           {"marker_set", "markers", "calibration_out", "calibration_min_s", "calibration_max_s"})
+      for (const char* key : {"marker_set", "markers", "calibration_out", "calibration_min_s",
+                              "calibration_max_s", "calibration_subsets"})
         if (t.Has(key)) t.Fail(table->get(key), key, "only for calibrate = \"live\"");
     if (s.live.max_seconds < s.live.min_seconds)
       t.Fail(table->get("calibration_max_s"), "calibration_max_s",

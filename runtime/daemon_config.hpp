@@ -12,6 +12,7 @@
 
 #include "filters/cleanup_pipeline.hpp"
 #include "filters/retarget.hpp"
+#include "filters/subject_calibration.hpp"
 #include "formats/marker_set.hpp"
 #include "formats/subject_file.hpp"
 #include "protocol/curve.hpp"
@@ -31,6 +32,9 @@ struct LiveCalibrationConfig {
   std::string out_path;             ///< Where the calibrated subject is written.
   double min_seconds = 10.0;        ///< Motion collected before the first refinement.
   double max_seconds = 60.0;        ///< The last refinement by then swaps in, ready or not.
+  /// Interleaved subsets averaged with the whole take's solve in each refinement
+  /// (SubjectCalibrationOptions::interleaved_solves; 1: one solve, ~3.5x quicker).
+  int interleaved_solves = SubjectCalibrationOptions{}.interleaved_solves;
 };
 
 struct SubjectConfig {

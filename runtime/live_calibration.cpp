@@ -180,6 +180,7 @@ bool LiveCalibration::Refine(bool force) {
 
   MarkersOnlyOptions options;
   options.marker_set = subject_.live.marker_set;
+  options.solve.interleaved_solves = subject_.live.interleaved_solves;
   MarkersOnlyCalibration calibration;
   try {
     calibration = CalibrateFromMarkers(std::span<const C3dTake>(&take, 1), options, subject_.name);

@@ -57,6 +57,13 @@ int main(int argc, char** argv) {
                    "plug-in-gait-lower, cmu-41, optitrack-baseline, qualisys-sports) or a set "
                    "file")
       ->capture_default_str();
+  cal_cmd
+      ->add_option("--subsets", cal.interleaved_solves,
+                   "Markers alone: also solve this many interleaved subsets of the frames and "
+                   "average them with the whole take's solve (steadier bones; 1: one solve, "
+                   "about 3.5 times quicker)")
+      ->check(CLI::Range(1, mocapd::kMaxInterleavedSolves))
+      ->capture_default_str();
   cal_cmd->add_option("--report", cal.report_json,
                       "Markers alone: write the calibration report (JSON)");
   cal_cmd

@@ -50,10 +50,12 @@ class SubjectFromMarkersTest : public ::testing::Test {
     }
     take_ = std::move(out);
   }
-  // 100 poses keep the tests quick under the sanitizers.
+  // 100 poses and one solve keep the tests quick under the sanitizers (the mean of
+  // several solves has its own tests below).
   MarkersOnlyCalibration Calibrate(int poses = 100) const {
     MarkersOnlyOptions options;
     options.solve.max_frames = poses;
+    options.solve.interleaved_solves = 1;
     return CalibrateFromMarkers(std::span<const C3dTake>(&take_, 1), options, "actor");
   }
   // The limb joints' centres, solved through `take` on the calibrated subject, against
@@ -242,6 +244,7 @@ TEST_F(SubjectFromMarkersTest, AnUnknownSetIsPlacedByClusteringOnTheSegmentsItRi
       }
     MarkersOnlyOptions options;
     options.solve.max_frames = 60;
+    options.solve.interleaved_solves = 1;
     const MarkersOnlyCalibration cal =
         CalibrateFromMarkers(std::span<const C3dTake>(&renamed, 1), options, "actor");
     EXPECT_EQ(cal.marker_set, kClusteredSetName);
@@ -296,6 +299,7 @@ TEST_F(SubjectFromMarkersTest, AnUnknownSetThatShowsNoWholeBodyIsRefused) {
   auto error_of = [](const C3dTake& take) {
     MarkersOnlyOptions o;
     o.solve.max_frames = 40;
+    o.solve.interleaved_solves = 1;
     try {
       CalibrateFromMarkers(std::span<const C3dTake>(&take, 1), o, "x");
     } catch (const std::runtime_error& e) {
@@ -393,6 +397,7 @@ TEST_F(SubjectFromMarkersTest, AnUnknownSetInACorruptedTakeIsPlacedOrRefusedNeve
     MarkersOnlyOptions options;
     options.marker_set = "none";
     options.solve.max_frames = 60;
+    options.solve.interleaved_solves = 1;
     try {
       const MarkersOnlyCalibration cal =
           CalibrateFromMarkers(std::span<const C3dTake>(&bad, 1), options, "actor");

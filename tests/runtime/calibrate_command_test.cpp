@@ -193,6 +193,7 @@ TEST(CalibrateCommandTest, WarnsOfALabelGivenToTwoPoints) {
   CalibrateCommandOptions options;
   options.markers_c3d = {dir + "/take.c3d"};
   options.out_subject = dir + "/actor.toml";
+  options.interleaved_solves = 1;  // quick under the sanitizers
   std::ostringstream out;
   RunCalibrateCommand(options, out);
   EXPECT_NE(out.str().find("warning: " + dir + "/take.c3d: 2 points are labelled " +
@@ -215,6 +216,8 @@ TEST(CalibrateCommandTest, LabelsOfNoSetAreCalibratedByClusteringAlone) {
   options.markers_c3d = {dir + "/take.c3d"};
   options.out_subject = dir + "/actor.toml";
   options.report_json = dir + "/report.json";
+  // Two subsets (not the default four) keep the test quick under the sanitizers.
+  options.interleaved_solves = 2;
   std::ostringstream out;
   const int accepted = RunCalibrateCommand(options, out);
   EXPECT_GE(accepted * 10, f.markers->num_markers() * 9) << out.str();
@@ -242,6 +245,8 @@ TEST(CalibrateCommandTest, LabelsOfNoSetAreCalibratedByClusteringAlone) {
   const std::string text((std::istreambuf_iterator<char>(report)),
                          std::istreambuf_iterator<char>());
   EXPECT_NE(text.find("placed_by_clustering"), std::string::npos);
+  EXPECT_NE(out.str().find("the mean of 3 solves"), std::string::npos) << out.str();
+  EXPECT_NE(text.find("\"solves\": 3"), std::string::npos) << text;
 }
 
 }  // namespace

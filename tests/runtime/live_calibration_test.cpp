@@ -99,11 +99,15 @@ class LiveCalibrationTest : public ::testing::Test {
     return m;
   }
 
-  // A live subject's runner with its calibration, as a daemon's worker holds them.
+  // A live subject's runner with its calibration, as a daemon's worker holds them. One
+  // solve per refinement keeps the tests quick under the sanitizers; the mean of several
+  // is the default the live_calibration_process test runs.
   struct LiveSubject {
     LiveSubject(const LiveCalibrationTest& test, const std::string& lines,
                 const std::string& tables = "")
-        : config(test.Config("calibrate = \"live\"\nmarker_set = \"cmu-41\"\n" + lines, tables)),
+        : config(test.Config(
+              "calibrate = \"live\"\nmarker_set = \"cmu-41\"\ncalibration_subsets = 1\n" + lines,
+              tables)),
           subject(config.subjects[0]),
           calibration(board.Attach(subject, config)),
           runner(subject, config) {
@@ -440,6 +444,15 @@ TEST_F(LiveCalibrationTest, BadLiveConfigurationsNameTheirField) {
                 .find("calibration_max_s"),
             std::string::npos);
   EXPECT_NE(error("marker_set = \"cmu-41\"\n").find("add calibrate = \"live\""), std::string::npos);
+  EXPECT_NE(error("calibrate = \"live\"\nmarker_set = \"cmu-41\"\ncalibration_subsets = 0\n")
+                .find("calibration_subsets"),
+            std::string::npos);
+  EXPECT_NE(error("model = \"a.toml\"\ncalibration_subsets = 2\n").find("only for calibrate"),
+            std::string::npos);
+  EXPECT_EQ(Config("calibrate = \"live\"\nmarker_set = \"cmu-41\"\ncalibration_subsets = 2\n")
+                .subjects[0]
+                .live.interleaved_solves,
+            2);
   EXPECT_NE(error("").find("give the subject's model file, or calibrate"), std::string::npos);
   EXPECT_NE(error("calibrate = \"live\"\n").find("cmu-41"), std::string::npos);  // names the sets
   EXPECT_NE(error("calibrate = \"live\"\nmarker_set = \"cmu-41\"\nmarkers = [\"LFHD\", \"RFHD\"]\n")
