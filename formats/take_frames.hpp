@@ -26,6 +26,8 @@ class TakeMarkerMap {
   /// first time the message holds this many markers.
   void FillMessage(const C3dTake& take, int frame, protocol::MarkerFrameMessage* message) const;
   int matched() const { return matched_; }
+  /// The take's point a subject's marker reads, or -1 (not in the take, or ambiguous).
+  int point_of_marker(int marker) const { return point_of_marker_[static_cast<size_t>(marker)]; }
   const std::vector<std::string>& unmatched() const { return unmatched_; }
   /// The subject's markers whose exact label the take gives to more than one point (the
   /// first such point is used): an exporter's merge or a labelling mistake.

@@ -103,6 +103,30 @@ void CheckOutputs(const ProcessCommandOptions& options) {
     throw std::runtime_error("--plot " + options.plot_dir + ": is a file, not a folder");
 }
 
+// What the take captures at all: a label whose every sample is invalid (an exporter that
+// kept a lost marker's channel) and frames with none of the subject's markers (a dropped
+// camera sync) come out as repairs the summary would otherwise count like any other.
+void MeasureCoverage(const C3dTake& take, const TakeMarkerMap& map, const MarkerSet& markers,
+                     ProcessSummary* summary) {
+  const int M = markers.num_markers();
+  std::vector<Vec3> observed(static_cast<size_t>(M));
+  std::vector<double> weights(observed.size());
+  std::vector<uint8_t> captured(observed.size(), 0);
+  int run = 0;
+  for (int f = 0; f < take.num_frames; ++f) {
+    map.Observe(take, f, observed, weights);
+    bool any = false;
+    for (size_t m = 0; m < weights.size(); ++m)
+      if (weights[m] > 0.0) captured[m] = 1, any = true;
+    run = any ? 0 : run + 1;
+    summary->blank_frames += !any;
+    summary->longest_blank_run = std::max(summary->longest_blank_run, run);
+  }
+  for (int m = 0; m < M; ++m)
+    if (map.point_of_marker(m) >= 0 && !captured[static_cast<size_t>(m)])
+      summary->never_captured.push_back(markers.marker(m).name);
+}
+
 }  // namespace
 
 std::string CharacterOutputPath(const ProcessCommandOptions& options) {
@@ -180,6 +204,15 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
   summary.frames = take.num_frames;
   summary.markers = markers.num_markers();
   summary.matched_markers = map.matched();
+  MeasureCoverage(take, map, markers, &summary);
+  warn(summary.never_captured,
+       "are in the take but captured in no frame: never published (unrecoverable), "
+       "and the solve goes without them");
+  if (summary.blank_frames > 0)
+    out << "warning: " << summary.blank_frames << " frames capture none of the subject's markers "
+        << "(the longest run " << summary.longest_blank_run << " frames, "
+        << summary.longest_blank_run / take.rate_hz
+        << " s): their skeleton and markers are guesses from the frames either side\n";
   std::vector<Pose> poses(static_cast<size_t>(take.num_frames), RestPose(*subject.skeleton));
   std::vector<Vec3> observed(static_cast<size_t>(markers.num_markers()));
   std::vector<double> weights(observed.size());
@@ -287,6 +320,12 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
       residuals.push_back(r);
       sum_sq[m] += r * r;
       ++residual_count[m];
+    }
+    for (size_t m = 0; m < observed.size(); ++m) {
+      if (frame.status[m] != MarkerStatus::kRepaired) continue;
+      summary.repaired_captured += frame.source[m] == SampleSource::kCaptured;
+      summary.repaired_interpolated += frame.source[m] == SampleSource::kInterpolated;
+      summary.repaired_extrapolated += frame.source[m] == SampleSource::kExtrapolated;
     }
     for (size_t m = 0; m < point_of_marker.size(); ++m) {
       const int p = point_of_marker[m];
@@ -451,6 +490,17 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
                   100.0 * static_cast<double>(n) / samples);
     out << line;
   }
+  const int64_t repaired =
+      summary.repaired_captured + summary.repaired_interpolated + summary.repaired_extrapolated;
+  if (repaired > 0) {
+    std::snprintf(line, sizeof(line),
+                  "  of the repairs: %lld captured samples relabelled, %lld filled between "
+                  "captured ends, %lld guessed from one side\n",
+                  static_cast<long long>(summary.repaired_captured),
+                  static_cast<long long>(summary.repaired_interpolated),
+                  static_cast<long long>(summary.repaired_extrapolated));
+    out << line;
+  }
   std::snprintf(line, sizeof(line), "  unrecoverable            %8lld samples  %6.2f %%\n",
                 static_cast<long long>(c.unrecoverable),
                 100.0 * static_cast<double>(c.unrecoverable) / samples);
@@ -510,6 +560,13 @@ nlohmann::json ProcessSummaryJson(const ProcessSummary& summary,
           {"markers_in_take", summary.matched_markers},
           {"samples", c.samples_out},
           {"repaired_samples_by_reason", repaired},
+          {"repaired_samples_by_source",
+           {{"captured", summary.repaired_captured},
+            {"interpolated", summary.repaired_interpolated},
+            {"extrapolated", summary.repaired_extrapolated}}},
+          {"markers_never_captured", summary.never_captured},
+          {"frames_capturing_no_marker", summary.blank_frames},
+          {"longest_run_capturing_no_marker", summary.longest_blank_run},
           {"swaps_relabelled", c.swaps_relabelled},
           {"unrecoverable_samples", c.unrecoverable},
           {"unsolved_frames", summary.unsolved_frames},

@@ -52,6 +52,14 @@ struct ProcessSummary {
   int markers = 0;
   int matched_markers = 0;
   CleanupCounters counters;
+  /// Repaired samples by where they came from: a capture relabelled, a fill between two
+  /// captured ends, or a guess from one side (the counters' reasons say why a sample was
+  /// repaired, not how much it rests on).
+  int64_t repaired_captured = 0, repaired_interpolated = 0, repaired_extrapolated = 0;
+  /// Markers in the take that no frame captures (every sample of them is a guess), and
+  /// frames that capture none of the subject's markers (the longest run of them).
+  std::vector<std::string> never_captured;
+  int blank_frames = 0, longest_blank_run = 0;
   /// Frames the final solve could not solve (too few markers, or a failed solve), and
   /// how many of them came before the first solved one (those hold the first solved
   /// pose in the written BVH).

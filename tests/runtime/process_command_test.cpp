@@ -388,6 +388,53 @@ TEST(ProcessCommandTest, PlotsShowEveryMarkerTheSolveAndTheErrorAgainstTheTruth)
 
 // A subject calibrated from markers alone names its joints by role; the truth that
 // mocap-sim writes names them its own way. The limb joints are matched by role.
+// A label whose every sample is invalid and a run of frames with no marker at all came
+// out as "repaired (missing)" like any short gap, with no word that nothing was seen.
+TEST(ProcessCommandTest, SaysWhatTheTakeNeverCapturesAndWhichRepairsAreOneSidedGuesses) {
+  const auto f = testing::MakeHumanoidFixture("walk", 3.0, 60.0);
+  const std::string dir = testing::TempDir("process_coverage");
+  WriteFixtureSubject(f, dir + "/actor.toml");
+  C3dTake take = f.take;
+  const auto P = static_cast<size_t>(take.num_points());
+  const int lost = 4;
+  for (int fr = 0; fr < take.num_frames; ++fr)
+    for (size_t p = 0; p < P; ++p)
+      if (static_cast<int>(p) == lost || (fr >= 60 && fr < 90))
+        take.residuals[static_cast<size_t>(fr) * P + p] = -1.0f;
+  WriteC3d(dir + "/take.c3d", take);
+  ProcessCommandOptions options = OptionsIn(dir);
+  options.lookahead = 6;
+  options.report_json = dir + "/report.json";
+  std::ostringstream out;
+  const ProcessSummary summary = RunProcessCommand(options, out);
+  const std::string lost_name = take.labels[static_cast<size_t>(lost)];
+  ASSERT_EQ(summary.never_captured, std::vector<std::string>{lost_name}) << out.str();
+  EXPECT_NE(out.str().find("captured in no frame: never published (unrecoverable), and the "
+                           "solve goes without them: " +
+                           lost_name),
+            std::string::npos)
+      << out.str();
+  EXPECT_EQ(summary.blank_frames, 30);
+  EXPECT_EQ(summary.longest_blank_run, 30);
+  EXPECT_NE(out.str().find("30 frames capture none of the subject's markers (the longest run "
+                           "30 frames, 0.5 s)"),
+            std::string::npos)
+      << out.str();
+  // A 30-frame hole seen 6 frames ahead: its first 24 frames are guessed from one side.
+  EXPECT_GE(summary.repaired_extrapolated, 24 * (f.markers->num_markers() - 1));
+  EXPECT_GT(summary.repaired_interpolated, 0);
+  int64_t repaired = 0;
+  for (const int64_t n : summary.counters.repaired_by) repaired += n;
+  EXPECT_EQ(
+      summary.repaired_captured + summary.repaired_interpolated + summary.repaired_extrapolated,
+      repaired);
+  std::ifstream report_file(dir + "/report.json");
+  const nlohmann::json report = nlohmann::json::parse(report_file);
+  EXPECT_EQ(report["markers_never_captured"][0], lost_name);
+  EXPECT_EQ(report["frames_capturing_no_marker"], 30);
+  EXPECT_EQ(report["repaired_samples_by_source"]["extrapolated"], summary.repaired_extrapolated);
+}
+
 TEST(ProcessCommandTest, ATruthWithOtherJointNamesIsMatchedByRoleOnTheLimbs) {
   const auto f = testing::MakeHumanoidFixture("mixed", 9.0, 60.0, 0.001);
   const std::string dir = testing::TempDir("process_truth_roles");
