@@ -256,7 +256,7 @@ class Parser {
     const int points = static_cast<int>(Number("POINT:USED").value_or(header_points_));
     if (points < 0) Fail("parameters", 0, "POINT:USED is negative");
     // Integer parameters above 32767 are stored as unsigned 16-bit words.
-    const auto used = static_cast<size_t>(points < 0 ? points + 65536 : points);
+    auto used = static_cast<size_t>(points < 0 ? points + 65536 : points);
     const double scale = Number("POINT:SCALE").value_or(header_scale_);
     if (!std::isfinite(scale) || scale == 0.0)
       Fail("parameters", Find("POINT:SCALE") ? Find("POINT:SCALE")->offset : 0,
@@ -303,6 +303,56 @@ class Parser {
     }
     take.first_frame = header_first_;
 
+    size_t data_block = header_data_block_;
+    if (auto d = Number("POINT:DATA_START")) {
+      double v = *d;
+      if (v < 0) v += 65536;
+      if (v >= 1) data_block = static_cast<size_t>(v);
+    }
+    if (data_block < 1) Fail("header", 16, "data section block number is 0");
+    const size_t data_start = (data_block - 1) * kBlock;
+    const size_t value_size = take.float_storage ? 4 : 2;
+    const size_t analog_values = header_analog_;
+    const auto frame_bytes_of = [&](size_t points_per_frame) {
+      return (points_per_frame * 4 + analog_values) * value_size;
+    };
+    const size_t available = data_start <= reader_.size() ? reader_.size() - data_start : 0;
+    const auto holds = [&](int64_t n, size_t points_per_frame) {
+      const size_t bytes = frame_bytes_of(points_per_frame);
+      return bytes == 0 || static_cast<size_t>(std::max<int64_t>(n, 0)) <= available / bytes;
+    };
+    // POINT:USED is the standard's count, but an exporter can rewrite it and not the
+    // header (points added or dropped after the capture): where the data holds frames of
+    // the header's count and not of USED's, the header's is the layout. It was refused as
+    // a truncated file.
+    const size_t used_parameter = used;
+    if (Find("POINT:USED") && header_points_ != used && !holds(frames, used) &&
+        holds(frames, header_points_)) {
+      used = header_points_;
+      take.notes.push_back("POINT:USED says " + std::to_string(used_parameter) +
+                           " points, the header " + std::to_string(used) +
+                           ": the data holds frames of " + std::to_string(used) +
+                           " points, so the header's count is used");
+    }
+    const size_t frame_bytes = frame_bytes_of(used);
+    // TRIAL counts past 65535 frames, where the header cannot; but a cropping tool can
+    // leave it behind, longer than the header and the data (even when they count none):
+    // trusted over the header only when the data holds that many frames, or the header is
+    // capped (and a frame stores something: with nothing per frame nothing confirms it).
+    if (trial_frames > frames && frame_bytes > 0 &&
+        (header_last_ == 65535 || holds(trial_frames, used)))
+      frames = trial_frames;
+    if (frames < 0) frames = 0;
+    if (frame_bytes > 0 && static_cast<size_t>(frames) > available / frame_bytes) {
+      const size_t whole = available / frame_bytes;
+      std::string counts;
+      if (header_points_ != used_parameter && Find("POINT:USED"))
+        counts = "; POINT:USED says " + std::to_string(used_parameter) + " points, the header " +
+                 std::to_string(header_points_) + ", and the data holds frames of neither";
+      Fail("data", data_start + whole * frame_bytes,
+           "file ends inside frame " + std::to_string(whole + 1) + " of " + std::to_string(frames) +
+               " (" + std::to_string(frame_bytes) + " bytes per frame" + counts + ")");
+    }
     take.labels = StringsContinued("POINT", "LABELS");
     take.descriptions = StringsContinued("POINT", "DESCRIPTIONS");
     take.labels.resize(used);
@@ -317,32 +367,6 @@ class Parser {
       }
     }
 
-    size_t data_block = header_data_block_;
-    if (auto d = Number("POINT:DATA_START")) {
-      double v = *d;
-      if (v < 0) v += 65536;
-      if (v >= 1) data_block = static_cast<size_t>(v);
-    }
-    if (data_block < 1) Fail("header", 16, "data section block number is 0");
-    const size_t data_start = (data_block - 1) * kBlock;
-    const size_t value_size = take.float_storage ? 4 : 2;
-    const size_t analog_values = header_analog_;
-    const size_t frame_bytes = (used * 4 + analog_values) * value_size;
-    const size_t available = data_start <= reader_.size() ? reader_.size() - data_start : 0;
-    // TRIAL counts past 65535 frames, where the header cannot; but a cropping tool can
-    // leave it behind, longer than the header and the data (even when they count none):
-    // trusted over the header only when the header is capped or the data holds that many
-    // frames.
-    if (trial_frames > frames && (header_last_ == 65535 || frame_bytes == 0 ||
-                                  static_cast<size_t>(trial_frames) <= available / frame_bytes))
-      frames = trial_frames;
-    if (frames < 0) frames = 0;
-    if (frame_bytes > 0 && static_cast<size_t>(frames) > available / frame_bytes) {
-      const size_t whole = available / frame_bytes;
-      Fail("data", data_start + whole * frame_bytes,
-           "file ends inside frame " + std::to_string(whole + 1) + " of " + std::to_string(frames) +
-               " (" + std::to_string(frame_bytes) + " bytes per frame)");
-    }
     if (frames > 0 && used > 0 && static_cast<uint64_t>(frames) * used > (1ull << 31))
       Fail("data", data_start,
            "implausible size: " + std::to_string(frames) + " frames x " + std::to_string(used) +

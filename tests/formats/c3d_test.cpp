@@ -319,6 +319,65 @@ TEST(C3dTest, AnEmptyTakeWithAStaleTrialRangeReadsAsEmpty) {
   EXPECT_EQ(ParseC3d(bytes, "empty.c3d").num_frames, 0);
 }
 
+// The byte offset of a parameter's first value: after its name, link (2), type (1) and
+// dimension count (1), and the dimensions themselves.
+size_t ValueOffset(const std::vector<uint8_t>& bytes, const std::string& name, int dimensions) {
+  const auto at = std::search(bytes.begin(), bytes.end(), name.begin(), name.end());
+  EXPECT_NE(at, bytes.end()) << name;
+  return static_cast<size_t>(at - bytes.begin()) + name.size() + 2 + 1 + 1 +
+         static_cast<size_t>(dimensions);
+}
+
+// An exporter that rewrote POINT:USED and not the header: the data holds frames of the
+// header's count, which is used, with a note (it was refused as a truncated file). Where
+// the data holds frames of neither, the error names both counts.
+TEST(C3dTest, APointCountTheDataDoesNotHoldGivesWayToTheHeadersWithANote) {
+  const C3dTake take = MakeTake(3, 20);
+  std::vector<uint8_t> bytes = EncodeC3d(take);
+  const size_t used = ValueOffset(bytes, "USED", 0);
+  ASSERT_EQ(bytes[used] + 256 * bytes[used + 1], 3);
+  bytes[used] = 5;
+  const C3dTake read = ParseC3d(bytes, "used.c3d");
+  ExpectSameTake(take, read);
+  ASSERT_EQ(read.notes.size(), 1u);
+  EXPECT_NE(read.notes[0].find("POINT:USED says 5 points, the header 3"), std::string::npos)
+      << read.notes[0];
+  // Neither count fits: the last frame cut short (header word 9: the data's first block).
+  const size_t data_start = (bytes[16] + 256u * bytes[17] - 1) * 512;
+  bytes.resize(data_start + 19 * 3 * 16 + 8);
+  try {
+    ParseC3d(bytes, "cut.c3d");
+    FAIL();
+  } catch (const C3dError& e) {
+    EXPECT_NE(std::string(e.what()).find("POINT:USED says 5 points, the header 3, and the data "
+                                         "holds frames of neither"),
+              std::string::npos)
+        << e.what();
+  }
+}
+
+// No points and no frames, with a stale TRIAL range from the take it was cut from: nothing
+// per frame confirms the range, so the header's count (none) stands. It was refused ("5000
+// frames declared but no points or analog channels to store").
+TEST(C3dTest, ATakeWithNoPointsAndAStaleTrialRangeReadsAsEmpty) {
+  C3dTake take;
+  take.rate_hz = 100.0;
+  take.Allocate(20);
+  std::vector<uint8_t> bytes = EncodeC3d(take);
+  const size_t trial_end = ValueOffset(bytes, "ACTUAL_END_FIELD", 1);
+  bytes[trial_end] = 5000 & 0xff;
+  bytes[trial_end + 1] = 5000 >> 8;
+  const size_t point_frames = ValueOffset(bytes, "FRAMES", 0);
+  ASSERT_EQ(bytes[point_frames] + 256 * bytes[point_frames + 1], 20);
+  bytes[point_frames] = bytes[point_frames + 1] = 0;
+  const int last = take.first_frame - 1;  // header word 5, one before the first
+  bytes[8] = static_cast<uint8_t>(last & 0xff);
+  bytes[9] = static_cast<uint8_t>(last >> 8);
+  const C3dTake read = ParseC3d(bytes, "nothing.c3d");
+  EXPECT_EQ(read.num_frames, 0);
+  EXPECT_EQ(read.num_points(), 0);
+}
+
 TEST(C3dTest, MetresPerUnitKnowsTheUsualUnits) {
   EXPECT_DOUBLE_EQ(MetresPerUnit("mm"), 1e-3);
   EXPECT_DOUBLE_EQ(MetresPerUnit("M "), 1.0);
