@@ -26,12 +26,15 @@ int main(int argc, char** argv) {
   CLI::App* demo_cmd = app.add_subcommand(
       "demo", "Synthesize a take from the built-in humanoid and solve it frame by frame");
   demo_cmd->add_option("--seconds", demo.seconds, "Take length")
+      ->check(CLI::Number)
       ->check(CLI::Range(0.1, 3600.0))
       ->capture_default_str();
   demo_cmd->add_option("--rate", demo.rate_hz, "Capture rate, Hz")
+      ->check(CLI::Number)
       ->check(CLI::Range(1.0, 2000.0))
       ->capture_default_str();
   demo_cmd->add_option("--noise-mm", demo.noise_mm, "Gaussian marker noise (sigma, mm)")
+      ->check(CLI::Number)
       ->check(CLI::Range(0.0, 100.0))
       ->capture_default_str();
   demo_cmd->add_option("--motion", demo.motion, "walk | reach | turn | mixed")
@@ -62,6 +65,7 @@ int main(int argc, char** argv) {
                    "Markers alone: also solve this many interleaved subsets of the frames and "
                    "average them with the whole take's solve (steadier bones; 1: one solve, "
                    "about 3.5 times quicker)")
+      ->check(CLI::TypeValidator<int>())
       ->check(CLI::Range(1, mocapd::kMaxInterleavedSolves))
       ->capture_default_str();
   cal_cmd->add_option("--report", cal.report_json,
@@ -77,6 +81,7 @@ int main(int argc, char** argv) {
   cal_cmd
       ->add_option("--max-residual-mm", max_rms_mm,
                    "Reject markers whose best fit leaves more RMS than this")
+      ->check(CLI::Number)
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
 
@@ -93,6 +98,7 @@ int main(int argc, char** argv) {
   proc_cmd->add_option("--out-c3d", proc.output_c3d,
                        "Cleaned markers to write (C3D; untouched samples are kept bit for bit)");
   proc_cmd->add_option("--lookahead", proc.lookahead, "Frames of lookahead K (delay)")
+      ->check(CLI::TypeValidator<int>())
       ->check(CLI::Range(0, 1000))
       ->capture_default_str();
   proc_cmd->add_option("--report", proc.report_json, "Write the summary as JSON");

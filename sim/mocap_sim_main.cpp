@@ -298,12 +298,14 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({"walk", "reach", "turn", "mixed", "rom"}))
       ->excludes(bvh_opt);
   synth_cmd->add_option("--seconds", synth.seconds, "Length of built-in humanoid motion")
+      ->check(CLI::Number)
       ->check(CLI::Range(0.1, 3600.0))
       ->capture_default_str();
   synth_cmd->add_option("--out", synth.out, "Marker take to write (.c3d)")->required();
   synth_cmd
       ->add_option("--rate", synth.rate_hz,
                    "Output rate in Hz (default: the source's); motion is slerp-resampled")
+      ->check(CLI::Number)
       ->check(CLI::Range(1.0, 2000.0));
   synth_cmd->add_option("--subject-out", synth.subject_out,
                         "Also write the subject model (skeleton + markers)");
@@ -319,12 +321,14 @@ int main(int argc, char** argv) {
   synth_cmd
       ->add_option("--soft-tissue-mm", synth.soft_tissue_mm,
                    "Soft-tissue wobble of markers on fleshy segments, mm (pose-correlated)")
+      ->check(CLI::Number)
       ->check(CLI::Range(0.0, 100.0));
   synth_cmd->add_option("--truth-bvh", synth.truth_bvh,
                         "Also write the resampled ground-truth motion");
   synth_cmd->add_option("--bvh-units", synth.bvh_units,
                         "BVH length unit: mm, cm, m or in (default: guess)");
   synth_cmd->add_option("--noise-mm", synth.noise_mm, "Gaussian marker noise (sigma, mm)")
+      ->check(CLI::Number)
       ->check(CLI::Range(0.0, 100.0));
   synth_cmd->add_option("--seed", synth.seed, "Noise and corruption seed")->capture_default_str();
   synth_cmd
@@ -357,16 +361,19 @@ int main(int argc, char** argv) {
   replay_cmd
       ->add_option("--seconds", replay.seconds,
                    "Length of the built-in humanoid's take (or the graph stream)")
+      ->check(CLI::Number)
       ->check(CLI::Range(0.1, 3600.0))
       ->capture_default_str();
   replay_cmd
       ->add_option("--synth-rate", replay.synth_rate_hz,
                    "Rate markers are synthesized at (humanoid, BVH), Hz")
+      ->check(CLI::Number)
       ->check(CLI::Range(1.0, 2000.0))
       ->capture_default_str();
   replay_cmd
       ->add_option("--noise-mm", replay.noise_mm,
                    "Marker noise of the built-in humanoid's take (sigma)")
+      ->check(CLI::Number)
       ->check(CLI::Range(0.0, 100.0))
       ->capture_default_str();
   replay_cmd
@@ -407,6 +414,7 @@ int main(int argc, char** argv) {
   replay_cmd
       ->add_option("--subjects", replay.options.subjects,
                    "Actors at once (actor1 .. actorN, 2.5 m apart)")
+      ->check(CLI::TypeValidator<int>())
       ->check(CLI::Range(1, 64))
       ->capture_default_str();
   replay_cmd
@@ -414,17 +422,20 @@ int main(int argc, char** argv) {
                    "Actor names are PREFIX1 .. PREFIXN")
       ->capture_default_str();
   replay_cmd->add_option("--loop", replay.options.loops, "Play the take this many times")
+      ->check(CLI::TypeValidator<int>())
       ->check(CLI::Range(1, 100000))
       ->capture_default_str();
   replay_cmd
       ->add_option("--protocol", replay.options.protocol_version,
                    "Wire version of the marker frames: 2 adds a capture session, the exact "
                    "rate and timecode (checked in the daemon's echo); 1 for older daemons")
+      ->check(CLI::TypeValidator<int>())
       ->check(CLI::Range(1, 2))
       ->capture_default_str();
   replay_cmd
       ->add_option("--timecode", replay.options.timecode_fps,
                    "Stamp frames with non-drop SMPTE timecode at this many fps (protocol 2)")
+      ->check(CLI::TypeValidator<int>())
       ->check(CLI::Range(0, 256));
   replay_cmd->add_option("--report", replay.report, "Write the report as JSON");
   replay_cmd->add_option("--plot", replay.plot, "Write a processing-latency histogram (SVG)");
@@ -432,16 +443,19 @@ int main(int argc, char** argv) {
       ->add_option("--connect-timeout", replay.options.connect_timeout_s,
                    "Seconds to wait for the daemon")
       ->capture_default_str()
+      ->check(CLI::Number)
       ->check(CLI::Range(0.0, 1e6));
   replay_cmd
       ->add_option("--drain-timeout", replay.options.drain_timeout_s,
                    "Seconds to wait for the last skeletons")
       ->capture_default_str()
+      ->check(CLI::Number)
       ->check(CLI::Range(0.0, 1e6));
 
   replay_cmd
       ->add_option("--latency-interval", replay.options.latency_interval_s,
                    "Also report processing latency per this many seconds (a soak's drift)")
+      ->check(CLI::Number)
       ->check(CLI::NonNegativeNumber);
   replay_cmd
       ->add_option("--curve-key", replay.options.curve_key_file,
@@ -463,6 +477,7 @@ int main(int argc, char** argv) {
                          "Comma-separated subjects to record (default: all)");
   record_cmd
       ->add_option("--seconds", record.seconds, "Stop after this long (default: until Ctrl-C)")
+      ->check(CLI::Number)
       ->check(CLI::NonNegativeNumber);
   record_cmd
       ->add_option("--curve-key", record.curve_key_file,

@@ -132,3 +132,15 @@ file(SHA256 ${WORK_DIR}/walk.bvh walk_after_graph)
 if(NOT rc EQUAL 1 OR NOT err MATCHES "'s take" OR NOT walk_before STREQUAL walk_after_graph)
   message(FATAL_ERROR "graph synth over its own take: rc=${rc} err=${err}")
 endif()
+# A value that is not a number names itself ("Value abc not in range 0 to 1000" read as
+# a number out of range).
+execute_process(COMMAND ${MOCAPD} process --subject ${WORK_DIR}/synthetic.toml --in ${WORK_DIR}/bad.c3d
+                        --out-bvh ${WORK_DIR}/x.bvh --lookahead abc RESULT_VARIABLE rc ERROR_VARIABLE err)
+if(rc EQUAL 0 OR NOT err MATCHES "--lookahead: Failed parsing abc as a INT")
+  message(FATAL_ERROR "a lookahead that is no number: rc=${rc} err=${err}")
+endif()
+execute_process(COMMAND ${MOCAP_SIM} synth --humanoid walk --rate fast --out ${WORK_DIR}/fast.c3d
+                RESULT_VARIABLE rc ERROR_VARIABLE err)
+if(rc EQUAL 0 OR NOT err MATCHES "--rate: Failed parsing fast as a FLOAT")
+  message(FATAL_ERROR "a rate that is no number: rc=${rc} err=${err}")
+endif()
