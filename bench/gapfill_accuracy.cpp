@@ -7,7 +7,8 @@
 // per gap length. Default take: ../shared/data/cmu/01_01.c3d when present, else a
 // synthesized one (the humanoid's range of motion and mixed motion with the CMU set and
 // soft tissue).
-// Usage: gapfill_accuracy [--seed S] [--fraction F] [--lookahead K] [--check] [TAKE.c3d]
+// Usage: gapfill_accuracy [--seed S] [--fraction F] [--lookahead K] [--subsets N] [--check]
+//   [TAKE.c3d]
 // --check: exit 1 unless ours beats both baselines over all gaps (the CI test's use).
 #include <algorithm>
 #include <cmath>
@@ -160,6 +161,7 @@ int main(int argc, char** argv) {
   bool check = false;
   std::string path;
   double synth_seconds = 30.0;
+  int subsets = SubjectCalibrationOptions{}.interleaved_solves;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--seed") && i + 1 < argc)
       seed = std::strtoull(argv[++i], nullptr, 10);
@@ -167,6 +169,8 @@ int main(int argc, char** argv) {
       fraction = std::atof(argv[++i]);
     else if (!std::strcmp(argv[i], "--lookahead") && i + 1 < argc)
       lookahead = std::atoi(argv[++i]);
+    else if (!std::strcmp(argv[i], "--subsets") && i + 1 < argc)
+      subsets = std::atoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--synth-seconds") && i + 1 < argc)
       synth_seconds = std::atof(argv[++i]);
     else if (!std::strcmp(argv[i], "--check"))
@@ -176,7 +180,7 @@ int main(int argc, char** argv) {
     else {
       std::fprintf(stderr,
                    "usage: gapfill_accuracy [--seed S] [--fraction F] [--lookahead K] "
-                   "[--synth-seconds S] [--check] [TAKE.c3d | synth]\n");
+                   "[--subsets N] [--synth-seconds S] [--check] [TAKE.c3d | synth]\n");
       return 2;
     }
   }
@@ -199,6 +203,7 @@ int main(int argc, char** argv) {
 
   // Ours: calibrate from the gapped markers alone, then the streaming cleanup.
   MarkersOnlyOptions options;
+  options.solve.interleaved_solves = subsets;
   const MarkersOnlyCalibration calibration =
       CalibrateFromMarkers(std::span<const C3dTake>(&gapped, 1), options, "actor");
   std::printf("calibrated: marker set %s, %zu markers, median residual %.1f mm\n",
