@@ -253,10 +253,18 @@ class Parser {
     take.processor = processor_ == kProcessorIntel ? "Intel"
                      : processor_ == kProcessorDec ? "DEC"
                                                    : "MIPS";
-    const int points = static_cast<int>(Number("POINT:USED").value_or(header_points_));
-    if (points < 0) Fail("parameters", 0, "POINT:USED is negative");
+    double used_value = Number("POINT:USED").value_or(header_points_);
+    const Parameter* used_parameter_entry = Find("POINT:USED");
     // Integer parameters above 32767 are stored as unsigned 16-bit words.
-    auto used = static_cast<size_t>(points < 0 ? points + 65536 : points);
+    if (used_parameter_entry != nullptr && used_parameter_entry->type == 2 && used_value < 0)
+      used_value += 65536;
+    // A float count of 1e9 (or NaN) would size the labels before any frame check.
+    if (!std::isfinite(used_value) || used_value < 0 || used_value > 65535 ||
+        used_value != std::floor(used_value))
+      Fail("parameters", used_parameter_entry ? used_parameter_entry->offset : 0,
+           "POINT:USED is " + std::to_string(used_value) +
+               ", expected a whole number of points from 0 to 65535");
+    auto used = static_cast<size_t>(used_value);
     const double scale = Number("POINT:SCALE").value_or(header_scale_);
     if (!std::isfinite(scale) || scale == 0.0)
       Fail("parameters", Find("POINT:SCALE") ? Find("POINT:SCALE")->offset : 0,
@@ -289,6 +297,9 @@ class Parser {
     if (auto f = Number("POINT:FRAMES")) {
       double v = *f;
       if (Find("POINT:FRAMES")->type == 2 && v < 0) v += 65536;  // unsigned word
+      if (!std::isfinite(v) || v < 0 || v > 2147483647.0)
+        Fail("parameters", Find("POINT:FRAMES")->offset,
+             "POINT:FRAMES is " + std::to_string(v) + ", expected a frame count");
       if (header_last_ == 65535 || frames <= 0 || static_cast<int64_t>(v) > frames)
         frames = static_cast<int64_t>(v);
     }
@@ -321,13 +332,22 @@ class Parser {
       const size_t bytes = frame_bytes_of(points_per_frame);
       return bytes == 0 || static_cast<size_t>(std::max<int64_t>(n, 0)) <= available / bytes;
     };
+    // How far the data falls short of filling the file with frames of this many points:
+    // a writer pads the data section to a whole 512-byte block and no more.
+    const auto fills = [&](size_t points_per_frame) {
+      const size_t bytes = frame_bytes_of(points_per_frame) * static_cast<size_t>(frames);
+      return frames > 0 && bytes <= available && available - bytes < kBlock;
+    };
     // POINT:USED is the standard's count, but an exporter can rewrite it and not the
-    // header (points added or dropped after the capture): where the data holds frames of
-    // the header's count and not of USED's, the header's is the layout. It was refused as
-    // a truncated file.
+    // header (points added or dropped after the capture). Where the data holds frames of
+    // the header's count and not of USED's (more points than stored), or frames of the
+    // header's count fill the data section and USED's leave more than a block unread
+    // (fewer), the header's is the layout, with a note. More was refused as a truncated
+    // file; fewer read every frame at the wrong stride.
     const size_t used_parameter = used;
-    if (Find("POINT:USED") && header_points_ != used && !holds(frames, used) &&
-        holds(frames, header_points_)) {
+    if (used_parameter_entry != nullptr && header_points_ > 0 && header_points_ != used &&
+        holds(frames, header_points_) &&
+        (!holds(frames, used) || (fills(header_points_) && !fills(used)))) {
       used = header_points_;
       take.notes.push_back("POINT:USED says " + std::to_string(used_parameter) +
                            " points, the header " + std::to_string(used) +
@@ -346,7 +366,8 @@ class Parser {
     if (frame_bytes > 0 && static_cast<size_t>(frames) > available / frame_bytes) {
       const size_t whole = available / frame_bytes;
       std::string counts;
-      if (header_points_ != used_parameter && Find("POINT:USED"))
+      if (used_parameter_entry != nullptr && header_points_ != used_parameter &&
+          used == used_parameter)
         counts = "; POINT:USED says " + std::to_string(used_parameter) + " points, the header " +
                  std::to_string(header_points_) + ", and the data holds frames of neither";
       Fail("data", data_start + whole * frame_bytes,

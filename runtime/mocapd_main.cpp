@@ -63,8 +63,8 @@ int main(int argc, char** argv) {
   cal_cmd
       ->add_option("--subsets", cal.interleaved_solves,
                    "Markers alone: also solve this many interleaved subsets of the frames and "
-                   "average them with the whole take's solve (steadier bones; 1: one solve, "
-                   "about 3.5 times quicker)")
+                   "average them with the whole take's solve (steadier bones; at most one "
+                   "subset per 160 frames; 1: one solve, about 3.5 times quicker than 4)")
       ->check(CLI::TypeValidator<int>())
       ->check(CLI::Range(1, mocapd::kMaxInterleavedSolves))
       ->capture_default_str();

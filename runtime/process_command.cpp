@@ -104,8 +104,9 @@ void CheckOutputs(const ProcessCommandOptions& options) {
 }
 
 // What the take captures at all: a label whose every sample is invalid (an exporter that
-// kept a lost marker's channel) and frames with none of the subject's markers (a dropped
-// camera sync) come out as repairs the summary would otherwise count like any other.
+// kept a lost marker's channel) is never published, and frames with none of the subject's
+// markers (a dropped camera sync) come out as repairs counted like any short gap's; the
+// summary says so rather than leaving either to be found in the counts.
 void MeasureCoverage(const C3dTake& take, const TakeMarkerMap& map, const MarkerSet& markers,
                      ProcessSummary* summary) {
   const int M = markers.num_markers();
@@ -212,7 +213,8 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
     out << "warning: " << summary.blank_frames << " frames capture none of the subject's markers "
         << "(the longest run " << summary.longest_blank_run << " frames, "
         << summary.longest_blank_run / take.rate_hz
-        << " s): their skeleton and markers are guesses from the frames either side\n";
+        << " s): their skeleton and markers are guesses (between the frames either side, or "
+           "from one side where the run is longer than the lookahead)\n";
   std::vector<Pose> poses(static_cast<size_t>(take.num_frames), RestPose(*subject.skeleton));
   std::vector<Vec3> observed(static_cast<size_t>(markers.num_markers()));
   std::vector<double> weights(observed.size());

@@ -356,6 +356,22 @@ TEST(C3dTest, APointCountTheDataDoesNotHoldGivesWayToTheHeadersWithANote) {
   }
 }
 
+// Fewer points in POINT:USED than the header and the data hold: the smaller count's
+// frames leave most of the data section unread, the header's fill it. Every frame was
+// read at the wrong stride, silently.
+TEST(C3dTest, APointCountThatLeavesTheDataHalfReadGivesWayToTheHeadersWithANote) {
+  const C3dTake take = MakeTake(3, 100);
+  std::vector<uint8_t> bytes = EncodeC3d(take);
+  const size_t used = ValueOffset(bytes, "USED", 0);
+  ASSERT_EQ(bytes[used] + 256 * bytes[used + 1], 3);
+  bytes[used] = 1;
+  const C3dTake read = ParseC3d(bytes, "fewer.c3d");
+  ExpectSameTake(take, read);
+  ASSERT_EQ(read.notes.size(), 1u);
+  EXPECT_NE(read.notes[0].find("POINT:USED says 1 points, the header 3"), std::string::npos)
+      << read.notes[0];
+}
+
 // No points and no frames, with a stale TRIAL range from the take it was cut from: nothing
 // per frame confirms the range, so the header's count (none) stands. It was refused ("5000
 // frames declared but no points or analog channels to store").

@@ -139,6 +139,11 @@ execute_process(COMMAND ${MOCAPD} process --subject ${WORK_DIR}/synthetic.toml -
 if(rc EQUAL 0 OR NOT err MATCHES "--lookahead: Failed parsing abc as a INT")
   message(FATAL_ERROR "a lookahead that is no number: rc=${rc} err=${err}")
 endif()
+execute_process(COMMAND ${MOCAPD} process --subject ${WORK_DIR}/synthetic.toml --in ${WORK_DIR}/bad.c3d
+                        --out-bvh ${WORK_DIR}/x.bvh --lookahead 2.5 RESULT_VARIABLE rc ERROR_VARIABLE err)
+if(rc EQUAL 0 OR NOT err MATCHES "--lookahead: Failed parsing 2.5 as a INT")
+  message(FATAL_ERROR "a lookahead that is no whole number: rc=${rc} err=${err}")
+endif()
 execute_process(COMMAND ${MOCAP_SIM} synth --humanoid walk --rate fast --out ${WORK_DIR}/fast.c3d
                 RESULT_VARIABLE rc ERROR_VARIABLE err)
 if(rc EQUAL 0 OR NOT err MATCHES "--rate: Failed parsing fast as a FLOAT")

@@ -386,8 +386,6 @@ TEST(ProcessCommandTest, PlotsShowEveryMarkerTheSolveAndTheErrorAgainstTheTruth)
   }
 }
 
-// A subject calibrated from markers alone names its joints by role; the truth that
-// mocap-sim writes names them its own way. The limb joints are matched by role.
 // A label whose every sample is invalid and a run of frames with no marker at all came
 // out as "repaired (missing)" like any short gap, with no word that nothing was seen.
 TEST(ProcessCommandTest, SaysWhatTheTakeNeverCapturesAndWhichRepairsAreOneSidedGuesses) {
@@ -435,6 +433,8 @@ TEST(ProcessCommandTest, SaysWhatTheTakeNeverCapturesAndWhichRepairsAreOneSidedG
   EXPECT_EQ(report["repaired_samples_by_source"]["extrapolated"], summary.repaired_extrapolated);
 }
 
+// A subject calibrated from markers alone names its joints by role; the truth that
+// mocap-sim writes names them its own way. The limb joints are matched by role.
 TEST(ProcessCommandTest, ATruthWithOtherJointNamesIsMatchedByRoleOnTheLimbs) {
   const auto f = testing::MakeHumanoidFixture("mixed", 9.0, 60.0, 0.001);
   const std::string dir = testing::TempDir("process_truth_roles");
