@@ -344,12 +344,12 @@ class Parser {
     // header's count fill the data section and USED's leave more than a block unread
     // (fewer), the header's is the layout, with a note. More was refused as a truncated
     // file; fewer read every frame at the wrong stride.
-    const size_t used_parameter = used;
+    const size_t used_in_parameter = used;
     if (used_parameter_entry != nullptr && header_points_ > 0 && header_points_ != used &&
         holds(frames, header_points_) &&
         (!holds(frames, used) || (fills(header_points_) && !fills(used)))) {
       used = header_points_;
-      take.notes.push_back("POINT:USED says " + std::to_string(used_parameter) +
+      take.notes.push_back("POINT:USED says " + std::to_string(used_in_parameter) +
                            " points, the header " + std::to_string(used) +
                            ": the data holds frames of " + std::to_string(used) +
                            " points, so the header's count is used");
@@ -366,9 +366,9 @@ class Parser {
     if (frame_bytes > 0 && static_cast<size_t>(frames) > available / frame_bytes) {
       const size_t whole = available / frame_bytes;
       std::string counts;
-      if (used_parameter_entry != nullptr && header_points_ != used_parameter &&
-          used == used_parameter)
-        counts = "; POINT:USED says " + std::to_string(used_parameter) + " points, the header " +
+      if (used_parameter_entry != nullptr && header_points_ != used_in_parameter &&
+          used == used_in_parameter)
+        counts = "; POINT:USED says " + std::to_string(used_in_parameter) + " points, the header " +
                  std::to_string(header_points_) + ", and the data holds frames of neither";
       Fail("data", data_start + whole * frame_bytes,
            "file ends inside frame " + std::to_string(whole + 1) + " of " + std::to_string(frames) +

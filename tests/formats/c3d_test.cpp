@@ -295,30 +295,6 @@ TEST(C3dTest, AStaleTrialRangeLongerThanTheDataLeavesTheHeadersCount) {
   EXPECT_LT((read.at(19, 2) - take.at(19, 2)).norm(), 1e-6);
 }
 
-// A take cropped to nothing: the header and POINT:FRAMES say zero frames, but the TRIAL
-// range of the take it came from stayed behind. Trusted because the header counted
-// nothing, it made an empty take a truncated one ("file ends inside frame 21 of 5000").
-TEST(C3dTest, AnEmptyTakeWithAStaleTrialRangeReadsAsEmpty) {
-  const C3dTake take = MakeTake(3, 20);
-  std::vector<uint8_t> bytes = EncodeC3d(take);
-  const auto value_after = [&](const std::string& name) {
-    const auto at = std::search(bytes.begin(), bytes.end(), name.begin(), name.end());
-    EXPECT_NE(at, bytes.end()) << name;
-    return static_cast<size_t>(at - bytes.begin()) + name.size() + 2 + 1 + 1;
-  };
-  const size_t trial_end = value_after("ACTUAL_END_FIELD") + 1;  // its one dimension
-  bytes[trial_end] = 5000 & 0xff;
-  bytes[trial_end + 1] = 5000 >> 8;
-  const size_t point_frames = value_after("FRAMES");
-  ASSERT_EQ(bytes[point_frames] + 256 * bytes[point_frames + 1], 20);
-  bytes[point_frames] = bytes[point_frames + 1] = 0;
-  // Header word 5, the last frame: one before the first (word 4).
-  const int last = take.first_frame - 1;
-  bytes[8] = static_cast<uint8_t>(last & 0xff);
-  bytes[9] = static_cast<uint8_t>(last >> 8);
-  EXPECT_EQ(ParseC3d(bytes, "empty.c3d").num_frames, 0);
-}
-
 // The byte offset of a parameter's first value: after its name, link (2), type (1) and
 // dimension count (1), and the dimensions themselves.
 size_t ValueOffset(const std::vector<uint8_t>& bytes, const std::string& name, int dimensions) {
@@ -328,15 +304,45 @@ size_t ValueOffset(const std::vector<uint8_t>& bytes, const std::string& name, i
          static_cast<size_t>(dimensions);
 }
 
+// An encoded 20-frame take cropped to nothing as a cropping tool leaves it: the header
+// and POINT:FRAMES count no frame, the TRIAL range of the take it came from says 5000.
+void CropToNothingLeavingTheTrialRange(std::vector<uint8_t>* bytes, int first_frame) {
+  std::vector<uint8_t>& b = *bytes;
+  const size_t trial_end = ValueOffset(b, "ACTUAL_END_FIELD", 1);
+  b[trial_end] = 5000 & 0xff;
+  b[trial_end + 1] = 5000 >> 8;
+  const size_t point_frames = ValueOffset(b, "FRAMES", 0);
+  ASSERT_EQ(b[point_frames] + 256 * b[point_frames + 1], 20);
+  b[point_frames] = b[point_frames + 1] = 0;
+  const int last = first_frame - 1;  // header word 5, one before the first (word 4)
+  b[8] = static_cast<uint8_t>(last & 0xff);
+  b[9] = static_cast<uint8_t>(last >> 8);
+}
+
+// POINT:USED rewritten from the 3 points the take holds (and the header says) to `used`.
+void RewritePointUsed(std::vector<uint8_t>* bytes, uint8_t used) {
+  const size_t at = ValueOffset(*bytes, "USED", 0);
+  ASSERT_EQ((*bytes)[at] + 256 * (*bytes)[at + 1], 3);
+  (*bytes)[at] = used;
+}
+
+// A take cropped to nothing: the header and POINT:FRAMES say zero frames, but the TRIAL
+// range of the take it came from stayed behind. Trusted because the header counted
+// nothing, it made an empty take a truncated one ("file ends inside frame 21 of 5000").
+TEST(C3dTest, AnEmptyTakeWithAStaleTrialRangeReadsAsEmpty) {
+  const C3dTake take = MakeTake(3, 20);
+  std::vector<uint8_t> bytes = EncodeC3d(take);
+  ASSERT_NO_FATAL_FAILURE(CropToNothingLeavingTheTrialRange(&bytes, take.first_frame));
+  EXPECT_EQ(ParseC3d(bytes, "empty.c3d").num_frames, 0);
+}
+
 // An exporter that rewrote POINT:USED and not the header: the data holds frames of the
 // header's count, which is used, with a note (it was refused as a truncated file). Where
 // the data holds frames of neither, the error names both counts.
 TEST(C3dTest, APointCountTheDataDoesNotHoldGivesWayToTheHeadersWithANote) {
   const C3dTake take = MakeTake(3, 20);
   std::vector<uint8_t> bytes = EncodeC3d(take);
-  const size_t used = ValueOffset(bytes, "USED", 0);
-  ASSERT_EQ(bytes[used] + 256 * bytes[used + 1], 3);
-  bytes[used] = 5;
+  ASSERT_NO_FATAL_FAILURE(RewritePointUsed(&bytes, 5));
   const C3dTake read = ParseC3d(bytes, "used.c3d");
   ExpectSameTake(take, read);
   ASSERT_EQ(read.notes.size(), 1u);
@@ -362,9 +368,7 @@ TEST(C3dTest, APointCountTheDataDoesNotHoldGivesWayToTheHeadersWithANote) {
 TEST(C3dTest, APointCountThatLeavesTheDataHalfReadGivesWayToTheHeadersWithANote) {
   const C3dTake take = MakeTake(3, 100);
   std::vector<uint8_t> bytes = EncodeC3d(take);
-  const size_t used = ValueOffset(bytes, "USED", 0);
-  ASSERT_EQ(bytes[used] + 256 * bytes[used + 1], 3);
-  bytes[used] = 1;
+  ASSERT_NO_FATAL_FAILURE(RewritePointUsed(&bytes, 1));
   const C3dTake read = ParseC3d(bytes, "fewer.c3d");
   ExpectSameTake(take, read);
   ASSERT_EQ(read.notes.size(), 1u);
@@ -380,15 +384,7 @@ TEST(C3dTest, ATakeWithNoPointsAndAStaleTrialRangeReadsAsEmpty) {
   take.rate_hz = 100.0;
   take.Allocate(20);
   std::vector<uint8_t> bytes = EncodeC3d(take);
-  const size_t trial_end = ValueOffset(bytes, "ACTUAL_END_FIELD", 1);
-  bytes[trial_end] = 5000 & 0xff;
-  bytes[trial_end + 1] = 5000 >> 8;
-  const size_t point_frames = ValueOffset(bytes, "FRAMES", 0);
-  ASSERT_EQ(bytes[point_frames] + 256 * bytes[point_frames + 1], 20);
-  bytes[point_frames] = bytes[point_frames + 1] = 0;
-  const int last = take.first_frame - 1;  // header word 5, one before the first
-  bytes[8] = static_cast<uint8_t>(last & 0xff);
-  bytes[9] = static_cast<uint8_t>(last >> 8);
+  ASSERT_NO_FATAL_FAILURE(CropToNothingLeavingTheTrialRange(&bytes, take.first_frame));
   const C3dTake read = ParseC3d(bytes, "nothing.c3d");
   EXPECT_EQ(read.num_frames, 0);
   EXPECT_EQ(read.num_points(), 0);
