@@ -14,6 +14,7 @@
 #include "runtime/calibrate_command.hpp"
 #include "runtime/daemon.hpp"
 #include "runtime/process_command.hpp"
+#include "sim/cli_checks.hpp"
 #include "sim/demo_command.hpp"
 
 #include <unistd.h>
@@ -26,15 +27,15 @@ int main(int argc, char** argv) {
   CLI::App* demo_cmd = app.add_subcommand(
       "demo", "Synthesize a take from the built-in humanoid and solve it frame by frame");
   demo_cmd->add_option("--seconds", demo.seconds, "Take length")
-      ->check(CLI::Number)
+      ->check(mocapd::kFiniteNumber)
       ->check(CLI::Range(0.1, 3600.0))
       ->capture_default_str();
   demo_cmd->add_option("--rate", demo.rate_hz, "Capture rate, Hz")
-      ->check(CLI::Number)
+      ->check(mocapd::kFiniteNumber)
       ->check(CLI::Range(1.0, 2000.0))
       ->capture_default_str();
   demo_cmd->add_option("--noise-mm", demo.noise_mm, "Gaussian marker noise (sigma, mm)")
-      ->check(CLI::Number)
+      ->check(mocapd::kFiniteNumber)
       ->check(CLI::Range(0.0, 100.0))
       ->capture_default_str();
   demo_cmd->add_option("--motion", demo.motion, "walk | reach | turn | mixed")
@@ -81,7 +82,7 @@ int main(int argc, char** argv) {
   cal_cmd
       ->add_option("--max-residual-mm", max_rms_mm,
                    "Reject markers whose best fit leaves more RMS than this")
-      ->check(CLI::Number)
+      ->check(mocapd::kFiniteNumber)
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
 

@@ -11,6 +11,7 @@
 #include "formats/bvh.hpp"
 #include "formats/file_paths.hpp"
 #include "formats/subject_file.hpp"
+#include "sim/cli_checks.hpp"
 #include "sim/graph_match.hpp"
 #include "sim/graph_planner.hpp"
 #include "sim/graph_walker.hpp"
@@ -50,7 +51,7 @@ GraphCommands::GraphCommands(CLI::App& app) : state_(std::make_unique<State>()) 
   s.build->add_option("TAKES", s.takes, "BVH takes")->required()->check(CLI::ExistingFile);
   s.build->add_option("--out", s.out, "Graph file to write (JSON)")->required();
   s.build->add_option("--rate", s.rate_hz, "Graph rate in Hz (default: the first take's)")
-      ->check(CLI::Number)
+      ->check(mocapd::kFiniteNumber)
       ->check(CLI::Range(1.0, 1000.0));
   s.build->add_option("--units", s.units, "BVH length unit: mm, cm, m or in (default: guess)");
   s.build->add_option("--subject-out", s.subject_out,
@@ -65,13 +66,13 @@ GraphCommands::GraphCommands(CLI::App& app) : state_(std::make_unique<State>()) 
   s.build
       ->add_option("--max-cost-m", s.options.max_cost_m,
                    "Largest blend distortion kept (weighted RMS joint distance, m)")
-      ->check(CLI::Number)
+      ->check(mocapd::kFiniteNumber)
       ->check(CLI::Range(0.001, 10.0))
       ->capture_default_str();
   s.build
       ->add_option("--max-window-s", s.options.max_window_s,
                    "Longest blend half-window L (the blend spans 2L)")
-      ->check(CLI::Number)
+      ->check(mocapd::kFiniteNumber)
       ->check(CLI::Range(0.02, 0.99))
       ->capture_default_str();
 
@@ -80,11 +81,11 @@ GraphCommands::GraphCommands(CLI::App& app) : state_(std::make_unique<State>()) 
   s.synth->add_option("--graph", s.graph_path, "Graph file")->required()->check(CLI::ExistingFile);
   s.synth->add_option("--distance", s.distance_m, "Distance the root travels, metres")
       ->required()
-      ->check(CLI::Number)
+      ->check(mocapd::kFiniteNumber)
       ->check(CLI::Range(0.0, 5000.0));
   s.synth->add_option("--time", s.seconds, "Duration, seconds")
       ->required()
-      ->check(CLI::Number)
+      ->check(mocapd::kFiniteNumber)
       ->check(CLI::Range(0.01, 3600.0));
   s.synth->add_option("--from", s.from,
                       "First frame, TAKE:FRAME (default: the first take's frame 0)");

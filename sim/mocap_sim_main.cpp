@@ -22,6 +22,7 @@
 #include "formats/marker_set.hpp"
 #include "formats/subject_file.hpp"
 #include "formats/take_frames.hpp"
+#include "sim/cli_checks.hpp"
 #include "sim/corruption.hpp"
 #include "sim/graph_command.hpp"
 #include "sim/humanoid.hpp"
@@ -214,7 +215,9 @@ int RunReplayCommand(ReplayCommand& c) {
     c.options.rate_hz = -1.0;
   else {
     try {
-      c.options.rate_hz = std::stod(c.rate);
+      size_t used = 0;
+      c.options.rate_hz = std::stod(c.rate, &used);
+      if (used != c.rate.size()) throw std::invalid_argument("trailing text");  // "120x"
     } catch (const std::exception&) {
       throw std::invalid_argument("replay: --rate must be realtime, max or a rate in Hz, got '" +
                                   c.rate + "'");
@@ -298,14 +301,14 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({"walk", "reach", "turn", "mixed", "rom"}))
       ->excludes(bvh_opt);
   synth_cmd->add_option("--seconds", synth.seconds, "Length of built-in humanoid motion")
-      ->check(CLI::Number)
+      ->check(mocapd::kFiniteNumber)
       ->check(CLI::Range(0.1, 3600.0))
       ->capture_default_str();
   synth_cmd->add_option("--out", synth.out, "Marker take to write (.c3d)")->required();
   synth_cmd
       ->add_option("--rate", synth.rate_hz,
                    "Output rate in Hz (default: the source's); motion is slerp-resampled")
-      ->check(CLI::Number)
+      ->check(mocapd::kFiniteNumber)
       ->check(CLI::Range(1.0, 2000.0));
   synth_cmd->add_option("--subject-out", synth.subject_out,
                         "Also write the subject model (skeleton + markers)");
@@ -321,14 +324,14 @@ int main(int argc, char** argv) {
   synth_cmd
       ->add_option("--soft-tissue-mm", synth.soft_tissue_mm,
                    "Soft-tissue wobble of markers on fleshy segments, mm (pose-correlated)")
-      ->check(CLI::Number)
+      ->check(mocapd::kFiniteNumber)
       ->check(CLI::Range(0.0, 100.0));
   synth_cmd->add_option("--truth-bvh", synth.truth_bvh,
                         "Also write the resampled ground-truth motion");
   synth_cmd->add_option("--bvh-units", synth.bvh_units,
                         "BVH length unit: mm, cm, m or in (default: guess)");
   synth_cmd->add_option("--noise-mm", synth.noise_mm, "Gaussian marker noise (sigma, mm)")
-      ->check(CLI::Number)
+      ->check(mocapd::kFiniteNumber)
       ->check(CLI::Range(0.0, 100.0));
   synth_cmd->add_option("--seed", synth.seed, "Noise and corruption seed")->capture_default_str();
   synth_cmd
@@ -361,19 +364,19 @@ int main(int argc, char** argv) {
   replay_cmd
       ->add_option("--seconds", replay.seconds,
                    "Length of the built-in humanoid's take (or the graph stream)")
-      ->check(CLI::Number)
+      ->check(mocapd::kFiniteNumber)
       ->check(CLI::Range(0.1, 3600.0))
       ->capture_default_str();
   replay_cmd
       ->add_option("--synth-rate", replay.synth_rate_hz,
                    "Rate markers are synthesized at (humanoid, BVH), Hz")
-      ->check(CLI::Number)
+      ->check(mocapd::kFiniteNumber)
       ->check(CLI::Range(1.0, 2000.0))
       ->capture_default_str();
   replay_cmd
       ->add_option("--noise-mm", replay.noise_mm,
                    "Marker noise of the built-in humanoid's take (sigma)")
-      ->check(CLI::Number)
+      ->check(mocapd::kFiniteNumber)
       ->check(CLI::Range(0.0, 100.0))
       ->capture_default_str();
   replay_cmd
@@ -443,19 +446,19 @@ int main(int argc, char** argv) {
       ->add_option("--connect-timeout", replay.options.connect_timeout_s,
                    "Seconds to wait for the daemon")
       ->capture_default_str()
-      ->check(CLI::Number)
+      ->check(mocapd::kFiniteNumber)
       ->check(CLI::Range(0.0, 1e6));
   replay_cmd
       ->add_option("--drain-timeout", replay.options.drain_timeout_s,
                    "Seconds to wait for the last skeletons")
       ->capture_default_str()
-      ->check(CLI::Number)
+      ->check(mocapd::kFiniteNumber)
       ->check(CLI::Range(0.0, 1e6));
 
   replay_cmd
       ->add_option("--latency-interval", replay.options.latency_interval_s,
                    "Also report processing latency per this many seconds (a soak's drift)")
-      ->check(CLI::Number)
+      ->check(mocapd::kFiniteNumber)
       ->check(CLI::NonNegativeNumber);
   replay_cmd
       ->add_option("--curve-key", replay.options.curve_key_file,
@@ -477,7 +480,7 @@ int main(int argc, char** argv) {
                          "Comma-separated subjects to record (default: all)");
   record_cmd
       ->add_option("--seconds", record.seconds, "Stop after this long (default: until Ctrl-C)")
-      ->check(CLI::Number)
+      ->check(mocapd::kFiniteNumber)
       ->check(CLI::NonNegativeNumber);
   record_cmd
       ->add_option("--curve-key", record.curve_key_file,

@@ -149,3 +149,22 @@ execute_process(COMMAND ${MOCAP_SIM} synth --humanoid walk --rate fast --out ${W
 if(rc EQUAL 0 OR NOT err MATCHES "--rate: Failed parsing fast as a FLOAT")
   message(FATAL_ERROR "a rate that is no number: rc=${rc} err=${err}")
 endif()
+# nan passes CLI11's number and range checks (every comparison with it is false): it
+# ran a one-frame take for --seconds nan and the default rate for --rate nan.
+foreach(option IN ITEMS --seconds --rate --noise-mm)
+  foreach(value IN ITEMS nan NaN -inf)
+    execute_process(COMMAND ${MOCAP_SIM} synth --humanoid walk ${option} ${value} --out ${WORK_DIR}/nan.c3d
+                    RESULT_VARIABLE rc ERROR_VARIABLE err)
+    if(rc EQUAL 0 OR NOT err MATCHES "${option}: Value ${value} is not a finite number")
+      message(FATAL_ERROR "synth ${option} ${value} was not refused: rc=${rc} err=${err}")
+    endif()
+  endforeach()
+endforeach()
+execute_process(COMMAND ${MOCAPD} demo --seconds nan RESULT_VARIABLE rc ERROR_VARIABLE err)
+if(rc EQUAL 0 OR NOT err MATCHES "--seconds: Value nan is not a finite number")
+  message(FATAL_ERROR "demo --seconds nan was not refused: rc=${rc} err=${err}")
+endif()
+execute_process(COMMAND ${MOCAP_SIM} replay --rate 120x --from "" RESULT_VARIABLE rc ERROR_VARIABLE err)
+if(rc EQUAL 0 OR NOT err MATCHES "--rate must be realtime, max or a rate in Hz, got '120x'")
+  message(FATAL_ERROR "replay --rate 120x was not refused: rc=${rc} err=${err}")
+endif()
