@@ -134,7 +134,7 @@ void RetargetOptions::Validate() const {
   require(hand_reach_share >= 0 && hand_reach_share <= 1, "hand_reach_share", "in [0, 1]");
   require(contact_height_m >= 0 && contact_speed_m_s >= 0, "contact_height_m / contact_speed_m_s",
           ">= 0");
-  require(release_frames >= 1, "release_frames", ">= 1");
+  require(release_s > 0 && std::isfinite(release_s), "release_s", "> 0");
   require(contact_weight_gain >= 1, "contact_weight_gain", ">= 1");
   require(first_frame_passes >= 0 && first_frame_passes <= 1000, "first_frame_passes",
           "in [0, 1000]");
@@ -442,9 +442,9 @@ const Pose& Retargeter::Retarget(const Pose& source_pose) {
       foot_correction_[sd] = lock_[sd] - reference;
       release_correction_[sd] = foot_correction_[sd];
     } else {
-      // Lifted: ease the correction away over release_frames.
-      const double blend =
-          Smoothstep(static_cast<double>(since_release_[sd] + 1) / options_.release_frames);
+      // Lifted: ease the correction away over release_s (at least one frame).
+      const double blend = Smoothstep(static_cast<double>(since_release_[sd] + 1) /
+                                      std::max(1.0, options_.release_s * options_.rate_hz));
       foot_correction_[sd] = (1.0 - blend) * release_correction_[sd];
     }
   }

@@ -103,6 +103,16 @@ const CleanupOptionField& OptionField(const char* name) {
 
 }  // namespace
 
+int DaemonConfig::MaxGapFrames(double rate_hz) const {
+  return max_gap_frames >= 0 ? max_gap_frames : static_cast<int>(std::lround(max_gap_s * rate_hz));
+}
+
+int DaemonConfig::RestartBackjumpFrames(double rate_hz) const {
+  return restart_backjump_frames >= 1
+             ? restart_backjump_frames
+             : std::max(1, static_cast<int>(std::lround(restart_backjump_s * rate_hz)));
+}
+
 const SubjectConfig* DaemonConfig::FindSubject(const std::string& name) const {
   for (const SubjectConfig& s : subjects)
     if (s.name == name) return &s;
@@ -115,12 +125,12 @@ std::string SubjectFingerprint(const SubjectConfig& s, const DaemonConfig& c) {
   f << FormatSubjectModel(s.model) << '\n' << s.name << ' ' << s.rate_hz;
   for (const CleanupOptionField& field : CleanupOptionFields())
     std::visit([&](auto member) { f << ' ' << s.cleanup.*member; }, field.member);
-  f << ' ' << c.max_gap_frames << ' ' << c.restart_backjump_frames << ' '
+  f << ' ' << c.MaxGapFrames(s.rate_hz) << ' ' << c.RestartBackjumpFrames(s.rate_hz) << ' '
     << c.publish_cleaned_markers << ' ' << c.publish_global_transforms << ' '
     << c.output_protocol_version << '\n'
     << s.character_path << ' ' << s.character_map.report << ' ' << s.retarget.damping << ' '
     << s.retarget.contact_height_m << ' ' << s.retarget.contact_speed_m_s << ' '
-    << s.retarget.release_frames << ' ' << s.retarget.points_per_bone;
+    << s.retarget.release_s << ' ' << s.retarget.points_per_bone;
   if (s.live.enabled) {
     f << "\nlive " << s.live.marker_set << ' ' << s.live.out_path << ' ' << s.live.min_seconds
       << ' ' << s.live.max_seconds << ' ' << s.live.interleaved_solves;
@@ -302,9 +312,19 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
   }
 
   TomlTable frames = top.Table("frames");
-  c.max_gap_frames = frames.Integer("max_gap_frames", c.max_gap_frames, 0, 100000);
-  c.restart_backjump_frames =
-      frames.Integer("restart_backjump_frames", c.restart_backjump_frames, 1, 1'000'000);
+  // Each rule in time (ms), or as older configs gave it, in frames at every rate; not both.
+  const auto time_or_frames = [&frames](const char* ms_key, const char* frames_key, double* s,
+                                        int* n, double min_ms, int min_frames) {
+    if (frames.Has(ms_key) && frames.Has(frames_key))
+      frames.Fail(frames.Find(frames_key), frames_key,
+                  std::string("given as well as ") + ms_key + ": give one (" + ms_key +
+                      " holds at any capture rate)");
+    *s = frames.Number(ms_key, *s * 1e3, min_ms, 3'600'000.0) * 1e-3;
+    *n = frames.Integer(frames_key, *n, min_frames, 1'000'000);
+  };
+  time_or_frames("max_gap_ms", "max_gap_frames", &c.max_gap_s, &c.max_gap_frames, 0.0, 0);
+  time_or_frames("restart_backjump_ms", "restart_backjump_frames", &c.restart_backjump_s,
+                 &c.restart_backjump_frames, 1e-3, 1);
   frames.RejectUnknown();
 
   CleanupOptions defaults;
@@ -316,13 +336,18 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
   pipeline.RejectUnknown();
 
   RetargetOptions retarget;
+  int release_frames = 0;  // as older configs gave it: in frames at each subject's rate
   {
     TomlTable r = top.Table("retarget");
     retarget.damping = r.Number("damping", retarget.damping, 0, 10);
     retarget.contact_height_m =
         r.Number("contact_height_mm", retarget.contact_height_m * 1e3, 0, 1000) * 1e-3;
     retarget.contact_speed_m_s = r.Number("contact_speed_m_s", retarget.contact_speed_m_s, 0, 100);
-    retarget.release_frames = r.Integer("release_frames", retarget.release_frames, 1, 10000);
+    if (r.Has("release_ms") && r.Has("release_frames"))
+      r.Fail(r.Find("release_frames"), "release_frames",
+             "given as well as release_ms: give one (release_ms holds at any capture rate)");
+    retarget.release_s = r.Number("release_ms", retarget.release_s * 1e3, 1, 60'000) * 1e-3;
+    release_frames = r.Integer("release_frames", 0, 1, 10000);
     retarget.points_per_bone = r.Integer("points_per_bone", retarget.points_per_bone, 1, 32);
     r.RejectUnknown();
   }
@@ -436,6 +461,7 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
     }
     s.retarget = retarget;
     s.retarget.rate_hz = s.rate_hz;
+    if (release_frames > 0) s.retarget.release_s = release_frames / s.rate_hz;
     if (!s.character_path.empty()) {
       try {
         const BvhTake character = ReadBvh(s.character_path);

@@ -112,9 +112,16 @@ struct DaemonConfig {
   /// SUB input: the capture publisher's public certificate (the daemon is its client).
   std::string curve_input_server_key_file;
   std::string curve_input_server_key;
-  // Frame accounting.
-  int max_gap_frames = 240;
-  int restart_backjump_frames = 120;
+  // Frame accounting, in time so that it holds at any capture rate (the defaults are the
+  // 240 and 120 frames they were at 120 Hz). A config may still give them in frames
+  // (max_gap_frames, restart_backjump_frames: taken as given at every rate); -1: from time.
+  double max_gap_s = 2.0;
+  double restart_backjump_s = 1.0;
+  int max_gap_frames = -1;
+  int restart_backjump_frames = -1;
+  /// The rules above in frames at a subject's rate.
+  int MaxGapFrames(double rate_hz) const;
+  int RestartBackjumpFrames(double rate_hz) const;
   std::vector<SubjectConfig> subjects;
 
   const SubjectConfig* FindSubject(const std::string& name) const;

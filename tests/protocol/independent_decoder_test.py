@@ -1252,7 +1252,7 @@ def run(mocapd, config_dir, work):
         summary.append(f"/health after end of stream (+{WATCHDOG_S + 0.3:.1f} s): ok, accounted")
 
         # Phase 2: a fresh stream in version 1 (any number accepted) with one missing frame
-        # number, then a jump of more than max_gap_frames (240).
+        # number, then a jump of more than max_gap_frames (240 at 120 Hz: max_gap_ms 2000).
         T1 = 77_000_000_000
         JUMP_FROM, JUMP_TO = 49, 350
         phase2 = list(range(10, JUMP_FROM + 1)) + list(range(JUMP_TO, JUMP_TO + 20))

@@ -56,7 +56,8 @@ TEST(DaemonConfigTest, ShippedDefaultParsesWithDocumentedValues) {
   const DaemonConfig minimal = ParseDaemonConfig(kMinimal, "minimal.toml", MOCAPD_CONFIG_DIR);
   EXPECT_EQ(SubjectFingerprint(minimal.subjects[0], minimal), SubjectFingerprint(c.subjects[0], c));
   EXPECT_EQ(minimal.watchdog_timeout_s, c.watchdog_timeout_s);
-  EXPECT_EQ(minimal.max_gap_frames, c.max_gap_frames);
+  EXPECT_EQ(minimal.max_gap_s, c.max_gap_s);
+  EXPECT_EQ(minimal.restart_backjump_s, c.restart_backjump_s);
   EXPECT_EQ(c.output_protocol_version, 2);
 }
 
@@ -320,6 +321,45 @@ TEST(DaemonConfigTest, ThresholdsAndOverridesReachThePipelineOptions) {
 
 // config/mocapd.toml promises that its values are the defaults: every cleanup option a
 // config may set must be written there, with the value the code uses.
+// Frame accounting and a foot's release are in time, counted at each subject's rate; a
+// config of older versions may still give them in frames (the same count at any rate).
+TEST(DaemonConfigTest, GapsRestartsAndFootReleasesAreInTimeAtEachSubjectsRate) {
+  const DaemonConfig defaults = ParseDaemonConfig(kMinimal, "test.toml", MOCAPD_CONFIG_DIR);
+  EXPECT_EQ(defaults.MaxGapFrames(120.0), 240);
+  EXPECT_EQ(defaults.MaxGapFrames(360.0), 720);
+  EXPECT_EQ(defaults.RestartBackjumpFrames(120.0), 120);
+  EXPECT_EQ(defaults.RestartBackjumpFrames(60.0), 60);
+  EXPECT_DOUBLE_EQ(defaults.subjects[0].retarget.release_s, 0.07);
+
+  const std::string at_240 = std::string(kMinimal) + "rate_hz = 240.0\n";
+  const DaemonConfig in_time = ParseDaemonConfig(
+      at_240 +
+          "[frames]\nmax_gap_ms = 500\nrestart_backjump_ms = 250\n[retarget]\nrelease_ms = 100\n",
+      "test.toml", MOCAPD_CONFIG_DIR);
+  EXPECT_EQ(in_time.MaxGapFrames(in_time.subjects[0].rate_hz), 120);
+  EXPECT_EQ(in_time.RestartBackjumpFrames(in_time.subjects[0].rate_hz), 60);
+  EXPECT_DOUBLE_EQ(in_time.subjects[0].retarget.release_s, 0.1);
+
+  const DaemonConfig in_frames = ParseDaemonConfig(
+      at_240 +
+          "[frames]\nmax_gap_frames = 100\nrestart_backjump_frames = 30\n[retarget]\n"
+          "release_frames = 12\n",
+      "test.toml", MOCAPD_CONFIG_DIR);
+  EXPECT_EQ(in_frames.MaxGapFrames(240.0), 100);
+  EXPECT_EQ(in_frames.MaxGapFrames(60.0), 100);
+  EXPECT_EQ(in_frames.RestartBackjumpFrames(240.0), 30);
+  EXPECT_DOUBLE_EQ(in_frames.subjects[0].retarget.release_s, 12 / 240.0);
+
+  EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[frames]\nmax_gap_ms = 500\nmax_gap_frames = 60\n"),
+            "test.toml:7: field 'frames.max_gap_frames': given as well as max_gap_ms: give one "
+            "(max_gap_ms holds at any capture rate)");
+  EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[retarget]\nrelease_frames = 8\nrelease_ms = 70\n"),
+            "test.toml:6: field 'retarget.release_frames': given as well as release_ms: give one "
+            "(release_ms holds at any capture rate)");
+  EXPECT_NE(ErrorOf(std::string(kMinimal) + "[frames]\nmax_gap_ms = -1\n"), "");
+  EXPECT_NE(ErrorOf(std::string(kMinimal) + "[frames]\nrestart_backjump_ms = 0\n"), "");
+}
+
 TEST(DaemonConfigTest, ShippedConfigDocumentsEveryCleanupOptionAtItsDefault) {
   const toml::table doc = ReadTomlFile(std::string(MOCAPD_CONFIG_DIR) + "/mocapd.toml");
   const CleanupOptions defaults;

@@ -211,6 +211,31 @@ TEST_F(SubjectRunnerTest, ALongJumpAheadResynchronisesInsteadOfInsertingFrames) 
   ExpectBalanced(runner);
 }
 
+// The same 18 lost frames are 150 ms at 120 Hz and 75 ms at 240 Hz: against a 100 ms
+// max_gap_ms the first re-synchronises and the second is bridged. Counted in frames, one
+// threshold meant twice as long a hole at half the rate.
+TEST_F(SubjectRunnerTest, AGapIsBridgedOrResynchronisedByHowLongItLastsAtAnyRate) {
+  daemon_.max_gap_s = 0.1;
+  for (const double rate : {120.0, 240.0}) {
+    subject_.rate_hz = rate;
+    subject_.cleanup.rate_hz = rate;
+    RecordingSink sink;
+    SubjectRunner runner(subject_, daemon_);
+    auto send = [&](int f) {
+      protocol::MarkerFrameMessage m = Frame(f, static_cast<uint64_t>(f), 0);
+      m.rate_hz = static_cast<float>(rate);
+      return runner.Accept(m, 0, sink);
+    };
+    for (int f = 0; f < 20; ++f) ASSERT_FALSE(send(f).has_value());
+    for (int f = 38; f < 60; ++f) ASSERT_FALSE(send(f).has_value());  // 18 lost
+    runner.Flush(sink);
+    EXPECT_EQ(runner.counters().frames_skipped, 18u) << rate << " Hz";
+    EXPECT_EQ(runner.counters().frames_inserted, rate == 240.0 ? 18u : 0u) << rate << " Hz";
+    EXPECT_EQ(runner.counters().restarts, rate == 240.0 ? 0u : 1u) << rate << " Hz";
+    ExpectBalanced(runner);
+  }
+}
+
 // Protocol v2: the sender's session id, not a guess from frame numbers and clocks, says
 // when the capture restarted; frames that never arrived are counted.
 protocol::StreamInfo Session(uint64_t id, uint8_t seconds = 0, uint8_t frames = 0) {
