@@ -25,8 +25,11 @@ namespace {
 constexpr size_t kBlock = 512;
 constexpr uint8_t kProcessorIntel = 84, kProcessorDec = 85, kProcessorMips = 86;
 
+// A C3D string is space-padded; a C writer may end it with a NUL and leave whatever its
+// buffer held after it ("PEL1\0XYZ"), so the string ends at its first NUL.
 std::string TrimRight(std::string s) {
-  while (!s.empty() && (s.back() == ' ' || s.back() == '\0')) s.pop_back();
+  if (const size_t nul = s.find('\0'); nul != std::string::npos) s.resize(nul);
+  while (!s.empty() && s.back() == ' ') s.pop_back();
   return s;
 }
 
@@ -265,7 +268,7 @@ class Parser {
            "POINT:USED is " + std::to_string(used_value) +
                ", expected a whole number of points from 0 to 65535");
     auto used = static_cast<size_t>(used_value);
-    const double scale = Number("POINT:SCALE").value_or(header_scale_);
+    double scale = Number("POINT:SCALE").value_or(header_scale_);
     if (!std::isfinite(scale) || scale == 0.0)
       Fail("parameters", Find("POINT:SCALE") ? Find("POINT:SCALE")->offset : 0,
            "POINT:SCALE is " + std::to_string(scale) + ", expected a non-zero number");
@@ -322,22 +325,75 @@ class Parser {
     }
     if (data_block < 1) Fail("header", 16, "data section block number is 0");
     const size_t data_start = (data_block - 1) * kBlock;
-    const size_t value_size = take.float_storage ? 4 : 2;
-    const size_t analog_values = header_analog_;
+    size_t value_size = take.float_storage ? 4 : 2;
+    size_t analog_values = header_analog_;
+    const auto bytes_per_frame = [&](size_t points_per_frame, size_t analog, size_t word) {
+      return (points_per_frame * 4 + analog) * word;
+    };
     const auto frame_bytes_of = [&](size_t points_per_frame) {
-      return (points_per_frame * 4 + analog_values) * value_size;
+      return bytes_per_frame(points_per_frame, analog_values, value_size);
     };
     const size_t available = data_start <= reader_.size() ? reader_.size() - data_start : 0;
-    const auto holds = [&](int64_t n, size_t points_per_frame) {
-      const size_t bytes = frame_bytes_of(points_per_frame);
+    const auto holds_frames_of = [&](int64_t n, size_t bytes) {
       return bytes == 0 || static_cast<size_t>(std::max<int64_t>(n, 0)) <= available / bytes;
     };
-    // How far the data falls short of filling the file with frames of this many points:
-    // a writer pads the data section to a whole 512-byte block and no more.
-    const auto fills = [&](size_t points_per_frame) {
-      const size_t bytes = frame_bytes_of(points_per_frame) * static_cast<size_t>(frames);
+    const auto holds = [&](int64_t n, size_t points_per_frame) {
+      return holds_frames_of(n, frame_bytes_of(points_per_frame));
+    };
+    // How far the data falls short of filling the file with frames of this size: a writer
+    // pads the data section to a whole 512-byte block and no more.
+    const auto filled_by_frames_of = [&](size_t frame_bytes) {
+      const size_t bytes = frame_bytes * static_cast<size_t>(std::max<int64_t>(frames, 0));
       return frames > 0 && bytes <= available && available - bytes < kBlock;
     };
+    const auto fills = [&](size_t points_per_frame) {
+      return filled_by_frames_of(frame_bytes_of(points_per_frame));
+    };
+    // Where the header and the parameters disagree on the frame's layout, the one whose
+    // frames the data holds (and the other's not), or fill it (and the other's leave more
+    // than a block unread), is the layout. Read at the other, every frame is garbage.
+    const auto reads_better = [&](size_t frame_bytes, size_t instead_of) {
+      return holds_frames_of(frames, frame_bytes) &&
+             (!holds_frames_of(frames, instead_of) ||
+              (filled_by_frames_of(frame_bytes) && !filled_by_frames_of(instead_of)));
+    };
+    // Float or integer storage: POINT:SCALE's sign, the header's where only it fits.
+    if (Find("POINT:SCALE") != nullptr && std::isfinite(header_scale_) && header_scale_ != 0.0f &&
+        (header_scale_ < 0.0f) != take.float_storage) {
+      const size_t header_word = header_scale_ < 0.0f ? 4 : 2;
+      if (reads_better(bytes_per_frame(used, analog_values, header_word),
+                       bytes_per_frame(used, analog_values, value_size))) {
+        char note[200];
+        std::snprintf(note, sizeof(note),
+                      "POINT:SCALE is %g (%s samples), the header's scale %g: the data holds "
+                      "frames of %s samples, so the header's is used",
+                      scale, take.float_storage ? "float" : "integer",
+                      static_cast<double>(header_scale_), header_word == 4 ? "float" : "integer");
+        take.notes.emplace_back(note);
+        scale = header_scale_;
+        take.float_storage = scale < 0.0;
+        value_size = header_word;
+      }
+    }
+    // Analog values stored per frame: the header's count, or ANALOG:USED channels times
+    // the analog samples per point frame where only that fits.
+    const std::optional<double> analog_channels = Number("ANALOG:USED");
+    const std::optional<double> analog_rate = Number("ANALOG:RATE");
+    if (analog_channels && analog_rate && *analog_channels >= 0 && *analog_channels <= 65535 &&
+        std::isfinite(*analog_rate) && *analog_rate >= take.rate_hz) {
+      const double per_frame = std::round(*analog_rate / take.rate_hz);
+      const double values = std::floor(*analog_channels) * per_frame;
+      if (values <= 65535 && static_cast<size_t>(values) != analog_values &&
+          reads_better(bytes_per_frame(used, static_cast<size_t>(values), value_size),
+                       frame_bytes_of(used))) {
+        take.notes.push_back(
+            "the header stores " + std::to_string(analog_values) +
+            " analog values a frame, ANALOG:USED and ANALOG:RATE " +
+            std::to_string(static_cast<size_t>(values)) + ": the data holds frames of " +
+            std::to_string(static_cast<size_t>(values)) + ", so the parameters' count is used");
+        analog_values = static_cast<size_t>(values);
+      }
+    }
     // POINT:USED is the standard's count, but an exporter can rewrite it and not the
     // header (points added or dropped after the capture). Where the data holds frames of
     // the header's count and not of USED's (more points than stored), or frames of the

@@ -390,6 +390,87 @@ TEST(C3dTest, ATakeWithNoPointsAndAStaleTrialRangeReadsAsEmpty) {
   EXPECT_EQ(read.num_points(), 0);
 }
 
+// POINT:SCALE's sign says float or integer samples, and so does the header's scale. An
+// exporter that rewrote one: float data read as integers (or the reverse) was garbage in
+// every frame, without a word. Only one storage's frames fill the data: that one is read.
+TEST(C3dTest, AScaleWhoseSignTheDataContradictsGivesWayToTheHeadersWithANote) {
+  const C3dTake take = MakeTake(3, 100);
+  for (const bool integer : {false, true}) {
+    C3dEncoding encoding;
+    encoding.integer_storage = integer;
+    std::vector<uint8_t> bytes = EncodeC3d(take, encoding);
+    const float wrong = integer ? -0.1f : 0.1f;  // Intel: little-endian IEEE
+    std::memcpy(&bytes[ValueOffset(bytes, "SCALE", 0)], &wrong, sizeof(wrong));
+    const C3dTake read = ParseC3d(bytes, "scale.c3d");
+    ExpectSameTake(take, read);
+    EXPECT_EQ(read.float_storage, !integer);
+    ASSERT_EQ(read.notes.size(), 1u);
+    EXPECT_NE(read.notes[0].find(integer ? "POINT:SCALE is -0.1 (float samples), the header's "
+                                           "scale 0.1: the data holds frames of integer samples"
+                                         : "POINT:SCALE is 0.1 (integer samples), the header's "
+                                           "scale -0.1: the data holds frames of float samples"),
+              std::string::npos)
+        << read.notes[0];
+  }
+}
+
+// The same take with 8 analog channels sampled once a frame stored after each frame's
+// points (zeros), ANALOG:USED saying `channels` and the header `header_values`.
+std::vector<uint8_t> WithAnalogChannels(const C3dTake& take, uint8_t channels,
+                                        uint8_t header_values) {
+  std::vector<uint8_t> b = EncodeC3d(take);
+  const std::string used = "USED";
+  const auto point_used = std::search(b.begin(), b.end(), used.begin(), used.end());
+  const auto analog_used = std::search(point_used + 1, b.end(), used.begin(), used.end());
+  EXPECT_NE(analog_used, b.end());
+  b[static_cast<size_t>(analog_used - b.begin()) + used.size() + 4] = channels;
+  b[4] = header_values;  // header word 3: analog values a frame
+  b[5] = 0;
+  const size_t data_start = (b[16] + 256u * b[17] - 1) * 512;
+  const size_t point_bytes = static_cast<size_t>(take.num_points()) * 16;
+  std::vector<uint8_t> out(b.begin(), b.begin() + static_cast<std::ptrdiff_t>(data_start));
+  for (int f = 0; f < take.num_frames; ++f) {
+    const auto frame = b.begin() + static_cast<std::ptrdiff_t>(data_start + f * point_bytes);
+    out.insert(out.end(), frame, frame + static_cast<std::ptrdiff_t>(point_bytes));
+    out.insert(out.end(), 8 * 4, 0);
+  }
+  out.resize((out.size() + 511) / 512 * 512, 0);
+  return out;
+}
+
+// The header's count of analog values a frame against ANALOG:USED times the analog samples
+// a frame: where only the parameters' fills the data, the points were read at the wrong
+// stride, silently (73 % of a take's samples then repaired as missing).
+TEST(C3dTest, AnAnalogCountTheDataContradictsGivesWayToTheParametersWithANote) {
+  const C3dTake take = MakeTake(3, 100);
+  const C3dTake read = ParseC3d(WithAnalogChannels(take, 8, 4), "analog.c3d");
+  ExpectSameTake(take, read);
+  ASSERT_EQ(read.notes.size(), 1u);
+  EXPECT_NE(read.notes[0].find("the header stores 4 analog values a frame, ANALOG:USED and "
+                               "ANALOG:RATE 8: the data holds frames of 8"),
+            std::string::npos)
+      << read.notes[0];
+  // The header right and the parameter wrong: the header's stands, nothing to note.
+  const C3dTake header_right = ParseC3d(WithAnalogChannels(take, 4, 8), "analog.c3d");
+  ExpectSameTake(take, header_right);
+  EXPECT_TRUE(header_right.notes.empty());
+}
+
+// A C writer ends a label with a NUL and may leave its buffer's bytes after it: the label
+// ends at the NUL ("M0\0XYZ" was read as "M0\0XYZ", matched no subject marker and was
+// written by calibrate as "M0XYZ").
+TEST(C3dTest, ALabelEndsAtItsFirstNul) {
+  C3dTake take = MakeTake(3, 10);
+  take.labels[1] = "LONGNAME";
+  std::vector<uint8_t> bytes = EncodeC3d(take);
+  const std::string padded = "M0      ";
+  const auto at = std::search(bytes.begin(), bytes.end(), padded.begin(), padded.end());
+  ASSERT_NE(at, bytes.end());
+  const char garbage[] = {'M', '0', '\0', 'X', 'Y', 'Z', ' ', ' '};
+  std::copy(std::begin(garbage), std::end(garbage), at);
+  EXPECT_EQ(ParseC3d(bytes, "nul.c3d").labels[0], "M0");
+}
+
 TEST(C3dTest, MetresPerUnitKnowsTheUsualUnits) {
   EXPECT_DOUBLE_EQ(MetresPerUnit("mm"), 1e-3);
   EXPECT_DOUBLE_EQ(MetresPerUnit("M "), 1.0);
