@@ -5,6 +5,8 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <cstdlib>
+#include <cstring>
 #include <fstream>
 #include <sstream>
 #include <string_view>
@@ -42,9 +44,26 @@ class Tokens {
       } else {
         const size_t start = i;
         while (i < text.size() && !std::isspace(static_cast<unsigned char>(text[i]))) ++i;
-        tokens_.push_back({text.substr(start, i - start), line});
+        std::string token = text.substr(start, i - start);
+        // "Frames:480" and "Time:0.00833", as some writers print them: the keyword and
+        // its number. Only before a number: a joint may be named "mixamorig:Hips".
+        const size_t keyword = KeywordBeforeNumber(token);
+        if (keyword > 0) {
+          tokens_.push_back({token.substr(0, keyword), line});
+          token.erase(0, keyword);
+        }
+        tokens_.push_back({std::move(token), line});
       }
     }
+  }
+  static size_t KeywordBeforeNumber(const std::string& token) {
+    for (const char* keyword : {"Frames:", "Time:"}) {
+      const size_t n = std::strlen(keyword);
+      if (token.size() > n && IsKeyword(token.substr(0, n), keyword) &&
+          std::string_view("0123456789.+-").find(token[n]) != std::string_view::npos)
+        return n;
+    }
+    return 0;
   }
   bool done() const { return pos_ >= tokens_.size(); }
   int line() const {
@@ -210,17 +229,23 @@ Quat RotationFromChannels(const std::vector<BvhChannel>& channels, const double*
 // and 0.008342 is 119.88 Hz. A whole rate, or an NTSC one (n * 1000/1001), whose frame
 // time prints as the file's digits is taken as the rate meant; any other frame time is
 // kept as written. Below four significant digits a frame time is taken as exact (0.03 is
-// 33.3 Hz, not 33 Hz): so few digits say nothing about a rounded rate.
+// 33.3 Hz, not 33 Hz): so few digits say nothing about a rounded rate. In scientific
+// notation (8.333333e-03) the digits are the mantissa's, scaled by the exponent.
 double ExactFrameTime(double printed, const std::string& text) {
-  if (!(printed > 0.0) || text.find_first_of("eE") != std::string::npos) return printed;
-  const size_t first_significant = text.find_first_of("123456789");
-  const auto significant_digits = static_cast<int>(
-      std::count_if(text.begin() + static_cast<long>(std::min(first_significant, text.size())),
-                    text.end(), [](unsigned char c) { return std::isdigit(c) != 0; }));
+  if (!(printed > 0.0)) return printed;
+  const size_t e = text.find_first_of("eE");
+  const std::string mantissa = text.substr(0, e);
+  const long exponent = e == std::string::npos ? 0 : std::strtol(text.c_str() + e + 1, nullptr, 10);
+  if (exponent < -30 || exponent > 30) return printed;
+  const size_t first_significant = mantissa.find_first_of("123456789");
+  const auto significant_digits = static_cast<int>(std::count_if(
+      mantissa.begin() + static_cast<long>(std::min(first_significant, mantissa.size())),
+      mantissa.end(), [](unsigned char c) { return std::isdigit(c) != 0; }));
   if (significant_digits < 4) return printed;
-  const size_t point = text.find('.');
-  const int decimals = point == std::string::npos ? 0 : static_cast<int>(text.size() - point - 1);
-  const double half_last_digit = 0.5 * std::pow(10.0, -decimals);
+  const size_t point = mantissa.find('.');
+  const int decimals =
+      point == std::string::npos ? 0 : static_cast<int>(mantissa.size() - point - 1);
+  const double half_last_digit = 0.5 * std::pow(10.0, static_cast<double>(exponent) - decimals);
   const double rate = 1.0 / printed;
   for (const double meant : {std::round(rate), std::round(rate * 1.001) / 1.001}) {
     if (meant >= 1.0 && std::abs(1.0 / meant - printed) <= half_last_digit * (1.0 + 1e-9))

@@ -49,7 +49,19 @@ int CalibrateFromMarkersOnly(const CalibrateCommandOptions& options, std::ostrea
   const std::string name = options.subject_name.empty()
                                ? std::filesystem::path(options.out_subject).stem().string()
                                : options.subject_name;
-  MarkersOnlyCalibration cal = CalibrateFromMarkers(takes, mo, name);
+  // Its errors are about the takes (no motion, no marker set found): say which.
+  MarkersOnlyCalibration cal = [&] {
+    try {
+      return CalibrateFromMarkers(takes, mo, name);
+    } catch (const std::runtime_error& e) {
+      std::string files;
+      for (const std::string& path : options.markers_c3d)
+        files += (files.empty() ? "" : ", ") + path;
+      std::string what = e.what();
+      if (what.starts_with("calibrate: ")) what.erase(0, 11);
+      throw std::runtime_error("calibrate: " + files + ": " + what);
+    }
+  }();
   const SubjectCalibrationResult& r = cal.solve;
   const Skeleton& sk = *cal.model.skeleton;
 

@@ -158,7 +158,15 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
   for (const std::string& note : take.notes)
     out << "note: " << options.input_c3d << ": " << note << "\n";
   const MarkerSet& markers = *subject.markers;
-  const TakeMarkerMap map(markers, take);
+  // The map's own message says what is missing, not which take or subject it is about.
+  const TakeMarkerMap map = [&] {
+    try {
+      return TakeMarkerMap(markers, take);
+    } catch (const std::invalid_argument& e) {
+      throw std::invalid_argument(options.input_c3d + ": " + e.what() + " (subject " +
+                                  options.subject + ")");
+    }
+  }();
   auto warn = [&out](const std::vector<std::string>& names, const char* what) {
     if (names.empty()) return;
     out << "warning: " << names.size() << " of the subject's markers " << what << ":";
@@ -238,6 +246,14 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
       throw std::runtime_error(options.truth_bvh + ": " + std::to_string(truth->num_frames()) +
                                " frames, the take has " + std::to_string(take.num_frames) +
                                ": not the truth of this take");
+    // The same length at another rate (a 30 Hz truth of a 120 Hz take's first quarter)
+    // pairs frames of different moments. 2e-5: a C3D's 119.88 Hz against a BVH's 120000/1001.
+    if (std::abs(truth->rate_hz() - take.rate_hz) > 2e-5 * take.rate_hz) {
+      char rates[96];
+      std::snprintf(rates, sizeof(rates), " is at %.6g Hz, the take at %.6g Hz", truth->rate_hz(),
+                    take.rate_hz);
+      throw std::runtime_error(options.truth_bvh + rates + ": not the truth of this take");
+    }
     // A subject calibrated from markers names its joints by role (thigh_l...): it is
     // scored on the limb joints, whose centres (hip, knee, ankle, shoulder, elbow, wrist)
     // every convention shares, matched by humanoid role whatever the truth calls them;

@@ -35,6 +35,8 @@ ReplaySource BvhReplaySource(const std::string& path, double rate_hz, const std:
   BvhReadOptions read;
   read.units = units;
   const BvhTake bvh = ReadBvh(path, read);
+  if (bvh.frames.empty())
+    throw std::runtime_error(path + ": the take has no frames (Frames: 0): nothing to replay");
   ReplaySource s;
   s.rate_hz = rate_hz > 0 ? rate_hz : bvh.rate_hz();
   s.skeleton = std::make_shared<const Skeleton>(bvh.skeleton);
@@ -105,6 +107,7 @@ ReplaySource C3dReplaySource(const std::string& path, const std::string& subject
   s.skeleton = model.skeleton;
   s.markers = model.markers;
   s.take = ReadC3d(path);
+  if (s.take.num_frames < 1) throw std::runtime_error(path + ": the take has no frames to replay");
   s.rate_hz = s.take.rate_hz;
   s.description = path;
   return s;

@@ -265,7 +265,27 @@ TEST(BvhTest, AFrameTimeRoundedToItsDigitsMeansTheRateItWasPrintedFrom) {
   // Kept as written: too few digits to say, or no whole or NTSC rate prints this way.
   EXPECT_NEAR(rate_for("0.03"), 1.0 / 0.03, 1e-9);
   EXPECT_NEAR(rate_for("0.007100"), 1.0 / 0.0071, 1e-9);
-  EXPECT_NEAR(rate_for("3.33333e-2"), 1.0 / 0.0333333, 1e-9);
+  // In scientific notation likewise, by the mantissa's digits: taken as written,
+  // 8.333333e-03 lost a frame of 480 when resampled to 120 Hz.
+  EXPECT_NEAR(rate_for("8.333333e-03"), 120.0, 1e-9);
+  EXPECT_NEAR(rate_for("1.666667E-02"), 60.0, 1e-9);
+  EXPECT_NEAR(rate_for("3.33333e-2"), 30.0, 1e-9);
+  EXPECT_NEAR(rate_for("3.0e-2"), 1.0 / 0.03, 1e-9);
+  EXPECT_NEAR(rate_for("7.100e-3"), 1.0 / 0.0071, 1e-9);
+}
+
+// "Frames:2" and "Time:0.0333333", keyword and number with no space between, as some
+// writers print them; a joint name with a colon is still one name.
+TEST(BvhTest, AFrameCountOrTimeWrittenAgainstItsKeywordIsRead) {
+  std::string text = ReadText(kTinyPath);
+  const BvhTake plain = ParseBvh(text, "plain.bvh");
+  text.replace(text.find("Frame Time: "), 12, "Frame Time:");
+  text.replace(text.find("Frames: "), 8, "Frames:");
+  text.replace(text.find("ROOT "), 5, "ROOT Frames:");
+  const BvhTake joined = ParseBvh(text, "joined.bvh");
+  EXPECT_EQ(joined.frames.size(), plain.frames.size());
+  EXPECT_DOUBLE_EQ(joined.frame_time_s, plain.frame_time_s);
+  EXPECT_EQ(joined.skeleton.joint(0).name, "Frames:" + plain.skeleton.joint(0).name);
 }
 
 TEST(BvhTest, UnitsCanBeForced) {

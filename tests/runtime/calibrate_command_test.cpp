@@ -179,6 +179,20 @@ TEST(CalibrateCommandTest, ATakeWithNoOrTooFewFramesIsNamedAsSuch) {
             std::string::npos)
       << error_of(with_skeleton);
   EXPECT_FALSE(std::filesystem::exists(dir + "/out.toml"));
+  // A take standing still: which of the takes given (the message named none).
+  C3dTake still = f.take;
+  for (int fr = 1; fr < still.num_frames; ++fr)
+    for (int p = 0; p < still.num_points(); ++p) {
+      still.at(fr, p) = still.at(0, p);
+      still.residuals[static_cast<size_t>(fr * still.num_points() + p)] =
+          still.residuals[static_cast<size_t>(p)];
+    }
+  WriteC3d(dir + "/still.c3d", still);
+  markers_only.markers_c3d = {dir + "/still.c3d"};
+  EXPECT_EQ(
+      error_of(markers_only).rfind("calibrate: " + dir + "/still.c3d: the take shows no motion", 0),
+      0u)
+      << error_of(markers_only);
 }
 
 // A capture whose labels belong to no set (here the default layout's markers renamed

@@ -168,3 +168,10 @@ execute_process(COMMAND ${MOCAP_SIM} replay --rate 120x --from "" RESULT_VARIABL
 if(rc EQUAL 0 OR NOT err MATCHES "--rate must be realtime, max or a rate in Hz, got '120x'")
   message(FATAL_ERROR "replay --rate 120x was not refused: rc=${rc} err=${err}")
 endif()
+# A take of no frames names its file (it said "resample: no frames").
+file(WRITE ${WORK_DIR}/no_frames.bvh "HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 0\n  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n  End Site\n  {\n    OFFSET 0 10 0\n  }\n}\nMOTION\nFrames: 0\nFrame Time: 0.0083333\n")
+execute_process(COMMAND ${MOCAP_SIM} replay ${WORK_DIR}/no_frames.bvh --rate max --from ""
+                RESULT_VARIABLE rc ERROR_VARIABLE err)
+if(rc EQUAL 0 OR NOT err MATCHES "no_frames.bvh: the take has no frames")
+  message(FATAL_ERROR "replay of a take with no frames: rc=${rc} err=${err}")
+endif()

@@ -124,7 +124,17 @@ TEST(ProcessCommandTest, RefusesATakeWithoutTheSubjectsMarkers) {
   WriteC3d(dir + "/take.c3d", other);
   ProcessCommandOptions options = OptionsIn(dir);
   std::ostringstream out;
-  EXPECT_THROW(RunProcessCommand(options, out), std::invalid_argument);
+  try {
+    RunProcessCommand(options, out);
+    FAIL() << "no error";
+  } catch (const std::invalid_argument& e) {
+    // Which take and which subject: the message named neither.
+    EXPECT_EQ(std::string(e.what()).rfind(options.input_c3d + ": take has 0 of the subject's ", 0),
+              0u)
+        << e.what();
+    EXPECT_NE(std::string(e.what()).find("(subject " + options.subject + ")"), std::string::npos)
+        << e.what();
+  }
 }
 
 // A Vicon capture stands on +Z; its solve is written standing as the subject's rest pose
@@ -327,20 +337,43 @@ TEST(ProcessCommandTest, FramesBeforeTheSubjectIsSeenHoldItsFirstSolvedPose) {
 // A truth written in inches (mocap-sim synth writes it in the subject's bvh_units) is
 // read in inches when told: from its bones alone an inch file looks like centimetres,
 // and the error against it was 127 cm.
-TEST(ProcessCommandTest, ATruthInInchesIsReadInInchesWhenTold) {
-  const auto f = testing::MakeHumanoidFixture("walk", 2.0, 120.0);
-  const std::string dir = testing::TempDir("process_truth_units");
+// A 120 Hz fixture's subject and take in dir, and its motion as the truth written at
+// truth_rate_hz in units.
+ProcessCommandOptions OptionsWithTruth(const std::string& dir, double seconds, double truth_rate_hz,
+                                       const std::string& units) {
+  const auto f = testing::MakeHumanoidFixture("walk", seconds, 120.0);
   WriteFixtureSubject(f, dir + "/actor.toml");
   WriteC3d(dir + "/take.c3d", f.take);
-  WriteBvh(dir + "/truth.bvh", MakeBvhTake(*f.skeleton, f.motion, 1.0 / 120.0, "in"));
+  WriteBvh(dir + "/truth.bvh", MakeBvhTake(*f.skeleton, f.motion, 1.0 / truth_rate_hz, units));
   ProcessCommandOptions options = OptionsIn(dir);
   options.truth_bvh = dir + "/truth.bvh";
+  return options;
+}
+
+TEST(ProcessCommandTest, ATruthInInchesIsReadInInchesWhenTold) {
+  ProcessCommandOptions options =
+      OptionsWithTruth(testing::TempDir("process_truth_units"), 2.0, 120.0, "in");
   std::ostringstream out;
   EXPECT_GT(RunProcessCommand(options, out).truth_mean_cm, 10.0);  // guessed as cm
   options.truth_units = "in";
   EXPECT_LT(RunProcessCommand(options, out).truth_mean_cm, 1.0);
   options.truth_units = "furlongs";
   EXPECT_THROW(RunProcessCommand(options, out), BvhError);
+}
+
+// A truth of the same length at another rate is another moment in every frame but the
+// first: refused, naming both rates (it was scored frame by frame without a word).
+TEST(ProcessCommandTest, ATruthAtAnotherRateIsRefused) {
+  const ProcessCommandOptions options =
+      OptionsWithTruth(testing::TempDir("process_truth_rate"), 1.0, 30.0, "cm");
+  std::ostringstream out;
+  try {
+    RunProcessCommand(options, out);
+    FAIL() << "no error";
+  } catch (const std::runtime_error& e) {
+    EXPECT_EQ(std::string(e.what()),
+              options.truth_bvh + " is at 30 Hz, the take at 120 Hz: not the truth of this take");
+  }
 }
 
 TEST(ProcessCommandTest, PlotsShowEveryMarkerTheSolveAndTheErrorAgainstTheTruth) {
