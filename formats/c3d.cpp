@@ -430,6 +430,17 @@ class Parser {
            "file ends inside frame " + std::to_string(whole + 1) + " of " + std::to_string(frames) +
                " (" + std::to_string(frame_bytes) + " bytes per frame" + counts + ")");
     }
+    // More whole frames than counted, past a writer's block of padding: a take cropped by
+    // rewriting its count alone, or a count from another version of the file. The count
+    // is read; the rest is said, not dropped in silence.
+    if (frame_bytes > 0 && !filled_by_frames_of(frame_bytes)) {
+      const size_t whole = available / frame_bytes;
+      if (whole > static_cast<size_t>(frames))
+        take.notes.push_back("the data section is larger than the " + std::to_string(frames) +
+                             " frames the header and parameters count (room for " +
+                             std::to_string(whole) + "): the " + std::to_string(frames) +
+                             " counted are read");
+    }
     take.labels = StringsContinued("POINT", "LABELS");
     take.descriptions = StringsContinued("POINT", "DESCRIPTIONS");
     take.labels.resize(used);

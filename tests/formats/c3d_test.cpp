@@ -471,6 +471,29 @@ TEST(C3dTest, ALabelEndsAtItsFirstNul) {
   EXPECT_EQ(ParseC3d(bytes, "nul.c3d").labels[0], "M0");
 }
 
+// A take cropped by rewriting its frame counts alone: the counted frames are read, and
+// the frames past them said (they were left out without a word).
+TEST(C3dTest, FramesPastTheCountAreNotedNotDroppedInSilence) {
+  const C3dTake take = MakeTake(3, 100);
+  std::vector<uint8_t> bytes = EncodeC3d(take);
+  const int last = take.first_frame + 49;
+  bytes[8] = static_cast<uint8_t>(last & 0xff);  // header word 5: the last frame
+  bytes[9] = static_cast<uint8_t>(last >> 8);
+  const size_t point_frames = ValueOffset(bytes, "FRAMES", 0);
+  bytes[point_frames] = 50;
+  bytes[point_frames + 1] = 0;
+  const size_t trial_end = ValueOffset(bytes, "ACTUAL_END_FIELD", 1);
+  bytes[trial_end] = static_cast<uint8_t>(last & 0xff);
+  bytes[trial_end + 1] = static_cast<uint8_t>(last >> 8);
+  const C3dTake read = ParseC3d(bytes, "cropped.c3d");
+  EXPECT_EQ(read.num_frames, 50);
+  ASSERT_EQ(read.notes.size(), 1u);
+  EXPECT_EQ(read.notes[0],
+            "the data section is larger than the 50 frames the header and parameters count (room "
+            "for 106): the 50 counted are read");
+  EXPECT_TRUE(ParseC3d(EncodeC3d(take), "whole.c3d").notes.empty());
+}
+
 TEST(C3dTest, MetresPerUnitKnowsTheUsualUnits) {
   EXPECT_DOUBLE_EQ(MetresPerUnit("mm"), 1e-3);
   EXPECT_DOUBLE_EQ(MetresPerUnit("M "), 1.0);
