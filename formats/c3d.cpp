@@ -357,9 +357,29 @@ class Parser {
              (!holds_frames_of(frames, instead_of) ||
               (filled_by_frames_of(frame_bytes) && !filled_by_frames_of(instead_of)));
     };
+    // Analog values a frame by the parameters: ANALOG:USED channels times the analog
+    // samples per point frame (0 when they say nothing usable).
+    size_t parameter_analog = analog_values;
+    {
+      const std::optional<double> channels = Number("ANALOG:USED");
+      const std::optional<double> analog_rate = Number("ANALOG:RATE");
+      if (channels && analog_rate && *channels >= 0 && *channels <= 65535 &&
+          std::isfinite(*analog_rate) && *analog_rate >= take.rate_hz) {
+        const double values = std::floor(*channels) * std::round(*analog_rate / take.rate_hz);
+        if (values <= 65535) parameter_analog = static_cast<size_t>(values);
+      }
+    }
+    // Each of the two checks below settles one field where the header and the parameters
+    // disagree on that field alone: where two disagree, sizes alone cannot tell which
+    // (2 points fewer and 8 analog values more make the same frame), and the file is read
+    // by the standard's rules as before.
+    const bool points_agree = used_parameter_entry == nullptr || header_points_ == used;
+    const bool storage_agrees = Find("POINT:SCALE") == nullptr || !std::isfinite(header_scale_) ||
+                                header_scale_ == 0.0f ||
+                                (header_scale_ < 0.0f) == take.float_storage;
+    const bool analog_agrees = parameter_analog == analog_values;
     // Float or integer storage: POINT:SCALE's sign, the header's where only it fits.
-    if (Find("POINT:SCALE") != nullptr && std::isfinite(header_scale_) && header_scale_ != 0.0f &&
-        (header_scale_ < 0.0f) != take.float_storage) {
+    if (!storage_agrees && points_agree && analog_agrees) {
       const size_t header_word = header_scale_ < 0.0f ? 4 : 2;
       if (reads_better(bytes_per_frame(used, analog_values, header_word),
                        bytes_per_frame(used, analog_values, value_size))) {
@@ -375,24 +395,15 @@ class Parser {
         value_size = header_word;
       }
     }
-    // Analog values stored per frame: the header's count, or ANALOG:USED channels times
-    // the analog samples per point frame where only that fits.
-    const std::optional<double> analog_channels = Number("ANALOG:USED");
-    const std::optional<double> analog_rate = Number("ANALOG:RATE");
-    if (analog_channels && analog_rate && *analog_channels >= 0 && *analog_channels <= 65535 &&
-        std::isfinite(*analog_rate) && *analog_rate >= take.rate_hz) {
-      const double per_frame = std::round(*analog_rate / take.rate_hz);
-      const double values = std::floor(*analog_channels) * per_frame;
-      if (values <= 65535 && static_cast<size_t>(values) != analog_values &&
-          reads_better(bytes_per_frame(used, static_cast<size_t>(values), value_size),
-                       frame_bytes_of(used))) {
-        take.notes.push_back(
-            "the header stores " + std::to_string(analog_values) +
-            " analog values a frame, ANALOG:USED and ANALOG:RATE " +
-            std::to_string(static_cast<size_t>(values)) + ": the data holds frames of " +
-            std::to_string(static_cast<size_t>(values)) + ", so the parameters' count is used");
-        analog_values = static_cast<size_t>(values);
-      }
+    // Analog values stored per frame: the header's count, the parameters' where only that
+    // fits.
+    if (!analog_agrees && points_agree && storage_agrees &&
+        reads_better(bytes_per_frame(used, parameter_analog, value_size), frame_bytes_of(used))) {
+      take.notes.push_back("the header stores " + std::to_string(analog_values) +
+                           " analog values a frame, ANALOG:USED x ANALOG:RATE / POINT:RATE " +
+                           std::to_string(parameter_analog) + ": the data holds frames of " +
+                           std::to_string(parameter_analog) + ", so the parameters' count is used");
+      analog_values = parameter_analog;
     }
     // POINT:USED is the standard's count, but an exporter can rewrite it and not the
     // header (points added or dropped after the capture). Where the data holds frames of
@@ -433,7 +444,7 @@ class Parser {
     // More whole frames than counted, past a writer's block of padding: a take cropped by
     // rewriting its count alone, or a count from another version of the file. The count
     // is read; the rest is said, not dropped in silence.
-    if (frame_bytes > 0 && !filled_by_frames_of(frame_bytes)) {
+    if (frames > 0 && frame_bytes > 0 && !filled_by_frames_of(frame_bytes)) {
       const size_t whole = available / frame_bytes;
       if (whole > static_cast<size_t>(frames))
         take.notes.push_back("the data section is larger than the " + std::to_string(frames) +

@@ -320,8 +320,9 @@ MarkersOnlyCalibration CalibrateFromMarkers(std::span<const C3dTake> raw_takes,
     const double moved = travel.empty() ? 0.0 : travel[travel.size() * 9 / 10];
     if (moved < 0.03)
       throw std::runtime_error(
-          std::string(takes.size() == 1 ? "the take shows" : "the takes show") +
-          " no motion (its markers travel " +
+          std::string(takes.size() == 1 ? "calibrate: the take shows"
+                                        : "calibrate: the takes show") +
+          " no motion (the markers travel " +
           std::to_string(static_cast<int>(std::round(moved * 1e3))) +
           " mm at most, 90th percentile): calibration needs the joints to move, e.g. a "
           "range-of-motion take");

@@ -314,17 +314,20 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
   TomlTable frames = top.Table("frames");
   // Each rule in time (ms), or as older configs gave it, in frames at every rate; not both.
   const auto time_or_frames = [&frames](const char* ms_key, const char* frames_key, double* s,
-                                        int* n, double min_ms, int min_frames) {
+                                        int* n, double min_ms, int min_frames, int max_frames) {
     if (frames.Has(ms_key) && frames.Has(frames_key))
       frames.Fail(frames.Find(frames_key), frames_key,
                   std::string("given as well as ") + ms_key + ": give one (" + ms_key +
                       " holds at any capture rate)");
     *s = frames.Number(ms_key, *s * 1e3, min_ms, 3'600'000.0) * 1e-3;
-    *n = frames.Integer(frames_key, *n, min_frames, 1'000'000);
+    *n = frames.Integer(frames_key, *n, min_frames, max_frames);
   };
-  time_or_frames("max_gap_ms", "max_gap_frames", &c.max_gap_s, &c.max_gap_frames, 0.0, 0);
+  // Bridged frames are inserted at once on the data plane: at most kMaxGapFrames (also
+  // checked per subject, for max_gap_ms at its rate).
+  time_or_frames("max_gap_ms", "max_gap_frames", &c.max_gap_s, &c.max_gap_frames, 0.0, 0,
+                 DaemonConfig::kMaxGapFrames);
   time_or_frames("restart_backjump_ms", "restart_backjump_frames", &c.restart_backjump_s,
-                 &c.restart_backjump_frames, 1e-3, 1);
+                 &c.restart_backjump_frames, 1e-3, 1, 1'000'000);
   frames.RejectUnknown();
 
   CleanupOptions defaults;
@@ -401,6 +404,11 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
       t.Fail(table->get("calibration_max_s"), "calibration_max_s",
              "shorter than calibration_min_s");
     s.rate_hz = t.Number("rate_hz", s.rate_hz, 1, 2000);
+    if (c.MaxGapFrames(s.rate_hz) > DaemonConfig::kMaxGapFrames)
+      t.Fail(table->get("rate_hz"), "rate_hz",
+             "frames.max_gap_ms is " + std::to_string(c.MaxGapFrames(s.rate_hz)) +
+                 " frames at this rate, more than the " +
+                 std::to_string(DaemonConfig::kMaxGapFrames) + " a gap may bridge");
     s.cleanup = defaults;
     s.cleanup.rate_hz = s.rate_hz;
     const CleanupOptionField& lookahead = OptionField("lookahead");

@@ -115,6 +115,7 @@ struct DaemonConfig {
   // Frame accounting, in time so that it holds at any capture rate (the defaults are the
   // 240 and 120 frames they were at 120 Hz). A config may still give them in frames
   // (max_gap_frames, restart_backjump_frames: taken as given at every rate); -1: from time.
+  static constexpr int kMaxGapFrames = 100'000;
   double max_gap_s = 2.0;
   double restart_backjump_s = 1.0;
   int max_gap_frames = -1;

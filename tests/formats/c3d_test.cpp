@@ -416,14 +416,20 @@ TEST(C3dTest, AScaleWhoseSignTheDataContradictsGivesWayToTheHeadersWithANote) {
 
 // The same take with 8 analog channels sampled once a frame stored after each frame's
 // points (zeros), ANALOG:USED saying `channels` and the header `header_values`.
-std::vector<uint8_t> WithAnalogChannels(const C3dTake& take, uint8_t channels,
-                                        uint8_t header_values) {
-  std::vector<uint8_t> b = EncodeC3d(take);
+// ANALOG:USED (the second USED: POINT's comes first) rewritten to `channels`.
+void RewriteAnalogUsed(std::vector<uint8_t>* bytes, uint8_t channels) {
+  std::vector<uint8_t>& b = *bytes;
   const std::string used = "USED";
   const auto point_used = std::search(b.begin(), b.end(), used.begin(), used.end());
   const auto analog_used = std::search(point_used + 1, b.end(), used.begin(), used.end());
-  EXPECT_NE(analog_used, b.end());
+  ASSERT_NE(analog_used, b.end());
   b[static_cast<size_t>(analog_used - b.begin()) + used.size() + 4] = channels;
+}
+
+std::vector<uint8_t> WithAnalogChannels(const C3dTake& take, uint8_t channels,
+                                        uint8_t header_values) {
+  std::vector<uint8_t> b = EncodeC3d(take);
+  RewriteAnalogUsed(&b, channels);
   b[4] = header_values;  // header word 3: analog values a frame
   b[5] = 0;
   const size_t data_start = (b[16] + 256u * b[17] - 1) * 512;
@@ -446,14 +452,25 @@ TEST(C3dTest, AnAnalogCountTheDataContradictsGivesWayToTheParametersWithANote) {
   const C3dTake read = ParseC3d(WithAnalogChannels(take, 8, 4), "analog.c3d");
   ExpectSameTake(take, read);
   ASSERT_EQ(read.notes.size(), 1u);
-  EXPECT_NE(read.notes[0].find("the header stores 4 analog values a frame, ANALOG:USED and "
-                               "ANALOG:RATE 8: the data holds frames of 8"),
+  EXPECT_NE(read.notes[0].find("the header stores 4 analog values a frame, ANALOG:USED x "
+                               "ANALOG:RATE / POINT:RATE 8: the data holds frames of 8"),
             std::string::npos)
       << read.notes[0];
   // The header right and the parameter wrong: the header's stands, nothing to note.
   const C3dTake header_right = ParseC3d(WithAnalogChannels(take, 4, 8), "analog.c3d");
   ExpectSameTake(take, header_right);
   EXPECT_TRUE(header_right.notes.empty());
+  // Two fields at odds: POINT:USED 2 points fewer than the header and ANALOG:USED 8 values
+  // more make the same frame. Sizes cannot say which; the points' fallback stands alone,
+  // as before (the analog check took the header's last two points for analog values).
+  std::vector<uint8_t> both = EncodeC3d(take);
+  ASSERT_NO_FATAL_FAILURE(RewritePointUsed(&both, 1));
+  ASSERT_NO_FATAL_FAILURE(RewriteAnalogUsed(&both, 8));
+  const C3dTake points_first = ParseC3d(both, "both.c3d");
+  ExpectSameTake(take, points_first);
+  ASSERT_EQ(points_first.notes.size(), 1u);
+  EXPECT_NE(points_first.notes[0].find("POINT:USED says 1 points, the header 3"), std::string::npos)
+      << points_first.notes[0];
 }
 
 // A C writer ends a label with a NUL and may leave its buffer's bytes after it: the label
@@ -492,6 +509,8 @@ TEST(C3dTest, FramesPastTheCountAreNotedNotDroppedInSilence) {
             "the data section is larger than the 50 frames the header and parameters count (room "
             "for 106): the 50 counted are read");
   EXPECT_TRUE(ParseC3d(EncodeC3d(take), "whole.c3d").notes.empty());
+  // An empty take's padded data block is no frame past the count.
+  EXPECT_TRUE(ParseC3d(EncodeC3d(MakeTake(3, 0)), "empty.c3d").notes.empty());
 }
 
 TEST(C3dTest, MetresPerUnitKnowsTheUsualUnits) {

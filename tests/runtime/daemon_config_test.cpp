@@ -319,8 +319,6 @@ TEST(DaemonConfigTest, ThresholdsAndOverridesReachThePipelineOptions) {
   EXPECT_DOUBLE_EQ(o.stray_s, 0.2);
 }
 
-// config/mocapd.toml promises that its values are the defaults: every cleanup option a
-// config may set must be written there, with the value the code uses.
 // Frame accounting and a foot's release are in time, counted at each subject's rate; a
 // config of older versions may still give them in frames (the same count at any rate).
 TEST(DaemonConfigTest, GapsRestartsAndFootReleasesAreInTimeAtEachSubjectsRate) {
@@ -357,9 +355,25 @@ TEST(DaemonConfigTest, GapsRestartsAndFootReleasesAreInTimeAtEachSubjectsRate) {
             "test.toml:6: field 'retarget.release_frames': given as well as release_ms: give one "
             "(release_ms holds at any capture rate)");
   EXPECT_NE(ErrorOf(std::string(kMinimal) + "[frames]\nmax_gap_ms = -1\n"), "");
+  // Bridged frames are inserted at once: a minute at 2000 Hz is too many.
+  EXPECT_NE(ErrorOf(std::string(kMinimal) + "rate_hz = 2000.0\n[frames]\nmax_gap_ms = 60000\n")
+                .find("field 'subject[0].rate_hz': frames.max_gap_ms is 120000 frames at this "
+                      "rate, more than the 100000 a gap may bridge"),
+            std::string::npos);
+  // A reload re-creates a subject when what it does changes: the frames a gap spans.
+  const auto fingerprint_with_gap = [&](const char* ms) {
+    const DaemonConfig c =
+        ParseDaemonConfig(std::string(kMinimal) + "[frames]\nmax_gap_ms = " + ms + "\n",
+                          "test.toml", MOCAPD_CONFIG_DIR);
+    return SubjectFingerprint(c.subjects[0], c);
+  };
+  EXPECT_EQ(fingerprint_with_gap("2001"), fingerprint_with_gap("2000"));  // 240 frames either way
+  EXPECT_NE(fingerprint_with_gap("2100"), fingerprint_with_gap("2000"));
   EXPECT_NE(ErrorOf(std::string(kMinimal) + "[frames]\nrestart_backjump_ms = 0\n"), "");
 }
 
+// config/mocapd.toml promises that its values are the defaults: every cleanup option a
+// config may set must be written there, with the value the code uses.
 TEST(DaemonConfigTest, ShippedConfigDocumentsEveryCleanupOptionAtItsDefault) {
   const toml::table doc = ReadTomlFile(std::string(MOCAPD_CONFIG_DIR) + "/mocapd.toml");
   const CleanupOptions defaults;
