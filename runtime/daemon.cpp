@@ -1006,19 +1006,19 @@ void Daemon::Run(bool handle_signals) {
           const SubjectStats* before = nullptr;
           for (const SubjectStats& b : c.last_logged.subjects)
             if (b.name == s.name) before = &b;
+          // Each event as it was when it happened (a second may hold a stall, its end and a
+          // resync: the snapshot's last frame number is none of theirs).
           if (before != nullptr && s.counters.stalls > before->counters.stalls)
             spdlog::warn(
                 "watchdog: subject '{}' input stalled (no frame for {:.2f} s, last frame {})",
-                s.name, s.since_last_input_s, s.counters.last_frame_number);
-          if (before != nullptr && before->state == protocol::SubjectState::kStalled &&
-              s.state != protocol::SubjectState::kStalled)
-            spdlog::info("subject '{}' input resumed at frame {}", s.name,
-                         s.counters.last_frame_number);
+                s.name, s.counters.stall_silence_s, s.counters.stall_last_frame);
+          if (before != nullptr && s.counters.resumes > before->counters.resumes)
+            spdlog::info("subject '{}' input resumed at frame {}", s.name, s.counters.resume_frame);
           if (before != nullptr && s.counters.restarts > before->counters.restarts)
             spdlog::warn(
                 "subject '{}': capture restart or jump in frame numbers; pipeline re-synchronised "
                 "at frame {}",
-                s.name, s.counters.last_frame_number);
+                s.name, s.counters.resync_frame);
           if (s.rejecting_input && (before == nullptr || !before->rejecting_input))
             spdlog::warn("subject '{}': every frame dropped as {} for over 0.5 s{}", s.name,
                          to_string(s.rejecting_reason), RejectionDetail(s));

@@ -248,6 +248,12 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
   last_capture_ns_ = frame.capture_time_ns;
   counters_.last_frame_number = frame.frame_number;
   counters_.last_stream = frame.stream;
+  if (state_ == protocol::SubjectState::kStalled) {
+    ++counters_.resumes;
+    counters_.resume_frame = frame.frame_number;
+  }
+  if (resynchronised_) counters_.resync_frame = frame.frame_number;
+  resynchronised_ = false;
   if (state_ == protocol::SubjectState::kWaiting || state_ == protocol::SubjectState::kStalled)
     state_ = protocol::SubjectState::kTracking;
   if (live_) {
@@ -386,6 +392,7 @@ void SubjectRunner::Resynchronise(OutputSink& sink) {
   pushed_ = published_ = 0;
   started_ = false;
   ++counters_.restarts;
+  resynchronised_ = true;
 }
 
 void SubjectRunner::EndOfStream(OutputSink& sink) {
@@ -579,6 +586,8 @@ bool SubjectRunner::CheckStall(int64_t now_ns, int64_t timeout_ns, OutputSink& s
   Flush(sink);
   state_ = protocol::SubjectState::kStalled;
   ++counters_.stalls;
+  counters_.stall_silence_s = static_cast<double>(now_ns - last_receive_ns_) * 1e-9;
+  counters_.stall_last_frame = counters_.last_frame_number;
   PublishStatus(now_ns, sink);
   return true;
 }

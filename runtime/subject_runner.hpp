@@ -78,6 +78,13 @@ struct SubjectCounters {
   uint64_t character_frames_published = 0;
   LatencyHistogram processing;  ///< Receive of the frame that completed a publication -> its send.
   uint64_t last_frame_number = 0;
+  // What the log says of an event, as it was when it happened: the control plane reads
+  // these counters once a second, by when last_frame_number has moved on.
+  double stall_silence_s = 0.0;      ///< The last stall: how long no frame had come...
+  uint64_t stall_last_frame = 0;     ///< ...after this frame number.
+  uint64_t resumes = 0;              ///< Stalls ended by a frame accepted...
+  uint64_t resume_frame = 0;         ///< ...the last of which this was.
+  uint64_t resync_frame = 0;         ///< The frame the last re-synchronised stream began at.
   protocol::StreamInfo last_stream;  ///< The last accepted frame's session, rate and timecode.
   uint64_t dropped_total() const;
 };
@@ -240,6 +247,7 @@ class SubjectRunner {
   int64_t pushed_ = 0;         ///< Frames pushed since the last reset.
   int64_t published_ = 0;      ///< Frames published since the last reset.
   bool started_ = false;
+  bool resynchronised_ = false;  // the next frame accepted begins the new stream
   uint64_t next_frame_number_ = 0;
   uint64_t last_capture_ns_ = 0;
   int64_t last_receive_ns_ = -1;

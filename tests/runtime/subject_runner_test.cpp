@@ -194,6 +194,7 @@ TEST_F(SubjectRunnerTest, CaptureRestartFlushesAndStartsOver) {
   EXPECT_EQ(sink_.skeletons[50].frame_number, 0u);
   EXPECT_EQ(sink_.skeletons[99].frame_number, 49u);
   EXPECT_EQ(runner.counters().restarts, 1u);
+  EXPECT_EQ(runner.counters().resync_frame, 0u);  // the new stream's first, not its last (49)
   EXPECT_EQ(runner.counters().frames_inserted, 0u);
   ExpectBalanced(runner);
 }
@@ -374,6 +375,15 @@ TEST_F(SubjectRunnerTest, WatchdogMarksAStalledSubjectOnceAndPublishesIt) {
   EXPECT_EQ(runner.counters().stalls, 1u);
   ASSERT_FALSE(runner.Accept(Frame(1, 1, 0), 1'800'000'000, sink_).has_value());
   EXPECT_NE(runner.state(), protocol::SubjectState::kStalled);
+  // What the log reports, as it was at the stall and at its end: read a second later,
+  // the snapshot's last frame number and silence were of another moment ("no frame for
+  // 0.00 s, last frame 140" for a stall after frame 100).
+  ASSERT_FALSE(runner.Accept(Frame(2, 2, 0), 1'810'000'000, sink_).has_value());
+  EXPECT_DOUBLE_EQ(runner.counters().stall_silence_s, 0.6);
+  EXPECT_EQ(runner.counters().stall_last_frame, 0u);
+  EXPECT_EQ(runner.counters().resumes, 1u);
+  EXPECT_EQ(runner.counters().resume_frame, 1u);
+  EXPECT_EQ(runner.counters().last_frame_number, 2u);
 }
 
 // A stalled subject must not keep its last K frames until a next stream arrives that
