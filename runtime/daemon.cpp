@@ -1022,6 +1022,11 @@ void Daemon::Run(bool handle_signals) {
           if (s.rejecting_input && (before == nullptr || !before->rejecting_input))
             spdlog::warn("subject '{}': every frame dropped as {} for over 0.5 s{}", s.name,
                          to_string(s.rejecting_reason), RejectionDetail(s));
+          // The end of a rejection is said too: /health stops naming it, and an operator
+          // reading the log must not think every frame is still dropped.
+          if (!s.rejecting_input && before != nullptr && before->rejecting_input)
+            spdlog::info("subject '{}': no longer dropping every frame ({} accepted so far)",
+                         s.name, s.counters.frames_accepted);
           if (s.model_suspect && (before == nullptr || !before->model_suspect))
             spdlog::warn(
                 "subject '{}': model suspect: the received markers sit {:.0f} mm (median) from "

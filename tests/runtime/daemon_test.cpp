@@ -28,6 +28,10 @@
 #include <thread>
 #include <zmq.hpp>
 
+#include <spdlog/sinks/ostream_sink.h>
+#include <spdlog/spdlog.h>
+#include <sstream>
+
 #include "filters/pose_error.hpp"
 #include "formats/retarget_map.hpp"
 #include "formats/take_frames.hpp"
@@ -786,26 +790,46 @@ TEST(DaemonTest, HttpServesHealthSubjectsAndMetrics) {
 }
 
 // A bridge sending another marker set: every frame is dropped, and /health, which said
-// "ok" through it before, says degraded and names the subject and the reason.
+// "ok" through it before, says degraded and names the subject and the reason. When the
+// right model's frames come again, the log says the rejection ended.
 TEST(DaemonTest, HealthNamesASubjectWhoseFramesAreAllDropped) {
   const testing::HumanoidFixture f = testing::MakeHumanoidFixture("walk", 1.0, 120.0);
-  zmq::context_t context;
-  RunningDaemon daemon(context, TestConfig("inproc://reject-in", "inproc://reject-out", 4));
-  Sender sender(context, "inproc://reject-in", f.take, MakeHumanoidSubject("actor1"),
-                zmq::socket_type::push);
-  sender.message_.model_hash ^= 1;
-  for (int t = 0; t < 100; ++t) sender.Send(t, static_cast<uint64_t>(t));
-  ASSERT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) {
-    return s.subjects[0].counters.dropped_total() == 100 && s.subjects[0].rejecting_input;
-  }));
-  std::this_thread::sleep_for(50ms);  // one more snapshot
-  const std::string health = HttpGet(daemon->http_port(), "/health").second;
-  EXPECT_NE(health.find("\"status\": \"degraded\""), std::string::npos) << health;
-  EXPECT_NE(health.find("subject 'actor1': every frame dropped (model_mismatch)"),
+  // The log, captured: added before the daemon's threads start and removed after they end.
+  std::ostringstream log;
+  spdlog::default_logger()->sinks().push_back(
+      std::make_shared<spdlog::sinks::ostream_sink_mt>(log));
+  {
+    zmq::context_t context;
+    RunningDaemon daemon(context, TestConfig("inproc://reject-in", "inproc://reject-out", 4));
+    Sender sender(context, "inproc://reject-in", f.take, MakeHumanoidSubject("actor1"),
+                  zmq::socket_type::push);
+    sender.message_.model_hash ^= 1;
+    for (int t = 0; t < 100; ++t) sender.Send(t, static_cast<uint64_t>(t));
+    ASSERT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) {
+      return s.subjects[0].counters.dropped_total() == 100 && s.subjects[0].rejecting_input;
+    }));
+    std::this_thread::sleep_for(300ms);  // snapshots and control-plane ticks (50 ms) to log it
+    const std::string health = HttpGet(daemon->http_port(), "/health").second;
+    EXPECT_NE(health.find("\"status\": \"degraded\""), std::string::npos) << health;
+    EXPECT_NE(health.find("subject 'actor1': every frame dropped (model_mismatch)"),
+              std::string::npos)
+        << health;
+    const std::string subjects = HttpGet(daemon->http_port(), "/subjects").second;
+    EXPECT_NE(subjects.find("\"rejecting_input\": true"), std::string::npos) << subjects;
+    sender.message_.model_hash ^= 1;
+    for (int t = 100; t < 130; ++t) sender.Send(t - 100, static_cast<uint64_t>(t));
+    EXPECT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) {
+      return s.subjects[0].counters.frames_accepted == 30 && !s.subjects[0].rejecting_input;
+    }));
+    std::this_thread::sleep_for(300ms);  // a few control-plane ticks
+  }
+  spdlog::default_logger()->sinks().pop_back();
+  EXPECT_NE(log.str().find("subject 'actor1': every frame dropped as model_mismatch"),
             std::string::npos)
-      << health;
-  const std::string subjects = HttpGet(daemon->http_port(), "/subjects").second;
-  EXPECT_NE(subjects.find("\"rejecting_input\": true"), std::string::npos) << subjects;
+      << log.str();
+  EXPECT_NE(log.str().find("subject 'actor1': no longer dropping every frame (30 accepted"),
+            std::string::npos)
+      << log.str();
 }
 
 TEST(DaemonTest, HttpWithATokenAnswersOnlyRequestsThatCarryIt) {
