@@ -213,8 +213,14 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
   if (started_ && frame.frame_number != next_frame_number_) {
     if (frame.frame_number > next_frame_number_) {
       const uint64_t missing = frame.frame_number - next_frame_number_;
-      counters_.frames_skipped += missing;
-      if (missing > static_cast<uint64_t>(max_gap_frames_)) {
+      // The stream a long jump back interrupted goes on (newer number and clock): the
+      // jump was one late packet, and the numbers between were published already.
+      // Bridged, they went out a second time as repaired frames (71 at 60 Hz).
+      const bool interrupted_goes_on = interrupted_.has_value() &&
+                                       frame.frame_number > interrupted_->newest &&
+                                       frame.capture_time_ns > interrupted_->capture_ns;
+      if (!interrupted_goes_on) counters_.frames_skipped += missing;
+      if (interrupted_goes_on || missing > static_cast<uint64_t>(max_gap_frames_)) {
         // Too long to bridge with repaired frames: start over from this frame.
         Resynchronise(sink);
       } else {
@@ -237,7 +243,13 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
         // ++frames_in happens in the drop, so the last frame number stays the newest.
         return drop(back == 0 ? DropReason::kDuplicate : DropReason::kOutOfOrder);
       }
+      // Far back with an older clock: a capture whose clock restarted too, or a packet
+      // late by more than restart_backjump. Taken as a restart; what follows tells.
+      const bool older_clock = frame.capture_time_ns != 0 && last_capture_ns_ != 0 &&
+                               frame.capture_time_ns < last_capture_ns_;
+      const Interrupted interrupted{next_frame_number_ - 1, last_capture_ns_};
       Resynchronise(sink);
+      if (older_clock) interrupted_ = interrupted;
     }
   }
   ++counters_.frames_in;
@@ -393,6 +405,7 @@ void SubjectRunner::Resynchronise(OutputSink& sink) {
   started_ = false;
   ++counters_.restarts;
   resynchronised_ = true;
+  interrupted_.reset();
 }
 
 void SubjectRunner::EndOfStream(OutputSink& sink) {
@@ -401,6 +414,7 @@ void SubjectRunner::EndOfStream(OutputSink& sink) {
   if (retargeter_) retargeter_->Reset();
   pushed_ = published_ = 0;
   started_ = false;
+  interrupted_.reset();
   // An ended stream is waiting for the next one, not stalled: the watchdog stays quiet.
   state_ = protocol::SubjectState::kWaiting;
   consecutive_dropped_ = 0;

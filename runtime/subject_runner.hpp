@@ -248,6 +248,12 @@ class SubjectRunner {
   int64_t published_ = 0;      ///< Frames published since the last reset.
   bool started_ = false;
   bool resynchronised_ = false;  // the next frame accepted begins the new stream
+  // The stream a jump back with an older clock interrupted (v1): its newest frame and time.
+  struct Interrupted {
+    uint64_t newest = 0;
+    uint64_t capture_ns = 0;
+  };
+  std::optional<Interrupted> interrupted_;
   uint64_t next_frame_number_ = 0;
   uint64_t last_capture_ns_ = 0;
   int64_t last_receive_ns_ = -1;

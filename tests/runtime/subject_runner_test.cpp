@@ -5,6 +5,8 @@
 
 #include <gtest/gtest.h>
 
+#include <map>
+
 #include "formats/marker_layout.hpp"
 #include "formats/take_frames.hpp"
 #include "runtime/daemon.hpp"
@@ -197,6 +199,42 @@ TEST_F(SubjectRunnerTest, CaptureRestartFlushesAndStartsOver) {
   EXPECT_EQ(runner.counters().resync_frame, 0u);  // the new stream's first, not its last (49)
   EXPECT_EQ(runner.counters().frames_inserted, 0u);
   ExpectBalanced(runner);
+}
+
+// Version 1: a frame later than restart_backjump (1 s) with its older capture time is
+// taken as a restart, but when the interrupted stream then goes on (a newer number and
+// clock), the numbers between were published already: a second restart, not a bridge of
+// repaired frames re-publishing them (71 duplicates at 60 Hz).
+TEST_F(SubjectRunnerTest, AStreamThatGoesOnAfterALatePacketIsNotPublishedTwice) {
+  SubjectRunner runner(subject_, daemon_);
+  const auto ns = [](int f) { return 1'000'000'000ull + 8'333'333ull * static_cast<uint64_t>(f); };
+  for (int f = 0; f < 200; ++f) {
+    if (f == 50) continue;  // late: bridged by an inserted frame now
+    ASSERT_FALSE(runner.Accept(Frame(f % 120, f, ns(f)), 0, sink_).has_value());
+  }
+  ASSERT_FALSE(runner.Accept(Frame(50, 50, ns(50)), 0, sink_).has_value());  // 149 back
+  EXPECT_EQ(runner.counters().restarts, 1u);
+  for (int f = 200; f < 230; ++f)
+    ASSERT_FALSE(runner.Accept(Frame(f % 120, f, ns(f)), 0, sink_).has_value());
+  runner.Flush(sink_);
+  EXPECT_EQ(runner.counters().restarts, 2u);
+  EXPECT_EQ(runner.counters().frames_inserted, 1u);  // frame 50, in its own stream
+  EXPECT_EQ(runner.counters().frames_skipped, 1u);
+  std::map<uint64_t, int> published;
+  for (const auto& s : sink_.skeletons) ++published[s.frame_number];
+  EXPECT_EQ(published.size(), 230u);
+  EXPECT_EQ(published[50], 2);  // inserted, then the late packet itself
+  EXPECT_EQ(sink_.skeletons.size(), 231u);
+  ExpectBalanced(runner);
+  // A capture that restarted with its clock: its stream goes on from where it began.
+  SubjectRunner restarted(subject_, daemon_);
+  RecordingSink sink;
+  for (int f = 0; f < 200; ++f)
+    ASSERT_FALSE(restarted.Accept(Frame(f % 120, f, ns(f)), 0, sink).has_value());
+  for (int f = 0; f < 40; ++f)
+    ASSERT_FALSE(restarted.Accept(Frame(f, f, 1000 + f), 0, sink).has_value());
+  EXPECT_EQ(restarted.counters().restarts, 1u);
+  EXPECT_EQ(restarted.counters().frames_inserted, 0u);
 }
 
 TEST_F(SubjectRunnerTest, ALongJumpAheadResynchronisesInsteadOfInsertingFrames) {
