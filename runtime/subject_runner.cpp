@@ -199,7 +199,13 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
   };
   if (frame.model_hash != marker_hash_ || frame.positions.size() != missing_.size())
     return drop(DropReason::kModelMismatch);
-  if (std::abs(frame.rate_hz - rate_hz_) > 1e-3 * rate_hz_) {
+  // The configured rate, or its NTSC rate (1000/1001 of it: 119.88 Hz for 120), each
+  // within 0.1 %. A capture locked to video runs 0.1 % slow, which every rule of the cleanup
+  // takes in its stride; at one tolerance alone, the float rounding of how a sender wrote
+  // the rate decided (119.88 dropped, 120000/1001 taken).
+  const double ntsc_hz = rate_hz_ * 1000.0 / 1001.0;
+  if (std::abs(frame.rate_hz - rate_hz_) > 1e-3 * rate_hz_ &&
+      std::abs(frame.rate_hz - ntsc_hz) > 1e-3 * ntsc_hz) {
     mismatched_rate_hz_ = frame.rate_hz;
     return drop(DropReason::kRateMismatch);
   }

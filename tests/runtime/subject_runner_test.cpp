@@ -164,9 +164,21 @@ TEST_F(SubjectRunnerTest, FramesForAnotherModelOrRateAreNeverApplied) {
   fewer.positions.pop_back();
   fewer.valid.pop_back();
   EXPECT_EQ(runner.Accept(fewer, 0, sink_), DropReason::kModelMismatch);
+  // Beyond 0.1 % of the rate and of its NTSC rate (1000/1001 of it) is another rate; the
+  // NTSC rate is taken however the sender rounded it (119.88 was dropped, 120000/1001 not).
   protocol::MarkerFrameMessage rate = Frame(0, 0, 0);
-  rate.rate_hz = 240.0f;
-  EXPECT_EQ(runner.Accept(rate, 0, sink_), DropReason::kRateMismatch);
+  for (const float off : {119.7f, 120.13f, 119.75f, 240.0f}) {
+    rate.rate_hz = off;
+    EXPECT_EQ(runner.Accept(rate, 0, sink_), DropReason::kRateMismatch) << off;
+  }
+  SubjectRunner ntsc(subject_, daemon_);
+  RecordingSink ntsc_sink;
+  for (const float near : {119.88f, 119.88012f, 120.0f}) {
+    protocol::MarkerFrameMessage m = Frame(0, 0, 0);
+    m.rate_hz = near;
+    m.frame_number = ntsc.counters().frames_in;
+    EXPECT_FALSE(ntsc.Accept(m, 0, ntsc_sink).has_value()) << near;
+  }
   // The warning and /health say which rate came against which was configured (they gave
   // the reason's name alone).
   EXPECT_DOUBLE_EQ(runner.mismatched_rate_hz(), 240.0);
@@ -179,7 +191,7 @@ TEST_F(SubjectRunnerTest, FramesForAnotherModelOrRateAreNeverApplied) {
             ": the frames say 240 Hz, the subject is configured for 120 Hz (rate_hz)");
   runner.Flush(sink_);
   EXPECT_TRUE(sink_.skeletons.empty());
-  EXPECT_EQ(runner.counters().dropped_total(), 3u);
+  EXPECT_EQ(runner.counters().dropped_total(), 6u);
   ExpectBalanced(runner);
 }
 
