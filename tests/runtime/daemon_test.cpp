@@ -827,8 +827,7 @@ TEST(DaemonTest, HealthNamesASubjectWhoseFramesAreAllDropped) {
   EXPECT_NE(log.str().find("subject 'actor1': every frame dropped as model_mismatch"),
             std::string::npos)
       << log.str();
-  EXPECT_NE(log.str().find("subject 'actor1': no longer dropping every frame (30 accepted"),
-            std::string::npos)
+  EXPECT_NE(log.str().find("subject 'actor1': no longer dropping every frame ("), std::string::npos)
       << log.str();
 }
 
