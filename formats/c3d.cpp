@@ -358,7 +358,7 @@ class Parser {
               (filled_by_frames_of(frame_bytes) && !filled_by_frames_of(instead_of)));
     };
     // Analog values a frame by the parameters: ANALOG:USED channels times the analog
-    // samples per point frame (0 when they say nothing usable).
+    // samples per point frame (the header's count when they say nothing usable).
     size_t parameter_analog = analog_values;
     {
       const std::optional<double> channels = Number("ANALOG:USED");

@@ -227,7 +227,7 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
                                        frame.capture_time_ns > interrupted_->capture_ns;
       if (!interrupted_goes_on) counters_.frames_skipped += missing;
       if (interrupted_goes_on || missing > static_cast<uint64_t>(max_gap_frames_)) {
-        // Too long to bridge with repaired frames: start over from this frame.
+        // Not to be bridged (published already, or too long): start over from this frame.
         Resynchronise(sink);
       } else {
         for (uint64_t k = 0; k < missing; ++k) {

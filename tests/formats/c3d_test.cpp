@@ -326,6 +326,16 @@ void RewritePointUsed(std::vector<uint8_t>* bytes, uint8_t used) {
   (*bytes)[at] = used;
 }
 
+// Reads bytes expecting `take` back, with one note, which says `note`.
+C3dTake ReadWithOneNote(const std::vector<uint8_t>& bytes, const C3dTake& take,
+                        const std::string& note) {
+  const C3dTake read = ParseC3d(bytes, "noted.c3d");
+  ExpectSameTake(take, read);
+  EXPECT_EQ(read.notes.size(), 1u);
+  for (const std::string& n : read.notes) EXPECT_NE(n.find(note), std::string::npos) << n;
+  return read;
+}
+
 // A take cropped to nothing: the header and POINT:FRAMES say zero frames, but the TRIAL
 // range of the take it came from stayed behind. Trusted because the header counted
 // nothing, it made an empty take a truncated one ("file ends inside frame 21 of 5000").
@@ -343,11 +353,7 @@ TEST(C3dTest, APointCountTheDataDoesNotHoldGivesWayToTheHeadersWithANote) {
   const C3dTake take = MakeTake(3, 20);
   std::vector<uint8_t> bytes = EncodeC3d(take);
   ASSERT_NO_FATAL_FAILURE(RewritePointUsed(&bytes, 5));
-  const C3dTake read = ParseC3d(bytes, "used.c3d");
-  ExpectSameTake(take, read);
-  ASSERT_EQ(read.notes.size(), 1u);
-  EXPECT_NE(read.notes[0].find("POINT:USED says 5 points, the header 3"), std::string::npos)
-      << read.notes[0];
+  ReadWithOneNote(bytes, take, "POINT:USED says 5 points, the header 3");
   // Neither count fits: the last frame cut short (header word 9: the data's first block).
   const size_t data_start = (bytes[16] + 256u * bytes[17] - 1) * 512;
   bytes.resize(data_start + 19 * 3 * 16 + 8);
@@ -369,11 +375,7 @@ TEST(C3dTest, APointCountThatLeavesTheDataHalfReadGivesWayToTheHeadersWithANote)
   const C3dTake take = MakeTake(3, 100);
   std::vector<uint8_t> bytes = EncodeC3d(take);
   ASSERT_NO_FATAL_FAILURE(RewritePointUsed(&bytes, 1));
-  const C3dTake read = ParseC3d(bytes, "fewer.c3d");
-  ExpectSameTake(take, read);
-  ASSERT_EQ(read.notes.size(), 1u);
-  EXPECT_NE(read.notes[0].find("POINT:USED says 1 points, the header 3"), std::string::npos)
-      << read.notes[0];
+  ReadWithOneNote(bytes, take, "POINT:USED says 1 points, the header 3");
 }
 
 // No points and no frames, with a stale TRIAL range from the take it was cut from: nothing
@@ -401,16 +403,13 @@ TEST(C3dTest, AScaleWhoseSignTheDataContradictsGivesWayToTheHeadersWithANote) {
     std::vector<uint8_t> bytes = EncodeC3d(take, encoding);
     const float wrong = integer ? -0.1f : 0.1f;  // Intel: little-endian IEEE
     std::memcpy(&bytes[ValueOffset(bytes, "SCALE", 0)], &wrong, sizeof(wrong));
-    const C3dTake read = ParseC3d(bytes, "scale.c3d");
-    ExpectSameTake(take, read);
+    const C3dTake read = ReadWithOneNote(
+        bytes, take,
+        integer ? "POINT:SCALE is -0.1 (float samples), the header's scale 0.1: the data holds "
+                  "frames of integer samples"
+                : "POINT:SCALE is 0.1 (integer samples), the header's scale -0.1: the data "
+                  "holds frames of float samples");
     EXPECT_EQ(read.float_storage, !integer);
-    ASSERT_EQ(read.notes.size(), 1u);
-    EXPECT_NE(read.notes[0].find(integer ? "POINT:SCALE is -0.1 (float samples), the header's "
-                                           "scale 0.1: the data holds frames of integer samples"
-                                         : "POINT:SCALE is 0.1 (integer samples), the header's "
-                                           "scale -0.1: the data holds frames of float samples"),
-              std::string::npos)
-        << read.notes[0];
   }
 }
 
@@ -449,13 +448,9 @@ std::vector<uint8_t> WithAnalogChannels(const C3dTake& take, uint8_t channels,
 // stride, silently (73 % of a take's samples then repaired as missing).
 TEST(C3dTest, AnAnalogCountTheDataContradictsGivesWayToTheParametersWithANote) {
   const C3dTake take = MakeTake(3, 100);
-  const C3dTake read = ParseC3d(WithAnalogChannels(take, 8, 4), "analog.c3d");
-  ExpectSameTake(take, read);
-  ASSERT_EQ(read.notes.size(), 1u);
-  EXPECT_NE(read.notes[0].find("the header stores 4 analog values a frame, ANALOG:USED x "
-                               "ANALOG:RATE / POINT:RATE 8: the data holds frames of 8"),
-            std::string::npos)
-      << read.notes[0];
+  ReadWithOneNote(WithAnalogChannels(take, 8, 4), take,
+                  "the header stores 4 analog values a frame, ANALOG:USED x ANALOG:RATE / "
+                  "POINT:RATE 8: the data holds frames of 8");
   // The header right and the parameter wrong: the header's stands, nothing to note.
   const C3dTake header_right = ParseC3d(WithAnalogChannels(take, 4, 8), "analog.c3d");
   ExpectSameTake(take, header_right);
@@ -466,11 +461,7 @@ TEST(C3dTest, AnAnalogCountTheDataContradictsGivesWayToTheParametersWithANote) {
   std::vector<uint8_t> both = EncodeC3d(take);
   ASSERT_NO_FATAL_FAILURE(RewritePointUsed(&both, 1));
   ASSERT_NO_FATAL_FAILURE(RewriteAnalogUsed(&both, 8));
-  const C3dTake points_first = ParseC3d(both, "both.c3d");
-  ExpectSameTake(take, points_first);
-  ASSERT_EQ(points_first.notes.size(), 1u);
-  EXPECT_NE(points_first.notes[0].find("POINT:USED says 1 points, the header 3"), std::string::npos)
-      << points_first.notes[0];
+  ReadWithOneNote(both, take, "POINT:USED says 1 points, the header 3");
 }
 
 // A C writer ends a label with a NUL and may leave its buffer's bytes after it: the label
