@@ -19,6 +19,7 @@
 #include <cstdio>
 #include <map>
 #include <optional>
+#include <set>
 #include <zmq.hpp>
 
 #include "runtime/http_server.hpp"
@@ -125,8 +126,10 @@ struct Daemon::DataPlane final : OutputSink {
         if (config.subscribe_all) {
           input.set(zmq::sockopt::subscribe, "");
         } else {
-          for (const auto& r : runners)
+          for (const auto& r : runners) {
+            subscribed_topics.insert(Topic("markers", r->name()));
             input.set(zmq::sockopt::subscribe, Topic("markers", r->name()));
+          }
         }
         input.connect(config.input_endpoint);
       } else {
@@ -260,18 +263,24 @@ struct Daemon::DataPlane final : OutputSink {
       stats.retired_dropped += removed->counters().dropped_total();
     }
     runners = std::move(next);
-    const bool resubscribe = config.input_pattern == InputPattern::kSub && !config.subscribe_all;
-    if (resubscribe)
-      for (const SubjectConfig& s : config.subjects)
-        input.set(zmq::sockopt::unsubscribe, Topic("markers", s.name));
+    // Only the topics that changed: unsubscribing a kept subject's topic and subscribing
+    // it again lets the publisher filter out whatever it sends in between, and the kept
+    // subject then bridges a frame it was sent as a repaired one.
+    if (config.input_pattern == InputPattern::kSub && !config.subscribe_all) {
+      std::set<std::string> wanted;
+      for (const auto& r : runners) wanted.insert(Topic("markers", r->name()));
+      for (const std::string& topic : subscribed_topics)
+        if (!wanted.contains(topic)) input.set(zmq::sockopt::unsubscribe, topic);
+      for (const std::string& topic : wanted)
+        if (!subscribed_topics.contains(topic)) input.set(zmq::sockopt::subscribe, topic);
+      subscribed_topics = std::move(wanted);
+    }
     // Endpoints and socket options stay as bound; the rest of the config applies now.
     reload->config.input_endpoint = config.input_endpoint;
     reload->config.input_pattern = config.input_pattern;
     reload->config.output_endpoint = config.output_endpoint;
     reload->config.subscribe_all = config.subscribe_all;
     config = std::move(reload->config);
-    if (resubscribe)
-      for (const auto& r : runners) input.set(zmq::sockopt::subscribe, Topic("markers", r->name()));
     // A reload posted while an older one waited replaced it: the count is the newest's.
     stats.reloads = reload->sequence;
     for (const auto& r : runners) r->PublishDescription(*this);
@@ -380,6 +389,7 @@ struct Daemon::DataPlane final : OutputSink {
   zmq::context_t& context;
   zmq::socket_t input;
   zmq::socket_t output;
+  std::set<std::string> subscribed_topics;  // the input's (a SUB's, per subject)
   DaemonConfig config;
   int index = 0;           // which worker
   bool forwarded = false;  // publishes to the forwarding thread, not to consumers

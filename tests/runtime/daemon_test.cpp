@@ -529,6 +529,52 @@ TEST(DaemonTest, ASubscribingDaemonTakesOnlyItsSubjectsTopics) {
   EXPECT_TRUE(s.Balanced());
 }
 
+// A reload that keeps a subject must not touch its subscription: unsubscribing and
+// subscribing again let the capture publisher drop what it sent in between, and the kept
+// subject bridged that frame as a repaired one (seen once in CI, mid-shoot in the field).
+TEST(DaemonTest, ReloadsOfASubscribingDaemonLoseNoFrameOfAKeptSubject) {
+  const testing::HumanoidFixture f = testing::MakeHumanoidFixture("walk", 1.0, 120.0);
+  zmq::context_t context;
+  DaemonConfig config = TestConfig("tcp://127.0.0.1:27371", "tcp://127.0.0.1:27372", 4);
+  config.input_pattern = InputPattern::kSub;
+  const SubjectModel model = MakeHumanoidSubject("actor1");
+  Sender capture(context, config.input_endpoint, f.take, model, zmq::socket_type::pub);
+  RunningDaemon daemon(context, config);
+  uint64_t next = 0;
+  ASSERT_TRUE(WaitForStats(*daemon, [&](const DaemonStats& s) {
+    capture.Send(0, next++, "markers/actor1/");
+    return s.messages_in > 0;
+  }));
+  const uint64_t first_taken = daemon->Stats().subjects[0].counters.frames_in;
+  // The capture streams without pause while reloads land between its frames.
+  constexpr int kFrames = 3000;
+  std::atomic<bool> sent{false};
+  std::thread streamer([&] {
+    for (int k = 0; k < kFrames; ++k) {
+      capture.Send(k % f.take.num_frames, next++, "markers/actor1/");
+      std::this_thread::sleep_for(50us);
+    }
+    sent = true;
+  });
+  int reloads = 0;
+  for (; !sent; ++reloads) {
+    daemon->Reload(config);
+    std::this_thread::sleep_for(2ms);
+  }
+  streamer.join();
+  ASSERT_GT(reloads, 20);
+  ASSERT_TRUE(WaitForStats(*daemon, [&](const DaemonStats& s) {
+    return s.subjects[0].counters.last_frame_number == next - 1;
+  }));
+  daemon.Stop();
+  const DaemonStats s = daemon->Stats();
+  EXPECT_EQ(s.subjects[0].counters.frames_inserted, 0u);
+  EXPECT_EQ(s.subjects[0].counters.frames_skipped, 0u);
+  EXPECT_GE(s.subjects[0].counters.frames_in, first_taken + kFrames);
+  EXPECT_EQ(s.subjects[0].counters.frames_published, s.subjects[0].counters.frames_in);
+  EXPECT_TRUE(s.Balanced());
+}
+
 // A subscribing daemon with two data-plane workers and these subjects.
 DaemonConfig TwoWorkerConfig(const std::string& capture, const std::string& output, int lookahead,
                              const std::vector<std::string>& names) {
