@@ -15,6 +15,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <charconv>
 #include <csignal>
 #include <cstdio>
 #include <map>
@@ -26,6 +27,16 @@
 
 namespace mocapd {
 namespace {
+
+// A float rate as the double its shortest decimal spells: 119.88f widened is
+// 119.87999725341797, which is what /subjects printed for the rate a sender wrote.
+double AsWritten(float value) {
+  char text[32];
+  const auto written = std::to_chars(text, text + sizeof text, value);
+  double out = value;
+  std::from_chars(text, written.ptr, out);
+  return out;
+}
 
 int64_t SteadyNs() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(
@@ -197,7 +208,7 @@ struct Daemon::DataPlane final : OutputSink {
       // A non-finite value is found after the subject name, so it can be charged to it.
       SubjectRunner* runner =
           status == protocol::DecodeStatus::kNonFinite ? FindRunner(frame.subject) : nullptr;
-      if (runner != nullptr) return runner->CountDrop(DropReason::kNonFinite);
+      if (runner != nullptr) return runner->CountDrop(DropReason::kNonFinite, receive_ns);
       return Drop(status == protocol::DecodeStatus::kNonFinite ? DropReason::kNonFinite
                                                                : DropReason::kMalformed);
     }
@@ -310,18 +321,18 @@ struct Daemon::DataPlane final : OutputSink {
       s.cleanup = r.cleanup_counters();
       s.pending = r.pending_received();
       s.since_last_input_s =
-          r.last_receive_ns() < 0 ? -1.0 : static_cast<double>(now - r.last_receive_ns()) * 1e-9;
+          r.last_input_ns() < 0 ? -1.0 : static_cast<double>(now - r.last_input_ns()) * 1e-9;
       const protocol::SubjectDescriptionMessage& d = r.description();
       s.markers = static_cast<int>(d.marker_names.size());
       s.joints = static_cast<int>(d.joint_names.size());
-      s.rate_hz = d.rate_hz;
+      s.rate_hz = AsWritten(d.rate_hz);
       s.lookahead = d.lookahead_frames;
       s.marker_set_hash = d.marker_set_hash;
       s.skeleton_hash = d.skeleton_hash;
       const auto rejecting = r.rejecting();
       s.rejecting_input = rejecting.has_value();
       if (rejecting) s.rejecting_reason = *rejecting;
-      s.mismatched_rate_hz = r.mismatched_rate_hz();
+      s.mismatched_rate_hz = AsWritten(static_cast<float>(r.mismatched_rate_hz()));
       s.character = r.character_info();
       s.model_suspect = r.model_suspect();
       s.model_distance_mm = r.model_distance_m() * 1e3;

@@ -179,7 +179,8 @@ std::optional<CharacterInfo> SubjectRunner::character_info() const {
 
 uint64_t SubjectRunner::pending() const { return static_cast<uint64_t>(pushed_ - published_); }
 
-void SubjectRunner::CountDrop(DropReason reason) {
+void SubjectRunner::CountDrop(DropReason reason, int64_t receive_ns) {
+  last_input_ns_ = receive_ns;
   ++counters_.frames_in;
   ++counters_.dropped[static_cast<size_t>(reason)];
   ++consecutive_dropped_;
@@ -188,13 +189,14 @@ void SubjectRunner::CountDrop(DropReason reason) {
 
 void SubjectRunner::InheritCounters(const SubjectRunner& previous) {
   counters_ = previous.counters_;
+  last_input_ns_ = previous.last_input_ns_;
   started_ = false;
 }
 
 std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessage& frame,
                                                 int64_t receive_ns, OutputSink& sink) {
   auto drop = [&](DropReason reason) {
-    CountDrop(reason);
+    CountDrop(reason, receive_ns);
     return std::optional<DropReason>(reason);
   };
   if (frame.model_hash != marker_hash_ || frame.positions.size() != missing_.size())
@@ -263,6 +265,7 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
   consecutive_dropped_ = 0;
   started_ = true;
   last_receive_ns_ = receive_ns;
+  last_input_ns_ = receive_ns;
   last_capture_ns_ = frame.capture_time_ns;
   counters_.last_frame_number = frame.frame_number;
   counters_.last_stream = frame.stream;

@@ -113,7 +113,7 @@ class SubjectRunner {
   std::optional<DropReason> Accept(const protocol::MarkerFrameMessage& frame, int64_t receive_ns,
                                    OutputSink& sink);
   /// Counts a frame for this subject that was rejected before it could be decoded fully.
-  void CountDrop(DropReason reason);
+  void CountDrop(DropReason reason, int64_t receive_ns);
   /// Publishes everything still held in the lookahead (shutdown, reload, restart).
   void Flush(OutputSink& sink);
   /// The sender says the stream ended: publish the lookahead now; the next frame starts afresh.
@@ -149,6 +149,8 @@ class SubjectRunner {
   /// The rate the last frame dropped as rate_mismatch said it was captured at (0: none).
   double mismatched_rate_hz() const { return mismatched_rate_hz_; }
   int64_t last_receive_ns() const { return last_receive_ns_; }
+  /// When a frame for this subject last arrived, taken or dropped (-1: never).
+  int64_t last_input_ns() const { return last_input_ns_; }
   const SubjectCounters& counters() const { return counters_; }
   const CleanupCounters& cleanup_counters() const { return pipeline_->counters(); }
   /// Carries the counters of a runner this one replaces (a reload changed its model).
@@ -257,6 +259,7 @@ class SubjectRunner {
   uint64_t next_frame_number_ = 0;
   uint64_t last_capture_ns_ = 0;
   int64_t last_receive_ns_ = -1;
+  int64_t last_input_ns_ = -1;
   protocol::SubjectState state_ = protocol::SubjectState::kWaiting;
   uint64_t consecutive_dropped_ = 0;
   uint64_t rejecting_after_ = 10;

@@ -837,7 +837,9 @@ TEST(DaemonTest, HttpServesHealthSubjectsAndMetrics) {
 
 // A bridge sending another marker set: every frame is dropped, and /health, which said
 // "ok" through it before, says degraded and names the subject and the reason. When the
-// right model's frames come again, the log says the rejection ended.
+// right model's frames come again, the log says the rejection ended. /subjects says when
+// its frames last came (dropped or not) and its rate as configured (at 119.88 Hz, which a
+// float widened to double printed as 119.87999725341797).
 TEST(DaemonTest, HealthNamesASubjectWhoseFramesAreAllDropped) {
   const testing::HumanoidFixture f = testing::MakeHumanoidFixture("walk", 1.0, 120.0);
   // The log, captured: added before the daemon's threads start and removed after they end.
@@ -846,9 +848,12 @@ TEST(DaemonTest, HealthNamesASubjectWhoseFramesAreAllDropped) {
       std::make_shared<spdlog::sinks::ostream_sink_mt>(log));
   {
     zmq::context_t context;
-    RunningDaemon daemon(context, TestConfig("inproc://reject-in", "inproc://reject-out", 4));
+    DaemonConfig config = TestConfig("inproc://reject-in", "inproc://reject-out", 4);
+    config.subjects[0].rate_hz = config.subjects[0].cleanup.rate_hz = 119.88;
+    RunningDaemon daemon(context, config);
     Sender sender(context, "inproc://reject-in", f.take, MakeHumanoidSubject("actor1"),
                   zmq::socket_type::push);
+    sender.message_.rate_hz = 119.88f;
     sender.message_.model_hash ^= 1;
     for (int t = 0; t < 100; ++t) sender.Send(t, static_cast<uint64_t>(t));
     ASSERT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) {
@@ -862,6 +867,10 @@ TEST(DaemonTest, HealthNamesASubjectWhoseFramesAreAllDropped) {
         << health;
     const std::string subjects = HttpGet(daemon->http_port(), "/subjects").second;
     EXPECT_NE(subjects.find("\"rejecting_input\": true"), std::string::npos) << subjects;
+    EXPECT_NE(subjects.find("\"rate_hz\": 119.88,"), std::string::npos) << subjects;
+    const double since_input = nlohmann::json::parse(subjects)[0]["seconds_since_last_input"];
+    EXPECT_GE(since_input, 0.0);
+    EXPECT_LT(since_input, 30.0);
     sender.message_.model_hash ^= 1;
     for (int t = 100; t < 130; ++t) sender.Send(t - 100, static_cast<uint64_t>(t));
     EXPECT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) {
