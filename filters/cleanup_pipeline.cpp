@@ -2,6 +2,7 @@
 #include "filters/cleanup_pipeline.hpp"
 
 #include <algorithm>
+#include <optional>
 
 namespace mocapd {
 namespace {
@@ -35,6 +36,7 @@ CleanupPipeline::CleanupPipeline(std::shared_ptr<const Skeleton> skeleton,
   out_.pose = RestPose(*skeleton_);
   last_taken_.assign(m, Vec3::Zero());
   has_last_taken_.assign(m, 0);
+  glitch_last_.assign(m, Vec3::Constant(kNaN));
   displacement_.assign(m, 0.0);
   solve_samples_.assign(m, Vec3::Zero());
   return_motion_.assign(m, Vec3::Constant(kNaN));
@@ -93,16 +95,31 @@ bool CleanupPipeline::Push(std::span<const Vec3> p_WM) {
 // missing, it harms no solver's history. A jump that persists is a re-synchronisation.
 void CleanupPipeline::GateGlitch(WindowFrame& s) {
   const size_t m_count = s.raw.size();
-  int moved_count = 0;
-  for (size_t m = 0; m < m_count; ++m)
-    if (s.valid[m] && has_last_taken_[m])
-      displacement_[static_cast<size_t>(moved_count++)] = (s.raw[m] - last_taken_[m]).norm();
-  const double seconds = static_cast<double>(s.frame - last_taken_frame_) / options_.rate_hz;
+  // The median over the markers seen in this frame and in `from` of how far they moved.
+  auto median_move = [&](const std::vector<Vec3>& from, auto&& seen) -> std::optional<double> {
+    int count = 0;
+    for (size_t m = 0; m < m_count; ++m)
+      if (s.valid[m] && seen(m))
+        displacement_[static_cast<size_t>(count++)] = (s.raw[m] - from[m]).norm();
+    if (count < 3) return std::nullopt;
+    const auto mid = displacement_.begin() + count / 2;
+    std::nth_element(displacement_.begin(), mid, displacement_.begin() + count);
+    return *mid;
+  };
   bool glitch = false;
-  if (moved_count >= 3 && last_taken_frame_ >= 0) {
-    const auto mid = displacement_.begin() + moved_count / 2;
-    std::nth_element(displacement_.begin(), mid, displacement_.begin() + moved_count);
-    glitch = *mid > options_.glitch_speed_mps * seconds + 0.05;
+  if (last_taken_frame_ >= 0) {
+    const auto from_taken = median_move(last_taken_, [&](size_t m) { return has_last_taken_[m]; });
+    const double seconds = static_cast<double>(s.frame - last_taken_frame_) / options_.rate_hz;
+    glitch = from_taken && *from_taken > options_.glitch_speed_mps * seconds + 0.05;
+    // Within a glitch, the allowance above grows with every frame gated, until a jump that
+    // persists passes for motion (2 m at 120 Hz after 6 frames) and the skeleton chased it
+    // at the catch-up speed, every sample "observed". A frame nearer the glitch's frames
+    // than the last one taken carries the glitch on.
+    if (!glitch && from_taken && glitch_since_ >= 0) {
+      const auto from_glitch =
+          median_move(glitch_last_, [&](size_t m) { return glitch_last_[m].allFinite(); });
+      glitch = from_glitch && *from_glitch < *from_taken;
+    }
   }
   if (glitch) {
     glitch_since_ = glitch_since_ < 0 ? s.frame : glitch_since_;
@@ -110,6 +127,7 @@ void CleanupPipeline::GateGlitch(WindowFrame& s) {
         options_.glitch_resync_s) {
       ++counters_.glitch_frames;
       for (size_t m = 0; m < m_count; ++m) {
+        glitch_last_[m] = s.valid[m] ? s.raw[m] : Vec3::Constant(kNaN);
         s.raw[m] = Vec3::Constant(kNaN);
         s.valid[m] = 0;
         s.mask[m] = MaskReason::kMissing;

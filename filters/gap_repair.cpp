@@ -71,6 +71,9 @@ void GapRepair::Repair(const CleanupWindow& window, int64_t tau, int64_t newest,
                                 : newest;
       int64_t end = -1;
       for (int64_t f = tau + 1; f <= sight; ++f) {
+        // A re-synchronisation is another world frame, not the marker's return: a fill
+        // toward it glided the whole body across the jump through the glitch's frames.
+        if (window.at(f).resync) break;
         if (window.at(f).mask[m] == MaskReason::kNone) {
           end = f;
           break;
