@@ -128,8 +128,16 @@ class Parser {
     Require(reader_.ReadU8(&reserved1) && reader_.ReadU8(&reserved2) && reader_.ReadU8(&blocks) &&
                 reader_.ReadU8(&processor),
             "parameters", "truncated section header");
-    const size_t end =
+    const size_t declared_end =
         std::min(reader_.size(), param_start_ + std::max<size_t>(blocks, 1) * kBlock);
+    // Entries linked on past the declared blocks (a writer that counted the blocks wrong)
+    // are read up to the data section: cut at the count, the POINT group went missing in
+    // silence (no labels, no units, a take in metres read as millimetres).
+    const size_t data_start = (static_cast<size_t>(header_data_block_) - 1) * kBlock;
+    const size_t end = header_data_block_ >= 1 && data_start > declared_end
+                           ? std::min(reader_.size(), data_start)
+                           : declared_end;
+    size_t last_entry_end = 0;
     std::map<int, std::string> group_names;
     struct Pending {
       int group;
@@ -139,49 +147,64 @@ class Parser {
     std::vector<Pending> pending;
     size_t pos = param_start_ + 4;
     while (pos + 2 <= end) {
-      Require(reader_.Seek(pos), "parameters", "truncated");
-      int8_t name_len_signed = 0, id = 0;
-      Require(reader_.ReadI8(&name_len_signed) && reader_.ReadI8(&id), "parameters",
-              "truncated entry");
-      if (name_len_signed == 0 || id == 0) break;  // end of the list
-      const size_t name_len = static_cast<size_t>(std::abs(static_cast<int>(name_len_signed)));
-      std::string name;
-      Require(reader_.ReadString(name_len, &name), "parameters",
-              "name runs past the end of the file");
-      const size_t next_field = reader_.offset();
-      int16_t next = 0;
-      Require(reader_.ReadI16(&next), "parameters", "truncated entry");
-      if (id < 0) {
-        uint8_t desc_len = 0;
-        Require(reader_.ReadU8(&desc_len) && reader_.Skip(desc_len), "parameters",
-                "group '" + name + "' description runs past the end");
-        group_names[-id] = boost::algorithm::to_upper_copy(TrimRight(name));
-      } else {
-        Parameter p;
-        uint8_t ndims = 0;
-        Require(reader_.ReadI8(&p.type) && reader_.ReadU8(&ndims), "parameters",
-                "parameter '" + name + "' is truncated");
-        if (p.type != -1 && p.type != 1 && p.type != 2 && p.type != 4)
-          Fail("parameters", reader_.offset() - 2,
-               "parameter '" + name + "' has invalid type " + std::to_string(p.type));
-        size_t count = 1;
-        for (uint8_t d = 0; d < ndims; ++d) {
-          uint8_t dim = 0;
-          Require(reader_.ReadU8(&dim), "parameters",
-                  "parameter '" + name + "' dimensions are truncated");
-          p.dims.push_back(dim);
-          count *= dim;
+      // Past the declared blocks, an entry that does not read is where the list ends (the
+      // rest of the last block may be anything), not a broken file.
+      const bool beyond_declared = pos >= declared_end;
+      try {
+        Require(reader_.Seek(pos), "parameters", "truncated");
+        int8_t name_len_signed = 0, id = 0;
+        Require(reader_.ReadI8(&name_len_signed) && reader_.ReadI8(&id), "parameters",
+                "truncated entry");
+        if (name_len_signed == 0 || id == 0) break;  // end of the list
+        const size_t name_len = static_cast<size_t>(std::abs(static_cast<int>(name_len_signed)));
+        std::string name;
+        Require(reader_.ReadString(name_len, &name), "parameters",
+                "name runs past the end of the file");
+        const size_t next_field = reader_.offset();
+        int16_t next = 0;
+        Require(reader_.ReadI16(&next), "parameters", "truncated entry");
+        if (id < 0) {
+          uint8_t desc_len = 0;
+          Require(reader_.ReadU8(&desc_len) && reader_.Skip(desc_len), "parameters",
+                  "group '" + name + "' description runs past the end");
+          if (!beyond_declared || !group_names.contains(-id))
+            group_names[-id] = boost::algorithm::to_upper_copy(TrimRight(name));
+        } else {
+          Parameter p;
+          uint8_t ndims = 0;
+          Require(reader_.ReadI8(&p.type) && reader_.ReadU8(&ndims), "parameters",
+                  "parameter '" + name + "' is truncated");
+          if (p.type != -1 && p.type != 1 && p.type != 2 && p.type != 4)
+            Fail("parameters", reader_.offset() - 2,
+                 "parameter '" + name + "' has invalid type " + std::to_string(p.type));
+          size_t count = 1;
+          for (uint8_t d = 0; d < ndims; ++d) {
+            uint8_t dim = 0;
+            Require(reader_.ReadU8(&dim), "parameters",
+                    "parameter '" + name + "' dimensions are truncated");
+            p.dims.push_back(dim);
+            count *= dim;
+          }
+          const size_t bytes = count * static_cast<size_t>(std::abs(static_cast<int>(p.type)));
+          p.offset = reader_.offset();
+          Require(reader_.ReadBytes(bytes, &p.data), "parameters",
+                  "parameter '" + name + "' data (" + std::to_string(bytes) +
+                      " bytes) runs past the end");
+          pending.push_back({id, boost::algorithm::to_upper_copy(TrimRight(name)), std::move(p)});
         }
-        const size_t bytes = count * static_cast<size_t>(std::abs(static_cast<int>(p.type)));
-        p.offset = reader_.offset();
-        Require(reader_.ReadBytes(bytes, &p.data), "parameters",
-                "parameter '" + name + "' data (" + std::to_string(bytes) +
-                    " bytes) runs past the end");
-        pending.push_back({id, boost::algorithm::to_upper_copy(TrimRight(name)), std::move(p)});
+        last_entry_end = reader_.offset();
+        if (next <= 0) break;  // 0 marks the last entry; a negative link cannot move forward
+        pos = next_field + static_cast<size_t>(next);
+      } catch (const C3dError&) {
+        if (!beyond_declared) throw;
+        break;
       }
-      if (next <= 0) break;  // 0 marks the last entry; a negative link cannot move forward
-      pos = next_field + static_cast<size_t>(next);
     }
+    if (last_entry_end > declared_end)
+      notes_.push_back("the parameter section's header says " + std::to_string(blocks) +
+                       " blocks, its entries run on to block " +
+                       std::to_string((last_entry_end - 1 - param_start_) / kBlock + 1) +
+                       ": they are read to the last");
     for (Pending& p : pending) {
       auto g = group_names.find(p.group);
       const std::string group =
@@ -253,6 +276,7 @@ class Parser {
 
   C3dTake ReadData() {
     C3dTake take;
+    take.notes = notes_;
     take.processor = processor_ == kProcessorIntel ? "Intel"
                      : processor_ == kProcessorDec ? "DEC"
                                                    : "MIPS";
@@ -289,22 +313,28 @@ class Parser {
       take.notes.emplace_back(note);
     }
     const auto units = Strings("POINT:UNITS");
-    take.units = units.empty() || units[0].empty() ? "mm" : units[0];
+    // Trimmed both sides: " mm" was refused as an unknown unit while "mm " was read.
+    take.units = units.empty() ? "" : boost::algorithm::trim_copy(units[0]);
+    if (take.units.empty()) take.units = "mm";
     try {
       take.metres_per_unit = MetresPerUnit(take.units);
     } catch (const std::invalid_argument& e) {
       Fail("parameters", Find("POINT:UNITS")->offset, e.what());
     }
 
-    int64_t frames = static_cast<int64_t>(header_last_) - static_cast<int64_t>(header_first_) + 1;
+    const int64_t header_frames =
+        static_cast<int64_t>(header_last_) - static_cast<int64_t>(header_first_) + 1;
+    const bool header_capped = header_last_ == 65535;
+    int64_t frames = header_frames;
+    int64_t point_frames = -1;
     if (auto f = Number("POINT:FRAMES")) {
       double v = *f;
       if (Find("POINT:FRAMES")->type == 2 && v < 0) v += 65536;  // unsigned word
       if (!std::isfinite(v) || v < 0 || v > 2147483647.0)
         Fail("parameters", Find("POINT:FRAMES")->offset,
              "POINT:FRAMES is " + std::to_string(v) + ", expected a frame count");
-      if (header_last_ == 65535 || frames <= 0 || static_cast<int64_t>(v) > frames)
-        frames = static_cast<int64_t>(v);
+      point_frames = static_cast<int64_t>(v);
+      if (header_capped || frames <= 0 || point_frames > frames) frames = point_frames;
     }
     int64_t trial_frames = -1;
     if (auto end_lo = Number("TRIAL:ACTUAL_END_FIELD", 0)) {
@@ -429,6 +459,43 @@ class Parser {
     if (trial_frames > frames && frame_bytes > 0 &&
         (header_last_ == 65535 || holds(trial_frames, used)))
       frames = trial_frames;
+    // Vicon writes the count past 65535 as a float, POINT:LONG_FRAMES.
+    if (auto long_frames = Number("POINT:LONG_FRAMES");
+        long_frames && std::isfinite(*long_frames) && *long_frames > static_cast<double>(frames) &&
+        *long_frames < 2147483647.0 && frame_bytes > 0 &&
+        holds(static_cast<int64_t>(*long_frames), used))
+      frames = static_cast<int64_t>(*long_frames);
+    // A POINT:FRAMES longer than the header's count and than the data (left behind when a
+    // take was cropped) made the file unreadable: the header's count is read when the data
+    // holds it.
+    if (frame_bytes > 0 && !header_capped && frames == point_frames && header_frames > 0 &&
+        point_frames > header_frames && !holds(point_frames, used) && holds(header_frames, used)) {
+      take.notes.push_back("POINT:FRAMES says " + std::to_string(point_frames) +
+                           " frames, the header " + std::to_string(header_frames) +
+                           ": the data holds " + std::to_string(header_frames) +
+                           ", so the header's count is read");
+      frames = header_frames;
+    }
+    // A header capped at 65535 counts at least that many: a smaller POINT:FRAMES (a 16-bit
+    // count wrapped, or 0) dropped every frame past it, or all of them. The data's whole
+    // frames are read then, less trailing all-zero ones (a block's padding), with a note.
+    if (frame_bytes > 0 && header_capped && header_frames > 0 && frames < header_frames &&
+        holds(header_frames, used)) {
+      int64_t whole = static_cast<int64_t>(available / frame_bytes);
+      const auto all_zero = [&](int64_t frame) {
+        const auto start =
+            bytes_.begin() +
+            static_cast<std::ptrdiff_t>(data_start + static_cast<size_t>(frame) * frame_bytes);
+        return std::all_of(start, start + static_cast<std::ptrdiff_t>(frame_bytes),
+                           [](uint8_t b) { return b == 0; });
+      };
+      while (whole > header_frames && all_zero(whole - 1)) --whole;
+      take.notes.push_back("the header's frame count is capped at 65535 and POINT:FRAMES says " +
+                           std::to_string(point_frames < 0 ? 0 : point_frames) +
+                           ", with no TRIAL range: the " + std::to_string(whole) +
+                           " whole frames the data holds are read");
+      frames = whole;
+    }
     if (frames < 0) frames = 0;
     if (frame_bytes > 0 && static_cast<size_t>(frames) > available / frame_bytes) {
       const size_t whole = available / frame_bytes;
@@ -517,6 +584,7 @@ class Parser {
   }
 
   std::span<const uint8_t> bytes_;
+  std::vector<std::string> notes_;  // said while reading the header and parameters
   ByteReader reader_;
   std::string source_;
   size_t param_start_ = 0;
@@ -631,7 +699,7 @@ void C3dTake::Allocate(int frames) {
 }
 
 double MetresPerUnit(const std::string& units) {
-  const std::string u = boost::algorithm::to_upper_copy(TrimRight(units));
+  const std::string u = boost::algorithm::to_upper_copy(boost::algorithm::trim_copy(units));
   if (u == "MM") return 1e-3;
   if (u == "CM") return 1e-2;
   if (u == "M") return 1.0;
@@ -687,7 +755,9 @@ std::vector<uint8_t> EncodeC3d(const C3dTake& take, const C3dEncoding& encoding)
   WriteParameter(pw, params, order, 1, "SCALE", 4, {}, FloatData(layout, {scale}));
   WriteParameter(pw, params, order, 1, "RATE", 4, {},
                  FloatData(layout, {static_cast<float>(take.rate_hz)}));
-  const int first = std::clamp(take.first_frame, 1, 65535);
+  // A take numbered from 0 keeps its numbering (an empty one starts at 1: its last
+  // frame, first - 1, must not wrap to the header's 65535, which means "capped").
+  const int first = std::clamp(take.first_frame, take.num_frames > 0 ? 0 : 1, 65535);
   const bool long_take = static_cast<int64_t>(first) + take.num_frames - 1 > 65535;
   if (take.num_frames <= 32767)
     WriteParameter(pw, params, order, 1, "FRAMES", 2, {},

@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <optional>
 
@@ -348,10 +349,18 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
     }
     for (size_t m = 0; m < point_of_marker.size(); ++m) {
       const int p = point_of_marker[m];
-      if (p < 0 || frame.status[m] != MarkerStatus::kRepaired) continue;
-      cleaned.at(f, p) = frame.markers[m];
-      cleaned.residuals[static_cast<size_t>(f) * static_cast<size_t>(cleaned.num_points()) +
-                        static_cast<size_t>(p)] = 0.0f;
+      if (p < 0) continue;
+      const size_t sample = static_cast<size_t>(f) * static_cast<size_t>(cleaned.num_points()) +
+                            static_cast<size_t>(p);
+      if (frame.status[m] == MarkerStatus::kRepaired) {
+        cleaned.at(f, p) = frame.markers[m];
+        cleaned.residuals[sample] = 0.0f;
+      } else if (frame.status[m] == MarkerStatus::kUnrecoverable) {
+        // A captured sample judged bad with nothing to repair it from is missing, as the
+        // report counts it (it was written back as captured, bit for bit).
+        cleaned.positions[sample] = Vec3::Constant(std::numeric_limits<double>::quiet_NaN());
+        cleaned.residuals[sample] = -1.0f;
+      }
     }
   };
   auto draw_progress = [&](int done) {

@@ -504,9 +504,74 @@ TEST(C3dTest, FramesPastTheCountAreNotedNotDroppedInSilence) {
   EXPECT_TRUE(ParseC3d(EncodeC3d(MakeTake(3, 0)), "empty.c3d").notes.empty());
 }
 
+// A take cropped by rewriting the header's range, POINT:FRAMES left at the original's
+// 2751: the data holds the header's 20 frames, which are read, with a note. The file was
+// refused ("file ends inside frame 21 of 2751").
+TEST(C3dTest, AStalePointFramesLongerThanTheDataGivesWayToTheHeadersWithANote) {
+  const C3dTake take = MakeTake(3, 20);
+  std::vector<uint8_t> bytes = EncodeC3d(take);
+  const size_t point_frames = ValueOffset(bytes, "FRAMES", 0);
+  bytes[point_frames] = 2751 & 0xff;
+  bytes[point_frames + 1] = 2751 >> 8;
+  ReadWithOneNote(bytes, take, "POINT:FRAMES says 2751 frames, the header 20");
+}
+
+// Past 65535 frames the header is capped; the count is in the TRIAL range or a POINT:FRAMES
+// wide enough. With neither (no TRIAL group, POINT:FRAMES a 16-bit count wrapped or 0),
+// the smaller count won: 65536 frames dropped, or an empty take, in silence. The data's
+// whole frames are read, its padding block not among them, with a note.
+TEST(C3dTest, ACappedHeaderReadsEveryFrameTheDataHoldsWhenNoCountIsWider) {
+  const C3dTake take = MakeTake(1, 70000);
+  const std::vector<uint8_t> encoded = EncodeC3d(take);
+  for (const float point_frames : {4464.0f, 0.0f}) {
+    SCOPED_TRACE(point_frames);
+    std::vector<uint8_t> bytes = encoded;
+    const std::string trial = "ACTUAL_END_FIELD";
+    auto at = std::search(bytes.begin(), bytes.end(), trial.begin(), trial.end());
+    ASSERT_NE(at, bytes.end());
+    *at = 'X';  // an unknown parameter now: no TRIAL range
+    const size_t frames_at = ValueOffset(bytes, "FRAMES", 0);
+    std::memcpy(&bytes[frames_at], &point_frames, sizeof point_frames);
+    const C3dTake read = ParseC3d(bytes, "long.c3d");
+    ExpectSameTake(take, read);
+    ASSERT_EQ(read.notes.size(), 1u);
+    EXPECT_NE(read.notes[0].find("capped at 65535"), std::string::npos) << read.notes[0];
+    EXPECT_NE(read.notes[0].find("the 70000 whole frames the data holds are read"),
+              std::string::npos)
+        << read.notes[0];
+  }
+}
+
+// " mm" was refused as an unknown unit while "mm " was read; a take numbered from 0
+// kept its numbering nowhere (the writer made it 1..n).
+TEST(C3dTest, UnitsAreTrimmedBothSidesAndATakeFromFrameZeroKeepsItsNumbering) {
+  C3dTake take = MakeTake(2, 5);
+  take.units = " mm";
+  take.first_frame = 0;
+  const C3dTake read = ParseC3d(EncodeC3d(take), "zero.c3d");
+  EXPECT_EQ(read.units, "mm");
+  EXPECT_EQ(read.first_frame, 0);
+  EXPECT_EQ(read.num_frames, 5);
+  EXPECT_TRUE(read.notes.empty());
+}
+
+// A writer that counted its parameter blocks wrong (one, for a section of several): the
+// entries linked on past it were cut off in silence, labels and units among them. They
+// are read to the last, up to the data section, with a note; what follows the last entry
+// in its block is no entry.
+TEST(C3dTest, ParametersLinkedPastTheDeclaredBlocksAreReadWithANote) {
+  const C3dTake take = MakeTake(200, 3);
+  std::vector<uint8_t> bytes = EncodeC3d(take);
+  const size_t param_start = (bytes[0] - 1u) * 512;
+  ASSERT_GE(bytes[param_start + 2], 3);  // labels alone take 800 bytes
+  bytes[param_start + 2] = 1;
+  ReadWithOneNote(bytes, take, "the parameter section's header says 1 blocks, its entries run on");
+}
+
 TEST(C3dTest, MetresPerUnitKnowsTheUsualUnits) {
   EXPECT_DOUBLE_EQ(MetresPerUnit("mm"), 1e-3);
   EXPECT_DOUBLE_EQ(MetresPerUnit("M "), 1.0);
+  EXPECT_DOUBLE_EQ(MetresPerUnit(" mm"), 1e-3);
   EXPECT_DOUBLE_EQ(MetresPerUnit("in"), 0.0254);
   EXPECT_THROW(MetresPerUnit("parsec"), std::invalid_argument);
 }

@@ -70,7 +70,11 @@ TEST(ProcessCommandTest, CleansATakeAndWritesAlignedBvhCleanedC3dAndReport) {
   const std::string dir = testing::TempDir("process");
   WriteFixtureSubject(f, dir + "/actor.toml");
   CorruptionOptions corruption;
-  const CorruptedTake bad = CorruptTake(f.take, f.markers.get(), corruption);
+  CorruptedTake bad = CorruptTake(f.take, f.markers.get(), corruption);
+  // A marker 15 cm off its place from the take's first frame for 0.5 s: judged bad with
+  // nothing before it to repair from, unrecoverable.
+  for (int fr = 0; fr < 60; ++fr)
+    if (bad.take.valid(fr, 10)) bad.take.at(fr, 10) += Vec3(0.15, 0.0, 0.0);
   WriteC3d(dir + "/take.c3d", bad.take);
 
   ProcessCommandOptions options = OptionsIn(dir, "solved.bvh");
@@ -93,10 +97,12 @@ TEST(ProcessCommandTest, CleansATakeAndWritesAlignedBvhCleanedC3dAndReport) {
   const C3dTake input = ReadC3d(dir + "/take.c3d");
   const C3dTake cleaned = ReadC3d(dir + "/cleaned.c3d");
   ASSERT_EQ(cleaned.labels, input.labels);
-  int false_positives = 0, identical = 0;
+  int false_positives = 0, identical = 0, missing_out = 0, removed = 0;
   for (int fr = 0; fr < input.num_frames; ++fr) {
     for (int p = 0; p < input.num_points(); ++p) {
-      if (!input.valid(fr, p)) continue;
+      missing_out += !cleaned.valid(fr, p);
+      removed += input.valid(fr, p) && !cleaned.valid(fr, p);
+      if (!input.valid(fr, p) || !cleaned.valid(fr, p)) continue;
       const double moved = (cleaned.at(fr, p) - input.at(fr, p)).norm();
       ASSERT_TRUE(moved == 0.0 || moved > 1e-6) << fr << " " << p << " moved by " << moved;
       identical += moved == 0.0;
@@ -104,6 +110,11 @@ TEST(ProcessCommandTest, CleansATakeAndWritesAlignedBvhCleanedC3dAndReport) {
     }
   }
   EXPECT_GT(identical, input.num_frames * input.num_points() * 8 / 10);
+  // What the report calls unrecoverable is missing in the cleaned take, and nothing else:
+  // captured samples judged bad with nothing to repair them from were written back as
+  // captured.
+  EXPECT_GT(removed, 0);  // the displaced marker's, at least
+  EXPECT_EQ(missing_out, summary.counters.unrecoverable);
   EXPECT_LT(false_positives, input.num_frames * input.num_points() * 3 / 100);
 
   std::ifstream report_file(dir + "/report.json");
