@@ -702,20 +702,41 @@ void Daemon::Reload(DaemonConfig config) {
 
 void Daemon::ApplyReload(DaemonConfig config) {
   const DaemonConfig& old = control_->config;
-  if (config.input_endpoint != old.input_endpoint ||
-      config.output_endpoint != old.output_endpoint || config.input_pattern != old.input_pattern ||
-      config.subscribe_all != old.subscribe_all || config.http_port != old.http_port ||
-      config.http_address != old.http_address || config.http_enabled != old.http_enabled ||
-      config.http_token != old.http_token ||
-      config.http_max_connections != old.http_max_connections || config.workers != old.workers ||
-      config.live_view != old.live_view || config.live_view_rate_hz != old.live_view_rate_hz ||
-      config.live_view_max_viewers != old.live_view_max_viewers ||
-      config.pin_workers != old.pin_workers || config.curve != old.curve ||
-      config.curve_keys.secret_key != old.curve_keys.secret_key ||
-      config.curve_input_server_key != old.curve_input_server_key)
+  // What only a restart changes, against what runs: each such field keeps its running
+  // value in the control plane's copy, so a later reload is compared with the sockets as
+  // they are (compared with the last file, a second reload that kept a changed endpoint
+  // said nothing, and one that put the running one back warned).
+  std::string restart_only;
+  auto keep_running = [&](const char* name, auto DaemonConfig::*field) {
+    if (config.*field == old.*field) return;
+    restart_only += (restart_only.empty() ? "" : ", ") + std::string(name);
+    config.*field = old.*field;
+  };
+  keep_running("input.endpoint", &DaemonConfig::input_endpoint);
+  keep_running("input.pattern", &DaemonConfig::input_pattern);
+  keep_running("input.subscribe", &DaemonConfig::subscribe_all);
+  keep_running("input.workers", &DaemonConfig::workers);
+  keep_running("input.pin_workers", &DaemonConfig::pin_workers);
+  keep_running("output.endpoint", &DaemonConfig::output_endpoint);
+  keep_running("control.http_port", &DaemonConfig::http_port);
+  keep_running("control.http_address", &DaemonConfig::http_address);
+  keep_running("control.http", &DaemonConfig::http_enabled);
+  keep_running("control.http_token_file", &DaemonConfig::http_token);
+  keep_running("control.http_max_connections", &DaemonConfig::http_max_connections);
+  keep_running("control.live_view", &DaemonConfig::live_view);
+  keep_running("control.live_view_rate_hz", &DaemonConfig::live_view_rate_hz);
+  keep_running("control.live_view_max_viewers", &DaemonConfig::live_view_max_viewers);
+  keep_running("security.curve", &DaemonConfig::curve);
+  keep_running("security.input_server_key_file", &DaemonConfig::curve_input_server_key);
+  if (config.curve_keys.secret_key != old.curve_keys.secret_key) {
+    restart_only += (restart_only.empty() ? "" : ", ") + std::string("security.key_file");
+    config.curve_keys = old.curve_keys;
+  }
+  if (!restart_only.empty())
     spdlog::warn(
-        "reload: endpoint, worker, CURVE key and HTTP access changes take effect only after a "
-        "restart; the sockets, the workers and the HTTP endpoint stay as they are");
+        "reload: {} changed, which takes effect only after a restart; the sockets, the "
+        "workers and the HTTP endpoint stay as they are",
+        restart_only);
   AssignWorkers(config);
   // Every worker's part is built before any is posted: a reload applies everywhere or
   // nowhere.
@@ -1034,7 +1055,8 @@ void Daemon::Run(bool handle_signals) {
                 "watchdog: subject '{}' input stalled (no frame for {:.2f} s, last frame {})",
                 s.name, s.counters.stall_silence_s, s.counters.stall_last_frame);
           if (before != nullptr && s.counters.resumes > before->counters.resumes)
-            spdlog::info("subject '{}' input resumed at frame {}", s.name, s.counters.resume_frame);
+            spdlog::info("subject '{}' input resumed at frame {} after {:.2f} s without a frame",
+                         s.name, s.counters.resume_frame, s.counters.resume_silence_s);
           if (before != nullptr && s.counters.restarts > before->counters.restarts)
             spdlog::warn(
                 "subject '{}': capture restart or jump in frame numbers; pipeline re-synchronised "

@@ -2,6 +2,7 @@
 #include "runtime/daemon_config.hpp"
 
 #include <algorithm>
+#include <boost/asio/ip/address.hpp>
 #include <cctype>
 #include <cmath>
 #include <cstdio>
@@ -36,8 +37,12 @@ bool SplitTcp(const std::string& endpoint, std::string* host, std::string* port)
   return true;
 }
 
+// All of 127/8 and ::1 (127.0.0.2 was refused as "not loopback").
 bool IsLoopbackHost(const std::string& host) {
-  return host == "127.0.0.1" || host == "localhost" || host == "::1";
+  if (host == "localhost") return true;
+  boost::system::error_code ec;
+  const auto address = boost::asio::ip::make_address(host, ec);
+  return !ec && address.is_loopback();
 }
 
 std::string Endpoint(TomlTable& t, const std::string& key, const std::string& fallback) {
@@ -49,6 +54,14 @@ std::string Endpoint(TomlTable& t, const std::string& key, const std::string& fa
                       : SplitTcp(e, &host, &port) && !host.empty() && !port.empty();
   if (!ok)
     t.Fail(nullptr, key, "expected tcp://HOST:PORT, ipc://PATH or inproc://NAME, got '" + e + "'");
+  // ZeroMQ wraps a port past 65535 (99999 listened on 34463) and binds an unlogged one for
+  // 0: the port is a number from 1 to 65535.
+  if (e.rfind("tcp://", 0) == 0 &&
+      (port.size() > 5 ||
+       !std::all_of(port.begin(), port.end(),
+                    [](unsigned char ch) { return std::isdigit(ch) != 0; }) ||
+       std::stoi(port) < 1 || std::stoi(port) > 65535))
+    t.Fail(nullptr, key, "port '" + port + "' in '" + e + "' is not a number from 1 to 65535");
   return e;
 }
 
@@ -196,6 +209,13 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
   TomlTable control = top.Table("control");
   c.http_enabled = control.Bool("http", c.http_enabled);
   c.http_address = control.String("http_address", c.http_address);
+  if (c.http_address != "localhost") {
+    boost::system::error_code ec;
+    (void)boost::asio::ip::make_address(c.http_address, ec);
+    if (ec)
+      control.Fail(root["control"]["http_address"].node(), "http_address",
+                   "'" + c.http_address + "' is not an IP address");
+  }
   c.http_port = control.Integer("http_port", c.http_port, 0, 65535);
   c.stats_interval_s = control.Number("stats_interval_s", c.stats_interval_s, 0.05, 3600);
   c.watchdog_timeout_s = control.Number("watchdog_timeout_s", c.watchdog_timeout_s, 0.01, 3600);
@@ -361,9 +381,14 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
     const toml::table* table = &t.table();
     SubjectConfig s;
     s.name = t.String("name", "", true);
+    // No control character either: ESC, CR or NUL went raw into the log, the topic and
+    // Prometheus label values (a name could colour the operator's terminal).
     if (s.name.empty() || s.name.size() > protocol::kMaxSubjectName ||
-        s.name.find_first_of("/ \t\n") != std::string::npos)
-      t.Fail(table->get("name"), "name", "must be 1..63 characters without '/' or spaces");
+        s.name.find_first_of("/ ") != std::string::npos ||
+        std::any_of(s.name.begin(), s.name.end(),
+                    [](unsigned char ch) { return ch < 0x20 || ch == 0x7f; }))
+      t.Fail(table->get("name"), "name",
+             "must be 1..63 characters without '/', spaces or control characters");
     if (c.FindSubject(s.name) != nullptr ||
         std::count(c.other_shards_subjects.begin(), c.other_shards_subjects.end(), s.name) > 0)
       t.Fail(table->get("name"), "name", "subject '" + s.name + "' is listed twice");

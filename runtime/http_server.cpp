@@ -2,6 +2,7 @@
 #include "runtime/http_server.hpp"
 
 #include <algorithm>
+#include <boost/algorithm/string/predicate.hpp>
 #include <boost/beast/core.hpp>
 #include <boost/beast/http.hpp>
 #include <boost/beast/websocket/rfc6455.hpp>
@@ -155,7 +156,10 @@ class Session : public std::enable_shared_from_this<Session> {
     if (const auto header = request_.find(http::field::authorization); header != request_.end()) {
       constexpr std::string_view kScheme = "Bearer ";
       const std::string_view value(header->value().data(), header->value().size());
-      if (value.starts_with(kScheme) && SameSecret(value.substr(kScheme.size()), token))
+      // The scheme's name is case-insensitive (RFC 7235): "bearer TOKEN" was refused.
+      if (value.size() >= kScheme.size() &&
+          boost::algorithm::iequals(value.substr(0, kScheme.size()), kScheme) &&
+          SameSecret(value.substr(kScheme.size()), token))
         return Credential::kHeader;
     }
     if (const auto cookies = request_.find(http::field::cookie); cookies != request_.end()) {

@@ -218,6 +218,10 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
     ++counters_.session_changes;
     Resynchronise(sink);
   }
+  // Before any bridging: the inserted frames' publishing sets the state, and a stall
+  // ended by a frame past a gap went unlogged.
+  const bool resumes_stall = state_ == protocol::SubjectState::kStalled;
+  const int64_t silence_ns = last_receive_ns_ < 0 ? 0 : receive_ns - last_receive_ns_;
   if (started_ && frame.frame_number != next_frame_number_) {
     if (frame.frame_number > next_frame_number_) {
       const uint64_t missing = frame.frame_number - next_frame_number_;
@@ -269,9 +273,10 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
   last_capture_ns_ = frame.capture_time_ns;
   counters_.last_frame_number = frame.frame_number;
   counters_.last_stream = frame.stream;
-  if (state_ == protocol::SubjectState::kStalled) {
+  if (resumes_stall) {
     ++counters_.resumes;
     counters_.resume_frame = frame.frame_number;
+    counters_.resume_silence_s = static_cast<double>(silence_ns) * 1e-9;
   }
   if (resynchronised_) counters_.resync_frame = frame.frame_number;
   resynchronised_ = false;

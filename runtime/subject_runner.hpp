@@ -83,7 +83,8 @@ struct SubjectCounters {
   double stall_silence_s = 0.0;      ///< The last stall: how long no frame had come...
   uint64_t stall_last_frame = 0;     ///< ...after this frame number.
   uint64_t resumes = 0;              ///< Stalls ended by a frame accepted...
-  uint64_t resume_frame = 0;         ///< ...the last of which this was.
+  uint64_t resume_frame = 0;         ///< ...the last of which this was...
+  double resume_silence_s = 0.0;     ///< ...after this long without a frame taken.
   uint64_t resync_frame = 0;         ///< The frame the last re-synchronised stream began at.
   protocol::StreamInfo last_stream;  ///< The last accepted frame's session, rate and timecode.
   uint64_t dropped_total() const;

@@ -154,7 +154,14 @@ TEST(DaemonConfigTest, AnHttpTokenFileMustHoldOneLongToken) {
 TEST(DaemonConfigTest, SubjectsAreValidatedOneByOne) {
   EXPECT_EQ(
       ErrorOf("format_version = 1\n[[subject]]\nname = \"a/b\"\nmodel = \"demo_subject.toml\"\n"),
-      "test.toml:3: field 'subject[0].name': must be 1..63 characters without '/' or spaces");
+      "test.toml:3: field 'subject[0].name': must be 1..63 characters without '/', spaces or "
+      "control characters");
+  for (const char* name : {"a\\u001b[31mRED", "a\\rb", "a\\u007f", "a\\tb"})
+    EXPECT_NE(ErrorOf("format_version = 1\n[[subject]]\nname = \"" + std::string(name) +
+                      "\"\nmodel = \"demo_subject.toml\"\n")
+                  .find("control characters"),
+              std::string::npos)
+        << name;
   EXPECT_EQ(ErrorOf(std::string(kMinimal) +
                     "[[subject]]\nname = \"actor1\"\nmodel = \"demo_subject.toml\"\n"),
             "test.toml:6: field 'subject[1].name': subject 'actor1' is listed twice");
@@ -183,6 +190,26 @@ TEST(DaemonConfigTest, NonLoopbackBindsMustBeAskedFor) {
   EXPECT_TRUE(IsLocalEndpoint("ipc:///tmp/x"));
   EXPECT_TRUE(IsLocalEndpoint("tcp://[::1]:5"));
   EXPECT_FALSE(IsLocalEndpoint("tcp://*:5"));
+  // All of 127/8 is loopback; an address that is none is said to be none.
+  EXPECT_TRUE(IsLocalEndpoint("tcp://127.0.0.2:5"));
+  EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[control]\nhttp_address = \"127.0.0.2\"\n"), "");
+  EXPECT_NE(ErrorOf(std::string(kMinimal) + "[control]\nhttp_address = \"nowhere\"\n")
+                .find("'nowhere' is not an IP address"),
+            std::string::npos);
+}
+
+// ZeroMQ wrapped a port past 65535 (99999 listened on 34463) and bound an unlogged one for
+// 0: both are refused, naming the field.
+TEST(DaemonConfigTest, AnEndpointsPortIsANumberFrom1To65535) {
+  for (const char* port : {"99999", "0", "65536", "55a", "-1"}) {
+    const std::string error =
+        ErrorOf(std::string(kMinimal) + "[output]\nendpoint = \"tcp://127.0.0.1:" + port + "\"\n");
+    EXPECT_NE(error.find("field 'output.endpoint': port '" + std::string(port) +
+                         "' in 'tcp://127.0.0.1:" + port + "' is not a number from 1 to 65535"),
+              std::string::npos)
+        << error;
+  }
+  EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[input]\nendpoint = \"tcp://127.0.0.1:65535\"\n"), "");
 }
 
 // Keys for a CURVE config in dir: the daemon's pair, a capture publisher's public key and

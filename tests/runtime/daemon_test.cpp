@@ -575,6 +575,38 @@ TEST(DaemonTest, ReloadsOfASubscribingDaemonLoseNoFrameOfAKeptSubject) {
   EXPECT_TRUE(s.Balanced());
 }
 
+// What only a restart changes is compared with what runs, not with the last file: a second
+// reload that kept a changed endpoint said nothing, and one that put the running endpoint
+// back warned. The warning names the field.
+TEST(DaemonTest, ARestartOnlyChangeIsWarnedAgainstTheRunningSockets) {
+  std::ostringstream log;
+  spdlog::default_logger()->sinks().push_back(
+      std::make_shared<spdlog::sinks::ostream_sink_mt>(log));
+  {
+    zmq::context_t context;
+    const DaemonConfig running =
+        TestConfig("inproc://restart-only-in", "inproc://restart-only-out", 4);
+    RunningDaemon daemon(context, running);
+    DaemonConfig moved = running;
+    moved.output_endpoint = "inproc://elsewhere";
+    daemon->Reload(moved);
+    ASSERT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) { return s.reloads == 1; }));
+    moved.subjects[0].cleanup.lookahead = 6;
+    daemon->Reload(moved);
+    ASSERT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) { return s.reloads == 2; }));
+    daemon->Reload(running);
+    ASSERT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) { return s.reloads == 3; }));
+  }
+  spdlog::default_logger()->sinks().pop_back();
+  const std::string text = log.str();
+  const std::string warning =
+      "reload: output.endpoint changed, which takes effect only after a restart";
+  size_t count = 0;
+  for (size_t at = text.find(warning); at != std::string::npos; at = text.find(warning, at + 1))
+    ++count;
+  EXPECT_EQ(count, 2u) << text;
+}
+
 // A subscribing daemon with two data-plane workers and these subjects.
 DaemonConfig TwoWorkerConfig(const std::string& capture, const std::string& output, int lookahead,
                              const std::vector<std::string>& names) {
@@ -899,6 +931,9 @@ TEST(DaemonTest, HttpWithATokenAnswersOnlyRequestsThatCarryIt) {
   const auto [code, metrics] = HttpGet(port, "/metrics", "Bearer s3cret-token-0123456789");
   EXPECT_EQ(code, 200);
   EXPECT_NE(metrics.find("mocapd_http_unauthorized_total 4"), std::string::npos) << metrics;
+  // The scheme's name in any case (RFC 7235).
+  EXPECT_EQ(HttpGet(port, "/metrics", "bearer s3cret-token-0123456789").first, 200);
+  EXPECT_EQ(HttpGet(port, "/metrics", "BEARER s3cret-token-0123456789").first, 200);
 }
 
 // Connections that never send a request hold a slot until their 5 s timeout; beyond the

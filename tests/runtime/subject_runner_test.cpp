@@ -433,7 +433,16 @@ TEST_F(SubjectRunnerTest, WatchdogMarksAStalledSubjectOnceAndPublishesIt) {
   EXPECT_EQ(runner.counters().stall_last_frame, 0u);
   EXPECT_EQ(runner.counters().resumes, 1u);
   EXPECT_EQ(runner.counters().resume_frame, 1u);
+  EXPECT_DOUBLE_EQ(runner.counters().resume_silence_s, 0.8);
   EXPECT_EQ(runner.counters().last_frame_number, 2u);
+  // A stall ended by a frame past a gap, the gap bridged: its publishing set the state
+  // before the stall's end was counted, and the log never said the input resumed.
+  EXPECT_TRUE(runner.CheckStall(2'500'000'000, 500'000'000, sink_));
+  ASSERT_FALSE(runner.Accept(Frame(3, 40, 0), 3'000'000'000, sink_).has_value());
+  EXPECT_EQ(runner.counters().frames_inserted, 37u);
+  EXPECT_EQ(runner.counters().resumes, 2u);
+  EXPECT_EQ(runner.counters().resume_frame, 40u);
+  EXPECT_DOUBLE_EQ(runner.counters().resume_silence_s, 1.19);
 }
 
 // A stalled subject must not keep its last K frames until a next stream arrives that
