@@ -36,6 +36,7 @@ CleanupPipeline::CleanupPipeline(std::shared_ptr<const Skeleton> skeleton,
   out_.pose = RestPose(*skeleton_);
   last_taken_.assign(m, Vec3::Zero());
   has_last_taken_.assign(m, 0);
+  last_taken_at_.assign(m, 0);
   glitch_last_.assign(m, Vec3::Constant(kNaN));
   displacement_.assign(m, 0.0);
   solve_samples_.assign(m, Vec3::Zero());
@@ -108,9 +109,23 @@ void CleanupPipeline::GateGlitch(WindowFrame& s) {
   };
   bool glitch = false;
   if (last_taken_frame_ >= 0) {
+    // How far each marker moved beyond what a body can since it was last taken, by its own
+    // time: a frame with fewer than three markers seen is taken without them, and judged
+    // by the frame's time, markers back from a dropout had one frame's allowance for the
+    // whole of it (their first frame back gated, and the glitch carried on from there).
+    int count = 0;
+    for (size_t m = 0; m < m_count; ++m) {
+      if (!s.valid[m] || !has_last_taken_[m]) continue;
+      const double seconds = static_cast<double>(s.frame - last_taken_at_[m]) / options_.rate_hz;
+      displacement_[static_cast<size_t>(count++)] =
+          (s.raw[m] - last_taken_[m]).norm() - (options_.glitch_speed_mps * seconds + 0.05);
+    }
+    if (count >= 3) {
+      const auto mid = displacement_.begin() + count / 2;
+      std::nth_element(displacement_.begin(), mid, displacement_.begin() + count);
+      glitch = *mid > 0.0;
+    }
     const auto from_taken = median_move(last_taken_, [&](size_t m) { return has_last_taken_[m]; });
-    const double seconds = static_cast<double>(s.frame - last_taken_frame_) / options_.rate_hz;
-    glitch = from_taken && *from_taken > options_.glitch_speed_mps * seconds + 0.05;
     // Within a glitch, the allowance above grows with every frame gated, until a jump that
     // persists passes for motion (2 m at 120 Hz after 6 frames) and the skeleton chased it
     // at the catch-up speed, every sample "observed". A frame nearer the glitch's frames
@@ -144,6 +159,7 @@ void CleanupPipeline::GateGlitch(WindowFrame& s) {
   for (size_t m = 0; m < m_count; ++m) {
     if (!s.valid[m]) continue;
     last_taken_[m] = s.raw[m];
+    last_taken_at_[m] = s.frame;
     has_last_taken_[m] = 1;
   }
   last_taken_frame_ = s.frame;

@@ -71,8 +71,9 @@ class CleanupPipeline {
   std::vector<Vec3>
       last_taken_;  ///< Per marker, its last sample in a frame taken (the glitch gate).
   std::vector<uint8_t> has_last_taken_;
-  std::vector<Vec3> glitch_last_;     ///< The last frame a glitch gated, as captured.
-  std::vector<double> displacement_;  ///< GateGlitch's scratch.
+  std::vector<int64_t> last_taken_at_;  ///< Per marker, the frame of its last_taken_.
+  std::vector<Vec3> glitch_last_;       ///< The last frame a glitch gated, as captured.
+  std::vector<double> displacement_;    ///< GateGlitch's scratch.
   /// Savitzky-Golay (cubic) centre weights: row n (a half-width of n frames) holds the
   /// weights of offsets 0..n.
   std::vector<double> smoothing_weights_;

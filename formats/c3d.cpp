@@ -143,6 +143,7 @@ class Parser {
       int group;
       std::string name;
       Parameter param;
+      bool beyond_declared;  // a leftover there must not override a declared entry
     };
     std::vector<Pending> pending;
     size_t pos = param_start_ + 4;
@@ -190,7 +191,8 @@ class Parser {
           Require(reader_.ReadBytes(bytes, &p.data), "parameters",
                   "parameter '" + name + "' data (" + std::to_string(bytes) +
                       " bytes) runs past the end");
-          pending.push_back({id, boost::algorithm::to_upper_copy(TrimRight(name)), std::move(p)});
+          pending.push_back({id, boost::algorithm::to_upper_copy(TrimRight(name)), std::move(p),
+                             beyond_declared});
         }
         last_entry_end = reader_.offset();
         if (next <= 0) break;  // 0 marks the last entry; a negative link cannot move forward
@@ -209,7 +211,10 @@ class Parser {
       auto g = group_names.find(p.group);
       const std::string group =
           g == group_names.end() ? "GROUP" + std::to_string(p.group) : g->second;
-      params_[group + ":" + p.name] = std::move(p.param);
+      if (p.beyond_declared)
+        params_.emplace(group + ":" + p.name, std::move(p.param));
+      else
+        params_[group + ":" + p.name] = std::move(p.param);
     }
   }
 
@@ -478,21 +483,24 @@ class Parser {
     }
     // A header capped at 65535 counts at least that many: a smaller POINT:FRAMES (a 16-bit
     // count wrapped, or 0) dropped every frame past it, or all of them. The data's whole
-    // frames are read then, less trailing all-zero ones (a block's padding), with a note.
+    // frames are read then, less the last block's padding, with a note.
     if (frame_bytes > 0 && header_capped && header_frames > 0 && frames < header_frames &&
         holds(header_frames, used)) {
-      int64_t whole = static_cast<int64_t>(available / frame_bytes);
-      const auto all_zero = [&](int64_t frame) {
-        const auto start =
-            bytes_.begin() +
-            static_cast<std::ptrdiff_t>(data_start + static_cast<size_t>(frame) * frame_bytes);
-        return std::all_of(start, start + static_cast<std::ptrdiff_t>(frame_bytes),
+      auto whole = static_cast<int64_t>(available / frame_bytes);
+      // A writer pads the last block with zeros: an all-zero frame that lies wholly in the
+      // file's last 511 bytes is that padding. Further back, all zeros is a frame whose
+      // every sample is missing, as exporters write one, and is read.
+      const auto is_padding = [&](int64_t frame) {
+        const size_t start = static_cast<size_t>(frame) * frame_bytes;
+        if (available - start >= kBlock) return false;
+        const auto first = bytes_.begin() + static_cast<std::ptrdiff_t>(data_start + start);
+        return std::all_of(first, first + static_cast<std::ptrdiff_t>(frame_bytes),
                            [](uint8_t b) { return b == 0; });
       };
-      while (whole > header_frames && all_zero(whole - 1)) --whole;
+      while (whole > header_frames && is_padding(whole - 1)) --whole;
       take.notes.push_back("the header's frame count is capped at 65535 and POINT:FRAMES says " +
                            std::to_string(point_frames < 0 ? 0 : point_frames) +
-                           ", with no TRIAL range: the " + std::to_string(whole) +
+                           ", and no count reaches past it: the " + std::to_string(whole) +
                            " whole frames the data holds are read");
       frames = whole;
     }
@@ -687,6 +695,70 @@ int C3dTake::FindLabel(const std::string& label) const {
   // label repeated exactly is the file's own (its first point, as other readers take it).
   if (matches.size() > 1 && labels[static_cast<size_t>(matches[0])] != label) return -1;
   return matches[0];
+}
+
+namespace {
+std::string PrefixOf(const std::string& label) {
+  const size_t colon = label.rfind(':');
+  return colon == std::string::npos ? "" : boost::algorithm::trim_copy(label.substr(0, colon));
+}
+}  // namespace
+
+std::vector<std::string> ActorPrefixes(const C3dTake& take) {
+  // An actor labels three points at least (what places a segment); a prefix on one or two
+  // is a stray copy of a label, which the label matching warns of instead.
+  std::vector<std::string> prefixes;
+  std::map<std::string, int> points;
+  for (const std::string& label : take.labels) {
+    const std::string prefix = PrefixOf(label);
+    if (prefix.empty() || ++points[prefix] != 3) continue;
+    prefixes.push_back(prefix);
+  }
+  return prefixes;
+}
+
+void SelectActor(C3dTake* take, const std::string& actor, const std::string& path) {
+  const std::vector<std::string> prefixes = ActorPrefixes(*take);
+  std::string listed;
+  for (const std::string& p : prefixes) listed += (listed.empty() ? "" : ", ") + p;
+  std::string want = boost::algorithm::trim_copy(actor);
+  if (!want.empty() && want.back() == ':') want.pop_back();
+  if (want.empty()) {
+    // Two actors' LASI are no answer: the calibration took the first actor's and the
+    // solve matched neither, so each command said something else about one take.
+    if (prefixes.size() > 1)
+      throw std::runtime_error(path + ": the take holds the markers of " +
+                               std::to_string(prefixes.size()) + " actors (" + listed +
+                               "): choose one with --actor");
+    return;
+  }
+  std::vector<int> kept;
+  for (int p = 0; p < take->num_points(); ++p)
+    if (PrefixOf(take->labels[static_cast<size_t>(p)]) == want) kept.push_back(p);
+  if (kept.empty())
+    throw std::runtime_error(path + ": no point is labelled for actor '" + want + "' (" +
+                             (prefixes.empty() ? std::string("the labels have no actor prefix")
+                                               : "the take's actors: " + listed) +
+                             ")");
+  C3dTake out = *take;
+  out.labels.clear();
+  out.descriptions.clear();
+  out.model_output_kind.clear();
+  for (int p : kept) {
+    out.labels.push_back(take->labels[static_cast<size_t>(p)]);
+    out.descriptions.push_back(take->descriptions[static_cast<size_t>(p)]);
+    out.model_output_kind.push_back(take->model_output_kind[static_cast<size_t>(p)]);
+  }
+  out.Allocate(take->num_frames);
+  for (int f = 0; f < take->num_frames; ++f) {
+    for (size_t k = 0; k < kept.size(); ++k) {
+      const auto from = static_cast<size_t>(f) * take->labels.size() + static_cast<size_t>(kept[k]);
+      const auto to = static_cast<size_t>(f) * kept.size() + k;
+      out.positions[to] = take->positions[from];
+      out.residuals[to] = take->residuals[from];
+    }
+  }
+  *take = std::move(out);
 }
 
 void C3dTake::Allocate(int frames) {

@@ -65,6 +65,15 @@ struct C3dTake {
   }
 };
 
+/// The subject prefixes of a take's labels ("Justin" of "Justin:LASI") that label three
+/// points or more, in the order each reached three.
+std::vector<std::string> ActorPrefixes(const C3dTake& take);
+/// Keeps the points of one actor of a take that holds several (labels "Justin:*" and
+/// "Copy:*"): actor is the prefix (its ':' optional), empty for a take of one actor. Throws
+/// std::runtime_error naming `path` and the actors present when the take holds several and
+/// none is chosen, or the one chosen is not among them.
+void SelectActor(C3dTake* take, const std::string& actor, const std::string& path);
+
 /// Parses a C3D file held in memory. source_name is used in error messages.
 /// Throws C3dError if the file is malformed or truncated.
 C3dTake ParseC3d(std::span<const uint8_t> bytes, const std::string& source_name);

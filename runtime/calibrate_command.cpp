@@ -30,8 +30,9 @@ std::string Fixed(double v, int decimals) {
 
 // A take with no frames names itself: "the takes hold no markers" hid which file of
 // several was empty, and that it had its labels.
-C3dTake ReadTakeWithFrames(const std::string& path) {
+C3dTake ReadTakeWithFrames(const std::string& path, const std::string& actor) {
   C3dTake take = ReadC3d(path);
+  SelectActor(&take, actor, path);
   if (take.num_frames == 0)
     throw std::runtime_error(path + ": the take has no frames (" +
                              std::to_string(take.num_points()) +
@@ -42,7 +43,8 @@ C3dTake ReadTakeWithFrames(const std::string& path) {
 // The calibration from markers alone: summary on the terminal, JSON report, subject file.
 int CalibrateFromMarkersOnly(const CalibrateCommandOptions& options, std::ostream& out) {
   std::vector<C3dTake> takes;
-  for (const std::string& path : options.markers_c3d) takes.push_back(ReadTakeWithFrames(path));
+  for (const std::string& path : options.markers_c3d)
+    takes.push_back(ReadTakeWithFrames(path, options.actor));
   MarkersOnlyOptions mo;
   mo.marker_set = options.marker_set;
   mo.solve.interleaved_solves = options.interleaved_solves;
@@ -249,7 +251,7 @@ int RunCalibrateCommand(const CalibrateCommandOptions& options, std::ostream& ou
   BvhReadOptions bvh_options;
   bvh_options.units = options.bvh_units;
   const BvhTake bvh = ReadBvh(options.skeleton_bvh, bvh_options);
-  const C3dTake c3d = ReadTakeWithFrames(options.markers_c3d.front());
+  const C3dTake c3d = ReadTakeWithFrames(options.markers_c3d.front(), options.actor);
   std::vector<Pose> motion = bvh.frames;
   // The same rate as two files print it: a C3D stores 119.88 Hz as a float of its
   // decimal digits, a BVH reads as 120000/1001 Hz; 1e-6 apart, no reason to resample.

@@ -24,6 +24,7 @@ struct CalibrateCommandOptions {
   std::string report_json;          ///< Markers alone: the report as JSON (empty: none).
   /// Markers alone: interleaved subsets averaged with the whole take's solve (1: one solve).
   int interleaved_solves = SubjectCalibrationOptions{}.interleaved_solves;
+  std::string actor = {};  ///< Of takes holding several actors' markers: whose (label prefix).
 };
 
 /// Runs the calibration, prints a per-marker report to out and writes the subject file.

@@ -726,6 +726,9 @@ void Daemon::ApplyReload(DaemonConfig config) {
   keep_running("control.live_view", &DaemonConfig::live_view);
   keep_running("control.live_view_rate_hz", &DaemonConfig::live_view_rate_hz);
   keep_running("control.live_view_max_viewers", &DaemonConfig::live_view_max_viewers);
+  // A file turning CURVE off lists no keys: with CURVE kept on, those would have been the
+  // allow-list, refusing every client.
+  if (config.curve != old.curve) config.curve_authorized_keys = old.curve_authorized_keys;
   keep_running("security.curve", &DaemonConfig::curve);
   keep_running("security.input_server_key_file", &DaemonConfig::curve_input_server_key);
   if (config.curve_keys.secret_key != old.curve_keys.secret_key) {

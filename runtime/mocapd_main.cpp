@@ -54,6 +54,9 @@ int main(int argc, char** argv) {
                    "C3D marker take(s) of the actor (repeat for several takes)")
       ->required()
       ->check(CLI::ExistingFile);
+  cal_cmd->add_option("--actor", cal.actor,
+                      "Of takes holding several actors' markers (Justin:LASI, Copy:LASI): "
+                      "whose to use, by label prefix");
   cal_cmd
       ->add_option("--marker-set", cal.marker_set,
                    "auto (recognise from the labels; labels of no set are placed by "
@@ -95,6 +98,9 @@ int main(int argc, char** argv) {
   proc_cmd->add_option("--in", proc.input_c3d, "Marker take (C3D)")
       ->required()
       ->check(CLI::ExistingFile);
+  proc_cmd->add_option("--actor", proc.actor,
+                       "Of a take holding several actors' markers (Justin:LASI, Copy:LASI): "
+                       "whose to solve, by label prefix (--out-c3d then holds that actor's)");
   proc_cmd->add_option("--out-bvh", proc.output_bvh, "Solved skeleton to write (BVH)")->required();
   proc_cmd->add_option("--out-c3d", proc.output_c3d,
                        "Cleaned markers to write (C3D; untouched samples are kept bit for bit)");

@@ -154,6 +154,7 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
   RefuseOutputsOverInputs(inputs, outputs);
   const SubjectModel subject = ReadSubjectModel(options.subject);
   C3dTake take = ReadC3d(options.input_c3d);
+  SelectActor(&take, options.actor, options.input_c3d);
   if (take.num_frames == 0)
     throw std::runtime_error(options.input_c3d + ": the take has no frames: nothing to process");
   for (const std::string& note : take.notes)

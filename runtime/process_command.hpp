@@ -38,6 +38,7 @@ struct ProcessCommandOptions {
   /// Solve a take that labels fewer than half the subject's markers (refused otherwise:
   /// most likely the wrong subject or marker set).
   bool allow_partial = false;
+  std::string actor = {};  ///< Of a take holding several actors' markers: whose (label prefix).
 };
 
 /// Where the retargeted character is written: output_character_bvh, or beside the solved

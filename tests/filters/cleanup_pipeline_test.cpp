@@ -302,5 +302,21 @@ TEST_F(CleanupPipelineTest, AJumpThatPersistsPastItsAllowanceIsStillAResynchroni
   }
 }
 
+// Every marker missing for 0.4 s, then back where the walk took them: no glitch. Judged by
+// the time of the last frame taken (the dropout's), markers back had one frame's allowance
+// for 0.4 s of walking; their first frame back was gated, and the frames after it, nearer
+// it than the markers' last samples, carried the glitch on into a resync.
+TEST_F(CleanupPipelineTest, MarkersBackFromADropoutAreNoGlitch) {
+  for (size_t f = 300; f < 348; ++f)
+    for (auto& p : frames_[f]) p = Vec3::Constant(kNaN);
+  const auto out = Run(CleanupOptions{});
+  EXPECT_EQ(counters_.glitch_frames, 0);
+  EXPECT_EQ(counters_.resyncs, 0);
+  int observed = 0;
+  for (size_t m = 0; m < frames_[348].size(); ++m)
+    observed += out[350].status[m] == MarkerStatus::kObserved;
+  EXPECT_GT(observed, static_cast<int>(frames_[348].size()) * 9 / 10);
+}
+
 }  // namespace
 }  // namespace mocapd

@@ -568,6 +568,47 @@ TEST(C3dTest, ParametersLinkedPastTheDeclaredBlocksAreReadWithANote) {
   ReadWithOneNote(bytes, take, "the parameter section's header says 1 blocks, its entries run on");
 }
 
+// Two actors in one take: neither chosen is an error naming both; one chosen keeps its
+// points (and their samples) alone; one that is not there names those that are.
+TEST(C3dTest, SelectActorKeepsOneActorsPointsOrNamesTheActors) {
+  C3dTake take = MakeTake(6, 6);
+  take.labels = {"Justin:LASI", "Copy:LASI", "Justin:RASI", "Copy:RASI", "Justin:C7", "Copy:C7"};
+  const auto error_of = [&](const std::string& actor) {
+    C3dTake copy = take;
+    try {
+      SelectActor(&copy, actor, "two.c3d");
+    } catch (const std::runtime_error& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  EXPECT_EQ(error_of(""),
+            "two.c3d: the take holds the markers of 2 actors (Justin, Copy): choose one with "
+            "--actor");
+  EXPECT_EQ(error_of("Dan"),
+            "two.c3d: no point is labelled for actor 'Dan' (the take's actors: "
+            "Justin, Copy)");
+  C3dTake copy = take;
+  SelectActor(&copy, "Copy:", "two.c3d");
+  ASSERT_EQ(copy.labels, (std::vector<std::string>{"Copy:LASI", "Copy:RASI", "Copy:C7"}));
+  for (int f = 0; f < take.num_frames; ++f) {
+    for (const auto& [kept, original] : {std::pair{0, 1}, std::pair{1, 3}, std::pair{2, 5}}) {
+      ASSERT_EQ(copy.valid(f, kept), take.valid(f, original));
+      if (take.valid(f, original)) {
+        EXPECT_EQ(copy.at(f, kept), take.at(f, original));
+      }
+    }
+  }
+  C3dTake one = MakeTake(2, 3);  // no prefixes: nothing to choose
+  EXPECT_NO_THROW(SelectActor(&one, "", "one.c3d"));
+  EXPECT_EQ(one.num_points(), 2);
+  // A prefix on a point or two is a stray label copy, not an actor to choose.
+  C3dTake strays = take;
+  strays.labels = {"LASI", "Dan:RASI", "Eve:RASI", "C7", "LPSI", "RPSI"};
+  EXPECT_NO_THROW(SelectActor(&strays, "", "strays.c3d"));
+  EXPECT_EQ(strays.num_points(), 6);
+}
+
 TEST(C3dTest, MetresPerUnitKnowsTheUsualUnits) {
   EXPECT_DOUBLE_EQ(MetresPerUnit("mm"), 1e-3);
   EXPECT_DOUBLE_EQ(MetresPerUnit("M "), 1.0);
