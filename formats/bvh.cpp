@@ -328,15 +328,26 @@ BvhTake ParseBvh(const std::string& text, const std::string& source_name,
     constant_translation[j] = r.offset;
     for (size_t c = 0; c < r.channels.size(); ++c) {
       const double v0 = num_frames > 0 ? values[first_channel + c] : 0.0;
-      bool moving = false;
-      for (size_t f = 1; f < num_frames && !moving; ++f)
-        moving = std::abs(values[f * total_channels + first_channel + c] - v0) >
-                 1e-9 * std::max(1.0, std::abs(v0));
-      moves[j] = moves[j] || moving;
-      if (!IsRotation(r.channels[c])) {
-        translation_moves[j] = translation_moves[j] || moving;
-        if (num_frames > 0) constant_translation[j][Axis(r.channels[c])] = v0;
+      double lowest = v0, highest = v0;
+      for (size_t f = 1; f < num_frames; ++f) {
+        const double v = values[f * total_channels + first_channel + c];
+        lowest = std::min(lowest, v);
+        highest = std::max(highest, v);
       }
+      if (IsRotation(r.channels[c])) {
+        moves[j] = moves[j] || highest - lowest > 1e-9 * std::max(1.0, std::abs(v0));
+        continue;
+      }
+      // Exporters that key every joint's translation (Blender, MotionBuilder) rebuild it
+      // from float matrices, and it wobbles in the last printed digits. Read as motion,
+      // every bone became stretchable, and a character retargeted through it grew arms
+      // twice their length. A bone whose length varies by less than this is fixed for any
+      // capture (marker noise alone is ten times more).
+      constexpr double kStillTranslationM = 1e-4;
+      const bool moving = (highest - lowest) * s > kStillTranslationM;
+      moves[j] = moves[j] || moving;
+      translation_moves[j] = translation_moves[j] || moving;
+      if (num_frames > 0) constant_translation[j][Axis(r.channels[c])] = 0.5 * (lowest + highest);
     }
     first_channel += r.channels.size();
   }

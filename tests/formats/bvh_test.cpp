@@ -217,6 +217,36 @@ TEST(BvhTest, AOneFrameFileTypesTheRootByItsChannels) {
   EXPECT_EQ(ReadBvh(kTinyPath).skeleton.joint(0).type, JointType::kFixed);
 }
 
+// Blender and MotionBuilder can key every joint's translation, rebuilt from float matrices
+// so it wobbles in the last printed digit. Read as motion, every bone was stretchable and a
+// character retargeted through it grew arms two or three times their length. A bone that
+// truly changes length (1 mm here) stays free; the fixed one takes its mid value.
+TEST(BvhTest, TranslationsThatWobbleInTheLastDigitAreAFixedBone) {
+  const auto file = [](const char* second_frame_forearm) {
+    return std::string(
+               "HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 0\n"
+               "  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n"
+               "  JOINT Arm\n  {\n    OFFSET 0 10.5 0\n"
+               "    CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n"
+               "    JOINT Forearm\n    {\n      OFFSET 0 25.6 0\n"
+               "      CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n"
+               "      End Site\n      {\n        OFFSET 0 20 0\n      }\n    }\n  }\n}\n"
+               "MOTION\nFrames: 3\nFrame Time: 0.008333\n"
+               "0 90 0 0 0 0 -0.000001 10.500000 0.000001 0 10 0 0 25.600000 0 0 20 0\n"
+               "1 90 0 0 5 0 0.000001 10.499999 0.000000 0 15 0 ") +
+           second_frame_forearm + " 0 25 0\n" +
+           "2 90 0 0 9 0 0.000000 10.500001 -0.000001 0 20 0 0 25.600001 0 0 30 0\n";
+  };
+  const BvhTake wobbling = ParseBvh(file("0.000001 25.599999 0"), "blender.bvh");
+  EXPECT_EQ(wobbling.skeleton.joint(0).type, JointType::kFree);
+  EXPECT_EQ(wobbling.skeleton.joint(1).type, JointType::kBall);
+  EXPECT_EQ(wobbling.skeleton.joint(2).type, JointType::kBall);
+  EXPECT_NEAR(wobbling.skeleton.joint(2).offset.y(), 0.256, 1e-8);
+  const BvhTake stretching = ParseBvh(file("0 25.7 0"), "stretch.bvh");
+  EXPECT_EQ(stretching.skeleton.joint(1).type, JointType::kBall);
+  EXPECT_EQ(stretching.skeleton.joint(2).type, JointType::kFree);
+}
+
 // Some Windows editors and exporters start a text file with a UTF-8 byte order mark; the
 // file was refused as "binary data".
 TEST(BvhTest, AByteOrderMarkIsNotPartOfTheFile) {
