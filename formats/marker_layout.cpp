@@ -87,7 +87,16 @@ std::string RoleOfName(const std::string& bare) {
   return "";
 }
 
-// Roles found by joint names alone; the first joint (closest to the root) wins.
+// A helper joint placed where its parent is (CMU's LowerBack, a NeckBase): it bends
+// nothing a marker can see on its own, so a role goes to the real joint past it.
+bool SitsOnItsParent(const Skeleton& skeleton, int joint) {
+  constexpr double kZeroLengthM = 1e-3;
+  return skeleton.joint(joint).parent.value >= 0 &&
+         skeleton.joint(joint).offset.norm() < kZeroLengthM;
+}
+
+// Roles found by joint names alone; the first joint (closest to the root) wins, unless it
+// sits on its parent and a later one does not.
 std::map<std::string, int> RolesByName(const Skeleton& skeleton) {
   std::map<std::string, int> joint_of_role;
   for (int j = 0; j < skeleton.num_joints(); ++j) {
@@ -96,7 +105,9 @@ std::map<std::string, int> RolesByName(const Skeleton& skeleton) {
     if (base.empty()) continue;
     const bool sided = base != "pelvis" && base != "head" && base != "neck";
     if (sided && side == 0) continue;
-    joint_of_role.emplace(sided ? base + "_" + side : base, j);
+    const auto [it, added] = joint_of_role.emplace(sided ? base + "_" + side : base, j);
+    if (!added && SitsOnItsParent(skeleton, it->second) && !SitsOnItsParent(skeleton, j))
+      it->second = j;
   }
   return joint_of_role;
 }
@@ -268,9 +279,11 @@ HumanoidRoles MatchHumanoidRoles(const Skeleton& skeleton) {
   const int pelvis = roles.joint_of_role["pelvis"];
   const int top =
       roles.joint_of_role.count("neck") ? roles.joint_of_role["neck"] : roles.joint_of_role["head"];
+  // Zero-length helpers are left out: the spine role on CMU's LowerBack (at the hips)
+  // bent a retargeted character's back from the pelvis and left its real Spine untracked.
   for (int j = skeleton.joint(top).parent.value; j >= 0 && j != pelvis;
        j = skeleton.joint(j).parent.value)
-    roles.spine_chain.insert(roles.spine_chain.begin(), j);
+    if (!SitsOnItsParent(skeleton, j)) roles.spine_chain.insert(roles.spine_chain.begin(), j);
   if (!roles.spine_chain.empty()) {
     roles.joint_of_role["chest"] = roles.spine_chain.back();
     if (roles.spine_chain.size() >= 2) roles.joint_of_role["spine"] = roles.spine_chain.front();

@@ -67,6 +67,59 @@ TEST(MarkerLayoutTest, MatchesRolesAcrossNamingSchemes) {
   }
 }
 
+// The humanoid with a zero-length helper joint inserted above each named joint, as CMU's
+// rigs have LowerBack (at the hips) above Spine.
+Skeleton WithHelpersAbove(const std::map<std::string, std::string>& helper_above) {
+  const Skeleton base = MakeHumanoidSkeleton();
+  std::vector<Joint> joints;
+  std::vector<int> new_index;
+  for (const Joint& old : base.joints()) {
+    Joint j = old;
+    if (j.parent.is_valid()) j.parent = JointIndex(new_index[static_cast<size_t>(j.parent.value)]);
+    if (auto it = helper_above.find(j.name); it != helper_above.end()) {
+      Joint helper;
+      helper.name = it->second;
+      helper.parent = j.parent;
+      joints.push_back(helper);
+      j.parent = JointIndex(static_cast<int>(joints.size()) - 1);
+    }
+    joints.push_back(j);
+    new_index.push_back(static_cast<int>(joints.size()) - 1);
+  }
+  return Skeleton(joints);
+}
+
+// A joint that sits on its parent bends nothing a marker sees: as the spine, CMU's
+// LowerBack bent a retargeted character's back from its pelvis and left Spine untracked.
+TEST(MarkerLayoutTest, AHelperJointOnItsParentTakesNoRole) {
+  const Skeleton sk = WithHelpersAbove({{"Spine", "LowerBack"}, {"Neck", "NeckBase"}});
+  const HumanoidRoles roles = MatchHumanoidRoles(sk);
+  SCOPED_TRACE(roles.Describe(sk));
+  EXPECT_EQ(sk.joint(roles.joint_of_role.at("spine")).name, "Spine");
+  EXPECT_EQ(sk.joint(roles.joint_of_role.at("chest")).name, "Chest");
+  EXPECT_EQ(sk.joint(roles.joint_of_role.at("neck")).name, "Neck");
+  ASSERT_EQ(roles.spine_chain.size(), 2u);
+  // The default layout's markers land where they do on the rig without helpers.
+  const Skeleton plain = MakeHumanoidSkeleton();
+  const auto layout = DefaultMarkerLayout();
+  const auto with_helpers = PlaceMarkers(sk, roles, layout, {});
+  const auto without = PlaceMarkers(plain, MatchHumanoidRoles(plain), layout, {});
+  ASSERT_EQ(with_helpers.size(), without.size());
+  KinematicsWorkspace a(sk), b(plain);
+  ForwardKinematics(sk, RestPose(sk), &a);
+  ForwardKinematics(plain, RestPose(plain), &b);
+  for (size_t m = 0; m < without.size(); ++m) {
+    const auto& x = with_helpers[m].attachments[0];
+    const auto& y = without[m].attachments[0];
+    const Vec3 p =
+        a.p_WJ[static_cast<size_t>(x.joint)] + a.R_WJ[static_cast<size_t>(x.joint)] * x.offset;
+    const Vec3 q =
+        b.p_WJ[static_cast<size_t>(y.joint)] + b.R_WJ[static_cast<size_t>(y.joint)] * y.offset;
+    EXPECT_LT((p - q).norm(), 1e-9) << with_helpers[m].name;
+    EXPECT_EQ(sk.joint(x.joint).name, plain.joint(y.joint).name) << with_helpers[m].name;
+  }
+}
+
 TEST(MarkerLayoutTest, ExplainsWhatIsMissingOnANonHumanoid) {
   std::vector<Joint> joints(2);
   joints[0].name = "base";
