@@ -375,22 +375,30 @@ class Parser {
     const auto holds = [&](int64_t n, size_t points_per_frame) {
       return holds_frames_of(n, frame_bytes_of(points_per_frame));
     };
-    // How far the data falls short of filling the file with frames of this size: a writer
-    // pads the data section to a whole 512-byte block and no more.
-    const auto filled_by_frames_of = [&](size_t frame_bytes) {
-      const size_t bytes = frame_bytes * static_cast<size_t>(std::max<int64_t>(frames, 0));
-      return frames > 0 && bytes <= available && available - bytes < kBlock;
+    // Whether n frames of this size fill the data section: a writer pads it to a whole
+    // 512-byte block and no more.
+    const auto n_fill = [&](int64_t n, size_t frame_bytes) {
+      const size_t bytes = frame_bytes * static_cast<size_t>(std::max<int64_t>(n, 0));
+      return n > 0 && bytes <= available && available - bytes < kBlock;
     };
-    const auto fills = [&](size_t points_per_frame) {
-      return filled_by_frames_of(frame_bytes_of(points_per_frame));
+    const auto filled_by_frames_of = [&](size_t frame_bytes) {
+      return n_fill(frames, frame_bytes);
     };
     // Where the header and the parameters disagree on the frame's layout, the one whose
     // frames the data holds (and the other's not), or fill it (and the other's leave more
-    // than a block unread), is the layout. Read at the other, every frame is garbage.
-    const auto reads_better = [&](size_t frame_bytes, size_t instead_of) {
-      return holds_frames_of(frames, frame_bytes) &&
-             (!holds_frames_of(frames, instead_of) ||
-              (filled_by_frames_of(frame_bytes) && !filled_by_frames_of(instead_of)));
+    // than a block unread), is the layout. Read at the other, every frame is garbage. A
+    // stale POINT:FRAMES longer than the header's count (given way to below) fits no
+    // layout, so the header's count is tried too: with two quirks in one file, the file was
+    // refused as truncated.
+    const bool point_frames_may_be_stale = !header_capped && header_frames > 0 &&
+                                           point_frames > header_frames && frames == point_frames;
+    const auto layout_fits_better = [&](size_t frame_bytes, size_t instead_of) {
+      const auto at = [&](int64_t n) {
+        return holds_frames_of(n, frame_bytes) &&
+               (!holds_frames_of(n, instead_of) ||
+                (n_fill(n, frame_bytes) && !n_fill(n, instead_of)));
+      };
+      return at(frames) || (point_frames_may_be_stale && at(header_frames));
     };
     // Analog values a frame by the parameters: ANALOG:USED channels times the analog
     // samples per point frame (the header's count when they say nothing usable).
@@ -416,8 +424,8 @@ class Parser {
     // Float or integer storage: POINT:SCALE's sign, the header's where only it fits.
     if (!storage_agrees && points_agree && analog_agrees) {
       const size_t header_word = header_scale_ < 0.0f ? 4 : 2;
-      if (reads_better(bytes_per_frame(used, analog_values, header_word),
-                       bytes_per_frame(used, analog_values, value_size))) {
+      if (layout_fits_better(bytes_per_frame(used, analog_values, header_word),
+                             bytes_per_frame(used, analog_values, value_size))) {
         char note[200];
         std::snprintf(note, sizeof(note),
                       "POINT:SCALE is %g (%s samples), the header's scale %g: the data holds "
@@ -433,7 +441,8 @@ class Parser {
     // Analog values stored per frame: the header's count, the parameters' where only that
     // fits.
     if (!analog_agrees && points_agree && storage_agrees &&
-        reads_better(bytes_per_frame(used, parameter_analog, value_size), frame_bytes_of(used))) {
+        layout_fits_better(bytes_per_frame(used, parameter_analog, value_size),
+                           frame_bytes_of(used))) {
       take.notes.push_back("the header stores " + std::to_string(analog_values) +
                            " analog values a frame, ANALOG:USED x ANALOG:RATE / POINT:RATE " +
                            std::to_string(parameter_analog) + ": the data holds frames of " +
@@ -448,8 +457,7 @@ class Parser {
     // file; fewer read every frame at the wrong stride.
     const size_t used_in_parameter = used;
     if (used_parameter_entry != nullptr && header_points_ > 0 && header_points_ != used &&
-        holds(frames, header_points_) &&
-        (!holds(frames, used) || (fills(header_points_) && !fills(used)))) {
+        layout_fits_better(frame_bytes_of(header_points_), frame_bytes_of(used))) {
       used = header_points_;
       take.notes.push_back("POINT:USED says " + std::to_string(used_in_parameter) +
                            " points, the header " + std::to_string(used) +

@@ -516,6 +516,29 @@ TEST(C3dTest, AStalePointFramesLongerThanTheDataGivesWayToTheHeadersWithANote) {
   ReadWithOneNote(bytes, take, "POINT:FRAMES says 2751 frames, the header 20");
 }
 
+// Two quirks in one file: POINT:FRAMES left at a longer take's count and POINT:USED
+// rewritten. The point counts were weighed against the stale frame count, which no layout
+// fits, so the header's points were never tried and the file was refused as truncated.
+TEST(C3dTest, AStalePointFramesAndARewrittenPointUsedAreBothReconciled) {
+  const C3dTake take = MakeTake(3, 20);
+  for (const int used : {5, 1}) {
+    std::vector<uint8_t> bytes = EncodeC3d(take);
+    const size_t point_frames = ValueOffset(bytes, "FRAMES", 0);
+    bytes[point_frames] = 2751 & 0xff;
+    bytes[point_frames + 1] = 2751 >> 8;
+    ASSERT_NO_FATAL_FAILURE(RewritePointUsed(&bytes, used));
+    const C3dTake read = ParseC3d(bytes, "two_quirks.c3d");
+    ExpectSameTake(take, read);
+    ASSERT_EQ(read.notes.size(), 2u) << "POINT:USED " << used;
+    EXPECT_NE(
+        read.notes[0].find("POINT:USED says " + std::to_string(used) + " points, the header 3"),
+        std::string::npos)
+        << read.notes[0];
+    EXPECT_NE(read.notes[1].find("POINT:FRAMES says 2751 frames, the header 20"), std::string::npos)
+        << read.notes[1];
+  }
+}
+
 // Past 65535 frames the header is capped; the count is in the TRIAL range or a POINT:FRAMES
 // wide enough. With neither (no TRIAL group, POINT:FRAMES a 16-bit count wrapped or 0),
 // the smaller count won: 65536 frames dropped, or an empty take, in silence. The data's
