@@ -255,7 +255,17 @@ int RunCalibrateCommand(const CalibrateCommandOptions& options, std::ostream& ou
   std::vector<Pose> motion = bvh.frames;
   // The same rate as two files print it: a C3D stores 119.88 Hz as a float of its
   // decimal digits, a BVH reads as 120000/1001 Hz; 1e-6 apart, no reason to resample.
-  if (std::abs(bvh.rate_hz() - c3d.rate_hz) > 2e-5 * c3d.rate_hz) {
+  // A genlocked take labelled at the whole rate in one file and at the NTSC rate (1000/1001
+  // of it) in the other holds the same frames: resampled, it drifted half a frame over four
+  // seconds and markers were attached to the wrong joint.
+  const bool same_frames_other_label =
+      static_cast<int>(bvh.frames.size()) == c3d.num_frames &&
+      std::abs(bvh.rate_hz() - c3d.rate_hz) <= 1.5e-3 * c3d.rate_hz;
+  if (same_frames_other_label && std::abs(bvh.rate_hz() - c3d.rate_hz) > 2e-5 * c3d.rate_hz) {
+    out << options.skeleton_bvh << " says " << bvh.rate_hz() << " Hz and the capture "
+        << c3d.rate_hz << " Hz, with the same " << c3d.num_frames
+        << " frames: paired frame for frame (one rate is the other's NTSC label)\n";
+  } else if (std::abs(bvh.rate_hz() - c3d.rate_hz) > 2e-5 * c3d.rate_hz) {
     out << "resampling " << options.skeleton_bvh << " from " << bvh.rate_hz()
         << " Hz to the capture's " << c3d.rate_hz << " Hz\n";
     motion = ResampleMotion(bvh.skeleton, bvh.frames, bvh.rate_hz(), c3d.rate_hz);
