@@ -1055,11 +1055,12 @@ void Daemon::Run(bool handle_signals) {
           // resync: the snapshot's last frame number is none of theirs).
           if (before != nullptr && s.counters.stalls > before->counters.stalls)
             spdlog::warn(
-                "watchdog: subject '{}' input stalled (no frame for {:.2f} s, last frame {})",
+                "watchdog: subject '{}' input stalled (no frame taken for {:.2f} s, last frame {})",
                 s.name, s.counters.stall_silence_s, s.counters.stall_last_frame);
           if (before != nullptr && s.counters.resumes > before->counters.resumes)
-            spdlog::info("subject '{}' input resumed at frame {} after {:.2f} s without a frame",
-                         s.name, s.counters.resume_frame, s.counters.resume_silence_s);
+            spdlog::info(
+                "subject '{}' input resumed at frame {} after {:.2f} s without a frame taken",
+                s.name, s.counters.resume_frame, s.counters.resume_silence_s);
           if (before != nullptr && s.counters.restarts > before->counters.restarts)
             spdlog::warn(
                 "subject '{}': capture restart or jump in frame numbers; pipeline re-synchronised "

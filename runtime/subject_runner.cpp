@@ -89,9 +89,7 @@ SubjectRunner::SubjectRunner(const SubjectConfig& config, const DaemonConfig& da
       status_topic_(Topic("status", config.name)) {
   const auto joints = static_cast<size_t>(skeleton_->num_joints());
   const auto markers = static_cast<size_t>(config.model.markers->num_markers());
-  // Half a second of frames, all dropped, is a subject rejecting its input; the model
-  // distance is averaged over about a second.
-  rejecting_after_ = static_cast<uint64_t>(std::max(10.0, 0.5 * config.rate_hz));
+  // The model distance is averaged over about a second.
   model_distance_weight_ = std::min(1.0, 1.0 / config.rate_hz);
   model_suspect_m_ = daemon.model_suspect_mm * 1e-3;
   received_.assign(stamps_.size() * markers, Vec3::Constant(kNaN));
@@ -183,7 +181,8 @@ void SubjectRunner::CountDrop(DropReason reason, int64_t receive_ns) {
   last_input_ns_ = receive_ns;
   ++counters_.frames_in;
   ++counters_.dropped[static_cast<size_t>(reason)];
-  ++consecutive_dropped_;
+  if (consecutive_dropped_++ == 0) first_dropped_ns_ = receive_ns;
+  last_dropped_ns_ = receive_ns;
   last_drop_ = reason;
 }
 
@@ -196,6 +195,12 @@ void SubjectRunner::InheritCounters(const SubjectRunner& previous) {
 std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessage& frame,
                                                 int64_t receive_ns, OutputSink& sink) {
   auto drop = [&](DropReason reason) {
+    // A frame that arrived and was dropped is counted once, as dropped: not again as a
+    // skipped number when the next frame taken bridges over it (a sender at the wrong rate
+    // for 90 frames showed 90 dropped and 90 skipped).
+    if (started_ && frame.frame_number >= next_frame_number_ &&
+        frame.stream.session_id == counters_.last_stream.session_id)
+      ++dropped_ahead_;
     CountDrop(reason, receive_ns);
     return std::optional<DropReason>(reason);
   };
@@ -231,7 +236,8 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
       const bool interrupted_goes_on = interrupted_.has_value() &&
                                        frame.frame_number > interrupted_->newest &&
                                        frame.capture_time_ns > interrupted_->capture_ns;
-      if (!interrupted_goes_on) counters_.frames_skipped += missing;
+      if (!interrupted_goes_on)
+        counters_.frames_skipped += missing - std::min(missing, dropped_ahead_);
       if (interrupted_goes_on || missing > static_cast<uint64_t>(max_gap_frames_)) {
         // Not to be bridged (published already, or too long): start over from this frame.
         Resynchronise(sink);
@@ -267,6 +273,7 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
   ++counters_.frames_in;
   ++counters_.frames_accepted;
   consecutive_dropped_ = 0;
+  dropped_ahead_ = 0;
   started_ = true;
   last_receive_ns_ = receive_ns;
   last_input_ns_ = receive_ns;
@@ -431,7 +438,8 @@ void SubjectRunner::EndOfStream(OutputSink& sink) {
   interrupted_.reset();
   // An ended stream is waiting for the next one, not stalled: the watchdog stays quiet.
   state_ = protocol::SubjectState::kWaiting;
-  consecutive_dropped_ = 0;
+  // A stream whose every frame was dropped and then ended is no fixed sender: the rejection
+  // stands until a frame is taken (it was cleared here, and logged as over).
   ++counters_.ends_of_stream;
 }
 

@@ -134,10 +134,14 @@ class SubjectRunner {
     return pending() - (counters_.frames_inserted - counters_.inserted_published);
   }
   protocol::SubjectState state() const { return state_; }
-  /// Every frame of the last half second (10 at least) was dropped: the reason of the last.
+  /// Every frame received over the last half second (10 at least) was dropped: the reason
+  /// of the last. Judged by the time the drops span, not their count: counted at the
+  /// subject's rate, a 60 Hz sender into a 360 Hz subject was flagged after 3 s.
   std::optional<DropReason> rejecting() const {
-    return consecutive_dropped_ >= rejecting_after_ ? std::optional<DropReason>(last_drop_)
-                                                    : std::nullopt;
+    return consecutive_dropped_ >= kRejectingMinFrames &&
+                   last_dropped_ns_ - first_dropped_ns_ >= kRejectingAfterNs
+               ? std::optional<DropReason>(last_drop_)
+               : std::nullopt;
   }
   /// How far the received samples sit from the model's markers in the solved pose (the
   /// median over a frame's samples, averaged over about a second), metres; a model that
@@ -262,8 +266,12 @@ class SubjectRunner {
   int64_t last_receive_ns_ = -1;
   int64_t last_input_ns_ = -1;
   protocol::SubjectState state_ = protocol::SubjectState::kWaiting;
+  static constexpr uint64_t kRejectingMinFrames = 10;
+  static constexpr int64_t kRejectingAfterNs = 500'000'000;
   uint64_t consecutive_dropped_ = 0;
-  uint64_t rejecting_after_ = 10;
+  uint64_t dropped_ahead_ = 0;    ///< Of those, frames numbered past the last one taken.
+  int64_t first_dropped_ns_ = 0;  ///< Receive times of the first and last of those drops.
+  int64_t last_dropped_ns_ = 0;
   DropReason last_drop_ = DropReason::kMalformed;
   std::vector<Vec3> received_;           ///< Ring like stamps_: each held frame's samples.
   std::vector<double> distances_;        ///< Publish scratch: sample-to-model distances.

@@ -217,6 +217,27 @@ TEST_F(SubjectRunnerTest, CaptureRestartFlushesAndStartsOver) {
 // taken as a restart, but when the interrupted stream then goes on (a newer number and
 // clock), the numbers between were published already: a second restart, not a bridge of
 // repaired frames re-publishing them (71 duplicates at 60 Hz).
+// Frames that arrived at the wrong rate are dropped and counted so; bridged by the next
+// frame taken, they are not counted again as numbers that never arrived.
+TEST_F(SubjectRunnerTest, FramesDroppedMidStreamAreNotAlsoCountedAsSkipped) {
+  SubjectRunner runner(subject_, daemon_);
+  for (int f = 0; f < 230; ++f) {
+    protocol::MarkerFrameMessage m = Frame(f % 120, f, 0);
+    if (f >= 100 && f < 190) m.rate_hz = 240.0f;
+    runner.Accept(m, 0, sink_);
+  }
+  runner.Flush(sink_);
+  EXPECT_EQ(runner.counters().dropped[static_cast<size_t>(DropReason::kRateMismatch)], 90u);
+  EXPECT_EQ(runner.counters().frames_inserted, 90u);
+  EXPECT_EQ(runner.counters().frames_skipped, 0u);
+  ExpectBalanced(runner);
+  // A number that never arrived still is one.
+  SubjectRunner other(subject_, daemon_);
+  for (int f = 0; f < 50; ++f)
+    if (f != 20) other.Accept(Frame(f, f, 0), 0, sink_);
+  EXPECT_EQ(other.counters().frames_skipped, 1u);
+}
+
 TEST_F(SubjectRunnerTest, AStreamThatGoesOnAfterALatePacketIsNotPublishedTwice) {
   SubjectRunner runner(subject_, daemon_);
   const auto ns = [](int f) { return 1'000'000'000ull + 8'333'333ull * static_cast<uint64_t>(f); };
@@ -481,20 +502,33 @@ TEST_F(SubjectRunnerTest, AnEndedStreamWaitsInsteadOfStalling) {
 }
 
 // A bridge sending another marker set: every frame is dropped, and the subject says so
-// (on the wire and to /health) once half a second of frames has gone, not at the first.
+// (on the wire and to /health) once half a second of frames has gone, not at the first:
+// half a second of time, whatever the sender's rate (counted in the subject's frames, a
+// 60 Hz sender into a 360 Hz subject was flagged after 3 s). An end of stream does not
+// clear it; a frame taken does.
 TEST_F(SubjectRunnerTest, ASubjectWhoseFramesAreAllDroppedIsRejectingInput) {
   SubjectRunner runner(subject_, daemon_);
   protocol::MarkerFrameMessage wrong = Frame(0, 0, 0);
   wrong.model_hash ^= 1;
-  for (int f = 0; f < 59; ++f) ASSERT_TRUE(runner.Accept(wrong, 0, sink_).has_value());
+  // A burst of 100 within 0.1 s is no half second.
+  for (int f = 0; f < 100; ++f)
+    ASSERT_TRUE(runner.Accept(wrong, int64_t{f} * 1'000'000, sink_).has_value());
   EXPECT_FALSE(runner.rejecting().has_value());
-  ASSERT_TRUE(runner.Accept(wrong, 0, sink_).has_value());
+  ASSERT_FALSE(runner.Accept(Frame(0, 0, 0), 100'000'000, sink_).has_value());
+  constexpr int64_t kSixtyHz = 16'666'667;
+  const int64_t start = 1'000'000'000;
+  for (int f = 0; f < 30; ++f)
+    ASSERT_TRUE(runner.Accept(wrong, start + f * kSixtyHz, sink_).has_value());
+  EXPECT_FALSE(runner.rejecting().has_value());
+  ASSERT_TRUE(runner.Accept(wrong, start + 30 * kSixtyHz, sink_).has_value());
   ASSERT_TRUE(runner.rejecting().has_value());
   EXPECT_EQ(*runner.rejecting(), DropReason::kModelMismatch);
-  runner.PublishStatus(0, sink_);
+  runner.PublishStatus(start + 30 * kSixtyHz, sink_);
   ASSERT_EQ(sink_.statuses.size(), 1u);
   EXPECT_EQ(sink_.statuses[0].problems, protocol::kProblemRejectingInput);
-  ASSERT_FALSE(runner.Accept(Frame(0, 0, 0), 0, sink_).has_value());
+  runner.EndOfStream(sink_);
+  EXPECT_TRUE(runner.rejecting().has_value());
+  ASSERT_FALSE(runner.Accept(Frame(1, 1, 0), start + 31 * kSixtyHz, sink_).has_value());
   EXPECT_FALSE(runner.rejecting().has_value());
 }
 
