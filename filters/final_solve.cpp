@@ -36,18 +36,29 @@ void FinalSolve::Solve(CleanFrame* frame, CleanupCounters* counters,
   const int64_t tau = frame->frame;
   const double catchup = rules_.data_catchup_m;
   // Back from frames with no captured sample at all (a feed outage bridged by inserted
-  // frames, the whole body occluded): whatever the fills did, nothing real led the
-  // skeleton, so with most of the body seen again it is solved afresh on the data.
-  // Caught up at the catch-up speed it stayed 5-47 cm behind the markers for a third of a
-  // second, published as tracking.
-  size_t captured = 0;
-  for (size_t m = 0; m < tracks_.size(); ++m)
-    captured += frame->source[m] == SampleSource::kCaptured ? 1 : 0;
-  if (captured > 0 && blind_ && final_.has_solution() && 2 * captured >= tracks_.size()) {
+  // frames, the whole body occluded) with most of the body seen again and most of it
+  // further from the skeleton than the catch-up closes in a frame: nothing real led the
+  // skeleton, and it is solved afresh on the data. Caught up, it stayed 5-47 cm behind the
+  // markers for a third of a second after a 0.3-1.9 s outage, published as tracking. A
+  // frame lost within the lookahead is interpolated and the skeleton already there: no
+  // cold start (its hidden limbs would jump, and it costs a strict solve).
+  size_t captured = 0, far = 0;
+  for (size_t m = 0; m < tracks_.size(); ++m) {
+    if (frame->source[m] != SampleSource::kCaptured) continue;
+    ++captured;
+    if (final_.has_solution() &&
+        (frame->markers[m] - final_.predicted_markers()[m]).norm() > rules_.data_catchup_max_m)
+      ++far;
+  }
+  const bool most_seen = 2 * captured >= tracks_.size() && captured > 0;
+  if (blind_ && most_seen && 2 * far >= captured) {
     final_.Reset();
     for (Track& track : tracks_) track.weight = 1.0;
   }
-  blind_ = captured == 0;
+  // Armed by a frame with nothing captured; a body coming back a few markers at a time
+  // keeps it armed until most of it is seen.
+  if (captured == 0) blind_ = true;
+  if (most_seen) blind_ = false;
   for (size_t m = 0; m < tracks_.size(); ++m) {
     Track& track = tracks_[m];
     const MarkerStatus status = frame->status[m];

@@ -391,7 +391,8 @@ class Parser {
     // layout, so the header's count is tried too: with two quirks in one file, the file was
     // refused as truncated.
     const bool point_frames_may_be_stale = !header_capped && header_frames > 0 &&
-                                           point_frames > header_frames && frames == point_frames;
+                                           point_frames > header_frames && frames == point_frames &&
+                                           !holds(point_frames, used);
     const auto layout_fits_better = [&](size_t frame_bytes, size_t instead_of) {
       const auto at = [&](int64_t n) {
         return holds_frames_of(n, frame_bytes) &&

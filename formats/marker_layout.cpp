@@ -281,9 +281,15 @@ HumanoidRoles MatchHumanoidRoles(const Skeleton& skeleton) {
       roles.joint_of_role.count("neck") ? roles.joint_of_role["neck"] : roles.joint_of_role["head"];
   // Zero-length helpers are left out: the spine role on CMU's LowerBack (at the hips)
   // bent a retargeted character's back from the pelvis and left its real Spine untracked.
+  std::vector<int> whole_chain;
   for (int j = skeleton.joint(top).parent.value; j >= 0 && j != pelvis;
-       j = skeleton.joint(j).parent.value)
+       j = skeleton.joint(j).parent.value) {
+    whole_chain.insert(whole_chain.begin(), j);
     if (!SitsOnItsParent(skeleton, j)) roles.spine_chain.insert(roles.spine_chain.begin(), j);
+  }
+  // Left with one joint where there were two, the helper stays: without it the rig has no
+  // spine role and its spine markers would go unplaced.
+  if (roles.spine_chain.size() < 2 && whole_chain.size() >= 2) roles.spine_chain = whole_chain;
   if (!roles.spine_chain.empty()) {
     roles.joint_of_role["chest"] = roles.spine_chain.back();
     if (roles.spine_chain.size() >= 2) roles.joint_of_role["spine"] = roles.spine_chain.front();

@@ -259,11 +259,11 @@ int RunCalibrateCommand(const CalibrateCommandOptions& options, std::ostream& ou
   // of it) in the other holds the same frames: resampled, it drifted half a frame over four
   // seconds and markers were attached to the wrong joint.
   const bool same_frames_other_label =
-      static_cast<int>(bvh.frames.size()) == c3d.num_frames &&
+      std::abs(static_cast<int>(bvh.frames.size()) - c3d.num_frames) <= 1 &&
       std::abs(bvh.rate_hz() - c3d.rate_hz) <= 1.5e-3 * c3d.rate_hz;
   if (same_frames_other_label && std::abs(bvh.rate_hz() - c3d.rate_hz) > 2e-5 * c3d.rate_hz) {
     out << options.skeleton_bvh << " says " << bvh.rate_hz() << " Hz and the capture "
-        << c3d.rate_hz << " Hz, with the same " << c3d.num_frames
+        << c3d.rate_hz << " Hz, with " << bvh.frames.size() << " and " << c3d.num_frames
         << " frames: paired frame for frame (one rate is the other's NTSC label)\n";
   } else if (std::abs(bvh.rate_hz() - c3d.rate_hz) > 2e-5 * c3d.rate_hz) {
     out << "resampling " << options.skeleton_bvh << " from " << bvh.rate_hz()

@@ -181,7 +181,15 @@ void SubjectRunner::CountDrop(DropReason reason, int64_t receive_ns) {
   last_input_ns_ = receive_ns;
   ++counters_.frames_in;
   ++counters_.dropped[static_cast<size_t>(reason)];
-  if (consecutive_dropped_++ == 0) first_dropped_ns_ = receive_ns;
+  // Drops on either side of a silence (a few at one stream's end, a few at the next's
+  // start an hour later) are no half second of them, unless the rejection already stands.
+  const bool after_silence =
+      consecutive_dropped_ > 0 && receive_ns - last_dropped_ns_ > kRejectingAfterNs;
+  if (consecutive_dropped_ == 0 || (after_silence && !rejecting())) {
+    consecutive_dropped_ = 0;
+    first_dropped_ns_ = receive_ns;
+  }
+  ++consecutive_dropped_;
   last_dropped_ns_ = receive_ns;
   last_drop_ = reason;
 }
@@ -199,6 +207,7 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
     // skipped number when the next frame taken bridges over it (a sender at the wrong rate
     // for 90 frames showed 90 dropped and 90 skipped).
     if (started_ && frame.frame_number >= next_frame_number_ &&
+        frame.frame_number - next_frame_number_ <= static_cast<uint64_t>(max_gap_frames_) &&
         frame.stream.session_id == counters_.last_stream.session_id)
       ++dropped_ahead_;
     CountDrop(reason, receive_ns);

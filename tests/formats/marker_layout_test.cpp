@@ -120,6 +120,20 @@ TEST(MarkerLayoutTest, AHelperJointOnItsParentTakesNoRole) {
   }
 }
 
+// Where leaving the helpers out would leave a single spine joint, they stay: the rig
+// keeps its spine role and its spine markers.
+TEST(MarkerLayoutTest, AChainOfHelpersKeepsItsSpineRole) {
+  const Skeleton helped = WithHelpersAbove({{"Spine", "LowerBack"}});
+  std::vector<Joint> joints(helped.joints().begin(), helped.joints().end());
+  joints[static_cast<size_t>(helped.FindJoint("Chest")->value)].offset = Vec3::Zero();
+  const Skeleton sk(joints);
+  const HumanoidRoles roles = MatchHumanoidRoles(sk);
+  SCOPED_TRACE(roles.Describe(sk));
+  EXPECT_EQ(roles.spine_chain.size(), 3u);
+  EXPECT_EQ(roles.joint_of_role.count("spine"), 1u);
+  EXPECT_EQ(roles.joint_of_role.count("chest"), 1u);
+}
+
 TEST(MarkerLayoutTest, ExplainsWhatIsMissingOnANonHumanoid) {
   std::vector<Joint> joints(2);
   joints[0].name = "base";
