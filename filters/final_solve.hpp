@@ -62,7 +62,7 @@ class FinalSolve {
   const IkOptions final_ik_;  // options_.final_ik with the unseen-knee rule
   IkState final_, anchor_;
   std::vector<Track> tracks_;
-  bool blind_ = false;  // the last frame had no captured sample
+  bool blind_ = false;  // a frame had no captured sample, and none since saw most markers
   std::vector<double> weights_, anchor_weights_;
   std::vector<Vec3> solve_targets_;    // what the solve fits: X-, captured samples eased in
   std::vector<uint8_t> segment_seen_;  // per joint: a trusted sample on it

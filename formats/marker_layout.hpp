@@ -34,8 +34,9 @@ std::vector<LayoutMarker> ReadMarkerLayout(const std::string& path);
 /// Body segments found on a skeleton: role name -> joint index.
 struct HumanoidRoles {
   std::map<std::string, int> joint_of_role;
-  std::vector<int> spine_chain;  ///< Joints strictly between pelvis and neck, bottom first (none
-                                 ///< that sits on its parent).
+  /// Joints strictly between pelvis and neck, bottom first; none that sits on its parent,
+  /// unless leaving those out would leave a single joint.
+  std::vector<int> spine_chain;
   /// One line per role: "thigh_l -> UpperLeg_L".
   std::string Describe(const Skeleton& skeleton) const;
 };

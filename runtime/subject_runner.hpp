@@ -269,7 +269,7 @@ class SubjectRunner {
   static constexpr uint64_t kRejectingMinFrames = 10;
   static constexpr int64_t kRejectingAfterNs = 500'000'000;
   uint64_t consecutive_dropped_ = 0;
-  uint64_t dropped_ahead_ = 0;    ///< Of those, frames numbered past the last one taken.
+  uint64_t dropped_ahead_ = 0;    ///< Drops since the last frame taken numbered past it.
   int64_t first_dropped_ns_ = 0;  ///< Receive times of the first and last of those drops.
   int64_t last_dropped_ns_ = 0;
   DropReason last_drop_ = DropReason::kMalformed;
