@@ -271,9 +271,13 @@ void EncodeMarkerFrame(const MarkerFrameMessage& m, std::vector<uint8_t>* out) {
 
 DecodeStatus DecodeMarkerFrame(std::span<const uint8_t> bytes, MarkerFrameMessage* m) {
   ByteReader r(bytes);
+  m->frame_number = 0;
+  m->stream = StreamInfo{};
   if (const DecodeStatus s = ReadPrelude(r, MessageType::kMarkerFrame, &m->version, &m->subject);
-      s != DecodeStatus::kOk)
+      s != DecodeStatus::kOk) {
+    m->subject.clear();
     return s;
+  }
   uint16_t count = 0, reserved = 0;
   if (!r.ReadU64(&m->model_hash) || !r.ReadU64(&m->frame_number) ||
       !r.ReadU64(&m->capture_time_ns) || !r.ReadF32(&m->rate_hz) || !r.ReadU16(&count) ||

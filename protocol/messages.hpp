@@ -237,7 +237,10 @@ SubjectDescriptionMessage DescribeSubject(const std::string& subject, const Skel
 /// Reads the message type after validating the header. Returns kOk and sets type.
 DecodeStatus PeekType(std::span<const uint8_t> bytes, MessageType* type);
 /// Decodes into message, reusing its storage (no allocation once it has held a message
-/// of this size). On any status but kOk, message is unspecified.
+/// of this size). On any status but kOk, message.subject holds the subject's name if it
+/// was read (empty otherwise), so the failure can be charged to that subject, and
+/// message.frame_number and message.stream hold their values if they were read (0 and
+/// an empty stream otherwise); the rest is unspecified.
 DecodeStatus DecodeMarkerFrame(std::span<const uint8_t> bytes, MarkerFrameMessage* message);
 DecodeStatus DecodeSkeletonFrame(std::span<const uint8_t> bytes, SkeletonFrameMessage* message);
 DecodeStatus DecodeSubjectDescription(std::span<const uint8_t> bytes,

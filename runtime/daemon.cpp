@@ -205,12 +205,17 @@ struct Daemon::DataPlane final : OutputSink {
     if (type != protocol::MessageType::kMarkerFrame) return Drop(DropReason::kNotMarkerFrame);
     const protocol::DecodeStatus status = protocol::DecodeMarkerFrame(bytes, &frame);
     if (status != protocol::DecodeStatus::kOk) {
-      // A non-finite value is found after the subject name, so it can be charged to it.
-      SubjectRunner* runner =
-          status == protocol::DecodeStatus::kNonFinite ? FindRunner(frame.subject) : nullptr;
-      if (runner != nullptr) return runner->CountDrop(DropReason::kNonFinite, receive_ns);
-      return Drop(status == protocol::DecodeStatus::kNonFinite ? DropReason::kNonFinite
-                                                               : DropReason::kMalformed);
+      const DropReason reason = status == protocol::DecodeStatus::kNonFinite
+                                    ? DropReason::kNonFinite
+                                    : DropReason::kMalformed;
+      // Failed after the subject's name: charged to that subject, so a sender whose frames
+      // all fail (a rate fraction contradicting its float) is named in /health.
+      SubjectRunner* runner = frame.subject.empty() ? nullptr : FindRunner(frame.subject);
+      if (runner != nullptr) {
+        (void)runner->Drop(frame, reason, receive_ns);
+        return;
+      }
+      return Drop(reason);
     }
     SubjectRunner* runner = FindRunner(frame.subject);
     if (runner == nullptr) return Drop(DropReason::kUnknownSubject);
@@ -1062,10 +1067,7 @@ void Daemon::Run(bool handle_signals) {
                 "subject '{}' input resumed at frame {} after {:.2f} s without a frame taken",
                 s.name, s.counters.resume_frame, s.counters.resume_silence_s);
           if (before != nullptr && s.counters.restarts > before->counters.restarts)
-            spdlog::warn(
-                "subject '{}': capture restart or jump in frame numbers; pipeline re-synchronised "
-                "at frame {}",
-                s.name, s.counters.resync_frame);
+            spdlog::warn("{}", RestartLogLine(s, s.counters.restarts - before->counters.restarts));
           if (s.rejecting_input && (before == nullptr || !before->rejecting_input))
             spdlog::warn("subject '{}': every frame dropped as {} for over 0.5 s{}", s.name,
                          to_string(s.rejecting_reason), RejectionDetail(s));

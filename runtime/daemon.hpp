@@ -172,5 +172,9 @@ std::string FormatHealthJson(const DaemonStats& stats, bool data_plane_alive);
 /// Why a subject rejecting every frame does, beyond the drop reason's name (a rate
 /// mismatch: the frames' rate against the configured one); empty if nothing to add.
 std::string RejectionDetail(const SubjectStats& s);
+/// The log line for a subject's re-synchronisation: where its frame numbers (and v2
+/// sessions) jumped from and to, and how many restarts there were since the last report
+/// (a v1 packet late by over restart_backjump makes two: back, then forward again).
+std::string RestartLogLine(const SubjectStats& s, uint64_t restarts_since_last_report);
 
 }  // namespace mocapd

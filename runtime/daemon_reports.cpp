@@ -6,6 +6,7 @@
 #include <prometheus/histogram.h>
 #include <prometheus/registry.h>
 #include <prometheus/text_serializer.h>
+#include <spdlog/fmt/fmt.h>
 #include <nlohmann/json.hpp>
 
 #include "runtime/daemon.hpp"
@@ -309,6 +310,22 @@ std::string RejectionDetail(const SubjectStats& s) {
                 ": the frames say %g Hz, the subject is configured for %g Hz (rate_hz)",
                 s.mismatched_rate_hz, s.rate_hz);
   return detail;
+}
+
+std::string RestartLogLine(const SubjectStats& s, uint64_t restarts_since_last_report) {
+  const SubjectCounters& c = s.counters;
+  auto session = [](uint64_t id) {
+    return id == 0 ? std::string() : fmt::format(" (session {})", id);
+  };
+  std::string line = fmt::format(
+      "subject '{}': capture restart or jump in frame numbers, frame {}{} -> {}{}; pipeline "
+      "re-synchronised",
+      s.name, c.resync_from_frame, session(c.resync_from_session), c.resync_frame,
+      session(c.resync_session));
+  if (restarts_since_last_report > 1)
+    line += fmt::format(" ({} re-synchronisations since the last report; the last shown)",
+                        restarts_since_last_report);
+  return line;
 }
 
 std::string FormatHealthJson(const DaemonStats& stats, bool data_plane_alive) {

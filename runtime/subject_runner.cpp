@@ -200,19 +200,23 @@ void SubjectRunner::InheritCounters(const SubjectRunner& previous) {
   started_ = false;
 }
 
+std::optional<DropReason> SubjectRunner::Drop(const protocol::MarkerFrameMessage& frame,
+                                              DropReason reason, int64_t receive_ns) {
+  // A frame that arrived and was dropped is counted once, as dropped: not again as a
+  // skipped number when the next frame taken bridges over it (a sender at the wrong rate
+  // for 90 frames showed 90 dropped and 90 skipped). An undecodable frame whose number was
+  // not read has number 0, never ahead.
+  if (started_ && frame.frame_number >= next_frame_number_ &&
+      frame.frame_number - next_frame_number_ <= static_cast<uint64_t>(max_gap_frames_) &&
+      frame.stream.session_id == counters_.last_stream.session_id)
+    ++dropped_ahead_;
+  CountDrop(reason, receive_ns);
+  return reason;
+}
+
 std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessage& frame,
                                                 int64_t receive_ns, OutputSink& sink) {
-  auto drop = [&](DropReason reason) {
-    // A frame that arrived and was dropped is counted once, as dropped: not again as a
-    // skipped number when the next frame taken bridges over it (a sender at the wrong rate
-    // for 90 frames showed 90 dropped and 90 skipped).
-    if (started_ && frame.frame_number >= next_frame_number_ &&
-        frame.frame_number - next_frame_number_ <= static_cast<uint64_t>(max_gap_frames_) &&
-        frame.stream.session_id == counters_.last_stream.session_id)
-      ++dropped_ahead_;
-    CountDrop(reason, receive_ns);
-    return std::optional<DropReason>(reason);
-  };
+  auto drop = [&](DropReason reason) { return Drop(frame, reason, receive_ns); };
   if (frame.model_hash != marker_hash_ || frame.positions.size() != missing_.size())
     return drop(DropReason::kModelMismatch);
   // The configured rate, or its NTSC rate (1000/1001 of it: 119.88 Hz for 120), each
@@ -294,7 +298,10 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
     counters_.resume_frame = frame.frame_number;
     counters_.resume_silence_s = static_cast<double>(silence_ns) * 1e-9;
   }
-  if (resynchronised_) counters_.resync_frame = frame.frame_number;
+  if (resynchronised_) {
+    counters_.resync_frame = frame.frame_number;
+    counters_.resync_session = frame.stream.session_id;
+  }
   resynchronised_ = false;
   if (state_ == protocol::SubjectState::kWaiting || state_ == protocol::SubjectState::kStalled)
     state_ = protocol::SubjectState::kTracking;
@@ -434,6 +441,8 @@ void SubjectRunner::Resynchronise(OutputSink& sink) {
   pushed_ = published_ = 0;
   started_ = false;
   ++counters_.restarts;
+  counters_.resync_from_frame = counters_.last_frame_number;
+  counters_.resync_from_session = counters_.last_stream.session_id;
   resynchronised_ = true;
   interrupted_.reset();
 }

@@ -85,7 +85,10 @@ struct SubjectCounters {
   uint64_t resumes = 0;              ///< Stalls ended by a frame accepted...
   uint64_t resume_frame = 0;         ///< ...the last of which this was...
   double resume_silence_s = 0.0;     ///< ...after this long without a frame taken.
-  uint64_t resync_frame = 0;         ///< The frame the last re-synchronised stream began at.
+  uint64_t resync_frame = 0;         ///< The frame the last re-synchronised stream began at...
+  uint64_t resync_from_frame = 0;    ///< ...the last frame taken before it...
+  uint64_t resync_from_session = 0;  ///< ...and their capture sessions (0: a v1 sender).
+  uint64_t resync_session = 0;
   protocol::StreamInfo last_stream;  ///< The last accepted frame's session, rate and timecode.
   uint64_t dropped_total() const;
 };
@@ -113,8 +116,12 @@ class SubjectRunner {
   /// the frame was rejected (and counts it), nothing otherwise.
   std::optional<DropReason> Accept(const protocol::MarkerFrameMessage& frame, int64_t receive_ns,
                                    OutputSink& sink);
-  /// Counts a frame for this subject that was rejected before it could be decoded fully.
-  void CountDrop(DropReason reason, int64_t receive_ns);
+  /// Counts a frame of this subject as dropped for reason: one Accept rejected, or one
+  /// that failed to decode after its subject's name (frame holds what was read of it). A
+  /// drop numbered within the gap the next frame taken bridges is not counted again as a
+  /// skipped number.
+  std::optional<DropReason> Drop(const protocol::MarkerFrameMessage& frame, DropReason reason,
+                                 int64_t receive_ns);
   /// Publishes everything still held in the lookahead (shutdown, reload, restart).
   void Flush(OutputSink& sink);
   /// The sender says the stream ended: publish the lookahead now; the next frame starts afresh.
@@ -223,6 +230,7 @@ class SubjectRunner {
   void Publish(int64_t trigger_receive_ns, OutputSink& sink);
   void UpdateModelDistance(int64_t frame, const CleanFrame& out);
   void Resynchronise(OutputSink& sink);
+  void CountDrop(DropReason reason, int64_t receive_ns);
   void ShowLive(const CleanFrame& out, int64_t index, const Stamp& stamp, uint64_t publish_ns);
   void ScaleTemplate(std::span<const Vec3> positions, OutputSink& sink);
   /// Trades the published subject (pipeline, model, retargeter, description) for

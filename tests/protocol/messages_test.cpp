@@ -379,6 +379,32 @@ MarkerFrameMessage SampleMarkersWithStream() {
   return m;
 }
 
+TEST(MessagesTest, AFailedMarkerFrameKeepsOnlyWhatWasReadOfItsSubjectAndNumber) {
+  std::vector<uint8_t> bytes;
+  EncodeMarkerFrame(SampleMarkersWithStream(), &bytes);
+  MarkerFrameMessage m;
+  m.subject = "stale";
+  m.frame_number = 7;
+  m.stream.session_id = 9;
+  // Cut inside the subject's name: nothing of the frame is known.
+  std::vector<uint8_t> cut(bytes.begin(), bytes.begin() + kHeaderBytes + 3);
+  ASSERT_EQ(DecodeMarkerFrame(cut, &m), DecodeStatus::kTooShort);
+  EXPECT_TRUE(m.subject.empty());
+  EXPECT_EQ(m.frame_number, 0u);
+  EXPECT_EQ(m.stream.session_id, 0u);
+  // An exact rate that contradicts the float rate: the subject, number and session were
+  // read (a daemon charges the drop to that subject and knows which number it was).
+  MarkerFrameMessage contradicting = SampleMarkersWithStream();
+  contradicting.rate_hz = 120.0f;
+  contradicting.stream.rate_numerator = 120000;
+  contradicting.stream.rate_denominator = 1001;
+  EncodeMarkerFrame(contradicting, &bytes);
+  ASSERT_EQ(DecodeMarkerFrame(bytes, &m), DecodeStatus::kBadField);
+  EXPECT_EQ(m.subject, contradicting.subject);
+  EXPECT_EQ(m.frame_number, contradicting.frame_number);
+  EXPECT_EQ(m.stream.session_id, contradicting.stream.session_id);
+}
+
 TEST(MessagesTest, VersionTwoFramesCarryTheStreamBlockThrough) {
   MarkerFrameMessage m = SampleMarkersWithStream();
   std::vector<uint8_t> bytes;

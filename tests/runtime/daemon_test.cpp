@@ -354,6 +354,15 @@ TEST(DaemonTest, MalformedMessagesAreCountedByReasonAndTheStreamGoesOn) {
     std::memcpy(&b[b.size() - 13], &nan, 4);
     b[b.size() - 1] = 1;
   });
+  {  // an exact rate (120000/1001) that contradicts the float rate (120)
+    protocol::MarkerFrameMessage contradicting = sender.message_;
+    contradicting.stream.rate_numerator = 120000;
+    contradicting.stream.rate_denominator = 1001;
+    std::vector<uint8_t> b;
+    protocol::EncodeMarkerFrame(contradicting, &b);
+    sender.SendRaw(b);
+    ++sent;
+  }
   protocol::SkeletonFrameMessage skeleton;  // a well-formed message of the wrong kind
   skeleton.subject = "actor1";
   std::vector<uint8_t> wrong_kind;
@@ -378,6 +387,8 @@ TEST(DaemonTest, MalformedMessagesAreCountedByReasonAndTheStreamGoesOn) {
   };
   EXPECT_EQ(unattributed(DropReason::kMalformed),
             5u);  // truncated, magic, version, empty, three parts
+  // Read as far as its subject's name, it is charged to the subject: the contradicting rate.
+  EXPECT_EQ(subject(DropReason::kMalformed), 1u);
   EXPECT_EQ(unattributed(DropReason::kOversized), 1u);
   EXPECT_EQ(unattributed(DropReason::kUnknownSubject), 1u);
   EXPECT_EQ(unattributed(DropReason::kNotMarkerFrame), 1u);

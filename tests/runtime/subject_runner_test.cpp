@@ -5,6 +5,8 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <cstring>
 #include <map>
 
 #include "formats/marker_layout.hpp"
@@ -213,10 +215,6 @@ TEST_F(SubjectRunnerTest, CaptureRestartFlushesAndStartsOver) {
   ExpectBalanced(runner);
 }
 
-// Version 1: a frame later than restart_backjump (1 s) with its older capture time is
-// taken as a restart, but when the interrupted stream then goes on (a newer number and
-// clock), the numbers between were published already: a second restart, not a bridge of
-// repaired frames re-publishing them (71 duplicates at 60 Hz).
 // Frames that arrived at the wrong rate are dropped and counted so; bridged by the next
 // frame taken, they are not counted again as numbers that never arrived.
 TEST_F(SubjectRunnerTest, FramesDroppedMidStreamAreNotAlsoCountedAsSkipped) {
@@ -238,6 +236,10 @@ TEST_F(SubjectRunnerTest, FramesDroppedMidStreamAreNotAlsoCountedAsSkipped) {
   EXPECT_EQ(other.counters().frames_skipped, 1u);
 }
 
+// Version 1: a frame later than restart_backjump (1 s) with its older capture time is
+// taken as a restart, but when the interrupted stream then goes on (a newer number and
+// clock), the numbers between were published already: a second restart, not a bridge of
+// repaired frames re-publishing them (71 duplicates at 60 Hz).
 TEST_F(SubjectRunnerTest, AStreamThatGoesOnAfterALatePacketIsNotPublishedTwice) {
   SubjectRunner runner(subject_, daemon_);
   const auto ns = [](int f) { return 1'000'000'000ull + 8'333'333ull * static_cast<uint64_t>(f); };
@@ -247,10 +249,22 @@ TEST_F(SubjectRunnerTest, AStreamThatGoesOnAfterALatePacketIsNotPublishedTwice) 
   }
   ASSERT_FALSE(runner.Accept(Frame(50, 50, ns(50)), 0, sink_).has_value());  // 149 back
   EXPECT_EQ(runner.counters().restarts, 1u);
+  SubjectStats stats;
+  stats.name = "actor1";
+  stats.counters = runner.counters();
+  EXPECT_EQ(RestartLogLine(stats, 1),
+            "subject 'actor1': capture restart or jump in frame numbers, frame 199 -> 50; "
+            "pipeline re-synchronised");
   for (int f = 200; f < 230; ++f)
     ASSERT_FALSE(runner.Accept(Frame(f % 120, f, ns(f)), 0, sink_).has_value());
   runner.Flush(sink_);
   EXPECT_EQ(runner.counters().restarts, 2u);
+  // Both within one report: the log says there were two (it said one).
+  stats.counters = runner.counters();
+  EXPECT_EQ(RestartLogLine(stats, 2),
+            "subject 'actor1': capture restart or jump in frame numbers, frame 50 -> 200; "
+            "pipeline re-synchronised (2 re-synchronisations since the last report; the last "
+            "shown)");
   EXPECT_EQ(runner.counters().frames_inserted, 1u);  // frame 50, in its own stream
   EXPECT_EQ(runner.counters().frames_skipped, 1u);
   std::map<uint64_t, int> published;
@@ -340,6 +354,12 @@ TEST_F(SubjectRunnerTest, ANewSessionRestartsTheSubjectEvenWhenItsFrameNumbersGo
   runner.Flush(sink_);
   EXPECT_EQ(runner.counters().session_changes, 1u);
   EXPECT_EQ(runner.counters().restarts, 1u);
+  SubjectStats stats;
+  stats.name = "actor1";
+  stats.counters = runner.counters();
+  EXPECT_EQ(RestartLogLine(stats, 1),
+            "subject 'actor1': capture restart or jump in frame numbers, frame 29 (session 7) "
+            "-> 30 (session 8); pipeline re-synchronised");
   EXPECT_EQ(runner.counters().frames_skipped, 0u);
   ASSERT_EQ(sink_.skeletons.size(), 60u);
   EXPECT_EQ(sink_.skeletons[29].stream.session_id, 7u);
@@ -362,6 +382,43 @@ TEST_F(SubjectRunnerTest, WithinASessionALateFrameIsOutOfOrderNeverARestart) {
   protocol::MarkerFrameMessage v1 = Frame(10, 10, 5000);
   EXPECT_FALSE(runner.Accept(v1, 0, sink_).has_value());  // session 0: a new capture
   EXPECT_EQ(runner.counters().restarts, 1u);
+  ExpectBalanced(runner);
+}
+
+TEST_F(SubjectRunnerTest, FramesThatFailedToDecodeAreNotCountedAgainAsSkipped) {
+  SubjectRunner runner(subject_, daemon_);
+  auto frame = [&](int f) {
+    protocol::MarkerFrameMessage m = Frame(f, static_cast<uint64_t>(f), 1000 + f);
+    m.stream = Session(7);
+    return m;
+  };
+  for (int f = 0; f < 20; ++f) ASSERT_FALSE(runner.Accept(frame(f), 0, sink_).has_value());
+  // 20 and 21 arrive with a NaN in a valid marker: decoded as far as their numbers.
+  protocol::MarkerFrameMessage partial;
+  for (int f : {20, 21}) {
+    std::vector<uint8_t> bytes;
+    protocol::EncodeMarkerFrame(frame(f), &bytes);
+    const float nan = std::nanf("");
+    std::memcpy(&bytes[bytes.size() - 13], &nan, 4);
+    bytes.back() = 1;
+    ASSERT_EQ(protocol::DecodeMarkerFrame(bytes, &partial), protocol::DecodeStatus::kNonFinite);
+    EXPECT_EQ(partial.frame_number, static_cast<uint64_t>(f));
+    EXPECT_EQ(runner.Drop(partial, DropReason::kNonFinite, 0), DropReason::kNonFinite);
+  }
+  // 22's exact rate contradicts its float rate: malformed, read as far as its number.
+  protocol::MarkerFrameMessage contradicting = frame(22);
+  contradicting.stream.rate_numerator = 120000;
+  contradicting.stream.rate_denominator = 1001;
+  std::vector<uint8_t> bytes;
+  protocol::EncodeMarkerFrame(contradicting, &bytes);
+  ASSERT_EQ(protocol::DecodeMarkerFrame(bytes, &partial), protocol::DecodeStatus::kBadField);
+  EXPECT_EQ(runner.Drop(partial, DropReason::kMalformed, 0), DropReason::kMalformed);
+  for (int f = 23; f < 40; ++f) ASSERT_FALSE(runner.Accept(frame(f), 0, sink_).has_value());
+  runner.Flush(sink_);
+  EXPECT_EQ(runner.counters().dropped[static_cast<size_t>(DropReason::kNonFinite)], 2u);
+  EXPECT_EQ(runner.counters().dropped[static_cast<size_t>(DropReason::kMalformed)], 1u);
+  EXPECT_EQ(runner.counters().frames_inserted, 3u);
+  EXPECT_EQ(runner.counters().frames_skipped, 0u);  // each was counted once, as dropped
   ExpectBalanced(runner);
 }
 
