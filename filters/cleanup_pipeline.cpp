@@ -85,6 +85,7 @@ bool CleanupPipeline::Push(std::span<const Vec3> p_WM) {
     s.mask[m] = valid ? MaskReason::kNone : MaskReason::kMissing;
   }
   GateGlitch(s);
+  s.blind = std::none_of(s.valid.begin(), s.valid.end(), [](uint8_t v) { return v != 0; });
   detector_.Process(window_, t, next_out_, &counters_);
   if (t - options_.lookahead < next_out_) return false;
   Publish(next_out_, t);

@@ -90,6 +90,9 @@ struct WindowFrame {
   /// the rest pose of a subject never solved since the take began or re-synchronised.
   bool reference_solved = false;
   bool resync = false;  ///< The capture re-synchronised here: nothing before carries over.
+  /// No sample was taken at all (a frame lost before the cleanup and bridged, a gated
+  /// glitch): a hole in the capture, not in any one marker's track.
+  bool blind = false;
 };
 
 /// A ring of frames addressed by frame number, allocated once.

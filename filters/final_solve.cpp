@@ -82,7 +82,9 @@ void FinalSolve::Solve(CleanFrame* frame, CleanupCounters* counters,
     const bool shown = !return_motion.empty() && return_motion[m].allFinite();
     if (eased) {
       Vec3 motion = shown ? return_motion[m] : Vec3::Zero();
-      if (track.last_captured == tau - 1)
+      // Through a lost frame too: taken as still after each one, losing every other frame
+      // left every captured sample 2.5 cm behind, caught up from rest.
+      if (track.last_captured == tau - 1 || track.continuous_to == tau - 1)
         motion = track.data_motion + ClampNorm(Vec3(x - track.output - track.data_motion),
                                                rules_.data_motion_acceleration_m);
       track.data_motion = motion;
@@ -103,6 +105,9 @@ void FinalSolve::Solve(CleanFrame* frame, CleanupCounters* counters,
     solve_targets_[m] = solve_x;
     if (status != MarkerStatus::kUnrecoverable) track.output = x;
     if (data) track.last_captured = tau;
+    if (data || (captured == 0 && frame->source[m] == SampleSource::kInterpolated &&
+                 track.continuous_to == tau - 1))
+      track.continuous_to = tau;
     double weight = data                                              ? 1.0
                     : status == MarkerStatus::kUnrecoverable          ? 0.0
                     : frame->source[m] == SampleSource::kInterpolated ? options_.interpolated_weight

@@ -49,6 +49,10 @@ class FinalSolve {
     Vec3 output = Vec3::Zero();       // last published sample ...
     // ... and the frame of the last captured one (never one less than a frame number).
     int64_t last_captured = std::numeric_limits<int64_t>::min();
+    // The last frame whose sample was captured, or interpolated between captured ones in
+    // a frame with nothing captured at all (a frame lost before the cleanup): the sample's
+    // motion carries through such frames.
+    int64_t continuous_to = std::numeric_limits<int64_t>::min();
   };
 
   void AnchorRepairs(const CleanFrame& frame, CleanupCounters* counters);

@@ -861,20 +861,34 @@ void OutlierDetector::CleanMask(CleanupWindow& window, int64_t t, int64_t first_
     // reference after its first frame (nothing holds the limb), and its samples then fit;
     // but it left with a jump and comes back with one (the soak's actor3: a hand marker
     // published 42 cm off for two frames at 240 Hz).
-    auto jumped = [&](int64_t f) {
-      return (window.at(f).raw[m] - window.at(f - 1).raw[m]).norm() > rules_.marker_jump_m;
+    // A frame with no sample at all is passed over: a frame lost before the cleanup ends
+    // no marker's track (losing every other frame, each received sample sat between two
+    // such holes, and nearly all were thrown away as small tracks). The jump allowance
+    // grows with the frames passed over.
+    auto jumped = [&](int64_t f, int64_t before) {
+      return (window.at(f).raw[m] - window.at(before).raw[m]).norm() >
+             rules_.marker_jump_m * static_cast<double>(f - before);
     };
-    int64_t run_start = -1;
+    int64_t run_start = -1, before_run = -1, previous = first - 1;
     for (int64_t f = first; f <= t; ++f) {
-      const bool jump = run_start >= 0 && good(f, m) && jumped(f);
+      if (window.at(f).blind) continue;
+      const bool jump = run_start >= 0 && good(f, m) && jumped(f, previous);
       if (good(f, m) && !jump) {
-        if (run_start < 0) run_start = f;
+        if (run_start < 0) {
+          run_start = f;
+          before_run = previous;
+        }
+        previous = f;
         continue;
       }
-      if (run_start > first && (!good(run_start - 1, m) || jumped(run_start)) &&
+      if (run_start >= 0 && before_run >= first &&
+          (!good(before_run, m) || jumped(run_start, before_run)) &&
           f - run_start <= rules_.small_track_frames)
-        for (int64_t g = run_start; g < f; ++g) window.at(g).mask[m] = MaskReason::kSmallTrack;
+        for (int64_t g = run_start; g < f; ++g)
+          if (!window.at(g).blind) window.at(g).mask[m] = MaskReason::kSmallTrack;
       run_start = jump ? f : -1;
+      before_run = previous;
+      previous = f;
     }
   }
 }
