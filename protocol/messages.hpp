@@ -161,6 +161,7 @@ struct CleanedMarkersMessage {
 /// newer daemon may add some.
 inline constexpr uint8_t kProblemModelSuspect = 1;    ///< Observed samples far from the model.
 inline constexpr uint8_t kProblemRejectingInput = 2;  ///< Every recent frame dropped.
+inline constexpr uint8_t kProblemUnstableInput = 4;   ///< Re-synchronised 5 times in 2 s.
 
 struct SubjectStatusMessage {
   uint16_t version = kVersion;  ///< Same payload in versions 1 and 2.

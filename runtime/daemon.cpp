@@ -340,6 +340,7 @@ struct Daemon::DataPlane final : OutputSink {
       s.mismatched_rate_hz = AsWritten(static_cast<float>(r.mismatched_rate_hz()));
       s.character = r.character_info();
       s.model_suspect = r.model_suspect();
+      s.unstable_input = r.unstable_input(now);
       s.model_distance_mm = r.model_distance_m() * 1e3;
       s.worker = index;
       s.config_rank = r.rank();
@@ -451,6 +452,9 @@ struct Daemon::ControlPlane {
   std::array<uint64_t, kDropReasonCount> logged_drops{};
   // Per subject, the drops the last warning covered: the next one names who dropped what.
   std::map<std::string, std::array<uint64_t, kDropReasonCount>> logged_subject_drops;
+  // Frame numbers that never arrived, per subject, as of the last line that said so.
+  std::map<std::string, uint64_t> logged_skipped;
+  int64_t last_skipped_log_ns = 0;
   int64_t last_log_ns = 0;
   bool data_plane_alive = true;
   bool stopping = false;
@@ -1076,6 +1080,11 @@ void Daemon::Run(bool handle_signals) {
           if (!s.rejecting_input && before != nullptr && before->rejecting_input)
             spdlog::info("subject '{}': no longer dropping every frame ({} accepted so far)",
                          s.name, s.counters.frames_accepted);
+          if (s.unstable_input && (before == nullptr || !before->unstable_input))
+            spdlog::warn("subject '{}': {}", s.name, kUnstableInputText);
+          if (!s.unstable_input && before != nullptr && before->unstable_input)
+            spdlog::info("subject '{}': input stable again (no re-synchronisation for 2 s)",
+                         s.name);
           if (s.model_suspect && (before == nullptr || !before->model_suspect))
             spdlog::warn(
                 "subject '{}': model suspect: the received markers sit {:.0f} mm (median) from "
@@ -1119,6 +1128,22 @@ void Daemon::Run(bool handle_signals) {
                          to_string(static_cast<DropReason>(reason)), n, who);
             logged[static_cast<size_t>(reason)] = n;
             c.last_drop_log_ns[static_cast<size_t>(reason)] = t;
+          }
+        }
+        // Frames lost before the daemon: at most one line per log interval. Losing every
+        // other frame said nothing in the log but, later, "model suspect".
+        if (t - c.last_skipped_log_ns >= Seconds(c.config.log_interval_s)) {
+          std::string who;
+          for (const SubjectStats& s : now.subjects) {
+            uint64_t& seen = c.logged_skipped[s.name];
+            if (s.counters.frames_skipped > seen)
+              who += fmt::format("{}subject '{}' {} (total {})", who.empty() ? "" : ", ", s.name,
+                                 s.counters.frames_skipped - seen, s.counters.frames_skipped);
+            seen = s.counters.frames_skipped;
+          }
+          if (!who.empty()) {
+            spdlog::warn("frame numbers that never arrived (lost before the daemon): {}", who);
+            c.last_skipped_log_ns = t;
           }
         }
         if (t - c.last_log_ns >= Seconds(c.config.log_interval_s)) {

@@ -48,6 +48,8 @@ struct SubjectStats {
   double mismatched_rate_hz = 0.0;         ///< The last rate_mismatch frame's rate (0: none).
   std::optional<CharacterInfo> character;  ///< The character it drives, if any.
   bool model_suspect = false;              ///< Received samples persistently far from the model.
+  /// The stream re-synchronised 5 times within 2 s (two senders, a session id per frame).
+  bool unstable_input = false;
   double model_distance_mm = 0.0;  ///< Median sample-to-model distance, over about a second.
   int worker = 0;                  ///< The data-plane thread that solves it.
   int config_rank = 0;             ///< Its place in the config's subject list.
@@ -175,6 +177,8 @@ std::string RejectionDetail(const SubjectStats& s);
 /// The log line for a subject's re-synchronisation: where its frame numbers (and v2
 /// sessions) jumped from and to, and how many restarts there were since the last report
 /// (a v1 packet late by over restart_backjump makes two: back, then forward again).
+/// What /health and the log say of a subject whose input is unstable.
+extern const char* const kUnstableInputText;
 std::string RestartLogLine(const SubjectStats& s, uint64_t restarts_since_last_report);
 
 }  // namespace mocapd

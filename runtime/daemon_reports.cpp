@@ -251,6 +251,7 @@ nlohmann::json SubjectJson(const SubjectStats& s) {
           {"samples_unrecoverable", s.cleanup.unrecoverable},
           {"samples_out_of_volume", s.cleanup.samples_out_of_volume},
           {"rejecting_input", s.rejecting_input},
+          {"unstable_input", s.unstable_input},
           {"model_suspect", s.model_suspect},
           {"model_distance_mm", s.model_distance_mm},
           {"glitch_frames", s.cleanup.glitch_frames},
@@ -312,6 +313,10 @@ std::string RejectionDetail(const SubjectStats& s) {
   return detail;
 }
 
+const char* const kUnstableInputText =
+    "input unstable: re-synchronised 5 times within 2 s (two senders for one subject? a "
+    "session id that changes every frame?); the cleanup has no lookahead";
+
 std::string RestartLogLine(const SubjectStats& s, uint64_t restarts_since_last_report) {
   const SubjectCounters& c = s.counters;
   auto session = [](uint64_t id) {
@@ -338,6 +343,7 @@ std::string FormatHealthJson(const DaemonStats& stats, bool data_plane_alive) {
     if (s.rejecting_input)
       problems.push_back("subject '" + s.name + "': every frame dropped (" +
                          to_string(s.rejecting_reason) + ")" + RejectionDetail(s));
+    if (s.unstable_input) problems.push_back("subject '" + s.name + "': " + kUnstableInputText);
     if (s.model_suspect) {
       char line[160];
       std::snprintf(line, sizeof(line),

@@ -17,6 +17,12 @@ uint64_t WallClockNs() {
                                    .count());
 }
 
+// Frame numbers compared as serial numbers (RFC 1982): a is newer than b if it is less
+// than half the number space ahead, so a stream that wraps at 2^64 goes on (compared as
+// plain numbers, a gap across the wrap dropped every later frame as out of order).
+uint64_t Ahead(uint64_t a, uint64_t b) { return a - b; }
+bool Newer(uint64_t a, uint64_t b) { return a != b && Ahead(a, b) < (uint64_t{1} << 63); }
+
 int64_t SteadyNs() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(
              std::chrono::steady_clock::now().time_since_epoch())
@@ -206,8 +212,8 @@ std::optional<DropReason> SubjectRunner::Drop(const protocol::MarkerFrameMessage
   // skipped number when the next frame taken bridges over it (a sender at the wrong rate
   // for 90 frames showed 90 dropped and 90 skipped). An undecodable frame whose number was
   // not read has number 0, never ahead.
-  if (started_ && frame.frame_number >= next_frame_number_ &&
-      frame.frame_number - next_frame_number_ <= static_cast<uint64_t>(max_gap_frames_) &&
+  if (started_ &&
+      Ahead(frame.frame_number, next_frame_number_) <= static_cast<uint64_t>(max_gap_frames_) &&
       frame.stream.session_id == counters_.last_stream.session_id)
     ++dropped_ahead_;
   CountDrop(reason, receive_ns);
@@ -230,6 +236,8 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
     return drop(DropReason::kRateMismatch);
   }
 
+  const bool consecutive = started_ && frame.frame_number == next_frame_number_ &&
+                           frame.stream.session_id == counters_.last_stream.session_id;
   // A v2 sender says when its capture restarted: frame numbers of another session are not
   // comparable, whatever their values.
   if (started_ && frame.stream.session_id != counters_.last_stream.session_id) {
@@ -241,18 +249,31 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
   const bool resumes_stall = state_ == protocol::SubjectState::kStalled;
   const int64_t silence_ns = last_receive_ns_ < 0 ? 0 : receive_ns - last_receive_ns_;
   if (started_ && frame.frame_number != next_frame_number_) {
-    if (frame.frame_number > next_frame_number_) {
-      const uint64_t missing = frame.frame_number - next_frame_number_;
+    if (Newer(frame.frame_number, next_frame_number_)) {
+      const uint64_t missing = Ahead(frame.frame_number, next_frame_number_);
       // The stream a long jump back interrupted goes on (newer number and clock): the
       // jump was one late packet, and the numbers between were published already.
       // Bridged, they went out a second time as repaired frames (71 at 60 Hz).
       const bool interrupted_goes_on = interrupted_.has_value() &&
-                                       frame.frame_number > interrupted_->newest &&
+                                       Newer(frame.frame_number, interrupted_->newest) &&
                                        frame.capture_time_ns > interrupted_->capture_ns;
-      if (!interrupted_goes_on)
+      // Numbers far ahead of the capture clock (two bridges sending one subject, a
+      // renumbered stream): nothing was lost. Bridged, a bridge 100 frames ahead of the
+      // other had 99 frames inserted for each of its own, and they were counted as skipped.
+      const double clock_s =
+          frame.capture_time_ns >= last_capture_ns_
+              ? static_cast<double>(frame.capture_time_ns - last_capture_ns_) * 1e-9
+              : -1.0;
+      const bool numbers_outran_clock =
+          clock_follows_rate_.value_or(true) && frame.capture_time_ns != 0 &&
+          last_capture_ns_ != 0 && clock_s >= 0.0 &&
+          clock_s < 0.5 * (static_cast<double>(missing) + 1.0) / rate_hz_;
+      if (!interrupted_goes_on && !numbers_outran_clock)
         counters_.frames_skipped += missing - std::min(missing, dropped_ahead_);
-      if (interrupted_goes_on || missing > static_cast<uint64_t>(max_gap_frames_)) {
-        // Not to be bridged (published already, or too long): start over from this frame.
+      if (interrupted_goes_on || numbers_outran_clock ||
+          missing > static_cast<uint64_t>(max_gap_frames_)) {
+        // Not to be bridged (published already, no loss, or too long): start over from
+        // this frame.
         Resynchronise(sink);
       } else {
         for (uint64_t k = 0; k < missing; ++k) {
@@ -290,6 +311,11 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
   started_ = true;
   last_receive_ns_ = receive_ns;
   last_input_ns_ = receive_ns;
+  if (consecutive && frame.capture_time_ns != 0 && last_capture_ns_ != 0) {
+    const double step_s =
+        static_cast<double>(static_cast<int64_t>(frame.capture_time_ns - last_capture_ns_)) * 1e-9;
+    clock_follows_rate_ = std::abs(step_s * rate_hz_ - 1.0) <= 0.5;
+  }
   last_capture_ns_ = frame.capture_time_ns;
   counters_.last_frame_number = frame.frame_number;
   counters_.last_stream = frame.stream;
@@ -301,6 +327,8 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
   if (resynchronised_) {
     counters_.resync_frame = frame.frame_number;
     counters_.resync_session = frame.stream.session_id;
+    recent_restarts_ns_[next_restart_slot_] = receive_ns;
+    next_restart_slot_ = (next_restart_slot_ + 1) % kUnstableRestarts;
   }
   resynchronised_ = false;
   if (state_ == protocol::SubjectState::kWaiting || state_ == protocol::SubjectState::kStalled)
@@ -688,7 +716,8 @@ void SubjectRunner::PublishStatus(int64_t now_ns, OutputSink& sink) {
   protocol::SubjectStatusMessage& m = status_message_;
   m.state = state_;
   m.problems = static_cast<uint8_t>((model_suspect_ ? protocol::kProblemModelSuspect : 0) |
-                                    (rejecting() ? protocol::kProblemRejectingInput : 0));
+                                    (rejecting() ? protocol::kProblemRejectingInput : 0) |
+                                    (unstable_input(now_ns) ? protocol::kProblemUnstableInput : 0));
   m.last_frame_number = counters_.last_frame_number;
   m.since_last_input_ns =
       last_receive_ns_ < 0 ? 0

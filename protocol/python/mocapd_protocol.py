@@ -221,6 +221,7 @@ def decode_subject_status(data):
         raise ValueError("bad_field")
     return {"subject": subject, "state": SUBJECT_STATES[state],
             "model_suspect": bool(problems & 1), "rejecting_input": bool(problems & 2),
+            "unstable_input": bool(problems & 4),
             "last_frame": last_frame,
             "since_last_input_ns": since_ns, "frames_in": frames_in, "frames_out": frames_out,
             "frames_dropped": dropped}

@@ -1253,6 +1253,8 @@ def run(mocapd, config_dir, work):
 
         # Phase 2: a fresh stream in version 1 (any number accepted) with one missing frame
         # number, then a jump of more than max_gap_frames (240 at 120 Hz: max_gap_ms 2000).
+        # The capture clock goes on with the numbers (frames lost, not renumbered: README,
+        # "Frame numbering", a jump the clock does not share is no loss).
         T1 = 77_000_000_000
         JUMP_FROM, JUMP_TO = 49, 350
         phase2 = list(range(10, JUMP_FROM + 1)) + list(range(JUMP_TO, JUMP_TO + 20))
@@ -1260,7 +1262,7 @@ def run(mocapd, config_dir, work):
         t_start = time.monotonic()
         for i, number in enumerate(phase2):
             if number not in inserted_v1:
-                send_good(number, N1 + i, T1 + i * PERIOD_NS, version=1)
+                send_good(number, N1 + i, T1 + (number - phase2[0]) * PERIOD_NS, version=1)
             delay = t_start + (i + 1) / RATE - time.monotonic()
             if delay > 0:
                 time.sleep(delay)

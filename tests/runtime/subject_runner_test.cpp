@@ -7,6 +7,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <map>
 
 #include "formats/marker_layout.hpp"
@@ -419,6 +420,111 @@ TEST_F(SubjectRunnerTest, FramesThatFailedToDecodeAreNotCountedAgainAsSkipped) {
   EXPECT_EQ(runner.counters().dropped[static_cast<size_t>(DropReason::kMalformed)], 1u);
   EXPECT_EQ(runner.counters().frames_inserted, 3u);
   EXPECT_EQ(runner.counters().frames_skipped, 0u);  // each was counted once, as dropped
+  ExpectBalanced(runner);
+}
+
+// Two v1 bridges sending one subject, the second 100 frames ahead, both stamping the
+// capture's clock: each forward jump is in numbers only. Bridged, 99 frames were inserted
+// for each of the second bridge's frames (50 times the capture rate published) and
+// counted as skipped; /health said ok.
+TEST_F(SubjectRunnerTest, TwoBridgesOnOneSubjectInsertNothingAndAreFlaggedUnstable) {
+  SubjectRunner runner(subject_, daemon_);
+  const auto ns = [](int f) { return 1'000'000'000ull + 8'333'333ull * static_cast<uint64_t>(f); };
+  int64_t receive_ns = 0;
+  const auto step = int64_t{8'333'333};
+  for (int f = 0; f < 30; ++f, receive_ns += step)
+    ASSERT_FALSE(runner.Accept(Frame(f, f, ns(f)), receive_ns, sink_).has_value());
+  EXPECT_FALSE(runner.unstable_input(receive_ns));
+  for (int f = 30; f < 90; ++f, receive_ns += step) {
+    runner.Accept(Frame(f, f, ns(f)), receive_ns, sink_);
+    runner.Accept(Frame(f, f + 100, ns(f)), receive_ns + 1000, sink_);
+  }
+  EXPECT_EQ(runner.counters().frames_inserted, 0u);
+  EXPECT_EQ(runner.counters().frames_skipped, 0u);
+  EXPECT_GT(runner.counters().restarts, 100u);
+  EXPECT_TRUE(runner.unstable_input(receive_ns));
+  // Two seconds without a restart: stable again.
+  for (int f = 90; f < 400; ++f, receive_ns += step)
+    ASSERT_FALSE(runner.Accept(Frame(f % 120, f + 100, ns(f)), receive_ns, sink_).has_value());
+  EXPECT_FALSE(runner.unstable_input(receive_ns));
+  runner.Flush(sink_);
+  ExpectBalanced(runner);
+  // Both bridges from the first frame on: no consecutive frames to judge the clock by.
+  SubjectRunner from_start(subject_, daemon_);
+  RecordingSink sink_from_start;
+  for (int f = 0; f < 60; ++f) {
+    from_start.Accept(Frame(f, f, ns(f)), 0, sink_from_start);
+    from_start.Accept(Frame(f, f + 100, ns(f)), 0, sink_from_start);
+  }
+  EXPECT_EQ(from_start.counters().frames_inserted, 0u);
+  EXPECT_EQ(from_start.counters().frames_skipped, 0u);
+  // A clock in microseconds, not nanoseconds: it does not step a frame period, so it is not
+  // judged, and a real loss is bridged.
+  SubjectRunner other_units(subject_, daemon_);
+  for (int f = 0; f < 60; ++f) {
+    if (f >= 20 && f < 25) continue;
+    ASSERT_FALSE(other_units.Accept(Frame(f, f, ns(f) / 1000), 0, sink_from_start).has_value());
+  }
+  EXPECT_EQ(other_units.counters().frames_inserted, 5u);
+  EXPECT_EQ(other_units.counters().restarts, 0u);
+  // One bridge losing frames, its clock going on with them: still bridged and counted.
+  SubjectRunner lossy(subject_, daemon_);
+  RecordingSink sink;
+  for (int f = 0; f < 60; ++f)
+    if (f < 20 || f >= 25) {
+      ASSERT_FALSE(lossy.Accept(Frame(f, f, ns(f)), 0, sink).has_value());
+    }
+  EXPECT_EQ(lossy.counters().frames_inserted, 5u);
+  EXPECT_EQ(lossy.counters().frames_skipped, 5u);
+  EXPECT_EQ(lossy.counters().restarts, 0u);
+}
+
+// A bridge writing a new session id into every frame restarts the subject at every frame:
+// the cleanup never had its lookahead, and nothing said so but the log.
+TEST_F(SubjectRunnerTest, ASessionIdPerFrameIsFlaggedUnstableOnTheWireToo) {
+  SubjectRunner runner(subject_, daemon_);
+  int64_t receive_ns = 0;
+  for (int f = 0; f < 20; ++f, receive_ns += 8'333'333) {
+    protocol::MarkerFrameMessage m = Frame(f, f, 0);
+    m.stream = Session(static_cast<uint64_t>(1000 + f));
+    ASSERT_FALSE(runner.Accept(m, receive_ns, sink_).has_value());
+  }
+  EXPECT_EQ(runner.counters().session_changes, 19u);
+  EXPECT_TRUE(runner.unstable_input(receive_ns));
+  runner.PublishStatus(receive_ns, sink_);
+  ASSERT_FALSE(sink_.statuses.empty());
+  EXPECT_NE(sink_.statuses.back().problems & protocol::kProblemUnstableInput, 0);
+  SubjectStats stats;
+  stats.name = "actor1";
+  stats.unstable_input = true;
+  DaemonStats daemon_stats;
+  daemon_stats.subjects.push_back(stats);
+  const std::string health = FormatHealthJson(daemon_stats, true);
+  EXPECT_NE(health.find("\"degraded\""), std::string::npos) << health;
+  EXPECT_NE(health.find("subject 'actor1': input unstable"), std::string::npos) << health;
+}
+
+// Frame numbers are serial numbers: a stream that loses frames as it wraps past 2^64 - 1
+// goes on (compared as plain numbers, every later frame was dropped as out of order).
+TEST_F(SubjectRunnerTest, AStreamThatWrapsPastTheLargestFrameNumberGoesOn) {
+  SubjectRunner runner(subject_, daemon_);
+  const uint64_t last = std::numeric_limits<uint64_t>::max();
+  std::vector<uint64_t> numbers;
+  for (uint64_t k = 0; k < 40; ++k) numbers.push_back(last - 19 + k);  // wraps to 0 at k = 20
+  for (size_t k = 0; k < numbers.size(); ++k) {
+    if (k == 18 || k == 19 || k == 20) continue;  // last - 1, last and 0 lost
+    protocol::MarkerFrameMessage m = Frame(static_cast<int>(k), numbers[k], 0);
+    m.stream = Session(7);
+    ASSERT_FALSE(runner.Accept(m, 0, sink_).has_value()) << k;
+  }
+  protocol::MarkerFrameMessage late = Frame(0, last - 5, 0);  // behind, across the wrap
+  late.stream = Session(7);
+  EXPECT_EQ(runner.Accept(late, 0, sink_), DropReason::kOutOfOrder);
+  runner.Flush(sink_);
+  EXPECT_EQ(runner.counters().frames_inserted, 3u);
+  EXPECT_EQ(runner.counters().frames_skipped, 3u);
+  EXPECT_EQ(runner.counters().restarts, 0u);
+  EXPECT_EQ(sink_.skeletons.size(), 40u);
   ExpectBalanced(runner);
 }
 
