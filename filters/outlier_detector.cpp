@@ -869,9 +869,29 @@ void OutlierDetector::CleanMask(CleanupWindow& window, int64_t t, int64_t first_
       return (window.at(f).raw[m] - window.at(before).raw[m]).norm() >
              rules_.marker_jump_m * static_cast<double>(f - before);
     };
-    int64_t run_start = -1, before_run = -1, previous = first - 1;
+    // Before the first unpublished frame, the last frame with any sample: what a run from
+    // there follows (its mask is final, and the window still holds it).
+    int64_t previous = first - 1;
+    while (previous >= 0 && window.Holds(previous) && window.at(previous).blind) --previous;
+    int64_t run_start = -1, before_run = -1;
+    // The run [run_start, previous] ends: a small track if short (its own samples' span, not
+    // the frames passed over after it) and it began after a gap or a jump.
+    auto end_run = [&] {
+      if (run_start >= 0 && before_run >= 0 && window.Holds(before_run) &&
+          (!good(before_run, m) || jumped(run_start, before_run)) &&
+          previous - run_start + 1 <= rules_.small_track_frames)
+        for (int64_t g = run_start; g <= previous; ++g)
+          if (!window.at(g).blind) window.at(g).mask[m] = MaskReason::kSmallTrack;
+    };
     for (int64_t f = first; f <= t; ++f) {
       if (window.at(f).blind) continue;
+      // Nothing before a resync carries over: a run does not reach across the glitch
+      // frames passed over before it.
+      if (window.at(f).resync && run_start >= 0) {
+        end_run();
+        run_start = -1;
+        previous = f - 1;
+      }
       const bool jump = run_start >= 0 && good(f, m) && jumped(f, previous);
       if (good(f, m) && !jump) {
         if (run_start < 0) {
@@ -881,11 +901,7 @@ void OutlierDetector::CleanMask(CleanupWindow& window, int64_t t, int64_t first_
         previous = f;
         continue;
       }
-      if (run_start >= 0 && before_run >= first &&
-          (!good(before_run, m) || jumped(run_start, before_run)) &&
-          f - run_start <= rules_.small_track_frames)
-        for (int64_t g = run_start; g < f; ++g)
-          if (!window.at(g).blind) window.at(g).mask[m] = MaskReason::kSmallTrack;
+      end_run();
       run_start = jump ? f : -1;
       before_run = previous;
       previous = f;

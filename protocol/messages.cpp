@@ -283,12 +283,15 @@ DecodeStatus DecodeMarkerFrame(std::span<const uint8_t> bytes, MarkerFrameMessag
       !r.ReadU64(&m->capture_time_ns) || !r.ReadF32(&m->rate_hz) || !r.ReadU16(&count) ||
       !r.ReadU16(&reserved))
     return DecodeStatus::kTooShort;
-  if (!Finite(m->rate_hz) || !(m->rate_hz > 0.0f)) return DecodeStatus::kNonFinite;
   if (count > kMaxMarkers) return DecodeStatus::kTooManyItems;
-  if (const DecodeStatus s =
-          ReadStreamAndSize(r, m->version, kMarkerBytes * count, m->rate_hz, &m->stream);
+  // The stream block is read before the rate is judged, so a frame dropped for its rate is
+  // known by its session too (and not counted again as a skipped number).
+  const bool rate_ok = Finite(m->rate_hz) && m->rate_hz > 0.0f;
+  if (const DecodeStatus s = ReadStreamAndSize(r, m->version, kMarkerBytes * count,
+                                               rate_ok ? m->rate_hz : 0.0f, &m->stream);
       s != DecodeStatus::kOk)
     return s;
+  if (!rate_ok) return DecodeStatus::kNonFinite;
   m->positions.resize(count);
   m->valid.resize(count);
   for (size_t i = 0; i < count; ++i) {

@@ -48,7 +48,7 @@ struct SubjectStats {
   double mismatched_rate_hz = 0.0;         ///< The last rate_mismatch frame's rate (0: none).
   std::optional<CharacterInfo> character;  ///< The character it drives, if any.
   bool model_suspect = false;              ///< Received samples persistently far from the model.
-  /// The stream re-synchronised 5 times within 2 s (two senders, a session id per frame).
+  /// 5 re-synchronisations or repeated frames within 2 s (two senders, a session id per frame).
   bool unstable_input = false;
   double model_distance_mm = 0.0;  ///< Median sample-to-model distance, over about a second.
   int worker = 0;                  ///< The data-plane thread that solves it.
@@ -174,11 +174,11 @@ std::string FormatHealthJson(const DaemonStats& stats, bool data_plane_alive);
 /// Why a subject rejecting every frame does, beyond the drop reason's name (a rate
 /// mismatch: the frames' rate against the configured one); empty if nothing to add.
 std::string RejectionDetail(const SubjectStats& s);
+/// What /health and the log say of a subject whose input is unstable.
+extern const char* const kUnstableInputText;
 /// The log line for a subject's re-synchronisation: where its frame numbers (and v2
 /// sessions) jumped from and to, and how many restarts there were since the last report
 /// (a v1 packet late by over restart_backjump makes two: back, then forward again).
-/// What /health and the log say of a subject whose input is unstable.
-extern const char* const kUnstableInputText;
 std::string RestartLogLine(const SubjectStats& s, uint64_t restarts_since_last_report);
 
 }  // namespace mocapd

@@ -200,6 +200,17 @@ void SubjectRunner::CountDrop(DropReason reason, int64_t receive_ns) {
   last_drop_ = reason;
 }
 
+void SubjectRunner::NoteUnstableEvent(int64_t receive_ns) {
+  // Flagged until kUnstableWithinNs pass with no such event at all, so the flag does not
+  // flap and "stable again" is true when it is said.
+  if (receive_ns - last_unstable_event_ns_ > kUnstableWithinNs) unstable_ = false;
+  last_unstable_event_ns_ = receive_ns;
+  unstable_events_ns_[next_unstable_slot_] = receive_ns;
+  next_unstable_slot_ = (next_unstable_slot_ + 1) % kUnstableEvents;
+  const int64_t oldest = unstable_events_ns_[next_unstable_slot_];  // of the last five
+  if (oldest >= 0 && receive_ns - oldest <= kUnstableWithinNs) unstable_ = true;
+}
+
 void SubjectRunner::InheritCounters(const SubjectRunner& previous) {
   counters_ = previous.counters_;
   last_input_ns_ = previous.last_input_ns_;
@@ -260,13 +271,12 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
       // Numbers far ahead of the capture clock (two bridges sending one subject, a
       // renumbered stream): nothing was lost. Bridged, a bridge 100 frames ahead of the
       // other had 99 frames inserted for each of its own, and they were counted as skipped.
+      // A clock gone back (the other bridge stamped a moment earlier) shares no jump either.
       const double clock_s =
-          frame.capture_time_ns >= last_capture_ns_
-              ? static_cast<double>(frame.capture_time_ns - last_capture_ns_) * 1e-9
-              : -1.0;
+          static_cast<double>(static_cast<int64_t>(frame.capture_time_ns - last_capture_ns_)) *
+          1e-9;
       const bool numbers_outran_clock =
-          clock_follows_rate_.value_or(true) && frame.capture_time_ns != 0 &&
-          last_capture_ns_ != 0 && clock_s >= 0.0 &&
+          clock_trusted() && frame.capture_time_ns != 0 && last_capture_ns_ != 0 &&
           clock_s < 0.5 * (static_cast<double>(missing) + 1.0) / rate_hz_;
       if (!interrupted_goes_on && !numbers_outran_clock)
         counters_.frames_skipped += missing - std::min(missing, dropped_ahead_);
@@ -292,6 +302,7 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
                            (back >= static_cast<uint64_t>(restart_backjump_frames_) ||
                             (back > 0 && frame.capture_time_ns > last_capture_ns_));
       if (!restart) {
+        NoteUnstableEvent(receive_ns);
         // ++frames_in happens in the drop, so the last frame number stays the newest.
         return drop(back == 0 ? DropReason::kDuplicate : DropReason::kOutOfOrder);
       }
@@ -314,7 +325,10 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
   if (consecutive && frame.capture_time_ns != 0 && last_capture_ns_ != 0) {
     const double step_s =
         static_cast<double>(static_cast<int64_t>(frame.capture_time_ns - last_capture_ns_)) * 1e-9;
-    clock_follows_rate_ = std::abs(step_s * rate_hz_ - 1.0) <= 0.5;
+    ++consecutive_pairs_;
+    clock_agreeing_pairs_ = std::abs(step_s * rate_hz_ - 1.0) <= 0.5
+                                ? std::min(clock_agreeing_pairs_ + 1, kClockPairs)
+                                : 0;
   }
   last_capture_ns_ = frame.capture_time_ns;
   counters_.last_frame_number = frame.frame_number;
@@ -327,8 +341,7 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
   if (resynchronised_) {
     counters_.resync_frame = frame.frame_number;
     counters_.resync_session = frame.stream.session_id;
-    recent_restarts_ns_[next_restart_slot_] = receive_ns;
-    next_restart_slot_ = (next_restart_slot_ + 1) % kUnstableRestarts;
+    NoteUnstableEvent(receive_ns);
   }
   resynchronised_ = false;
   if (state_ == protocol::SubjectState::kWaiting || state_ == protocol::SubjectState::kStalled)

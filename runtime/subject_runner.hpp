@@ -150,13 +150,14 @@ class SubjectRunner {
                ? std::optional<DropReason>(last_drop_)
                : std::nullopt;
   }
-  /// The stream re-synchronised kUnstableRestarts times within kUnstableWithinNs before
-  /// now_ns: no capture restarts that often. Two bridges sending one subject, or one
-  /// writing a new session id into every frame, left the cleanup without its lookahead
-  /// and /health ok.
+  /// The stream re-synchronised, or was sent frames it had already taken (duplicate, out
+  /// of order), kUnstableEvents times within kUnstableWithinNs, and the last of those
+  /// was less than kUnstableWithinNs before now_ns. No capture restarts that often, and
+  /// ZeroMQ neither repeats nor reorders: two bridges sending one subject, or one writing
+  /// a new session id into every frame (the cleanup without its lookahead, or half the
+  /// input dropped, and /health ok).
   bool unstable_input(int64_t now_ns) const {
-    const int64_t oldest = recent_restarts_ns_[next_restart_slot_];
-    return oldest >= 0 && now_ns - oldest <= kUnstableWithinNs;
+    return unstable_ && now_ns - last_unstable_event_ns_ <= kUnstableWithinNs;
   }
   /// How far the received samples sit from the model's markers in the solved pose (the
   /// median over a frame's samples, averaged over about a second), metres; a model that
@@ -279,14 +280,23 @@ class SubjectRunner {
   std::optional<Interrupted> interrupted_;
   uint64_t next_frame_number_ = 0;
   uint64_t last_capture_ns_ = 0;
-  // Whether the sender's capture clock advanced by about a frame period between the last
-  // consecutive frames seen (none seen yet: taken as yes). A forward jump in frame numbers
-  // that such a clock does not share was no loss; a clock in other units is not judged.
-  std::optional<bool> clock_follows_rate_;
-  static constexpr size_t kUnstableRestarts = 5;
+  // The sender's capture clock, judged on consecutive frames: trusted while none has been
+  // seen or the last kClockPairs of them each stepped a frame period (+-50 %). A forward
+  // jump in frame numbers that a trusted clock does not share was no loss; a clock in
+  // other units, or stamped at bursty sends, is not judged.
+  static constexpr int kClockPairs = 8;
+  uint64_t consecutive_pairs_ = 0;
+  int clock_agreeing_pairs_ = 0;
+  bool clock_trusted() const {
+    return consecutive_pairs_ == 0 || clock_agreeing_pairs_ >= kClockPairs;
+  }
+  void NoteUnstableEvent(int64_t receive_ns);
+  static constexpr size_t kUnstableEvents = 5;
   static constexpr int64_t kUnstableWithinNs = 2'000'000'000;
-  std::array<int64_t, kUnstableRestarts> recent_restarts_ns_{-1, -1, -1, -1, -1};  // a ring
-  size_t next_restart_slot_ = 0;
+  std::array<int64_t, kUnstableEvents> unstable_events_ns_{-1, -1, -1, -1, -1};  // a ring
+  size_t next_unstable_slot_ = 0;
+  int64_t last_unstable_event_ns_ = 0;
+  bool unstable_ = false;
   int64_t last_receive_ns_ = -1;
   int64_t last_input_ns_ = -1;
   protocol::SubjectState state_ = protocol::SubjectState::kWaiting;

@@ -744,6 +744,21 @@ TEST_F(OutlierDetectorTest, ARunBetweenTwoJumpsNoBodyMakesIsASmallTrack) {
   EXPECT_EQ(dropped, 3);
 }
 
+// The same pop, with every frame after it lost (frames with no sample at all, passed over
+// by the rule): the run is judged by its own samples' span, not by the lost frames after
+// it, so it is still a small track.
+TEST_F(OutlierDetectorTest, APopBeforeLostFramesIsStillASmallTrack) {
+  const int m = Marker("RHND2");
+  for (int f = 500; f < 503; ++f) Sample(f, m) += Vec3(0.0, 0.4, 0.0);
+  for (int f = 503; f < 512; ++f)
+    for (Vec3& p : frames_[static_cast<size_t>(f)]) p = Vec3::Constant(kNaN);
+  Sample(512, m) = Vec3::Constant(kNaN);
+  const auto out = Run(Blind());
+  for (int f = 500; f < 503; ++f)
+    EXPECT_EQ(out[static_cast<size_t>(f)].reason[static_cast<size_t>(m)], MaskReason::kSmallTrack)
+        << "frame " << f;
+}
+
 TEST_F(OutlierDetectorTest, FallenOffMarkerIsClassifiedAndExcluded) {
   const int m = Marker("RUPA2");
   for (int f = 300; f < static_cast<int>(frames_.size()); ++f)

@@ -458,6 +458,24 @@ TEST_F(SubjectRunnerTest, TwoBridgesOnOneSubjectInsertNothingAndAreFlaggedUnstab
   }
   EXPECT_EQ(from_start.counters().frames_inserted, 0u);
   EXPECT_EQ(from_start.counters().frames_skipped, 0u);
+  // The second bridge stamps a moment before the first: a clock gone back shares no jump.
+  SubjectRunner lagging(subject_, daemon_);
+  for (int f = 0; f < 60; ++f) {
+    lagging.Accept(Frame(f, f, ns(f)), 0, sink_from_start);
+    lagging.Accept(Frame(f, f + 100, ns(f) - 1000), 0, sink_from_start);
+  }
+  EXPECT_EQ(lagging.counters().frames_inserted, 0u);
+  EXPECT_EQ(lagging.counters().frames_skipped, 0u);
+  // The bridge ahead arrives first: the other's frames are out of order, half the input
+  // dropped with no restart at all, and that is unstable too.
+  SubjectRunner ahead_first(subject_, daemon_);
+  int64_t receive = 0;
+  for (int f = 0; f < 30; ++f, receive += 8'333'333) {
+    ahead_first.Accept(Frame(f, f + 100, ns(f)), receive, sink_from_start);
+    ahead_first.Accept(Frame(f, f, ns(f)), receive + 1000, sink_from_start);
+  }
+  EXPECT_EQ(ahead_first.counters().dropped[static_cast<size_t>(DropReason::kOutOfOrder)], 30u);
+  EXPECT_TRUE(ahead_first.unstable_input(receive));
   // A clock in microseconds, not nanoseconds: it does not step a frame period, so it is not
   // judged, and a real loss is bridged.
   SubjectRunner other_units(subject_, daemon_);
