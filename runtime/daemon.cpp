@@ -21,6 +21,7 @@
 #include <map>
 #include <optional>
 #include <set>
+#include <tuple>
 #include <zmq.hpp>
 
 #include "runtime/http_server.hpp"
@@ -338,6 +339,7 @@ struct Daemon::DataPlane final : OutputSink {
       s.rejecting_input = rejecting.has_value();
       if (rejecting) s.rejecting_reason = *rejecting;
       s.mismatched_rate_hz = AsWritten(static_cast<float>(r.mismatched_rate_hz()));
+      std::tie(s.mismatched_model_hash, s.mismatched_marker_count) = r.mismatched_model();
       s.character = r.character_info();
       s.model_suspect = r.model_suspect();
       s.unstable_input = r.unstable_input(now);

@@ -46,6 +46,8 @@ struct SubjectStats {
   bool rejecting_input = false;                          ///< Every recent frame dropped...
   DropReason rejecting_reason = DropReason::kMalformed;  ///< ...the last one for this.
   double mismatched_rate_hz = 0.0;         ///< The last rate_mismatch frame's rate (0: none).
+  uint64_t mismatched_model_hash = 0;      ///< The last model_mismatch frame's hash...
+  size_t mismatched_marker_count = 0;      ///< ...and marker count.
   std::optional<CharacterInfo> character;  ///< The character it drives, if any.
   bool model_suspect = false;              ///< Received samples persistently far from the model.
   /// 5 re-synchronisations or repeated frames within 2 s (two senders, a session id per frame).
@@ -172,7 +174,8 @@ std::string FormatPrometheusMetrics(const DaemonStats& stats);
 std::string FormatSubjectsJson(const DaemonStats& stats);
 std::string FormatHealthJson(const DaemonStats& stats, bool data_plane_alive);
 /// Why a subject rejecting every frame does, beyond the drop reason's name (a rate
-/// mismatch: the frames' rate against the configured one); empty if nothing to add.
+/// mismatch: the frames' rate against the configured one; a model mismatch: the frames'
+/// hash and marker count against the model's); empty if nothing to add.
 std::string RejectionDetail(const SubjectStats& s);
 /// What /health and the log say of a subject whose input is unstable.
 extern const char* const kUnstableInputText;

@@ -305,6 +305,12 @@ std::string FormatSubjectsJson(const DaemonStats& stats) {
 }
 
 std::string RejectionDetail(const SubjectStats& s) {
+  // Another bridge's marker set, or a hash written wrong (0): which the frames carry, and
+  // what the model has, so an integrator can tell which.
+  if (s.rejecting_input && s.rejecting_reason == DropReason::kModelMismatch)
+    return fmt::format(
+        ": the frames carry marker-set hash {} with {} markers, the subject's model {} with {}",
+        s.mismatched_model_hash, s.mismatched_marker_count, s.marker_set_hash, s.markers);
   if (!s.rejecting_input || s.rejecting_reason != DropReason::kRateMismatch) return "";
   char detail[160];
   std::snprintf(detail, sizeof(detail),

@@ -234,8 +234,10 @@ std::optional<DropReason> SubjectRunner::Drop(const protocol::MarkerFrameMessage
 std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessage& frame,
                                                 int64_t receive_ns, OutputSink& sink) {
   auto drop = [&](DropReason reason) { return Drop(frame, reason, receive_ns); };
-  if (frame.model_hash != marker_hash_ || frame.positions.size() != missing_.size())
+  if (frame.model_hash != marker_hash_ || frame.positions.size() != missing_.size()) {
+    mismatched_model_ = {frame.model_hash, frame.positions.size()};
     return drop(DropReason::kModelMismatch);
+  }
   // The configured rate, or its NTSC rate (1000/1001 of it: 119.88 Hz for 120), each
   // within 0.1 %. A capture locked to video runs 0.1 % slow, which every rule of the cleanup
   // takes in its stride; at one tolerance alone, the float rounding of how a sender wrote

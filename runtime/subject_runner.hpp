@@ -14,6 +14,7 @@
 #include <span>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "filters/cleanup_pipeline.hpp"
@@ -169,6 +170,8 @@ class SubjectRunner {
   std::optional<CharacterInfo> character_info() const;
   /// The rate the last frame dropped as rate_mismatch said it was captured at (0: none).
   double mismatched_rate_hz() const { return mismatched_rate_hz_; }
+  /// The last model_mismatch frame's marker-set hash and marker count.
+  std::pair<uint64_t, size_t> mismatched_model() const { return mismatched_model_; }
   int64_t last_receive_ns() const { return last_receive_ns_; }
   /// When a frame for this subject last arrived, taken or dropped (-1: never).
   int64_t last_input_ns() const { return last_input_ns_; }
@@ -258,6 +261,7 @@ class SubjectRunner {
   uint64_t skeleton_hash_ = 0;
   double rate_hz_ = 0.0;
   double mismatched_rate_hz_ = 0.0;
+  std::pair<uint64_t, size_t> mismatched_model_{0, 0};
   std::string character_path_;
   int max_gap_frames_ = 0;
   int restart_backjump_frames_ = 0;

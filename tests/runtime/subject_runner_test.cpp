@@ -192,6 +192,20 @@ TEST_F(SubjectRunnerTest, FramesForAnotherModelOrRateAreNeverApplied) {
   stats.rate_hz = 120.0;
   EXPECT_EQ(RejectionDetail(stats),
             ": the frames say 240 Hz, the subject is configured for 120 Hz (rate_hz)");
+  // ...and which marker set came against the model's (a hash written as 0 was told apart
+  // from another bridge's set by nothing).
+  // The last was the frame one marker short.
+  EXPECT_EQ(
+      runner.mismatched_model(),
+      std::make_pair(protocol::MarkerSetHash(*subject_.model.markers), fewer.positions.size()));
+  stats.rejecting_reason = DropReason::kModelMismatch;
+  stats.mismatched_model_hash = 0;
+  stats.mismatched_marker_count = 59;
+  stats.marker_set_hash = 123;
+  stats.markers = 59;
+  EXPECT_EQ(RejectionDetail(stats),
+            ": the frames carry marker-set hash 0 with 59 markers, the subject's model 123 "
+            "with 59");
   runner.Flush(sink_);
   EXPECT_TRUE(sink_.skeletons.empty());
   EXPECT_EQ(runner.counters().dropped_total(), 6u);
