@@ -1043,123 +1043,125 @@ void Daemon::Run(bool handle_signals) {
 
   // Stats tick: the watchdog on the data plane itself, and rate-limited drop warnings.
   cp.tick.emplace(cp.io);
-  std::function<void(const boost::system::error_code&)> on_tick = [this,
-                                                                   &on_tick](const boost::system::
-                                                                                 error_code& ec) {
-    if (ec) return;
-    ControlPlane& c = *control_;
-    const DaemonStats now = Stats();
-    const int64_t t = SteadyNs();
-    const bool alive =
-        (now.running || now.stopping) && t - now.data_plane_heartbeat_ns < 1'000'000'000;
-    if (alive != c.data_plane_alive) {
-      if (!alive)
-        spdlog::error("watchdog: the data plane has not reported for over 1 s");
-      else
-        spdlog::info("watchdog: the data plane is reporting again");
-      c.data_plane_alive = alive;
-    }
-    for (const SubjectStats& s : now.subjects) {
-      const SubjectStats* before = nullptr;
-      for (const SubjectStats& b : c.last_logged.subjects)
-        if (b.name == s.name) before = &b;
-      // Each event as it was when it happened (a second may hold a stall, its end and a
-      // resync: the snapshot's last frame number is none of theirs).
-      if (before != nullptr && s.counters.stalls > before->counters.stalls)
-        spdlog::warn(
-            "watchdog: subject '{}' input stalled (no frame taken for {:.2f} s, last frame {})",
-            s.name, s.counters.stall_silence_s, s.counters.stall_last_frame);
-      if (before != nullptr && s.counters.resumes > before->counters.resumes)
-        spdlog::info("subject '{}' input resumed at frame {} after {:.2f} s without a frame taken",
-                     s.name, s.counters.resume_frame, s.counters.resume_silence_s);
-      if (before != nullptr && s.counters.restarts > before->counters.restarts)
-        spdlog::warn("{}", RestartLogLine(s, s.counters.restarts - before->counters.restarts));
-      if (s.rejecting_input && (before == nullptr || !before->rejecting_input))
-        spdlog::warn("subject '{}': every frame dropped as {} for over 0.5 s{}", s.name,
-                     to_string(s.rejecting_reason), RejectionDetail(s));
-      // The end of a rejection is said too: /health stops naming it, and an operator
-      // reading the log must not think every frame is still dropped.
-      if (!s.rejecting_input && before != nullptr && before->rejecting_input)
-        spdlog::info("subject '{}': no longer dropping every frame ({} accepted so far)", s.name,
-                     s.counters.frames_accepted);
-      if (s.unstable_input && (before == nullptr || !before->unstable_input))
-        spdlog::warn("subject '{}': {}", s.name, kUnstableInputText);
-      if (!s.unstable_input && before != nullptr && before->unstable_input)
-        spdlog::info(
-            "subject '{}': input stable again (no re-synchronisation or repeated frame for 2 s)",
-            s.name);
-      if (s.model_suspect && (before == nullptr || !before->model_suspect))
-        spdlog::warn(
-            "subject '{}': model suspect: the received markers sit {:.0f} mm (median) from "
-            "the model's; is this the actor's calibrated model, at the right scale?",
-            s.name, s.model_distance_mm);
-      if (!s.model_suspect && before != nullptr && before->model_suspect)
-        spdlog::info("subject '{}': the model fits again ({:.0f} mm median)", s.name,
-                     s.model_distance_mm);
-    }
-    // A backlog was read: its messages went through the allocator, which keeps the freed
-    // pages; hand them back so a burst does not leave the daemon tens of MB larger (on
-    // the control thread, so the data plane never waits for it).
-    if (c.last_logged.catching_up && !now.catching_up) {
-      malloc_trim(0);
-      spdlog::info("backlog read ({} full input batches so far); freed memory returned",
-                   now.full_batches);
-    }
-    // Drops: at most one line per reason per log interval, with the count since the last.
-    for (int reason = 0; reason < kDropReasonCount; ++reason) {
-      auto total = [&](const DaemonStats& st) {
-        uint64_t n = st.unattributed_dropped[static_cast<size_t>(reason)];
-        for (const SubjectStats& s : st.subjects)
-          n += s.counters.dropped[static_cast<size_t>(reason)];
-        return n;
-      };
-      if (t - c.last_drop_log_ns[static_cast<size_t>(reason)] < Seconds(c.config.log_interval_s))
-        continue;
-      auto& logged = c.logged_drops;
-      const uint64_t n = total(now);
-      if (n > logged[static_cast<size_t>(reason)]) {
-        std::string who;
-        for (const SubjectStats& s : now.subjects) {
-          uint64_t& seen = c.logged_subject_drops[s.name][static_cast<size_t>(reason)];
-          const uint64_t count = s.counters.dropped[static_cast<size_t>(reason)];
-          if (count > seen) who += fmt::format(", subject '{}' {}", s.name, count - seen);
-          seen = count;
+  std::function<void(const boost::system::error_code&)> on_tick =
+      [this, &on_tick](const boost::system::error_code& ec) {
+        if (ec) return;
+        ControlPlane& c = *control_;
+        const DaemonStats now = Stats();
+        const int64_t t = SteadyNs();
+        const bool alive =
+            (now.running || now.stopping) && t - now.data_plane_heartbeat_ns < 1'000'000'000;
+        if (alive != c.data_plane_alive) {
+          if (!alive)
+            spdlog::error("watchdog: the data plane has not reported for over 1 s");
+          else
+            spdlog::info("watchdog: the data plane is reporting again");
+          c.data_plane_alive = alive;
         }
-        spdlog::warn("dropped {} input message(s): {} (total {}){}",
-                     n - logged[static_cast<size_t>(reason)],
-                     to_string(static_cast<DropReason>(reason)), n, who);
-        logged[static_cast<size_t>(reason)] = n;
-        c.last_drop_log_ns[static_cast<size_t>(reason)] = t;
-      }
-    }
-    // Frames lost before the daemon: at most one line per log interval. Losing every
-    // other frame said nothing in the log but, later, "model suspect".
-    if (t - c.last_skipped_log_ns >= Seconds(c.config.log_interval_s)) {
-      std::string who;
-      for (const SubjectStats& s : now.subjects) {
-        uint64_t& seen = c.logged_skipped[s.name];
-        if (s.counters.frames_skipped > seen)
-          who += fmt::format("{}subject '{}' {} (total {})", who.empty() ? "" : ", ", s.name,
-                             s.counters.frames_skipped - seen, s.counters.frames_skipped);
-        seen = s.counters.frames_skipped;
-      }
-      if (!who.empty()) {
-        spdlog::warn("frame numbers that never arrived (lost before the daemon): {}", who);
-        c.last_skipped_log_ns = t;
-      }
-    }
-    if (t - c.last_log_ns >= Seconds(c.config.log_interval_s)) {
-      spdlog::info("stats: {} messages in, {} frames published, {} dropped, {} pending",
-                   now.messages_in, now.published_total(), now.dropped_total(),
-                   now.pending_total());
-      c.last_log_ns = t;
-    }
-    if (c.live && c.live->viewers() > 0) c.live->OnStats(now);
-    c.last_logged = now;
-    c.tick->expires_after(std::chrono::milliseconds(
-        static_cast<int64_t>(std::min(c.config.stats_interval_s, 0.25) * 1e3)));
-    c.tick->async_wait(on_tick);
-  };
+        for (const SubjectStats& s : now.subjects) {
+          const SubjectStats* before = nullptr;
+          for (const SubjectStats& b : c.last_logged.subjects)
+            if (b.name == s.name) before = &b;
+          // Each event as it was when it happened (a second may hold a stall, its end and a
+          // resync: the snapshot's last frame number is none of theirs).
+          if (before != nullptr && s.counters.stalls > before->counters.stalls)
+            spdlog::warn(
+                "watchdog: subject '{}' input stalled (no frame taken for {:.2f} s, last frame {})",
+                s.name, s.counters.stall_silence_s, s.counters.stall_last_frame);
+          if (before != nullptr && s.counters.resumes > before->counters.resumes)
+            spdlog::info(
+                "subject '{}' input resumed at frame {} after {:.2f} s without a frame taken",
+                s.name, s.counters.resume_frame, s.counters.resume_silence_s);
+          if (before != nullptr && s.counters.restarts > before->counters.restarts)
+            spdlog::warn("{}", RestartLogLine(s, s.counters.restarts - before->counters.restarts));
+          if (s.rejecting_input && (before == nullptr || !before->rejecting_input))
+            spdlog::warn("subject '{}': every frame dropped as {} for over 0.5 s{}", s.name,
+                         to_string(s.rejecting_reason), RejectionDetail(s));
+          // The end of a rejection is said too: /health stops naming it, and an operator
+          // reading the log must not think every frame is still dropped.
+          if (!s.rejecting_input && before != nullptr && before->rejecting_input)
+            spdlog::info("subject '{}': no longer dropping every frame ({} accepted so far)",
+                         s.name, s.counters.frames_accepted);
+          if (s.unstable_input && (before == nullptr || !before->unstable_input))
+            spdlog::warn("subject '{}': {}", s.name, kUnstableInputText);
+          if (!s.unstable_input && before != nullptr && before->unstable_input)
+            spdlog::info(
+                "subject '{}': input stable again (no re-synchronisation or "
+                "repeated frame for 2 s)",
+                s.name);
+          if (s.model_suspect && (before == nullptr || !before->model_suspect))
+            spdlog::warn(
+                "subject '{}': model suspect: the received markers sit {:.0f} mm (median) from "
+                "the model's; is this the actor's calibrated model, at the right scale?",
+                s.name, s.model_distance_mm);
+          if (!s.model_suspect && before != nullptr && before->model_suspect)
+            spdlog::info("subject '{}': the model fits again ({:.0f} mm median)", s.name,
+                         s.model_distance_mm);
+        }
+        // A backlog was read: its messages went through the allocator, which keeps the freed
+        // pages; hand them back so a burst does not leave the daemon tens of MB larger (on
+        // the control thread, so the data plane never waits for it).
+        if (c.last_logged.catching_up && !now.catching_up) {
+          malloc_trim(0);
+          spdlog::info("backlog read ({} full input batches so far); freed memory returned",
+                       now.full_batches);
+        }
+        // Drops: at most one line per reason per log interval, with the count since the last.
+        for (int reason = 0; reason < kDropReasonCount; ++reason) {
+          auto total = [&](const DaemonStats& st) {
+            uint64_t n = st.unattributed_dropped[static_cast<size_t>(reason)];
+            for (const SubjectStats& s : st.subjects)
+              n += s.counters.dropped[static_cast<size_t>(reason)];
+            return n;
+          };
+          if (t - c.last_drop_log_ns[static_cast<size_t>(reason)] <
+              Seconds(c.config.log_interval_s))
+            continue;
+          auto& logged = c.logged_drops;
+          const uint64_t n = total(now);
+          if (n > logged[static_cast<size_t>(reason)]) {
+            std::string who;
+            for (const SubjectStats& s : now.subjects) {
+              uint64_t& seen = c.logged_subject_drops[s.name][static_cast<size_t>(reason)];
+              const uint64_t count = s.counters.dropped[static_cast<size_t>(reason)];
+              if (count > seen) who += fmt::format(", subject '{}' {}", s.name, count - seen);
+              seen = count;
+            }
+            spdlog::warn("dropped {} input message(s): {} (total {}){}",
+                         n - logged[static_cast<size_t>(reason)],
+                         to_string(static_cast<DropReason>(reason)), n, who);
+            logged[static_cast<size_t>(reason)] = n;
+            c.last_drop_log_ns[static_cast<size_t>(reason)] = t;
+          }
+        }
+        // Frames lost before the daemon: at most one line per log interval. Losing every
+        // other frame said nothing in the log but, later, "model suspect".
+        if (t - c.last_skipped_log_ns >= Seconds(c.config.log_interval_s)) {
+          std::string who;
+          for (const SubjectStats& s : now.subjects) {
+            uint64_t& seen = c.logged_skipped[s.name];
+            if (s.counters.frames_skipped > seen)
+              who += fmt::format("{}subject '{}' {} (total {})", who.empty() ? "" : ", ", s.name,
+                                 s.counters.frames_skipped - seen, s.counters.frames_skipped);
+            seen = s.counters.frames_skipped;
+          }
+          if (!who.empty()) {
+            spdlog::warn("frame numbers that never arrived (lost before the daemon): {}", who);
+            c.last_skipped_log_ns = t;
+          }
+        }
+        if (t - c.last_log_ns >= Seconds(c.config.log_interval_s)) {
+          spdlog::info("stats: {} messages in, {} frames published, {} dropped, {} pending",
+                       now.messages_in, now.published_total(), now.dropped_total(),
+                       now.pending_total());
+          c.last_log_ns = t;
+        }
+        if (c.live && c.live->viewers() > 0) c.live->OnStats(now);
+        c.last_logged = now;
+        c.tick->expires_after(std::chrono::milliseconds(
+            static_cast<int64_t>(std::min(c.config.stats_interval_s, 0.25) * 1e3)));
+        c.tick->async_wait(on_tick);
+      };
   cp.last_log_ns = SteadyNs();
   cp.tick->expires_after(std::chrono::milliseconds(100));
   cp.tick->async_wait(on_tick);

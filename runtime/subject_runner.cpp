@@ -23,6 +23,11 @@ uint64_t WallClockNs() {
 uint64_t Ahead(uint64_t a, uint64_t b) { return a - b; }
 bool Newer(uint64_t a, uint64_t b) { return a != b && Ahead(a, b) < (uint64_t{1} << 63); }
 
+// How far a sender's capture clock moved from `from` to `to`, negative if it went back.
+double ClockStepS(uint64_t to, uint64_t from) {
+  return static_cast<double>(static_cast<int64_t>(to - from)) * 1e-9;
+}
+
 int64_t SteadyNs() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(
              std::chrono::steady_clock::now().time_since_epoch())
@@ -274,12 +279,10 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
       // renumbered stream): nothing was lost. Bridged, a bridge 100 frames ahead of the
       // other had 99 frames inserted for each of its own, and they were counted as skipped.
       // A clock gone back (the other bridge stamped a moment earlier) shares no jump either.
-      const double clock_s =
-          static_cast<double>(static_cast<int64_t>(frame.capture_time_ns - last_capture_ns_)) *
-          1e-9;
-      const bool numbers_outran_clock =
-          clock_trusted() && frame.capture_time_ns != 0 && last_capture_ns_ != 0 &&
-          clock_s < 0.5 * (static_cast<double>(missing) + 1.0) / rate_hz_;
+      const bool numbers_outran_clock = clock_trusted() && frame.capture_time_ns != 0 &&
+                                        last_capture_ns_ != 0 &&
+                                        ClockStepS(frame.capture_time_ns, last_capture_ns_) <
+                                            0.5 * (static_cast<double>(missing) + 1.0) / rate_hz_;
       if (!interrupted_goes_on && !numbers_outran_clock)
         counters_.frames_skipped += missing - std::min(missing, dropped_ahead_);
       if (interrupted_goes_on || numbers_outran_clock ||
@@ -325,9 +328,8 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
   last_receive_ns_ = receive_ns;
   last_input_ns_ = receive_ns;
   if (consecutive && frame.capture_time_ns != 0 && last_capture_ns_ != 0) {
-    const double step_s =
-        static_cast<double>(static_cast<int64_t>(frame.capture_time_ns - last_capture_ns_)) * 1e-9;
-    ++consecutive_pairs_;
+    const double step_s = ClockStepS(frame.capture_time_ns, last_capture_ns_);
+    clock_pair_seen_ = true;
     clock_agreeing_pairs_ = std::abs(step_s * rate_hz_ - 1.0) <= 0.5
                                 ? std::min(clock_agreeing_pairs_ + 1, kClockPairs)
                                 : 0;

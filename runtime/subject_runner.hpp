@@ -89,7 +89,7 @@ struct SubjectCounters {
   uint64_t resync_frame = 0;         ///< The frame the last re-synchronised stream began at...
   uint64_t resync_from_frame = 0;    ///< ...the last frame taken before it...
   uint64_t resync_from_session = 0;  ///< ...and their capture sessions (0: a v1 sender).
-  uint64_t resync_session = 0;
+  uint64_t resync_session = 0;       ///< (the session of resync_frame)
   protocol::StreamInfo last_stream;  ///< The last accepted frame's session, rate and timecode.
   uint64_t dropped_total() const;
 };
@@ -289,11 +289,9 @@ class SubjectRunner {
   // jump in frame numbers that a trusted clock does not share was no loss; a clock in
   // other units, or stamped at bursty sends, is not judged.
   static constexpr int kClockPairs = 8;
-  uint64_t consecutive_pairs_ = 0;
+  bool clock_pair_seen_ = false;
   int clock_agreeing_pairs_ = 0;
-  bool clock_trusted() const {
-    return consecutive_pairs_ == 0 || clock_agreeing_pairs_ >= kClockPairs;
-  }
+  bool clock_trusted() const { return !clock_pair_seen_ || clock_agreeing_pairs_ >= kClockPairs; }
   void NoteUnstableEvent(int64_t receive_ns);
   static constexpr size_t kUnstableEvents = 5;
   static constexpr int64_t kUnstableWithinNs = 2'000'000'000;

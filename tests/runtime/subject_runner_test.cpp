@@ -85,6 +85,13 @@ class SubjectRunnerTest : public ::testing::Test {
     void Send(std::string_view, std::span<const uint8_t>) override {}
   };
 
+  // The log line for the runner's last re-synchronisation, restarts_since of them.
+  static std::string RestartLine(const SubjectRunner& r, uint64_t restarts_since) {
+    SubjectStats stats;
+    stats.name = r.name();
+    stats.counters = r.counters();
+    return RestartLogLine(stats, restarts_since);
+  }
   static void ExpectBalanced(const SubjectRunner& r) {
     const SubjectCounters& c = r.counters();
     EXPECT_EQ(c.frames_in, c.frames_published + c.dropped_total() + r.pending_received());
@@ -264,10 +271,7 @@ TEST_F(SubjectRunnerTest, AStreamThatGoesOnAfterALatePacketIsNotPublishedTwice) 
   }
   ASSERT_FALSE(runner.Accept(Frame(50, 50, ns(50)), 0, sink_).has_value());  // 149 back
   EXPECT_EQ(runner.counters().restarts, 1u);
-  SubjectStats stats;
-  stats.name = "actor1";
-  stats.counters = runner.counters();
-  EXPECT_EQ(RestartLogLine(stats, 1),
+  EXPECT_EQ(RestartLine(runner, 1),
             "subject 'actor1': capture restart or jump in frame numbers, frame 199 -> 50; "
             "pipeline re-synchronised");
   for (int f = 200; f < 230; ++f)
@@ -275,8 +279,7 @@ TEST_F(SubjectRunnerTest, AStreamThatGoesOnAfterALatePacketIsNotPublishedTwice) 
   runner.Flush(sink_);
   EXPECT_EQ(runner.counters().restarts, 2u);
   // Both within one report: the log says there were two (it said one).
-  stats.counters = runner.counters();
-  EXPECT_EQ(RestartLogLine(stats, 2),
+  EXPECT_EQ(RestartLine(runner, 2),
             "subject 'actor1': capture restart or jump in frame numbers, frame 50 -> 200; "
             "pipeline re-synchronised (2 re-synchronisations since the last report; the last "
             "shown)");
@@ -369,10 +372,7 @@ TEST_F(SubjectRunnerTest, ANewSessionRestartsTheSubjectEvenWhenItsFrameNumbersGo
   runner.Flush(sink_);
   EXPECT_EQ(runner.counters().session_changes, 1u);
   EXPECT_EQ(runner.counters().restarts, 1u);
-  SubjectStats stats;
-  stats.name = "actor1";
-  stats.counters = runner.counters();
-  EXPECT_EQ(RestartLogLine(stats, 1),
+  EXPECT_EQ(RestartLine(runner, 1),
             "subject 'actor1': capture restart or jump in frame numbers, frame 29 (session 7) "
             "-> 30 (session 8); pipeline re-synchronised");
   EXPECT_EQ(runner.counters().frames_skipped, 0u);
