@@ -34,6 +34,11 @@ int64_t SteadyNs() {
       .count();
 }
 
+// A frame the subject had already taken: noted as unstable at every such drop.
+bool IsRepeat(DropReason reason) {
+  return reason == DropReason::kDuplicate || reason == DropReason::kOutOfOrder;
+}
+
 }  // namespace
 
 const char* to_string(DropReason reason) {
@@ -189,6 +194,11 @@ std::optional<CharacterInfo> SubjectRunner::character_info() const {
 uint64_t SubjectRunner::pending() const { return static_cast<uint64_t>(pushed_ - published_); }
 
 void SubjectRunner::CountDrop(DropReason reason, int64_t receive_ns) {
+  // A drop right after a frame taken (and, in Accept, a frame taken right after drops):
+  // input switching between what the subject takes and what it cannot (two bridges with
+  // different marker orders taking turns) lost half its frames with /health ok, since no
+  // half second was all drops. Repeated frames note their own event, one per frame.
+  if (started_ && consecutive_dropped_ == 0 && !IsRepeat(reason)) NoteUnstableEvent(receive_ns);
   last_input_ns_ = receive_ns;
   ++counters_.frames_in;
   ++counters_.dropped[static_cast<size_t>(reason)];
@@ -322,6 +332,7 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
   }
   ++counters_.frames_in;
   ++counters_.frames_accepted;
+  if (started_ && consecutive_dropped_ > 0 && !IsRepeat(last_drop_)) NoteUnstableEvent(receive_ns);
   consecutive_dropped_ = 0;
   dropped_ahead_ = 0;
   started_ = true;

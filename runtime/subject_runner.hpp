@@ -151,12 +151,12 @@ class SubjectRunner {
                ? std::optional<DropReason>(last_drop_)
                : std::nullopt;
   }
-  /// The stream re-synchronised, or was sent frames it had already taken (duplicate, out
-  /// of order), kUnstableEvents times within kUnstableWithinNs, and the last of those
-  /// was less than kUnstableWithinNs before now_ns. No capture restarts that often, and
-  /// ZeroMQ neither repeats nor reorders: two bridges sending one subject, or one writing
-  /// a new session id into every frame (the cleanup without its lookahead, or half the
-  /// input dropped, and /health ok).
+  /// The stream re-synchronised, was sent frames it had already taken (duplicate, out
+  /// of order), or switched between taking and dropping frames, kUnstableEvents times within
+  /// kUnstableWithinNs, and the last of those was less than kUnstableWithinNs before
+  /// now_ns. No capture restarts that often, and ZeroMQ neither repeats nor reorders: two
+  /// bridges sending one subject, or one writing a new session id into every frame (the
+  /// cleanup without its lookahead, or half the input dropped, and /health ok).
   bool unstable_input(int64_t now_ns) const {
     return unstable_ && now_ns - last_unstable_event_ns_ <= kUnstableWithinNs;
   }

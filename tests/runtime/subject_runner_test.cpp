@@ -727,6 +727,45 @@ TEST_F(SubjectRunnerTest, ASubjectWhoseFramesAreAllDroppedIsRejectingInput) {
   EXPECT_FALSE(runner.rejecting().has_value());
 }
 
+// Two bridges with different marker orders taking turns every 30 frames at 120 Hz: half
+// the input dropped as model_mismatch, and never half a second of nothing but drops, so
+// never rejecting: /health said ok. Each switch between frames taken and frames dropped is
+// an unstable event. A frame dropped now and then (less often than once a second) is
+// flagged by nothing but its count.
+TEST_F(SubjectRunnerTest, InputSwitchingBetweenTakenAndDroppedFramesIsFlaggedUnstable) {
+  constexpr int64_t kPeriod = 8'333'333;
+  SubjectRunner runner(subject_, daemon_);
+  int64_t receive_ns = 0;
+  uint64_t number = 0;
+  for (int block = 0; block < 8; ++block)
+    for (int f = 0; f < 30; ++f, ++number, receive_ns += kPeriod) {
+      protocol::MarkerFrameMessage m = Frame(static_cast<int>(number % 200), number, 0);
+      if (block % 2 == 1) m.model_hash ^= 1;
+      runner.Accept(m, receive_ns, sink_);
+    }
+  EXPECT_FALSE(runner.rejecting().has_value());
+  EXPECT_TRUE(runner.unstable_input(receive_ns));
+  EXPECT_EQ(runner.counters().dropped[static_cast<size_t>(DropReason::kModelMismatch)], 120u);
+  runner.PublishStatus(receive_ns, sink_);
+  ASSERT_FALSE(sink_.statuses.empty());
+  EXPECT_EQ(sink_.statuses.back().problems, protocol::kProblemUnstableInput);
+  // Clears once 2 s pass with every frame taken.
+  for (int f = 0; f < 300; ++f, ++number, receive_ns += kPeriod)
+    runner.Accept(Frame(static_cast<int>(number % 200), number, 0), receive_ns, sink_);
+  EXPECT_FALSE(runner.unstable_input(receive_ns));
+
+  SubjectRunner now_and_then(subject_, daemon_);
+  RecordingSink now_and_then_sink;
+  receive_ns = 0;
+  for (uint64_t n = 0; n < 1200; ++n, receive_ns += kPeriod) {
+    protocol::MarkerFrameMessage m = Frame(static_cast<int>(n % 200), n, 0);
+    if (n % 150 == 60) m.model_hash ^= 1;  // every 1.25 s
+    now_and_then.Accept(m, receive_ns, now_and_then_sink);
+    EXPECT_FALSE(now_and_then.unstable_input(receive_ns)) << n;
+  }
+  EXPECT_EQ(now_and_then.counters().dropped[static_cast<size_t>(DropReason::kModelMismatch)], 8u);
+}
+
 // The model's marker names match the bridge's, so every frame is accepted, but its bones
 // are 1.5 times too long: the received markers sit far from it, and it is flagged. The
 // actor's own model, fed the same frames, is not.
