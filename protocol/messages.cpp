@@ -126,11 +126,23 @@ DecodeStatus ReadStream(ByteReader& r, float rate_hz, StreamInfo* stream) {
 
 // What follows the fixed fields of a frame: the stream block in version 2, then
 // item_bytes of per-item arrays, exactly. rate_hz: the frame's own rate (0 if it has none).
+// A version 2 frame that fails before its stream block is read (its size, its item count)
+// still names its session, the block's first field, when the bytes are there: dropped, it
+// is then known as this session's frame (not one of another stream), and the gap it leaves
+// is not counted again as frames lost before the daemon.
+void PeekSessionId(ByteReader r, uint16_t version, StreamInfo* stream) {
+  uint64_t session_id = 0;
+  if (version >= kVersion2 && r.ReadU64(&session_id)) stream->session_id = session_id;
+}
+
 DecodeStatus ReadStreamAndSize(ByteReader& r, uint16_t version, size_t item_bytes, float rate_hz,
                                StreamInfo* stream) {
   const size_t stream_bytes = version >= kVersion2 ? kStreamBlockBytes : 0;
-  if (r.remaining() != stream_bytes + item_bytes) return DecodeStatus::kSizeMismatch;
   *stream = StreamInfo{};
+  if (r.remaining() != stream_bytes + item_bytes) {
+    PeekSessionId(r, version, stream);
+    return DecodeStatus::kSizeMismatch;
+  }
   return stream_bytes != 0 ? ReadStream(r, rate_hz, stream) : DecodeStatus::kOk;
 }
 
@@ -283,7 +295,10 @@ DecodeStatus DecodeMarkerFrame(std::span<const uint8_t> bytes, MarkerFrameMessag
       !r.ReadU64(&m->capture_time_ns) || !r.ReadF32(&m->rate_hz) || !r.ReadU16(&count) ||
       !r.ReadU16(&reserved))
     return DecodeStatus::kTooShort;
-  if (count > kMaxMarkers) return DecodeStatus::kTooManyItems;
+  if (count > kMaxMarkers) {
+    PeekSessionId(r, m->version, &m->stream);
+    return DecodeStatus::kTooManyItems;
+  }
   // The stream block is read before the rate is judged, so a frame dropped for its rate is
   // known by its session too (and not counted again as a skipped number).
   const bool rate_ok = Finite(m->rate_hz) && m->rate_hz > 0.0f;

@@ -428,11 +428,29 @@ TEST_F(SubjectRunnerTest, FramesThatFailedToDecodeAreNotCountedAgainAsSkipped) {
   protocol::EncodeMarkerFrame(contradicting, &bytes);
   ASSERT_EQ(protocol::DecodeMarkerFrame(bytes, &partial), protocol::DecodeStatus::kBadField);
   EXPECT_EQ(runner.Drop(partial, DropReason::kMalformed, 0), DropReason::kMalformed);
-  for (int f = 23; f < 40; ++f) ASSERT_FALSE(runner.Accept(frame(f), 0, sink_).has_value());
+  // 23 one byte too long, 24 claiming more markers than any frame may carry: neither's
+  // stream block is read, but their session id is (they were counted as skipped too).
+  protocol::EncodeMarkerFrame(frame(23), &bytes);
+  bytes.push_back(0);
+  const auto payload = static_cast<uint32_t>(bytes.size() - protocol::kHeaderBytes);
+  std::memcpy(&bytes[8], &payload, 4);  // the header's payload length, as a sender would
+  ASSERT_EQ(protocol::DecodeMarkerFrame(bytes, &partial), protocol::DecodeStatus::kSizeMismatch);
+  EXPECT_EQ(partial.stream.session_id, 7u);
+  EXPECT_EQ(runner.Drop(partial, DropReason::kMalformed, 0), DropReason::kMalformed);
+  protocol::EncodeMarkerFrame(frame(24), &bytes);
+  // The count sits before a reserved u16, the stream block and 13 bytes per marker.
+  const size_t count_offset =
+      bytes.size() - 13 * frame(24).positions.size() - protocol::kStreamBlockBytes - 4;
+  const uint16_t too_many = 0xffff;
+  std::memcpy(&bytes[count_offset], &too_many, 2);
+  ASSERT_EQ(protocol::DecodeMarkerFrame(bytes, &partial), protocol::DecodeStatus::kTooManyItems);
+  EXPECT_EQ(partial.stream.session_id, 7u);
+  EXPECT_EQ(runner.Drop(partial, DropReason::kMalformed, 0), DropReason::kMalformed);
+  for (int f = 25; f < 40; ++f) ASSERT_FALSE(runner.Accept(frame(f), 0, sink_).has_value());
   runner.Flush(sink_);
   EXPECT_EQ(runner.counters().dropped[static_cast<size_t>(DropReason::kNonFinite)], 2u);
-  EXPECT_EQ(runner.counters().dropped[static_cast<size_t>(DropReason::kMalformed)], 1u);
-  EXPECT_EQ(runner.counters().frames_inserted, 3u);
+  EXPECT_EQ(runner.counters().dropped[static_cast<size_t>(DropReason::kMalformed)], 3u);
+  EXPECT_EQ(runner.counters().frames_inserted, 5u);
   EXPECT_EQ(runner.counters().frames_skipped, 0u);  // each was counted once, as dropped
   ExpectBalanced(runner);
 }
