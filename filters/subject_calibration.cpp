@@ -451,17 +451,20 @@ SubjectCalibrationResult SolveOnce(const CalibrationTemplate& tmpl, std::span<co
             structure_blocks.emplace_back(joint_var(j),
                                           ws.R_WJ[static_cast<size_t>(base.joint(j).parent.value)]);
         }
+        // w Ja' formed once per block, then plain 3x3 products (a scalar times a transpose
+        // times a block, per pair, was evaluated coefficient by coefficient).
         for (const auto& [ca, Ja] : pose_blocks) {
-          b_p.segment<3>(ca) += w * Ja.transpose() * r;
-          for (const auto& [cb, Jb] : pose_blocks)
-            A_pp.block<3, 3>(ca, cb) += w * Ja.transpose() * Jb;
+          const Mat3 wJaT = w * Ja.transpose();
+          b_p.segment<3>(ca).noalias() += wJaT * r;
+          for (const auto& [cb, Jb] : pose_blocks) A_pp.block<3, 3>(ca, cb).noalias() += wJaT * Jb;
           for (const auto& [cb, Jb] : structure_blocks)
-            A_ps.block<3, 3>(ca, cb) += w * Ja.transpose() * Jb;
+            A_ps.block<3, 3>(ca, cb).noalias() += wJaT * Jb;
         }
         for (const auto& [ca, Ja] : structure_blocks) {
-          rhs.segment<3>(ca) += w * Ja.transpose() * r;
+          const Mat3 wJaT = w * Ja.transpose();
+          rhs.segment<3>(ca).noalias() += wJaT * r;
           for (const auto& [cb, Jb] : structure_blocks)
-            S.block<3, 3>(ca, cb) += w * Ja.transpose() * Jb;
+            S.block<3, 3>(ca, cb).noalias() += wJaT * Jb;
         }
       }
       // Damped (Marquardt); a joint no marker constrains still gets a tiny diagonal so
