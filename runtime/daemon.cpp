@@ -1086,8 +1086,8 @@ void Daemon::Run(bool handle_signals) {
             spdlog::warn("subject '{}': {}", s.name, kUnstableInputText);
           if (!s.unstable_input && before != nullptr && before->unstable_input)
             spdlog::info(
-                "subject '{}': input stable again (no re-synchronisation or "
-                "repeated frame for 2 s)",
+                "subject '{}': input stable again (no re-synchronisation, repeated "
+                "frame or switch between taken and dropped frames for 2 s)",
                 s.name);
           if (s.model_suspect && (before == nullptr || !before->model_suspect))
             spdlog::warn(

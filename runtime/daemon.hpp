@@ -50,8 +50,8 @@ struct SubjectStats {
   size_t mismatched_marker_count = 0;      ///< ...and marker count.
   std::optional<CharacterInfo> character;  ///< The character it drives, if any.
   bool model_suspect = false;              ///< Received samples persistently far from the model.
-  /// 5 re-synchronisations, repeated frames or drops among taken frames within 2 s (two senders, a
-  /// session id per frame).
+  /// 5 re-synchronisations, repeated frames or switches between taken and dropped frames
+  /// within 2 s (two senders, a session id per frame).
   bool unstable_input = false;
   double model_distance_mm = 0.0;  ///< Median sample-to-model distance, over about a second.
   int worker = 0;                  ///< The data-plane thread that solves it.

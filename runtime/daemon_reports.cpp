@@ -320,8 +320,9 @@ std::string RejectionDetail(const SubjectStats& s) {
 }
 
 const char* const kUnstableInputText =
-    "input unstable: 5 re-synchronisations, repeated frames or drops among taken frames "
-    "within 2 s (two senders for one subject? a session id that changes every frame?)";
+    "input unstable: 5 re-synchronisations, repeated frames or switches between taken and "
+    "dropped frames within 2 s (two senders for one subject? a session id that changes every "
+    "frame?)";
 
 std::string RestartLogLine(const SubjectStats& s, uint64_t restarts_since_last_report) {
   const SubjectCounters& c = s.counters;
