@@ -15,6 +15,24 @@
 #include <cstdio>
 
 namespace mocapd {
+namespace {
+
+// The drop series that can count anything. A message is charged to a subject only once
+// its name is read and configured: a size over the limit, another message type or an
+// unknown name are never a subject's; the subject's own checks (model, rate, numbering)
+// never leave a drop unattributed. Exported at zero, the others were pairs no daemon can
+// produce on every dashboard.
+bool ChargeableToSubject(DropReason reason) {
+  return reason != DropReason::kOversized && reason != DropReason::kNotMarkerFrame &&
+         reason != DropReason::kUnknownSubject;
+}
+bool LeftUnattributed(DropReason reason) {
+  return reason == DropReason::kOversized || reason == DropReason::kMalformed ||
+         reason == DropReason::kNonFinite || reason == DropReason::kNotMarkerFrame ||
+         reason == DropReason::kUnknownSubject;
+}
+
+}  // namespace
 
 std::string FormatPrometheusMetrics(const DaemonStats& stats) {
   using prometheus::BuildCounter;
@@ -163,8 +181,9 @@ std::string FormatPrometheusMetrics(const DaemonStats& stats) {
   const prometheus::Histogram::BucketBoundaries bounds(kLatencyBucketsS.begin(),
                                                        kLatencyBucketsS.end());
   for (int r = 0; r < kDropReasonCount; ++r)
-    dropped.Add({{"subject", ""}, {"reason", to_string(static_cast<DropReason>(r))}})
-        .Increment(static_cast<double>(stats.unattributed_dropped[static_cast<size_t>(r)]));
+    if (LeftUnattributed(static_cast<DropReason>(r)))
+      dropped.Add({{"subject", ""}, {"reason", to_string(static_cast<DropReason>(r))}})
+          .Increment(static_cast<double>(stats.unattributed_dropped[static_cast<size_t>(r)]));
   for (const SubjectStats& s : stats.subjects) {
     const prometheus::Labels subject{{"subject", s.name}};
     received.Add(subject).Increment(static_cast<double>(s.counters.frames_in));
@@ -184,8 +203,9 @@ std::string FormatPrometheusMetrics(const DaemonStats& stats) {
     glitches.Add(subject).Increment(static_cast<double>(s.cleanup.glitch_frames));
     resyncs.Add(subject).Increment(static_cast<double>(s.cleanup.resyncs));
     for (int r = 0; r < kDropReasonCount; ++r)
-      dropped.Add({{"subject", s.name}, {"reason", to_string(static_cast<DropReason>(r))}})
-          .Increment(static_cast<double>(s.counters.dropped[static_cast<size_t>(r)]));
+      if (ChargeableToSubject(static_cast<DropReason>(r)))
+        dropped.Add({{"subject", s.name}, {"reason", to_string(static_cast<DropReason>(r))}})
+            .Increment(static_cast<double>(s.counters.dropped[static_cast<size_t>(r)]));
     for (int r = 1; r < kMaskReasonCount; ++r)
       repaired.Add({{"subject", s.name}, {"detector", to_string(static_cast<MaskReason>(r))}})
           .Increment(static_cast<double>(s.cleanup.repaired_by[static_cast<size_t>(r)]));

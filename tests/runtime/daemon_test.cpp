@@ -875,6 +875,23 @@ TEST(DaemonTest, HttpServesHealthSubjectsAndMetrics) {
       << metrics;
   EXPECT_NE(metrics.find("mocapd_processing_latency_seconds_count{subject=\"actor1\"} 46"),
             std::string::npos);
+  // Drops are exported at zero only where they can happen: a subject's own checks for the
+  // subject, a message's size, type and name unattributed (every pair was exported).
+  EXPECT_EQ(MetricValue(metrics,
+                        R"(mocapd_frames_dropped_total{reason="model_mismatch",subject="actor1"})"),
+            0.0);
+  EXPECT_EQ(
+      MetricValue(metrics, R"(mocapd_frames_dropped_total{reason="malformed",subject="actor1"})"),
+      0.0);
+  EXPECT_EQ(
+      MetricValue(metrics, R"(mocapd_frames_dropped_total{reason="unknown_subject",subject=""})"),
+      0.0);
+  EXPECT_EQ(MetricValue(metrics, R"(mocapd_frames_dropped_total{reason="malformed",subject=""})"),
+            0.0);
+  EXPECT_EQ(metrics.find(R"({reason="unknown_subject",subject="actor1"})"), std::string::npos);
+  EXPECT_EQ(metrics.find(R"({reason="oversized",subject="actor1"})"), std::string::npos);
+  EXPECT_EQ(metrics.find(R"({reason="model_mismatch",subject=""})"), std::string::npos);
+  EXPECT_EQ(metrics.find(R"({reason="out_of_order",subject=""})"), std::string::npos);
   EXPECT_EQ(HttpGet(daemon->http_port(), "/nope").first, 404);
   // The watchdog: no input for longer than its timeout.
   EXPECT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) {
