@@ -66,6 +66,7 @@ class Tokens {
     return 0;
   }
   bool done() const { return pos_ >= tokens_.size(); }
+  size_t remaining() const { return done() ? 0 : tokens_.size() - pos_; }
   int line() const {
     return done() ? (tokens_.empty() ? 1 : tokens_.back().line) : tokens_[pos_].line;
   }
@@ -282,7 +283,12 @@ BvhTake ParseBvh(const std::string& text, const std::string& source_name,
 
   size_t total_channels = 0;
   for (const RawJoint& j : raw) total_channels += j.channels.size();
-  std::vector<double> values(num_frames * total_channels);
+  // Sized by the values the file holds, not by its frame count: a count far beyond the
+  // data (a header left from a longer take) is a truncated file, not gigabytes reserved
+  // and a bad_alloc. The loop fails at the first frame the file does not hold.
+  const size_t frames_held =
+      total_channels == 0 ? num_frames : std::min(num_frames, t.remaining() / total_channels + 1);
+  std::vector<double> values(frames_held * total_channels);
   // The first row that breaks one frame per line. A row a value short or long shows only
   // at the end of the file, as a truncated last frame or data after it; the row itself
   // is what the user has to find.

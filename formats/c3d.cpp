@@ -202,6 +202,7 @@ class Parser {
         break;
       }
     }
+    parameters_end_ = std::max(declared_end, last_entry_end);
     if (last_entry_end > declared_end)
       notes_.push_back("the parameter section's header says " + std::to_string(blocks) +
                        " blocks, its entries run on to block " +
@@ -358,6 +359,36 @@ class Parser {
       if (v < 0) v += 65536;
       if (v >= 1) data_block = static_cast<size_t>(v);
     }
+    // POINT:DATA_START is the standard's, but a tool that grew the parameter section can
+    // move the data and update only the header's word (or the other way round). Read at
+    // the wrong block, every frame was garbage, with no note. A start inside the
+    // parameters is not the data; of two starts past them, the one where the data holds
+    // the counted frames (and the other's not) is.
+    if (header_data_block_ >= 1 && data_block != header_data_block_) {
+      const size_t word = take.float_storage ? 4 : 2;
+      const size_t frame_size = (used * 4 + header_analog_) * word;
+      const auto start_of = [](size_t block) { return (block - 1) * kBlock; };
+      const auto inside_parameters = [&](size_t block) {
+        return start_of(block) < parameters_end_;
+      };
+      const auto holds_counted = [&](size_t block) {
+        const size_t start = start_of(block);
+        return start <= reader_.size() &&
+               (frame_size == 0 || frames <= 0 ||
+                (reader_.size() - start) / frame_size >= static_cast<size_t>(frames));
+      };
+      std::string why;
+      if (inside_parameters(data_block) && !inside_parameters(header_data_block_))
+        why = "lies inside the parameter section";
+      else if (!holds_counted(data_block) && holds_counted(header_data_block_))
+        why = "leaves too little data for the " + std::to_string(frames) + " frames counted";
+      take.notes.push_back("POINT:DATA_START says block " + std::to_string(data_block) +
+                           ", the header block " + std::to_string(header_data_block_) +
+                           (why.empty()
+                                ? ": POINT:DATA_START is read"
+                                : ": POINT:DATA_START " + why + ", so the header's is read"));
+      if (!why.empty()) data_block = header_data_block_;
+    }
     if (data_block < 1) Fail("header", 16, "data section block number is 0");
     const size_t data_start = (data_block - 1) * kBlock;
     size_t value_size = take.float_storage ? 4 : 2;
@@ -490,6 +521,16 @@ class Parser {
                            ", so the header's count is read");
       frames = header_frames;
     }
+    // The mirror: a crop that rewrote POINT:FRAMES but left the header's longer count was
+    // refused as truncated. POINT:FRAMES is read when the data holds it and not the header's.
+    if (frame_bytes > 0 && !header_capped && frames == header_frames && point_frames >= 0 &&
+        point_frames < header_frames && !holds(header_frames, used) && holds(point_frames, used)) {
+      take.notes.push_back("the header counts " + std::to_string(header_frames) +
+                           " frames, POINT:FRAMES " + std::to_string(point_frames) +
+                           ": the data holds " + std::to_string(point_frames) +
+                           ", so POINT:FRAMES is read");
+      frames = point_frames;
+    }
     // A header capped at 65535 counts at least that many: a smaller POINT:FRAMES (a 16-bit
     // count wrapped, or 0) dropped every frame past it, or all of them. The data's whole
     // frames are read then, less the last block's padding, with a note.
@@ -605,6 +646,7 @@ class Parser {
   ByteReader reader_;
   std::string source_;
   size_t param_start_ = 0;
+  size_t parameters_end_ = 0;  // past the declared blocks and the last entry read
   uint8_t processor_ = kProcessorIntel;
   uint16_t header_points_ = 0, header_analog_ = 0, header_first_ = 1, header_last_ = 0,
            header_data_block_ = 0;

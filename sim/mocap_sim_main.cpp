@@ -14,6 +14,7 @@
 #include <iostream>
 #include <nlohmann/json.hpp>
 #include <random>
+#include <stdexcept>
 
 #include "formats/bvh.hpp"
 #include "formats/c3d.hpp"
@@ -83,7 +84,12 @@ int RunSynth(const SynthOptions& o) {
   const double rate = o.rate_hz > 0 ? o.rate_hz : source.rate_hz();
   std::vector<mocapd::Pose> motion =
       mocapd::ResampleMotion(source.skeleton, source.frames, source.rate_hz(), rate);
-  const auto roles = mocapd::MatchHumanoidRoles(source.skeleton);
+  mocapd::HumanoidRoles roles;
+  try {
+    roles = mocapd::MatchHumanoidRoles(source.skeleton);
+  } catch (const std::invalid_argument& e) {
+    throw std::runtime_error((o.bvh.empty() ? "the built-in humanoid" : o.bvh) + ": " + e.what());
+  }
   std::shared_ptr<const mocapd::MarkerSet> markers;
   if (!o.marker_set.empty()) {
     markers = std::make_shared<const mocapd::MarkerSet>(

@@ -3,6 +3,7 @@
 
 #include <cstdio>
 #include <random>
+#include <stdexcept>
 
 #include "formats/bvh.hpp"
 #include "formats/marker_layout.hpp"
@@ -40,9 +41,14 @@ ReplaySource BvhReplaySource(const std::string& path, double rate_hz, const std:
   ReplaySource s;
   s.rate_hz = rate_hz > 0 ? rate_hz : bvh.rate_hz();
   s.skeleton = std::make_shared<const Skeleton>(bvh.skeleton);
+  HumanoidRoles roles;
+  try {
+    roles = MatchHumanoidRoles(bvh.skeleton);
+  } catch (const std::invalid_argument& e) {
+    throw std::runtime_error(path + ": " + e.what());  // a take from the user, named
+  }
   s.markers = std::make_shared<const MarkerSet>(
-      bvh.skeleton, PlaceMarkers(bvh.skeleton, MatchHumanoidRoles(bvh.skeleton),
-                                 DefaultMarkerLayout(), bvh.end_sites));
+      bvh.skeleton, PlaceMarkers(bvh.skeleton, roles, DefaultMarkerLayout(), bvh.end_sites));
   s.truth = ResampleMotion(bvh.skeleton, bvh.frames, bvh.rate_hz(), s.rate_hz);
   std::mt19937_64 rng(1);
   s.take = SynthesizeMarkers(*s.skeleton, *s.markers, s.truth, s.rate_hz, 0.0, &rng);

@@ -350,6 +350,11 @@ TEST(BvhTest, MalformedFilesGetErrorsNamingTheLine) {
   ExpectError("HIERARCHY\nROOT a\n{\nOFFSET 0 x 0\n}\n", "bad.bvh:4: expected a number");
   std::string truncated = good.substr(0, good.rfind("20 89"));
   ExpectError(truncated, "frame 3 of 3 is truncated");
+  // A frame count far beyond the data is the same truncation, found without reserving
+  // memory for the count (it reserved 19 GB and failed with a bare std::bad_alloc).
+  std::string overcounted = good;
+  overcounted.replace(overcounted.find("Frames: 3"), 9, "Frames: 100000000");
+  ExpectError(overcounted, "bad.bvh:36: frame 4 of 100000000 is truncated");
   // A row a value short or long is named by its frame and line, not only the file's end.
   std::string short_row = good;
   short_row.erase(short_row.find(" 10 80 -170"), 4);

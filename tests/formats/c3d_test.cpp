@@ -516,6 +516,55 @@ TEST(C3dTest, AStalePointFramesLongerThanTheDataGivesWayToTheHeadersWithANote) {
   ReadWithOneNote(bytes, take, "POINT:FRAMES says 2751 frames, the header 20");
 }
 
+// The mirror: a crop that rewrote POINT:FRAMES (and TRIAL) but left the header's longer
+// count was refused as truncated ("file ends inside frame 21 of 2751").
+TEST(C3dTest, AStaleHeaderCountLongerThanTheDataGivesWayToPointFramesWithANote) {
+  const C3dTake take = MakeTake(3, 20);
+  std::vector<uint8_t> bytes = EncodeC3d(take);
+  const int last = take.first_frame + 2750;
+  bytes[8] = static_cast<uint8_t>(last & 0xff);
+  bytes[9] = static_cast<uint8_t>(last >> 8);
+  ReadWithOneNote(bytes, take,
+                  "the header counts 2751 frames, POINT:FRAMES 20: the data holds 20, so "
+                  "POINT:FRAMES is read");
+}
+
+// A tool that grew the parameter section by a block moved the data on and updated the
+// header's data start, not POINT:DATA_START, which then pointed inside the parameters:
+// read there, every frame was garbage and nothing said so. One pointing a block past the
+// data's start was refused as truncated.
+TEST(C3dTest, ADataStartThatCannotBeTheDataGivesWayToTheHeadersWithANote) {
+  const C3dTake take = MakeTake(3, 20);
+  const std::vector<uint8_t> encoded = EncodeC3d(take);
+  const size_t param_start = (static_cast<size_t>(encoded[0]) - 1) * 512;
+  const size_t data_block =
+      static_cast<size_t>(encoded[16]) | (static_cast<size_t>(encoded[17]) << 8);
+  const auto block = [](size_t b) { return std::to_string(b); };
+  {
+    std::vector<uint8_t> grown = encoded;
+    grown.insert(grown.begin() + static_cast<std::ptrdiff_t>((data_block - 1) * 512), 512, 0);
+    grown[param_start + 2] = static_cast<uint8_t>(grown[param_start + 2] + 1);
+    grown[16] = static_cast<uint8_t>((data_block + 1) & 0xff);
+    grown[17] = static_cast<uint8_t>((data_block + 1) >> 8);
+    ReadWithOneNote(grown, take,
+                    "POINT:DATA_START says block " + block(data_block) + ", the header block " +
+                        block(data_block + 1) +
+                        ": POINT:DATA_START lies inside the parameter section, so the header's "
+                        "is read");
+  }
+  {
+    std::vector<uint8_t> late = encoded;
+    const size_t value = ValueOffset(late, "DATA_START", 0);
+    late[value] = static_cast<uint8_t>((data_block + 1) & 0xff);
+    late[value + 1] = static_cast<uint8_t>((data_block + 1) >> 8);
+    ReadWithOneNote(late, take,
+                    "POINT:DATA_START says block " + block(data_block + 1) + ", the header block " +
+                        block(data_block) +
+                        ": POINT:DATA_START leaves too little data for the 20 frames counted, "
+                        "so the header's is read");
+  }
+}
+
 // Two quirks in one file: POINT:FRAMES left at a longer take's count and POINT:USED
 // rewritten. The point counts were weighed against the stale frame count, which no layout
 // fits, so the header's points were never tried and the file was refused as truncated.

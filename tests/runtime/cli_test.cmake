@@ -109,6 +109,20 @@ execute_process(COMMAND ${MOCAP_SIM} info ${WORK_DIR}/broken.c3d RESULT_VARIABLE
 if(NOT rc EQUAL 1 OR NOT err MATCHES "header section")
   message(FATAL_ERROR "broken C3D: rc=${rc} err=${err}")
 endif()
+# A BVH that is no humanoid (an arm) is named by synth and replay (they said only "not a
+# recognisable humanoid").
+file(WRITE ${WORK_DIR}/arm.bvh "HIERARCHY\nROOT Base\n{\n  OFFSET 0 0 0\n  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n  JOINT Link1\n  {\n    OFFSET 0 30 0\n    CHANNELS 3 Zrotation Xrotation Yrotation\n    End Site\n    {\n      OFFSET 0 30 0\n    }\n  }\n}\nMOTION\nFrames: 2\nFrame Time: 0.0333333\n0 0 0 0 0 0 0 0 0\n0 0 0 0 0 0 10 0 0\n")
+foreach(command synth replay)
+  if(command STREQUAL synth)
+    set(args synth --bvh ${WORK_DIR}/arm.bvh --out ${WORK_DIR}/arm.c3d)
+  else()
+    set(args replay ${WORK_DIR}/arm.bvh --connect-timeout 1 --to tcp://127.0.0.1:1)
+  endif()
+  execute_process(COMMAND ${MOCAP_SIM} ${args} RESULT_VARIABLE rc ERROR_VARIABLE err)
+  if(NOT rc EQUAL 1 OR NOT err MATCHES "arm.bvh: not a recognisable humanoid")
+    message(FATAL_ERROR "${command} of a BVH that is no humanoid: rc=${rc} err=${err}")
+  endif()
+endforeach()
 # An output naming an input is refused before anything is written: the input survives.
 file(SHA256 ${WORK_DIR}/walk.bvh walk_before)
 execute_process(COMMAND ${MOCAP_SIM} synth --bvh ${WORK_DIR}/walk.bvh --out ${WORK_DIR}/./walk.bvh
