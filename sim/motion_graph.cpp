@@ -191,8 +191,14 @@ MotionLibrary MakeMotionLibrary(const std::vector<BvhTake>& bvh,
                                 const std::vector<uint64_t>& file_hashes, double rate_hz) {
   if (bvh.empty() || bvh.size() != paths.size() || bvh.size() != file_hashes.size())
     throw std::invalid_argument("motion graph: one name and hash per take");
+  // A single frame shows no motion, and its joints are typed by their channels alone (a
+  // rig's static top joint with position channels reads as the one that translates):
+  // merged below, one T-pose file among walks moved the graph's root onto a joint that
+  // never moves, and every transition was lost.
   for (size_t t = 0; t < bvh.size(); ++t)
-    if (bvh[t].frames.empty()) throw std::runtime_error(paths[t] + ": the take has no frames");
+    if (bvh[t].frames.size() < 2)
+      throw std::runtime_error(paths[t] + ": the take has " + std::to_string(bvh[t].frames.size()) +
+                               " frame(s): a graph's takes need motion, two frames or more");
   // One skeleton for all: a joint that translates in any take translates in all (a take
   // standing in place reads its hips as a bone of fixed length).
   const Skeleton& first = bvh.front().skeleton;

@@ -124,6 +124,22 @@ TEST_F(MotionGraphTest, TakesOfAnotherSkeletonAreRefusedNamingTheFile) {
   }
 }
 
+// A one-frame take (a T-pose file among the walks) shows no motion and is typed by its
+// channels alone; merged in, it could move the graph's root onto a joint that never moves
+// and every transition was lost, under a warning to check the units. Refused, named.
+TEST_F(MotionGraphTest, ATakeOfOneFrameIsRefusedNamingTheFile) {
+  const std::string still = Folder() + "/tpose.bvh";
+  const Skeleton sk = MakeHumanoidSkeleton();
+  WriteBvh(still, MakeBvhTake(sk, {RestPose(sk)}, 1.0 / 30.0));
+  try {
+    LoadMotionLibrary({Paths()[0], still}, 0.0);
+    FAIL() << "a take of one frame was accepted";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("tpose.bvh: the take has 1 frame(s)"), std::string::npos)
+        << e.what();
+  }
+}
+
 TEST_F(MotionGraphTest, CorruptGraphFilesNameTheFileAndField) {
   const std::string good = Folder() + "/good.json";
   WriteMotionGraph(good, graph());
