@@ -368,8 +368,9 @@ class Parser {
       const size_t word = take.float_storage ? 4 : 2;
       const size_t frame_size = (used * 4 + header_analog_) * word;
       const auto start_of = [](size_t block) { return (block - 1) * kBlock; };
-      const auto inside_parameters = [&](size_t block) {
-        return start_of(block) < parameters_end_;
+      const auto inside_parameters = [&](size_t block) {  // or the header
+        return start_of(block) < kBlock ||
+               (start_of(block) >= param_start_ && start_of(block) < parameters_end_);
       };
       const auto holds_counted = [&](size_t block) {
         const size_t start = start_of(block);
