@@ -19,6 +19,8 @@ echo "== AddressSanitizer + UndefinedBehaviorSanitizer build"
 # of the run) took a third longer at -O1 for about the same build time (7.5 vs 8.7 min).
 cmake -S . -B build/asan -G Ninja -DCMAKE_CXX_COMPILER=clang++ -DCMAKE_BUILD_TYPE=Debug \
   -DCMAKE_CXX_FLAGS_DEBUG="-O2 -g1" -DMOCAPD_SANITIZE=ON -DMOCAPD_BUILD_BENCHMARKS=OFF
+# Only what the unit tests run (the daemon's and simulator's executables serve the process
+# tests, which this build does not run).
 cmake --build build/asan -j "$jobs" --target unit_tests
 ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
   ctest --test-dir build/asan --output-on-failure -j "$jobs" -L unit
