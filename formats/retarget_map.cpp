@@ -331,4 +331,28 @@ RetargetMap MakeRetargetMap(const Skeleton& source, std::span<const BvhEndSite> 
   return map;
 }
 
+Skeleton CharacterSkeleton(const BvhTake& character) {
+  const Skeleton& sk = character.skeleton;
+  if (character.frames.size() >= 2) return sk;  // typed by its motion
+  int pelvis = -1;
+  try {
+    pelvis = MatchHumanoidRoles(sk).joint_of_role.at("pelvis");
+  } catch (const std::invalid_argument&) {
+    return sk;  // MakeRetargetMap says what is missing
+  }
+  if (sk.joint(pelvis).type == JointType::kFree) return sk;
+  bool translates_above = false;
+  for (int a = sk.joint(pelvis).parent.value; a >= 0; a = sk.joint(a).parent.value)
+    translates_above = translates_above || sk.joint(a).type == JointType::kFree;
+  const auto& channels = character.channels[static_cast<size_t>(pelvis)];
+  const auto positions = std::count_if(channels.begin(), channels.end(), [](BvhChannel c) {
+    return c == BvhChannel::kXposition || c == BvhChannel::kYposition ||
+           c == BvhChannel::kZposition;
+  });
+  if (!translates_above || positions != 3 || channels.size() != 6) return sk;
+  std::vector<Joint> joints(sk.joints().begin(), sk.joints().end());
+  joints[static_cast<size_t>(pelvis)].type = JointType::kFree;
+  return Skeleton(std::move(joints));
+}
+
 }  // namespace mocapd

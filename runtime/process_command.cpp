@@ -197,7 +197,7 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
   std::optional<RetargetMap> joints;
   if (!options.retarget_bvh.empty()) {
     character = ReadBvh(options.retarget_bvh);
-    target = std::make_shared<const Skeleton>(character->skeleton);
+    target = std::make_shared<const Skeleton>(CharacterSkeleton(*character));
     try {
       joints =
           MakeRetargetMap(*subject.skeleton, {}, *target, character->end_sites, options.joint_map);
@@ -494,6 +494,7 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
     }
     summary.retarget_p50_us = Quantile(retarget_us, 0.5);
     summary.retarget_p99_us = Quantile(retarget_us, 0.99);
+    character->skeleton = *target;  // the joints that carry the motion, as solved
     character->frames = std::move(motion);
     character->frame_time_s = 1.0 / take.rate_hz;
     const std::string path = CharacterOutputPath(options);

@@ -276,6 +276,44 @@ TEST_F(RetargetTest, ACharacterFromAOneFrameFileFollowsTheRoot) {
   EXPECT_LT(worst_root, 0.01);
 }
 
+// A one-frame character file with a floor-level root over a pelvis that has position
+// channels (Bandai's joint_Root over its Hips): the reader types the top joint free, and
+// the written character travelled on joint_Root, its Hips held metres from it. As a file
+// character it travels on its pelvis, and the joint above stays at rest; a file with
+// motion keeps the types its motion gave.
+TEST_F(RetargetTest, AOneFrameCharacterUnderAFloorRootTravelsOnItsPelvis) {
+  std::vector<Joint> joints = {
+      Joint{.name = "joint_Root", .parent = {}, .offset = Vec3::Zero(), .type = JointType::kFree}};
+  for (const Joint& j : source_->joints()) {
+    Joint joint = j;
+    joint.parent = JointIndex(j.parent.is_valid() ? j.parent.value + 1 : 0);
+    joints.push_back(joint);
+  }
+  const Skeleton rig(std::move(joints));  // both joints free: written with 6 channels each
+  const BvhTake file =
+      ParseBvh(FormatBvh(MakeBvhTake(rig, {RestPose(rig)}, 1.0 / 30.0, "cm")), "tpose.bvh");
+  ASSERT_EQ(file.skeleton.joint(0).type, JointType::kFree);
+  ASSERT_NE(file.skeleton.joint(1).type, JointType::kFree);
+  const auto character = std::make_shared<const Skeleton>(CharacterSkeleton(file));
+  EXPECT_EQ(character->joint(1).type, JointType::kFree);
+  Retargeter r(source_, character, MakeRetargetMap(*source_, {}, *character, file.end_sites),
+               NoContacts());
+  const Pose rest = RestPose(*character);
+  double floor_moved = 0.0, pelvis_off = 0.0;
+  KinematicsWorkspace ws(*character);
+  for (size_t f = 5; f < motion_.size(); ++f) {
+    const Pose& out = r.Retarget(motion_[f]);
+    ForwardKinematics(*character, out, &ws);
+    floor_moved = std::max(floor_moved, (out.translation[0] - rest.translation[0]).norm());
+    pelvis_off = std::max(pelvis_off, (ws.p_WJ[1] - motion_[f].translation[0]).norm());
+  }
+  EXPECT_LT(floor_moved, 1e-9);
+  EXPECT_LT(pelvis_off, 0.01);
+  const BvhTake moving = ParseBvh(
+      FormatBvh(MakeBvhTake(rig, {RestPose(rig), RestPose(rig)}, 1.0 / 30.0, "cm")), "two.bvh");
+  EXPECT_EQ(CharacterSkeleton(moving).joint(1).type, moving.skeleton.joint(1).type);
+}
+
 // The scale is the legs' length along their bones, wherever the file stood the pelvis:
 // under a floor-level root joint (Bandai's joint_Root) its height was taken as the leg
 // length, so a one-frame character file (the pelvis where the take starts) and the same

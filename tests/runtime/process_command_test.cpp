@@ -502,5 +502,41 @@ TEST(ProcessCommandTest, ATruthWithOtherJointNamesIsMatchedByRoleOnTheLimbs) {
   EXPECT_NE(out.str().find("12 joints matched by humanoid role"), std::string::npos) << out.str();
 }
 
+// A character file of one frame whose floor-level root (Bandai's joint_Root) sits over a
+// pelvis with position channels of its own: the written character travelled on joint_Root,
+// its Hips held metres from it (global positions right, the rig's own takes moving the
+// Hips). Now the Hips travel and the floor root stays where the file has it.
+TEST(ProcessCommandTest, AOneFrameCharacterUnderAFloorRootIsWrittenTravellingOnItsPelvis) {
+  const auto f = testing::MakeHumanoidFixture("walk", 3.0, 120.0);
+  const std::string dir = testing::TempDir("process_floor_root");
+  WriteFixtureSubject(f, dir + "/actor.toml");
+  WriteC3d(dir + "/take.c3d", f.take);
+  std::vector<Joint> joints = {
+      Joint{.name = "joint_Root", .parent = {}, .offset = Vec3::Zero(), .type = JointType::kFree}};
+  for (const Joint& j : f.skeleton->joints()) {
+    Joint joint = j;
+    joint.parent = JointIndex(j.parent.is_valid() ? j.parent.value + 1 : 0);
+    joints.push_back(joint);
+  }
+  const Skeleton rig(std::move(joints));
+  WriteBvh(dir + "/tpose.bvh", MakeBvhTake(rig, {RestPose(rig)}, 1.0 / 30.0, "cm"));
+  ProcessCommandOptions options = OptionsIn(dir, "solved.bvh");
+  options.retarget_bvh = dir + "/tpose.bvh";
+  std::ostringstream out;
+  RunProcessCommand(options, out);
+  const BvhTake written = ReadBvh(CharacterOutputPath(options));
+  ASSERT_EQ(written.num_frames(), f.take.num_frames);
+  EXPECT_NE(written.skeleton.joint(0).type, JointType::kFree);  // read back from its motion
+  EXPECT_EQ(written.skeleton.joint(1).type, JointType::kFree);
+  KinematicsWorkspace ws(written.skeleton);
+  double pelvis_off = 0.0;
+  for (int fr = 5; fr < written.num_frames(); ++fr) {
+    ForwardKinematics(written.skeleton, written.frames[static_cast<size_t>(fr)], &ws);
+    pelvis_off = std::max(pelvis_off,
+                          (ws.p_WJ[1] - f.motion[static_cast<size_t>(fr)].translation[0]).norm());
+  }
+  EXPECT_LT(pelvis_off, 0.02);
+}
+
 }  // namespace
 }  // namespace mocapd
