@@ -47,6 +47,21 @@ int64_t SteadyNs() {
 
 int64_t Seconds(double s) { return static_cast<int64_t>(s * 1e9); }
 
+// ZeroMQ binds an interface or an address, not a host name, and an IPv6 address only with
+// the socket's IPv6 option: "tcp://localhost:N" and "tcp://[::1]:N", which the config
+// takes as loopback, failed with "No such device".
+void BindTo(zmq::socket_t& socket, const std::string& endpoint) {
+  const std::string localhost = "tcp://localhost:";
+  if (endpoint.find('[') != std::string::npos) socket.set(zmq::sockopt::ipv6, 1);
+  socket.bind(endpoint.rfind(localhost, 0) == 0
+                  ? "tcp://127.0.0.1:" + endpoint.substr(localhost.size())
+                  : endpoint);
+}
+void ConnectTo(zmq::socket_t& socket, const std::string& endpoint) {
+  if (endpoint.find('[') != std::string::npos) socket.set(zmq::sockopt::ipv6, 1);
+  socket.connect(endpoint);
+}
+
 }  // namespace
 
 uint64_t DaemonStats::published_total() const {
@@ -143,9 +158,9 @@ struct Daemon::DataPlane final : OutputSink {
             input.set(zmq::sockopt::subscribe, Topic("markers", r->name()));
           }
         }
-        input.connect(config.input_endpoint);
+        ConnectTo(input, config.input_endpoint);
       } else {
-        input.bind(config.input_endpoint);
+        BindTo(input, config.input_endpoint);
       }
     } catch (const zmq::error_t& e) {
       throw std::runtime_error("input endpoint '" + config.input_endpoint + "': " + e.what());
@@ -160,7 +175,7 @@ struct Daemon::DataPlane final : OutputSink {
         curve::MakeServer(output, config.curve_keys, CurveSocketName(CurveSocket::kOutput));
         if (authenticator) authenticator->Monitor(output.handle(), CurveSocket::kOutput, false);
       }
-      output.bind(config.output_endpoint);
+      BindTo(output, config.output_endpoint);
     } catch (const zmq::error_t& e) {
       throw std::runtime_error("output endpoint '" + config.output_endpoint + "': " + e.what());
     }
@@ -486,7 +501,7 @@ struct Daemon::OutputProxy {
       if (authenticator) authenticator->Monitor(to_consumers.handle(), CurveSocket::kOutput, false);
     }
     try {
-      to_consumers.bind(config.output_endpoint);
+      BindTo(to_consumers, config.output_endpoint);
     } catch (const zmq::error_t& e) {
       throw std::runtime_error("output endpoint '" + config.output_endpoint + "': " + e.what());
     }

@@ -12,6 +12,7 @@
 #include <set>
 #include <sstream>
 #include <stdexcept>
+#include <string_view>
 #include <type_traits>
 #include <variant>
 
@@ -53,7 +54,8 @@ std::string Endpoint(TomlTable& t, const std::string& key, const std::string& fa
                       ? e.size() > 9
                       : SplitTcp(e, &host, &port) && !host.empty() && !port.empty();
   if (!ok)
-    t.Fail(nullptr, key, "expected tcp://HOST:PORT, ipc://PATH or inproc://NAME, got '" + e + "'");
+    t.Fail(t.Find(key), key,
+           "expected tcp://HOST:PORT, ipc://PATH or inproc://NAME, got '" + e + "'");
   // ZeroMQ wraps a port past 65535 (99999 listened on 34463) and binds an unlogged one for
   // 0: the port is a number from 1 to 65535.
   if (e.rfind("tcp://", 0) == 0 &&
@@ -61,7 +63,7 @@ std::string Endpoint(TomlTable& t, const std::string& key, const std::string& fa
        !std::all_of(port.begin(), port.end(),
                     [](unsigned char ch) { return std::isdigit(ch) != 0; }) ||
        std::stoi(port) < 1 || std::stoi(port) > 65535))
-    t.Fail(nullptr, key, "port '" + port + "' in '" + e + "' is not a number from 1 to 65535");
+    t.Fail(t.Find(key), key, "port '" + port + "' in '" + e + "' is not a number from 1 to 65535");
   return e;
 }
 
@@ -377,6 +379,29 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
 
   if (!top.Has("subject"))
     top.Fail(nullptr, "subject", "no [[subject]] tables: name at least one subject to solve");
+  // The files the config names, so that no live calibration writes over one: a
+  // calibration_out naming the config itself replaced it with a subject file (the next
+  // start failed), and one naming another subject's model or output overwrote it.
+  struct NamedFile {
+    std::filesystem::path path;
+    std::string what;
+    bool written;  // a live calibration's output
+  };
+  std::vector<NamedFile> named_files;
+  const auto same_file = [](const std::string& path) {
+    std::error_code ec;
+    const std::filesystem::path p = std::filesystem::weakly_canonical(path, ec);
+    return ec ? std::filesystem::path(path).lexically_normal() : p;
+  };
+  if (!source_name.empty())
+    named_files.push_back({same_file(source_name), "the config file", false});
+  // What else the config names at that path (only outputs, if written_only).
+  const auto named_at = [&](const std::string& path, bool written_only) -> std::string {
+    const std::filesystem::path p = same_file(path);
+    for (const NamedFile& f : named_files)
+      if (f.path == p && (f.written || !written_only)) return f.what;
+    return {};
+  };
   for (TomlTable& t : top.Tables("subject", /*required=*/true)) {
     const toml::table* table = &t.table();
     SubjectConfig s;
@@ -394,6 +419,12 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
       t.Fail(table->get("name"), "name", "subject '" + s.name + "' is listed twice");
     s.live.enabled = t.Choice("calibrate", "no", {"no", "live"}) == "live";
     s.model_path = resolve(t.String("model", ""));
+    if (!s.model_path.empty()) {
+      if (const std::string other = named_at(s.model_path, true); !other.empty())
+        t.Fail(table->get("model"), "model",
+               "'" + s.model_path + "' is " + other + ": a live calibration writes over it");
+      named_files.push_back({same_file(s.model_path), "subject '" + s.name + "''s model", false});
+    }
     if (!s.live.enabled && s.model_path.empty())
       t.Fail(nullptr, t.Has("marker_set") ? "marker_set" : "model",
              t.Has("marker_set")
@@ -444,6 +475,13 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
     if (!s.character_path.empty() && std::filesystem::path(s.character_path).is_relative())
       s.character_path =
           (std::filesystem::path(base_dir) / s.character_path).lexically_normal().string();
+    if (!s.character_path.empty()) {
+      if (const std::string other = named_at(s.character_path, true); !other.empty())
+        t.Fail(table->get("character"), "character",
+               "'" + s.character_path + "' is " + other + ": a live calibration writes over it");
+      named_files.push_back(
+          {same_file(s.character_path), "subject '" + s.name + "''s character", false});
+    }
     const std::map<std::string, std::string> joint_map = t.StringMap("character_joint_map");
     t.RejectUnknown();
     if (s.live.enabled) {
@@ -468,6 +506,12 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
                "'" + out_dir.string() +
                    "' is not a directory: the calibrated subject could not be "
                    "written there");
+      if (const std::string other = named_at(s.live.out_path, false); !other.empty())
+        t.Fail(table->get("calibration_out"), "calibration_out",
+               "'" + s.live.out_path + "' is " + other +
+                   ": the calibrated subject would be written over it");
+      named_files.push_back(
+          {same_file(s.live.out_path), "subject '" + s.name + "''s calibration_out", true});
       try {
         s.model = TemplateSubject(s.live.set, s.live.labels, 1.75, s.name);
       } catch (const std::exception& e) {
@@ -504,7 +548,10 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
         s.character_end_sites = character.end_sites;
         s.character_joint_map = joint_map;
       } catch (const std::exception& e) {
-        t.Fail(table->get("character"), "character", e.what());
+        // The map's own mistakes (an unknown role or joint) are the joint map's field.
+        const bool map_error = std::string_view(e.what()).starts_with("retarget joint map");
+        t.Fail(table->get(map_error ? "character_joint_map" : "character"),
+               map_error ? "character_joint_map" : "character", e.what());
       }
       if (const std::string problem = WireProblem(*s.character, nullptr); !problem.empty())
         t.Fail(table->get("character"), "character", problem);

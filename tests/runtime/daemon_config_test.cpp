@@ -80,7 +80,7 @@ TEST(DaemonConfigTest, ErrorsNameFileLineAndField) {
   EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[pipeline.detectors]\nspike_mm = 0.0\n"),
             "test.toml:6: field 'pipeline.detectors.spike_mm': must be in [1, 100000], got 0");
   EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[output]\nendpoint = \"udp://x\"\n"),
-            "test.toml:5: field 'output.endpoint': expected tcp://HOST:PORT, ipc://PATH or "
+            "test.toml:6: field 'output.endpoint': expected tcp://HOST:PORT, ipc://PATH or "
             "inproc://NAME, got 'udp://x'");
   EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[output]\nprotocol_version = 3\n"),
             "test.toml:6: field 'output.protocol_version': must be in [1, 2], got 3");
@@ -210,6 +210,49 @@ TEST(DaemonConfigTest, AnEndpointsPortIsANumberFrom1To65535) {
         << error;
   }
   EXPECT_EQ(ErrorOf(std::string(kMinimal) + "[input]\nendpoint = \"tcp://127.0.0.1:65535\"\n"), "");
+  // Named at the endpoint's own line, not its table's (it said line 5 for line 7).
+  const std::string far = ErrorOf(std::string(kMinimal) +
+                                  "[output]\ncleaned_markers = true\n\nendpoint = \"udp://x:1\"\n");
+  EXPECT_NE(far.find("test.toml:8: field 'output.endpoint': expected tcp://"), std::string::npos)
+      << far;
+}
+
+// A live calibration's output never writes over a file the config names: the config
+// itself (it was replaced by a subject file, and the next start failed), another subject's
+// model or character, or another live subject's output.
+TEST(DaemonConfigTest, ALiveCalibrationNeverWritesOverAFileTheConfigNames) {
+  const std::string dir = testing::TempDir("config_calibration_out");
+  const std::string config = dir + "/live.toml";
+  std::filesystem::copy_file(std::string(MOCAPD_CONFIG_DIR) + "/demo_subject.toml",
+                             dir + "/demo_subject.toml");
+  const auto live = [](const std::string& name, const std::string& out) {
+    return "[[subject]]\nname = \"" + name +
+           "\"\ncalibrate = \"live\"\nmarker_set = \"cmu-41\"\ncalibration_out = \"" + out + "\"\n";
+  };
+  const auto error_of = [&](const std::string& text) {
+    try {
+      ParseDaemonConfig("format_version = 1\n" + text, config, dir);
+    } catch (const std::exception& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  const std::string over_config = error_of(live("a", "live.toml"));
+  EXPECT_NE(
+      over_config.find("field 'subject[0].calibration_out': '" + config + "' is the config file"),
+      std::string::npos)
+      << over_config;
+  const std::string model = "[[subject]]\nname = \"m\"\nmodel = \"demo_subject.toml\"\n";
+  EXPECT_NE(error_of(model + live("a", "demo_subject.toml")).find("is subject 'm''s model"),
+            std::string::npos);
+  EXPECT_NE(error_of(live("a", "demo_subject.toml") + model)
+                .find("field 'subject[1].model': '" + dir +
+                      "/demo_subject.toml' is subject 'a''s calibration_out"),
+            std::string::npos);
+  EXPECT_NE(error_of(live("a", "x.toml") + live("b", "./x.toml"))
+                .find("is subject 'a''s calibration_out"),
+            std::string::npos);
+  EXPECT_EQ(error_of(live("a", "a.toml") + live("b", "b.toml") + model), "");
 }
 
 // Keys for a CURVE config in dir: the daemon's pair, a capture publisher's public key and
@@ -324,6 +367,9 @@ TEST(DaemonConfigTest, ASubjectCanDriveACharacterFromABvh) {
   const std::string bad_map = ErrorOf(std::string(kMinimal) + "character = \"" + dir +
                                       "/ogre.bvh\"\ncharacter_joint_map = { hand_l = \"Paw\" }\n");
   EXPECT_NE(bad_map.find("the character has no joint 'Paw'"), std::string::npos) << bad_map;
+  // The joint map's own mistake is named at its own field and line (it was the character's).
+  EXPECT_NE(bad_map.find("test.toml:6: field 'subject[0].character_joint_map':"), std::string::npos)
+      << bad_map;
   EXPECT_NE(ErrorOf(std::string(kMinimal) + "character_joint_map = { head = \"Head\" }\n")
                 .find("given without a character"),
             std::string::npos);

@@ -1088,6 +1088,32 @@ TEST(DaemonTest, CurveAdmitsOnlyAuthorizedKeysAndCountsEveryoneElse) {
 
 // A negative timeout is a caller's mistake, refused before any socket opens (the CLI
 // range-checks its flags; a library caller gets this).
+// The config takes tcp://localhost and tcp://[::1] as loopback, but ZeroMQ binds neither
+// as written: the daemon failed to start with "No such device". Both bind now.
+TEST(DaemonTest, LocalhostAndIpv6LoopbackEndpointsBind) {
+  zmq::context_t context;
+  {
+    // A machine (or container) without IPv6 loopback cannot bind [::1] at all.
+    zmq::socket_t probe(context, zmq::socket_type::pull);
+    probe.set(zmq::sockopt::ipv6, 1);
+    try {
+      probe.bind("tcp://[::1]:27393");
+    } catch (const zmq::error_t&) {
+      GTEST_SKIP() << "no IPv6 loopback here";
+    }
+  }
+  DaemonConfig config = TestConfig("tcp://[::1]:27391", "tcp://localhost:27392");
+  RunningDaemon daemon(context, config);
+  Subscriber sub(context, "tcp://127.0.0.1:27392");
+  EXPECT_TRUE(sub.WaitConnected());
+  zmq::socket_t push(context, zmq::socket_type::push);
+  push.set(zmq::sockopt::ipv6, 1);
+  push.set(zmq::sockopt::linger, 0);
+  push.connect("tcp://[::1]:27391");
+  push.send(zmq::str_buffer("not a message"), zmq::send_flags::none);
+  EXPECT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) { return s.messages_in == 1; }));
+}
+
 TEST(DaemonTest, AReplayRefusesANegativeTimeout) {
   const ReplaySource source = HumanoidReplaySource("walk", 0.5, 120.0, 0.0, 1);
   for (const bool connect : {true, false}) {
