@@ -198,6 +198,10 @@ struct Daemon::DataPlane final : OutputSink {
   }
 
   void Drop(DropReason reason) { ++stats.unattributed_dropped[static_cast<size_t>(reason)]; }
+  void DropUnknown(const std::string& subject) {
+    stats.last_unknown_subject.assign(subject);  // reserved for the longest name: no allocation
+    Drop(DropReason::kUnknownSubject);
+  }
 
   // One message from the input socket, all of its parts already received into parts.
   void Handle(size_t part_count, const zmq::message_t& message, int64_t receive_ns) {
@@ -214,7 +218,7 @@ struct Daemon::DataPlane final : OutputSink {
       if (protocol::DecodeEndOfStream(bytes, &end_of_stream) != protocol::DecodeStatus::kOk)
         return Drop(DropReason::kMalformed);
       SubjectRunner* runner = FindRunner(end_of_stream.subject);
-      if (runner == nullptr) return Drop(DropReason::kUnknownSubject);
+      if (runner == nullptr) return DropUnknown(end_of_stream.subject);
       ++stats.control_messages;
       return runner->EndOfStream(*this);
     }
@@ -234,7 +238,7 @@ struct Daemon::DataPlane final : OutputSink {
       return Drop(reason);
     }
     SubjectRunner* runner = FindRunner(frame.subject);
-    if (runner == nullptr) return Drop(DropReason::kUnknownSubject);
+    if (runner == nullptr) return DropUnknown(frame.subject);
     runner->Accept(frame, receive_ns, *this);
   }
 
@@ -369,6 +373,7 @@ struct Daemon::DataPlane final : OutputSink {
     int64_t next_tick = start_ns;
     int64_t next_snapshot = start_ns;
     zmq::pollitem_t items[] = {{input.handle(), 0, ZMQ_POLLIN, 0}};
+    stats.last_unknown_subject.reserve(protocol::kMaxSubjectName + 1);
     stats.running = true;
     while (!stop.load(std::memory_order_acquire)) {
       if (has_pending_reload.load(std::memory_order_acquire)) ApplyPendingReload();
@@ -835,6 +840,7 @@ DaemonStats Daemon::Stats() const {
     stats.control_messages += w.control_messages;
     for (size_t r = 0; r < stats.unattributed_dropped.size(); ++r)
       stats.unattributed_dropped[r] += w.unattributed_dropped[r];
+    if (!w.last_unknown_subject.empty()) stats.last_unknown_subject = w.last_unknown_subject;
     stats.retired_published += w.retired_published;
     stats.retired_dropped += w.retired_dropped;
     stats.output_send_failures += w.output_send_failures;
@@ -1142,6 +1148,8 @@ void Daemon::Run(bool handle_signals) {
               if (count > seen) who += fmt::format(", subject '{}' {}", s.name, count - seen);
               seen = count;
             }
+            if (reason == static_cast<int>(DropReason::kUnknownSubject))
+              who += fmt::format(", the last for '{}'", now.last_unknown_subject);
             spdlog::warn("dropped {} input message(s): {} (total {}){}",
                          n - logged[static_cast<size_t>(reason)],
                          to_string(static_cast<DropReason>(reason)), n, who);

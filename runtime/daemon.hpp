@@ -71,6 +71,9 @@ struct DaemonStats {
   uint64_t control_messages = 0;  ///< Accepted end-of-stream messages (not frames).
   /// Drops not attributable to a configured subject (malformed, unknown subject, ...).
   std::array<uint64_t, kDropReasonCount> unattributed_dropped{};
+  /// The name the last unknown_subject drop carried: a sender's typo ("Actor1" for
+  /// "actor1") was counted but named nowhere.
+  std::string last_unknown_subject;
   /// Frames published by subjects a reload removed (so the totals still add up).
   uint64_t retired_published = 0;
   uint64_t retired_dropped = 0;

@@ -386,16 +386,20 @@ std::string FormatHealthJson(const DaemonStats& stats, bool data_plane_alive) {
                        : stats.catching_up ? "catching up"
                        : !problems.empty() ? "degraded"
                                            : "ok";
-  const nlohmann::json health = {{"status", status},
-                                 {"uptime_s", stats.uptime_s},
-                                 {"messages_received", stats.messages_in},
-                                 {"frames_published", stats.published_total()},
-                                 {"frames_dropped", stats.dropped_total()},
-                                 {"frames_pending", stats.pending_total()},
-                                 {"accounted", stats.Balanced()},
-                                 {"catching_up", stats.catching_up},
-                                 {"problems", problems},
-                                 {"subjects", subjects}};
+  const nlohmann::json health = {
+      {"status", status},
+      {"uptime_s", stats.uptime_s},
+      {"messages_received", stats.messages_in},
+      {"frames_published", stats.published_total()},
+      {"frames_dropped", stats.dropped_total()},
+      {"frames_pending", stats.pending_total()},
+      {"accounted", stats.Balanced()},
+      {"catching_up", stats.catching_up},
+      {"unknown_subject_dropped",
+       stats.unattributed_dropped[static_cast<size_t>(DropReason::kUnknownSubject)]},
+      {"last_unknown_subject", stats.last_unknown_subject},
+      {"problems", problems},
+      {"subjects", subjects}};
   return health.dump(2) + "\n";
 }
 

@@ -956,6 +956,34 @@ TEST(DaemonTest, HealthNamesASubjectWhoseFramesAreAllDropped) {
       << log.str();
 }
 
+// A sender that spells its subject another way ("Actor1" for "actor1"): every frame is
+// dropped as unknown_subject, which the log counted and /health did not mention, and
+// neither said which name came. Both name it now.
+TEST(DaemonTest, TheLogAndHealthNameTheUnknownSubjectThatCame) {
+  const testing::HumanoidFixture f = testing::MakeHumanoidFixture("walk", 1.0, 120.0);
+  std::ostringstream log;
+  spdlog::default_logger()->sinks().push_back(
+      std::make_shared<spdlog::sinks::ostream_sink_mt>(log));
+  {
+    zmq::context_t context;
+    RunningDaemon daemon(context, TestConfig("inproc://typo-in", "inproc://typo-out", 4));
+    Sender sender(context, "inproc://typo-in", f.take, MakeHumanoidSubject("actor1"),
+                  zmq::socket_type::push);
+    sender.message_.subject = "Actor1";
+    for (int t = 0; t < 20; ++t) sender.Send(t, static_cast<uint64_t>(t));
+    ASSERT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) {
+      return s.unattributed_dropped[static_cast<size_t>(DropReason::kUnknownSubject)] == 20;
+    }));
+    std::this_thread::sleep_for(300ms);  // snapshots and control-plane ticks to log it
+    const auto health = nlohmann::json::parse(HttpGet(daemon->http_port(), "/health").second);
+    EXPECT_EQ(health["unknown_subject_dropped"], 20);
+    EXPECT_EQ(health["last_unknown_subject"], "Actor1");
+  }
+  spdlog::default_logger()->sinks().pop_back();
+  EXPECT_NE(log.str().find("unknown_subject (total 20), the last for 'Actor1'"), std::string::npos)
+      << log.str();
+}
+
 TEST(DaemonTest, HttpWithATokenAnswersOnlyRequestsThatCarryIt) {
   DaemonConfig config = TestConfig("inproc://token-in", "inproc://token-out", 4);
   config.http_token = "s3cret-token-0123456789";
