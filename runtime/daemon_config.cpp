@@ -413,7 +413,7 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
         std::any_of(s.name.begin(), s.name.end(),
                     [](unsigned char ch) { return ch < 0x20 || ch == 0x7f; }))
       t.Fail(table->get("name"), "name",
-             "must be 1..63 characters without '/', spaces or control characters");
+             "must be 1..63 bytes (UTF-8) without '/', spaces or control characters");
     if (c.FindSubject(s.name) != nullptr ||
         std::count(c.other_shards_subjects.begin(), c.other_shards_subjects.end(), s.name) > 0)
       t.Fail(table->get("name"), "name", "subject '" + s.name + "' is listed twice");

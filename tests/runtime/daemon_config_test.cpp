@@ -154,7 +154,7 @@ TEST(DaemonConfigTest, AnHttpTokenFileMustHoldOneLongToken) {
 TEST(DaemonConfigTest, SubjectsAreValidatedOneByOne) {
   EXPECT_EQ(
       ErrorOf("format_version = 1\n[[subject]]\nname = \"a/b\"\nmodel = \"demo_subject.toml\"\n"),
-      "test.toml:3: field 'subject[0].name': must be 1..63 characters without '/', spaces or "
+      "test.toml:3: field 'subject[0].name': must be 1..63 bytes (UTF-8) without '/', spaces or "
       "control characters");
   for (const char* name : {"a\\u001b[31mRED", "a\\rb", "a\\u007f", "a\\tb"})
     EXPECT_NE(ErrorOf("format_version = 1\n[[subject]]\nname = \"" + std::string(name) +
