@@ -732,6 +732,11 @@ void Daemon::Reload(DaemonConfig config) {
 }
 
 void Daemon::ApplyReload(DaemonConfig config) {
+  if (control_->stopping) {
+    spdlog::warn("reload of {} ignored: the daemon is stopping (flushing what it holds)",
+                 config.source);
+    return;
+  }
   const DaemonConfig& old = control_->config;
   // What only a restart changes, against what runs: each such field keeps its running
   // value in the control plane's copy, so a later reload is compared with the sockets as
@@ -1043,8 +1048,14 @@ void Daemon::Run(bool handle_signals) {
     on_signal = [this, &on_signal](const boost::system::error_code& ec, int sig) {
       if (ec) return;
       if (sig == SIGHUP) {
-        spdlog::info("SIGHUP: reloading {}", config_path_);
-        Reload();
+        // Once stopping, the workers only flush: a reload would build runners that never
+        // run, and the log would say it was applied.
+        if (control_->stopping)
+          spdlog::warn("SIGHUP ignored: the daemon is stopping (flushing what it holds)");
+        else {
+          spdlog::info("SIGHUP: reloading {}", config_path_);
+          Reload();
+        }
         control_->signals->async_wait(on_signal);
         return;
       }

@@ -67,6 +67,21 @@ std::string Endpoint(TomlTable& t, const std::string& key, const std::string& fa
   return e;
 }
 
+// Whether two endpoints name one socket address: equal ipc/inproc names, or one TCP port
+// on hosts that overlap (the same host, "localhost" for 127.0.0.1, or a wildcard). The
+// output bound on the input's address would take the bridge's place, or feed the daemon
+// its own messages.
+bool SameSocketAddress(const std::string& a, const std::string& b) {
+  std::string host_a, port_a, host_b, port_b;
+  if (!SplitTcp(a, &host_a, &port_a) || !SplitTcp(b, &host_b, &port_b)) return a == b;
+  if (port_a != port_b) return false;
+  const auto wildcard = [](const std::string& h) {
+    return h == "*" || h == "0.0.0.0" || h == "::";
+  };
+  const auto named = [](const std::string& h) { return h == "localhost" ? "127.0.0.1" : h; };
+  return named(host_a) == named(host_b) || wildcard(host_a) || wildcard(host_b);
+}
+
 // Reads every cleanup option a config may set (CleanupOptionFields: the one place their
 // names, units and bounds are written) from its section's table.
 void ReadCleanupOptions(TomlTable& table, const std::string& section, CleanupOptions* o) {
@@ -200,6 +215,10 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
 
   TomlTable output = top.Table("output");
   c.output_endpoint = Endpoint(output, "endpoint", c.output_endpoint);
+  if (SameSocketAddress(c.output_endpoint, c.input_endpoint))
+    output.Fail(output.Find("endpoint"), "endpoint",
+                "'" + c.output_endpoint + "' is the input's address (input.endpoint = '" +
+                    c.input_endpoint + "'): the cleaned frames need an address of their own");
   c.send_high_water_mark =
       output.Integer("send_high_water_mark", c.send_high_water_mark, 1, 10'000'000);
   c.publish_cleaned_markers = output.Bool("cleaned_markers", c.publish_cleaned_markers);

@@ -4,10 +4,12 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <filesystem>
 #include <fstream>
 #include <map>
 #include <sstream>
+#include <vector>
 
 #include "formats/bvh.hpp"
 #include "formats/toml_reader.hpp"
@@ -215,6 +217,29 @@ TEST(DaemonConfigTest, AnEndpointsPortIsANumberFrom1To65535) {
                                   "[output]\ncleaned_markers = true\n\nendpoint = \"udp://x:1\"\n");
   EXPECT_NE(far.find("test.toml:8: field 'output.endpoint': expected tcp://"), std::string::npos)
       << far;
+}
+
+// An output on the input's address would take the capture bridge's place, or feed the
+// daemon its own frames: refused at load, however the address is spelled.
+TEST(DaemonConfigTest, TheOutputMayNotUseTheInputsAddress) {
+  const auto both = [](const std::string& in, const std::string& pattern, const std::string& out) {
+    return ErrorOf(std::string(kMinimal) + "[input]\nendpoint = \"" + in + "\"\npattern = \"" +
+                   pattern + "\"\n[output]\nendpoint = \"" + out + "\"\n");
+  };
+  for (const auto& [in, pattern, out] : std::vector<std::array<std::string, 3>>{
+           {"tcp://127.0.0.1:5555", "sub", "tcp://127.0.0.1:5555"},
+           {"tcp://localhost:5555", "sub", "tcp://127.0.0.1:5555"},
+           {"tcp://*:6000", "pull", "tcp://127.0.0.1:6000"},
+           {"tcp://192.168.1.4:5555", "sub", "tcp://0.0.0.0:5555"},
+           {"ipc:///tmp/mocap.sock", "sub", "ipc:///tmp/mocap.sock"}}) {
+    const std::string error = both(in, pattern, out);
+    EXPECT_NE(error.find("field 'output.endpoint': '" + out + "' is the input's address"),
+              std::string::npos)
+        << in << " / " << out << ": " << error;
+  }
+  EXPECT_EQ(both("tcp://127.0.0.1:5555", "sub", "tcp://127.0.0.1:5556"), "");
+  EXPECT_EQ(both("tcp://[::1]:5555", "sub", "tcp://127.0.0.1:5555"), "");
+  EXPECT_EQ(both("ipc:///tmp/in.sock", "sub", "ipc:///tmp/out.sock"), "");
 }
 
 // A live calibration's output never writes over a file the config names: the config

@@ -901,6 +901,32 @@ TEST(DaemonTest, HttpServesHealthSubjectsAndMetrics) {
             std::string::npos);
 }
 
+// A reload that comes once the daemon is stopping (a SIGHUP during a SIGTERM's flush) is
+// refused: the workers only flush by then, and the log said the new config was applied.
+TEST(DaemonTest, AReloadWhileStoppingIsIgnoredAndSaysSo) {
+  std::ostringstream log;
+  spdlog::default_logger()->sinks().push_back(
+      std::make_shared<spdlog::sinks::ostream_sink_mt>(log));
+  {
+    zmq::context_t context;
+    const DaemonConfig running = TestConfig("inproc://stopping-in", "inproc://stopping-out", 4);
+    RunningDaemon daemon(context, running);
+    DaemonConfig changed = running;
+    changed.source = "changed.toml";
+    changed.subjects[0].cleanup.lookahead = 6;
+    // Both go through the control plane's queue in this order: the stop is seen first.
+    daemon->Stop();
+    daemon->Reload(changed);
+    daemon.Stop();
+    EXPECT_EQ(daemon->Stats().reloads, 0u);
+  }
+  spdlog::default_logger()->sinks().pop_back();
+  const std::string text = log.str();
+  EXPECT_NE(text.find("reload of changed.toml ignored: the daemon is stopping"), std::string::npos)
+      << text;
+  EXPECT_EQ(text.find("reload: applying"), std::string::npos) << text;
+}
+
 // A bridge sending another marker set: every frame is dropped, and /health, which said
 // "ok" through it before, says degraded and names the subject and the reason. When the
 // right model's frames come again, the log says the rejection ended. /subjects says when
