@@ -337,9 +337,11 @@ Skeleton CharacterSkeleton(const BvhTake& character) {
   int pelvis = -1;
   try {
     pelvis = MatchHumanoidRoles(sk).joint_of_role.at("pelvis");
-  } catch (const std::invalid_argument&) {
+  } catch (const std::exception&) {
     return sk;  // MakeRetargetMap says what is missing
   }
+  // A take built by hand may carry no channel list; its joints keep the skeleton's types.
+  if (pelvis < 0 || static_cast<size_t>(pelvis) >= character.channels.size()) return sk;
   if (sk.joint(pelvis).type == JointType::kFree) return sk;
   bool translates_above = false;
   for (int a = sk.joint(pelvis).parent.value; a >= 0; a = sk.joint(a).parent.value)
