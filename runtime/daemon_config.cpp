@@ -82,6 +82,26 @@ bool SameSocketAddress(const std::string& a, const std::string& b) {
   return named(host_a) == named(host_b) || wildcard(host_a) || wildcard(host_b);
 }
 
+// Whether a name holds a code point that shows as nothing or as a space, or turns the text
+// around (bidirectional controls, as in "Trojan Source"): "actor\u00a01" and "actor\u200b1"
+// look like names the sender spells otherwise, and every frame would be dropped as an
+// unknown subject. TOML has already checked that the text is UTF-8.
+bool HasInvisibleCodePoint(const std::string& text) {
+  for (size_t i = 0; i < text.size();) {
+    const auto lead = static_cast<unsigned char>(text[i]);
+    const size_t length = lead < 0x80 ? 1 : lead < 0xe0 ? 2 : lead < 0xf0 ? 3 : 4;
+    char32_t code = length == 1 ? lead : lead & (0x7f >> length);
+    for (size_t k = 1; k < length && i + k < text.size(); ++k)
+      code = (code << 6) | (static_cast<unsigned char>(text[i + k]) & 0x3f);
+    i += length;
+    if ((code >= 0x80 && code <= 0xa0) || code == 0xad || code == 0x1680 || code == 0x180e ||
+        (code >= 0x2000 && code <= 0x200f) || (code >= 0x2028 && code <= 0x202f) ||
+        (code >= 0x205f && code <= 0x206f) || code == 0x3000 || code == 0xfeff)
+      return true;
+  }
+  return false;
+}
+
 // Reads every cleanup option a config may set (CleanupOptionFields: the one place their
 // names, units and bounds are written) from its section's table.
 void ReadCleanupOptions(TomlTable& table, const std::string& section, CleanupOptions* o) {
@@ -430,9 +450,11 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
     if (s.name.empty() || s.name.size() > protocol::kMaxSubjectName ||
         s.name.find_first_of("/ ") != std::string::npos ||
         std::any_of(s.name.begin(), s.name.end(),
-                    [](unsigned char ch) { return ch < 0x20 || ch == 0x7f; }))
+                    [](unsigned char ch) { return ch < 0x20 || ch == 0x7f; }) ||
+        HasInvisibleCodePoint(s.name))
       t.Fail(table->get("name"), "name",
-             "must be 1..63 bytes (UTF-8) without '/', spaces or control characters");
+             "must be 1..63 bytes (UTF-8) without '/', spaces, control or invisible "
+             "characters");
     if (c.FindSubject(s.name) != nullptr ||
         std::count(c.other_shards_subjects.begin(), c.other_shards_subjects.end(), s.name) > 0)
       t.Fail(table->get("name"), "name", "subject '" + s.name + "' is listed twice");

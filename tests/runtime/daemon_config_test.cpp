@@ -156,13 +156,26 @@ TEST(DaemonConfigTest, AnHttpTokenFileMustHoldOneLongToken) {
 TEST(DaemonConfigTest, SubjectsAreValidatedOneByOne) {
   EXPECT_EQ(
       ErrorOf("format_version = 1\n[[subject]]\nname = \"a/b\"\nmodel = \"demo_subject.toml\"\n"),
-      "test.toml:3: field 'subject[0].name': must be 1..63 bytes (UTF-8) without '/', spaces or "
-      "control characters");
-  for (const char* name : {"a\\u001b[31mRED", "a\\rb", "a\\u007f", "a\\tb"})
+      "test.toml:3: field 'subject[0].name': must be 1..63 bytes (UTF-8) without '/', spaces, "
+      "control or invisible characters");
+  // Controls, and what looks like nothing or a space, or turns the text around (a name that
+  // reads as the sender's spelling and matches none of its frames): a no-break space, a
+  // zero-width space and joiner, a right-to-left override, a byte-order mark, an
+  // ideographic space, a C1 control.
+  for (const char* name :
+       {"a\\u001b[31mRED", "a\\rb", "a\\u007f", "a\\tb", "actor\\u00a01", "actor\\u200b1",
+        "actor\\u200d1", "actor\\u202e1", "\\ufeffactor1", "actor\\u30001", "actor\\u00851"})
     EXPECT_NE(ErrorOf("format_version = 1\n[[subject]]\nname = \"" + std::string(name) +
                       "\"\nmodel = \"demo_subject.toml\"\n")
-                  .find("control characters"),
+                  .find("control or invisible characters"),
               std::string::npos)
+        << name;
+  // Letters of any script are names.
+  for (const char* name :
+       {"acteur\\u00e91", "\\u4fb3\\u512a", "\\u0410\\u043a\\u0442\\u0451\\u0440"})
+    EXPECT_EQ(ErrorOf("format_version = 1\n[[subject]]\nname = \"" + std::string(name) +
+                      "\"\nmodel = \"demo_subject.toml\"\n"),
+              "")
         << name;
   EXPECT_EQ(ErrorOf(std::string(kMinimal) +
                     "[[subject]]\nname = \"actor1\"\nmodel = \"demo_subject.toml\"\n"),
