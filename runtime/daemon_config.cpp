@@ -68,24 +68,29 @@ std::string Endpoint(TomlTable& t, const std::string& key, const std::string& fa
 }
 
 // Whether two endpoints name one socket address: equal ipc/inproc names, or one TCP port
-// on hosts that overlap (the same host, "localhost" for 127.0.0.1, or a wildcard). The
-// output bound on the input's address would take the bridge's place, or feed the daemon
-// its own messages.
+// on hosts that overlap (the same host, "localhost" for 127.0.0.1, or a wildcard beside a
+// loopback address or another wildcard). The output bound on the input's address would
+// take the bridge's place, or feed the daemon its own messages. A wildcard output beside
+// an input on another machine's address is two sockets.
 bool SameSocketAddress(const std::string& a, const std::string& b) {
   std::string host_a, port_a, host_b, port_b;
   if (!SplitTcp(a, &host_a, &port_a) || !SplitTcp(b, &host_b, &port_b)) return a == b;
-  if (port_a != port_b) return false;
+  if (std::stoi(port_a) != std::stoi(port_b)) return false;  // digits, checked by Endpoint
   const auto wildcard = [](const std::string& h) {
     return h == "*" || h == "0.0.0.0" || h == "::";
   };
+  const auto local = [&](const std::string& h) { return wildcard(h) || IsLoopbackHost(h); };
   const auto named = [](const std::string& h) { return h == "localhost" ? "127.0.0.1" : h; };
-  return named(host_a) == named(host_b) || wildcard(host_a) || wildcard(host_b);
+  return named(host_a) == named(host_b) || (wildcard(host_a) && local(host_b)) ||
+         (wildcard(host_b) && local(host_a));
 }
 
 // Whether a name holds a code point that shows as nothing or as a space, or turns the text
 // around (bidirectional controls, as in "Trojan Source"): "actor\u00a01" and "actor\u200b1"
 // look like names the sender spells otherwise, and every frame would be dropped as an
-// unknown subject. TOML has already checked that the text is UTF-8.
+// unknown subject. Also variation selectors, tag characters and the blank Hangul fillers.
+// The joiners U+200C/U+200D go too, though some Persian and Indic spellings use them: a
+// subject name is an identifier typed twice, not prose. TOML has already checked UTF-8.
 bool HasInvisibleCodePoint(const std::string& text) {
   for (size_t i = 0; i < text.size();) {
     const auto lead = static_cast<unsigned char>(text[i]);
@@ -94,9 +99,13 @@ bool HasInvisibleCodePoint(const std::string& text) {
     for (size_t k = 1; k < length && i + k < text.size(); ++k)
       code = (code << 6) | (static_cast<unsigned char>(text[i + k]) & 0x3f);
     i += length;
-    if ((code >= 0x80 && code <= 0xa0) || code == 0xad || code == 0x1680 || code == 0x180e ||
+    if ((code >= 0x80 && code <= 0xa0) || code == 0xad || code == 0x34f || code == 0x61c ||
+        code == 0x115f || code == 0x1160 || code == 0x1680 || (code >= 0x180b && code <= 0x180f) ||
         (code >= 0x2000 && code <= 0x200f) || (code >= 0x2028 && code <= 0x202f) ||
-        (code >= 0x205f && code <= 0x206f) || code == 0x3000 || code == 0xfeff)
+        (code >= 0x205f && code <= 0x206f) || code == 0x2800 || code == 0x3000 || code == 0x3164 ||
+        (code >= 0xfe00 && code <= 0xfe0f) || code == 0xfeff || code == 0xffa0 ||
+        (code >= 0xfff9 && code <= 0xfffb) || (code >= 0x1d173 && code <= 0x1d17a) ||
+        (code >= 0xe0000 && code <= 0xe007f) || (code >= 0xe0100 && code <= 0xe01ef))
       return true;
   }
   return false;
@@ -235,10 +244,17 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
 
   TomlTable output = top.Table("output");
   c.output_endpoint = Endpoint(output, "endpoint", c.output_endpoint);
-  if (SameSocketAddress(c.output_endpoint, c.input_endpoint))
-    output.Fail(output.Find("endpoint"), "endpoint",
-                "'" + c.output_endpoint + "' is the input's address (input.endpoint = '" +
-                    c.input_endpoint + "'): the cleaned frames need an address of their own");
+  if (SameSocketAddress(c.output_endpoint, c.input_endpoint)) {
+    // Named at the field the file wrote: an input set on the output's default is the
+    // input's mistake.
+    if (output.Has("endpoint"))
+      output.Fail(output.Find("endpoint"), "endpoint",
+                  "'" + c.output_endpoint + "' is the input's address (input.endpoint = '" +
+                      c.input_endpoint + "'): the cleaned frames need an address of their own");
+    input.Fail(input.Find("endpoint"), "endpoint",
+               "'" + c.input_endpoint + "' is the output's default address (" + c.output_endpoint +
+                   "): set output.endpoint to another");
+  }
   c.send_high_water_mark =
       output.Integer("send_high_water_mark", c.send_high_water_mark, 1, 10'000'000);
   c.publish_cleaned_markers = output.Bool("cleaned_markers", c.publish_cleaned_markers);

@@ -164,7 +164,8 @@ TEST(DaemonConfigTest, SubjectsAreValidatedOneByOne) {
   // ideographic space, a C1 control.
   for (const char* name :
        {"a\\u001b[31mRED", "a\\rb", "a\\u007f", "a\\tb", "actor\\u00a01", "actor\\u200b1",
-        "actor\\u200d1", "actor\\u202e1", "\\ufeffactor1", "actor\\u30001", "actor\\u00851"})
+        "actor\\u200d1", "actor\\u202e1", "\\ufeffactor1", "actor\\u30001", "actor\\u00851",
+        "actor1\\ufe0f", "\\u3164actor1", "actor\\u061c1", "actor1\\U000e0041"})
     EXPECT_NE(ErrorOf("format_version = 1\n[[subject]]\nname = \"" + std::string(name) +
                       "\"\nmodel = \"demo_subject.toml\"\n")
                   .find("control or invisible characters"),
@@ -243,7 +244,9 @@ TEST(DaemonConfigTest, TheOutputMayNotUseTheInputsAddress) {
            {"tcp://127.0.0.1:5555", "sub", "tcp://127.0.0.1:5555"},
            {"tcp://localhost:5555", "sub", "tcp://127.0.0.1:5555"},
            {"tcp://*:6000", "pull", "tcp://127.0.0.1:6000"},
-           {"tcp://192.168.1.4:5555", "sub", "tcp://0.0.0.0:5555"},
+           {"tcp://localhost:5555", "sub", "tcp://0.0.0.0:5555"},
+           {"tcp://192.168.1.4:5555", "sub", "tcp://192.168.1.4:5555"},
+           {"tcp://127.0.0.1:05555", "sub", "tcp://127.0.0.1:5555"},
            {"ipc:///tmp/mocap.sock", "sub", "ipc:///tmp/mocap.sock"}}) {
     const std::string error = both(in, pattern, out);
     EXPECT_NE(error.find("field 'output.endpoint': '" + out + "' is the input's address"),
@@ -252,7 +255,18 @@ TEST(DaemonConfigTest, TheOutputMayNotUseTheInputsAddress) {
   }
   EXPECT_EQ(both("tcp://127.0.0.1:5555", "sub", "tcp://127.0.0.1:5556"), "");
   EXPECT_EQ(both("tcp://[::1]:5555", "sub", "tcp://127.0.0.1:5555"), "");
+  // Another machine's bridge on the port this daemon binds on every interface: two sockets
+  // (refused only for want of CURVE on a non-loopback output).
+  EXPECT_EQ(both("tcp://192.168.1.4:5555", "sub", "tcp://*:5555").find("input's address"),
+            std::string::npos);
   EXPECT_EQ(both("ipc:///tmp/in.sock", "sub", "ipc:///tmp/out.sock"), "");
+  // An input on the output's default address is the input's mistake, named at its line.
+  const std::string on_default =
+      ErrorOf(std::string(kMinimal) + "[input]\nendpoint = \"tcp://127.0.0.1:5556\"\n");
+  EXPECT_NE(on_default.find("test.toml:6: field 'input.endpoint': 'tcp://127.0.0.1:5556' is "
+                            "the output's default address"),
+            std::string::npos)
+      << on_default;
 }
 
 // A live calibration's output never writes over a file the config names: the config
