@@ -472,6 +472,10 @@ struct Daemon::ControlPlane {
   DaemonStats last_logged;
   std::array<int64_t, kDropReasonCount> last_drop_log_ns{};
   std::array<uint64_t, kDropReasonCount> logged_drops{};
+  // When each reason's count last grew (seen at a tick), and its count then: a line that
+  // waited out the log interval says how long ago its drops stopped.
+  std::array<int64_t, kDropReasonCount> last_drop_seen_ns{};
+  std::array<uint64_t, kDropReasonCount> drops_at_last_tick{};
   // Per subject, the drops the last warning covered: the next one names who dropped what.
   std::map<std::string, std::array<uint64_t, kDropReasonCount>> logged_subject_drops;
   // Frame numbers that never arrived, per subject, as of the last line that said so.
@@ -1146,11 +1150,14 @@ void Daemon::Run(bool handle_signals) {
               n += s.counters.dropped[static_cast<size_t>(reason)];
             return n;
           };
+          const uint64_t n = total(now);
+          if (n > c.drops_at_last_tick[static_cast<size_t>(reason)])
+            c.last_drop_seen_ns[static_cast<size_t>(reason)] = t;
+          c.drops_at_last_tick[static_cast<size_t>(reason)] = n;
           if (t - c.last_drop_log_ns[static_cast<size_t>(reason)] <
               Seconds(c.config.log_interval_s))
             continue;
           auto& logged = c.logged_drops;
-          const uint64_t n = total(now);
           if (n > logged[static_cast<size_t>(reason)]) {
             std::string who;
             for (const SubjectStats& s : now.subjects) {
@@ -1161,6 +1168,10 @@ void Daemon::Run(bool handle_signals) {
             }
             if (reason == static_cast<int>(DropReason::kUnknownSubject))
               who += fmt::format(", the last for '{}'", now.last_unknown_subject);
+            // Held back by the log interval, the line can come after the drops stopped.
+            const double quiet_s =
+                static_cast<double>(t - c.last_drop_seen_ns[static_cast<size_t>(reason)]) * 1e-9;
+            if (quiet_s >= 0.5) who += fmt::format("; none for the last {:.1f} s", quiet_s);
             spdlog::warn("dropped {} input message(s): {} (total {}){}",
                          n - logged[static_cast<size_t>(reason)],
                          to_string(static_cast<DropReason>(reason)), n, who);

@@ -121,7 +121,8 @@ class Daemon {
   bool Reload();
   /// Thread-safe: applies a new config (on the control plane, so only while Run runs).
   /// Subjects whose model and options are unchanged keep their pipeline (no frame lost or
-  /// re-timed); changed ones are flushed and rebuilt; removed ones are flushed.
+  /// re-timed); changed ones are flushed and rebuilt; removed ones are flushed. Once Stop()
+  /// has been called, a reload is ignored with a warning (the workers only flush).
   void Reload(DaemonConfig config);
   /// Blocks until Run has bound everything (or failed); false on timeout or failure.
   bool WaitUntilRunning(std::chrono::milliseconds timeout);
