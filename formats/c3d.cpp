@@ -354,10 +354,13 @@ class Parser {
     take.first_frame = header_first_;
 
     size_t data_block = header_data_block_;
+    size_t data_start_parameter = 0;  // 0: none, or none that can be a block
     if (auto d = Number("POINT:DATA_START")) {
       double v = *d;
       if (v < 0) v += 65536;
-      if (v >= 1) data_block = static_cast<size_t>(v);
+      // A float-typed value can be anything: only a block number a header word could hold.
+      if (std::isfinite(v) && v >= 1 && v <= 65535)
+        data_block = data_start_parameter = static_cast<size_t>(v);
     }
     // POINT:DATA_START is the standard's, but a tool that grew the parameter section can
     // move the data and update only the header's word (or the other way round). Read at
@@ -563,9 +566,18 @@ class Parser {
           used == used_in_parameter)
         counts = "; POINT:USED says " + std::to_string(used_in_parameter) + " points, the header " +
                  std::to_string(header_points_) + ", and the data holds frames of neither";
+      // Where the data was read from, and what each field said: data that sits at neither
+      // start reads as a file too short, and the fields are what to check.
+      std::string start = "; data read from block " + std::to_string(data_block);
+      if (data_start_parameter == 0 || data_start_parameter == header_data_block_)
+        start += data_start_parameter == 0 ? " (the header's; no usable POINT:DATA_START)"
+                                           : " (the header's and POINT:DATA_START's)";
+      else
+        start += " (POINT:DATA_START says " + std::to_string(data_start_parameter) +
+                 ", the header " + std::to_string(header_data_block_) + ")";
       Fail("data", data_start + whole * frame_bytes,
            "file ends inside frame " + std::to_string(whole + 1) + " of " + std::to_string(frames) +
-               " (" + std::to_string(frame_bytes) + " bytes per frame" + counts + ")");
+               " (" + std::to_string(frame_bytes) + " bytes per frame" + counts + start + ")");
     }
     // More whole frames than counted, past a writer's block of padding: a take cropped by
     // rewriting its count alone, or a count from another version of the file. The count

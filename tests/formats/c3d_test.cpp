@@ -565,6 +565,44 @@ TEST(C3dTest, ADataStartThatCannotBeTheDataGivesWayToTheHeadersWithANote) {
   }
 }
 
+// Data at neither start (both fields a block past it) reads as a file too short: the
+// error says which block the data was read from and what each field said, where it said
+// only where the file ended.
+TEST(C3dTest, AFileTooShortForItsDataStartSaysWhereTheDataWasRead) {
+  const C3dTake take = MakeTake(3, 20);
+  std::vector<uint8_t> bytes = EncodeC3d(take);
+  const size_t data_block = static_cast<size_t>(bytes[16]) | (static_cast<size_t>(bytes[17]) << 8);
+  const size_t value = ValueOffset(bytes, "DATA_START", 0);
+  for (const size_t at : {size_t{16}, value}) {
+    bytes[at] = static_cast<uint8_t>((data_block + 1) & 0xff);
+    bytes[at + 1] = static_cast<uint8_t>((data_block + 1) >> 8);
+  }
+  try {
+    ParseC3d(bytes, "moved.c3d");
+    FAIL() << "a file too short for its data start was read";
+  } catch (const C3dError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("file ends inside frame"), std::string::npos) << what;
+    EXPECT_NE(what.find("data read from block " + std::to_string(data_block + 1) +
+                        " (the header's and POINT:DATA_START's)"),
+              std::string::npos)
+        << what;
+  }
+  // The fields disagreeing, and neither holding the frames: both are named.
+  bytes[16] = static_cast<uint8_t>((data_block + 2) & 0xff);
+  bytes[17] = static_cast<uint8_t>((data_block + 2) >> 8);
+  try {
+    ParseC3d(bytes, "moved.c3d");
+    FAIL() << "a file too short for its data start was read";
+  } catch (const C3dError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("POINT:DATA_START says " + std::to_string(data_block + 1) +
+                        ", the header " + std::to_string(data_block + 2)),
+              std::string::npos)
+        << what;
+  }
+}
+
 // Two quirks in one file: POINT:FRAMES left at a longer take's count and POINT:USED
 // rewritten. The point counts were weighed against the stale frame count, which no layout
 // fits, so the header's points were never tried and the file was refused as truncated.
