@@ -9,6 +9,7 @@
 #include <sys/socket.h>
 #include <sys/time.h>
 
+#include <algorithm>
 #include <boost/asio/connect.hpp>
 #include <boost/asio/ip/tcp.hpp>
 #include <boost/asio/read.hpp>
@@ -65,6 +66,29 @@ DaemonConfig TestConfig(const std::string& input, const std::string& output, int
   c.subjects.push_back(s);
   return c;
 }
+
+// The default logger's output while it lives. Declare it before the daemon's scope so it
+// is attached before the daemon's threads start; Text() detaches it (call it once they have
+// ended). Detached on destruction too: a failed ASSERT returning early left a sink writing
+// into a destroyed stream for every later test.
+class CapturedLog {
+ public:
+  CapturedLog() { spdlog::default_logger()->sinks().push_back(sink_); }
+  ~CapturedLog() { Detach(); }
+  std::string Text() {
+    Detach();
+    return stream_.str();
+  }
+
+ private:
+  void Detach() {
+    auto& sinks = spdlog::default_logger()->sinks();
+    sinks.erase(std::remove(sinks.begin(), sinks.end(), sink_), sinks.end());
+  }
+  std::ostringstream stream_;
+  std::shared_ptr<spdlog::sinks::ostream_sink_mt> sink_ =
+      std::make_shared<spdlog::sinks::ostream_sink_mt>(stream_);
+};
 
 // Runs a daemon on a thread for the length of a test.
 class RunningDaemon {
@@ -596,9 +620,7 @@ TEST(DaemonTest, ReloadsOfASubscribingDaemonLoseNoFrameOfAKeptSubject) {
 // reload that kept a changed endpoint said nothing, and one that put the running endpoint
 // back warned. The warning names the field.
 TEST(DaemonTest, ARestartOnlyChangeIsWarnedAgainstTheRunningSockets) {
-  std::ostringstream log;
-  spdlog::default_logger()->sinks().push_back(
-      std::make_shared<spdlog::sinks::ostream_sink_mt>(log));
+  CapturedLog log;
   {
     zmq::context_t context;
     const DaemonConfig running =
@@ -614,8 +636,7 @@ TEST(DaemonTest, ARestartOnlyChangeIsWarnedAgainstTheRunningSockets) {
     daemon->Reload(running);
     ASSERT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) { return s.reloads == 3; }));
   }
-  spdlog::default_logger()->sinks().pop_back();
-  const std::string text = log.str();
+  const std::string text = log.Text();
   const std::string warning =
       "reload: output.endpoint changed, which takes effect only after a restart";
   size_t count = 0;
@@ -909,9 +930,7 @@ TEST(DaemonTest, HttpServesHealthSubjectsAndMetrics) {
 TEST(DaemonTest, AReloadWhileStoppingIsIgnoredAndSaysSo) {
   bool ignored = false;
   for (int attempt = 0; attempt < 5 && !ignored; ++attempt) {
-    std::ostringstream log;
-    spdlog::default_logger()->sinks().push_back(
-        std::make_shared<spdlog::sinks::ostream_sink_mt>(log));
+    CapturedLog log;
     {
       zmq::context_t context;
       const std::string name = "inproc://stopping-" + std::to_string(attempt);
@@ -925,8 +944,7 @@ TEST(DaemonTest, AReloadWhileStoppingIsIgnoredAndSaysSo) {
       daemon.Stop();
       EXPECT_EQ(daemon->Stats().reloads, 0u);
     }
-    spdlog::default_logger()->sinks().pop_back();
-    const std::string text = log.str();
+    const std::string text = log.Text();
     EXPECT_EQ(text.find("reload: applying"), std::string::npos) << text;
     ignored =
         text.find("reload of changed.toml ignored: the daemon is stopping") != std::string::npos;
@@ -941,10 +959,7 @@ TEST(DaemonTest, AReloadWhileStoppingIsIgnoredAndSaysSo) {
 // float widened to double printed as 119.87999725341797).
 TEST(DaemonTest, HealthNamesASubjectWhoseFramesAreAllDropped) {
   const testing::HumanoidFixture f = testing::MakeHumanoidFixture("walk", 1.0, 120.0);
-  // The log, captured: added before the daemon's threads start and removed after they end.
-  std::ostringstream log;
-  spdlog::default_logger()->sinks().push_back(
-      std::make_shared<spdlog::sinks::ostream_sink_mt>(log));
+  CapturedLog log;
   {
     zmq::context_t context;
     DaemonConfig config = TestConfig("inproc://reject-in", "inproc://reject-out", 4);
@@ -981,12 +996,11 @@ TEST(DaemonTest, HealthNamesASubjectWhoseFramesAreAllDropped) {
     }));
     std::this_thread::sleep_for(300ms);  // a few control-plane ticks
   }
-  spdlog::default_logger()->sinks().pop_back();
-  EXPECT_NE(log.str().find("subject 'actor1': every frame dropped as model_mismatch"),
-            std::string::npos)
-      << log.str();
-  EXPECT_NE(log.str().find("subject 'actor1': no longer dropping every frame ("), std::string::npos)
-      << log.str();
+  const std::string text = log.Text();
+  EXPECT_NE(text.find("subject 'actor1': every frame dropped as model_mismatch"), std::string::npos)
+      << text;
+  EXPECT_NE(text.find("subject 'actor1': no longer dropping every frame ("), std::string::npos)
+      << text;
 }
 
 // A sender that spells its subject another way ("Actor1" for "actor1"): every frame is
@@ -994,9 +1008,7 @@ TEST(DaemonTest, HealthNamesASubjectWhoseFramesAreAllDropped) {
 // neither said which name came. Both name it now.
 TEST(DaemonTest, TheLogAndHealthNameTheUnknownSubjectThatCame) {
   const testing::HumanoidFixture f = testing::MakeHumanoidFixture("walk", 1.0, 120.0);
-  std::ostringstream log;
-  spdlog::default_logger()->sinks().push_back(
-      std::make_shared<spdlog::sinks::ostream_sink_mt>(log));
+  CapturedLog log;
   {
     zmq::context_t context;
     RunningDaemon daemon(context, TestConfig("inproc://typo-in", "inproc://typo-out", 4));
@@ -1012,18 +1024,16 @@ TEST(DaemonTest, TheLogAndHealthNameTheUnknownSubjectThatCame) {
     EXPECT_EQ(health["unknown_subject_dropped"], 20);
     EXPECT_EQ(health["last_unknown_subject"], "Actor1");
   }
-  spdlog::default_logger()->sinks().pop_back();
-  EXPECT_NE(log.str().find("unknown_subject (total 20), the last for 'Actor1'"), std::string::npos)
-      << log.str();
+  const std::string text = log.Text();
+  EXPECT_NE(text.find("unknown_subject (total 20), the last for 'Actor1'"), std::string::npos)
+      << text;
 }
 
 // Drops are logged at most once per log interval per reason, so a line can come after
 // the drops stopped: it says how long there have been none (it read as if they went on).
 TEST(DaemonTest, ADropLineHeldBackByTheLogIntervalSaysTheDropsStopped) {
   const testing::HumanoidFixture f = testing::MakeHumanoidFixture("walk", 1.0, 120.0);
-  std::ostringstream log;
-  spdlog::default_logger()->sinks().push_back(
-      std::make_shared<spdlog::sinks::ostream_sink_mt>(log));
+  CapturedLog log;
   {
     zmq::context_t context;
     DaemonConfig config = TestConfig("inproc://held-in", "inproc://held-out", 4);
@@ -1044,8 +1054,7 @@ TEST(DaemonTest, ADropLineHeldBackByTheLogIntervalSaysTheDropsStopped) {
     ASSERT_TRUE(WaitForStats(*daemon, dropped(2)));
     std::this_thread::sleep_for(2500ms);  // the second waits out the interval
   }
-  spdlog::default_logger()->sinks().pop_back();
-  const std::string text = log.str();
+  const std::string text = log.Text();
   const size_t first = text.find("dropped 1 input message(s): unknown_subject (total 1)");
   ASSERT_NE(first, std::string::npos) << text;
   const size_t second = text.find("dropped 1 input message(s): unknown_subject (total 2)");
