@@ -9,8 +9,11 @@
 // kPopExcessSpeedMps, 2 cm per frame at 120 Hz; a run of such frames is one pop).
 // Usage: cleanup_accuracy [--seeds N] [--severity light|medium|heavy]... [--rates 60,120,240]
 // [--lookahead K (ours only, any K)] [--jitter-mm MIN,MAX] [--explain-pops] [--explain-worst]
-// [--explain-rejections] [--trace TAKE:FROM:TO:MARKER,...] [--digest] [TAKE.bvh ...]
+// [--explain-rejections] [--trace TAKE:FROM:TO:MARKER,...] [--digest] [--oracle] [TAKE.bvh ...]
 // --explain-worst explains each run's worst frame (over 3 cm) the way --explain-pops does.
+// --oracle adds rows that bound what detection and lookahead could gain: the same pipeline
+// on each corrupted take with every injected sample removed (perfect detection), at K and
+// at 2 s of lookahead, and with those gaps filled offline (Catmull-Rom) before it.
 // --digest prints, per row of ours, a hash of every published bit (markers, status,
 // reasons, weights, poses): a change meant to alter no arithmetic must keep it.
 // MOCAPD_EXPLAIN_BACK=N shows N frames before each pop (default 4); MOCAPD_EXP_<FIELD>
@@ -245,7 +248,23 @@ Scores SolveBaseline(const bench::BenchTake& take, const C3dTake& markers, doubl
   return scorer.Finish();
 }
 
+// The corrupted take with every injected sample removed, as if detection were perfect:
+// what an offline fill over the whole take can do with only the data the corruption left.
+C3dTake WithInjectedSamplesRemoved(const CorruptedTake& bad) {
+  C3dTake out = bad.take;
+  for (int f = 0; f < out.num_frames; ++f)
+    for (int p = 0; p < out.num_points(); ++p)
+      if (bad.at(f, p) != CorruptionKind::kNone) {
+        // Missing as the pipeline reads it (a non-finite position) and as C3D says it.
+        out.at(f, p) = Vec3::Constant(std::numeric_limits<double>::quiet_NaN());
+        out.residuals[static_cast<size_t>(f) * static_cast<size_t>(out.num_points()) +
+                      static_cast<size_t>(p)] = -1.0f;
+      }
+  return out;
+}
+
 bool g_explain_pops = false;
+bool g_oracle = false;
 bool g_digest = false;
 bool g_explain_worst = false;
 bool g_explain_rejections = false;
@@ -290,8 +309,9 @@ bool ParseTrace(const std::string& spec, Trace* trace) {
   return !trace->take.empty() && !trace->markers.empty();
 }
 
+// variant names the run in --explain-worst/--explain-pops lines ("" for the plain one).
 Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const C3dTake& clean,
-                   int lookahead, double rate_hz) {
+                   int lookahead, double rate_hz, const std::string& variant = "") {
   const auto skeleton = std::make_shared<const Skeleton>(take.bvh.skeleton);
   CleanupOptions options;
   options.lookahead = lookahead;
@@ -387,14 +407,14 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
   while (pipeline.Flush()) collect();
   Scores s = scorer.Finish();
   if (g_explain_worst && s.worst_frame >= 0 && s.worst_frame_cm > 3.0) {
-    std::printf("worst frame %s K=%d %.0f Hz: frame %d joint %s %.1f cm off\n", take.name.c_str(),
-                lookahead, rate_hz, s.worst_frame, skeleton->joint(s.worst_joint).name.c_str(),
-                s.worst_frame_cm);
+    std::printf("worst frame %s%s K=%d %.0f Hz: frame %d joint %s %.1f cm off\n", take.name.c_str(),
+                variant.c_str(), lookahead, rate_hz, s.worst_frame,
+                skeleton->joint(s.worst_joint).name.c_str(), s.worst_frame_cm);
     s.pop_frames.push_back({s.worst_frame, s.worst_joint, s.worst_frame_cm / 100});
   }
   if (g_explain_worst && s.clean_worst_frame >= 0)
-    std::printf("worst clean-segment joint %s K=%d %.0f Hz: frame %d joint %s %.1f cm off\n",
-                take.name.c_str(), lookahead, rate_hz, s.clean_worst_frame,
+    std::printf("worst clean-segment joint %s%s K=%d %.0f Hz: frame %d joint %s %.1f cm off\n",
+                take.name.c_str(), variant.c_str(), lookahead, rate_hz, s.clean_worst_frame,
                 skeleton->joint(s.clean_worst_joint).name.c_str(), s.clean_worst_frame_cm);
   if (g_explain_rejections) {
     // Clean samples (nothing injected) the pipeline did not publish as observed, in runs
@@ -484,8 +504,8 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
                       e.last_frame, take.markers->marker(e.marker).name.c_str(),
                       take.markers->marker(e.other).name.c_str());
     for (const auto& [f, j, excess] : s.pop_frames) {
-      std::printf("pop %s K=%d frame %d joint %s +%.1fcm:", take.name.c_str(), lookahead, f,
-                  skeleton->joint(j).name.c_str(), excess * 100);
+      std::printf("pop %s%s K=%d frame %d joint %s +%.1fcm:", take.name.c_str(), variant.c_str(),
+                  lookahead, f, skeleton->joint(j).name.c_str(), excess * 100);
       const int parent = skeleton->joint(j).parent.value;
       for (int m = 0; m < take.markers->num_markers(); ++m) {
         if (take.markers->primary_joint(m) != j && take.markers->primary_joint(m) != parent)
@@ -578,9 +598,11 @@ constexpr const char* kUsage =
     "Usage: cleanup_accuracy [--seeds N] [--severity light|medium|heavy]... [--rates 60,120,240]\n"
     "  [--lookahead K (ours only, any K >= 0)] [--jitter-mm MIN,MAX] [--explain-pops]\n"
     "  [--explain-worst] [--explain-rejections] [--trace TAKE:FROM:TO:MARKER,...] [--digest]\n"
-    "  [TAKE.bvh ...]\n"
+    "  [--oracle] [TAKE.bvh ...]\n"
     "  [--graph-actor K [--graph humanoid|FILE] [--graph-seconds S] [--graph-seed N]]\n"
     "Without takes: the ../shared Bandai takes when present, else the built-in humanoid.\n"
+    "--oracle: also the pipeline on each corrupted take with every injected sample removed\n"
+    "(perfect detection) at K and at 2 s of lookahead, and with those gaps filled offline.\n"
     "--graph-actor: instead, actor K of `mocap-sim replay --graph` (the soak's stream: the\n"
     "same walk, chunks and corruption, for --graph-seconds at each rate; no noise), run once\n"
     "per severity and rate at --lookahead (default 12).\n";
@@ -604,6 +626,8 @@ int Run(int argc, char** argv) {
       g_explain_pops = g_explain_worst = true;
     else if (std::strcmp(argv[i], "--explain-rejections") == 0)
       g_explain_rejections = true;
+    else if (std::strcmp(argv[i], "--oracle") == 0)
+      g_oracle = true;
     else if (std::strcmp(argv[i], "--digest") == 0)
       g_digest = true;
     else if (std::strcmp(argv[i], "--graph-actor") == 0 && i + 1 < argc)
@@ -688,6 +712,23 @@ int Run(int argc, char** argv) {
             co.jitter_max_m = jitter_mm.second * 1e-3;
           }
           const CorruptedTake bad = CorruptTake(clean, take.markers.get(), co);
+          if (g_oracle) {
+            // What detection cannot be blamed for: every injected sample removed before the
+            // pipeline sees the take, at this lookahead and at 2 s of it.
+            CorruptedTake masked = bad;
+            masked.take = WithInjectedSamplesRemoved(bad);
+            const int k = only_lookahead >= 0 ? only_lookahead : 12;
+            const int long_k = static_cast<int>(std::lround(2.0 * rate));
+            results["oracle mask, mocapd K=" + std::to_string(k)].push_back(
+                RunPipeline(take, masked, clean, k, rate, " (oracle mask)"));
+            results["oracle mask, mocapd 2 s"].push_back(
+                RunPipeline(take, masked, clean, long_k, rate, " (oracle mask)"));
+            // ... and every gap filled offline (Catmull-Rom over the whole take) before.
+            CorruptedTake filled = masked;
+            filled.take = bench::FillGaps(masked.take, true);
+            results["oracle mask + cubic fill, mocapd K=" + std::to_string(k)].push_back(
+                RunPipeline(take, filled, clean, k, rate, " (oracle mask + cubic fill)"));
+          }
           if (only_lookahead >= 0) {
             results["mocapd K=" + std::to_string(only_lookahead)].push_back(
                 RunPipeline(take, bad, clean, only_lookahead, rate));
@@ -707,6 +748,13 @@ int Run(int argc, char** argv) {
                                           "mocapd K=0", "mocapd K=4",       "mocapd K=12"};
       if (only_lookahead >= 0 && only_lookahead != 0 && only_lookahead != 4 && only_lookahead != 12)
         methods.push_back("mocapd K=" + std::to_string(only_lookahead));
+      if (g_oracle) {
+        methods.push_back("oracle mask, mocapd K=" +
+                          std::to_string(only_lookahead >= 0 ? only_lookahead : 12));
+        methods.push_back("oracle mask, mocapd 2 s");
+        methods.push_back("oracle mask + cubic fill, mocapd K=" +
+                          std::to_string(only_lookahead >= 0 ? only_lookahead : 12));
+      }
       for (const std::string& method_name : methods) {
         const char* method = method_name.c_str();
         const auto& v = results[method_name];
@@ -729,7 +777,7 @@ int Run(int argc, char** argv) {
           mean.clean_joint_error.Add(s.clean_joint_error);
           mean.other_joint_error.Add(s.other_joint_error);
         }
-        const bool ours = std::string(method).rfind("mocapd", 0) == 0;
+        const bool ours = method_name.find("mocapd") != std::string::npos;
         char rmse[32] = "-", timing[48] = "-", clean[48] = "-";
         if (ours) {
           std::snprintf(rmse, sizeof(rmse), "%.1f", mean.marker_rmse_mm);
