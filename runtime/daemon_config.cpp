@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <optional>
 #include <set>
 #include <sstream>
 #include <stdexcept>
@@ -38,12 +39,30 @@ bool SplitTcp(const std::string& endpoint, std::string* host, std::string* port)
   return true;
 }
 
-// All of 127/8 and ::1 (127.0.0.2 was refused as "not loopback").
-bool IsLoopbackHost(const std::string& host) {
-  if (host == "localhost") return true;
+// Host names are case-insensitive: "LOCALHOST" is the loopback host too (it was taken as
+// a remote address, and then failed to bind).
+bool IsLocalhostName(const std::string& host) {
+  return host.size() == 9 && std::equal(host.begin(), host.end(), "localhost", [](char a, char b) {
+           return std::tolower(static_cast<unsigned char>(a)) == b;
+         });
+}
+
+// The address a host literal names, an IPv4-mapped IPv6 one (::ffff:127.0.0.1) as its IPv4
+// address; nullopt for a name (an interface, a wildcard).
+std::optional<boost::asio::ip::address> HostAddress(const std::string& host) {
+  if (IsLocalhostName(host)) return boost::asio::ip::make_address_v4("127.0.0.1");
   boost::system::error_code ec;
   const auto address = boost::asio::ip::make_address(host, ec);
-  return !ec && address.is_loopback();
+  if (ec) return std::nullopt;
+  if (address.is_v6() && address.to_v6().is_v4_mapped())
+    return boost::asio::ip::make_address_v4(boost::asio::ip::v4_mapped, address.to_v6());
+  return address;
+}
+
+// All of 127/8 and ::1 (127.0.0.2 was refused as "not loopback").
+bool IsLoopbackHost(const std::string& host) {
+  const auto address = HostAddress(host);
+  return address && address->is_loopback();
 }
 
 std::string Endpoint(TomlTable& t, const std::string& key, const std::string& fallback) {
@@ -64,25 +83,42 @@ std::string Endpoint(TomlTable& t, const std::string& key, const std::string& fa
                     [](unsigned char ch) { return std::isdigit(ch) != 0; }) ||
        std::stoi(port) < 1 || std::stoi(port) > 65535))
     t.Fail(t.Find(key), key, "port '" + port + "' in '" + e + "' is not a number from 1 to 65535");
+  // The daemon binds "localhost" as 127.0.0.1, spelled in lower case.
+  if (IsLocalhostName(host) && host != "localhost") return "tcp://localhost:" + port;
   return e;
 }
 
 // Whether two endpoints name one socket address: equal ipc/inproc names, or one TCP port
-// on hosts that overlap (the same host, "localhost" for 127.0.0.1, or a wildcard beside a
-// loopback address or another wildcard). The output bound on the input's address would
-// take the bridge's place, or feed the daemon its own messages. A wildcard output beside
-// an input on another machine's address is two sockets.
+// on hosts that overlap: the same address however it is written ("localhost" in any case
+// for 127.0.0.1, ::ffff:127.0.0.1 too), or a wildcard beside a loopback address or another
+// wildcard. The output bound on the input's address would take the bridge's place, or feed
+// the daemon its own messages. A wildcard output beside an input on another machine's
+// address is two sockets; so is IPv4's ("*", 0.0.0.0) beside IPv6's loopback, since ZeroMQ
+// binds "*" for IPv4 alone unless the endpoint is IPv6 ("[::]" takes both).
 bool SameSocketAddress(const std::string& a, const std::string& b) {
   std::string host_a, port_a, host_b, port_b;
   if (!SplitTcp(a, &host_a, &port_a) || !SplitTcp(b, &host_b, &port_b)) return a == b;
   if (std::stoi(port_a) != std::stoi(port_b)) return false;  // digits, checked by Endpoint
-  const auto wildcard = [](const std::string& h) {
-    return h == "*" || h == "0.0.0.0" || h == "::";
+  const auto address_a = HostAddress(host_a), address_b = HostAddress(host_b);
+  if (address_a && address_b ? *address_a == *address_b
+                             : !address_a && !address_b && host_a == host_b)
+    return true;
+  const auto any_v4 = [](const std::string& h, const auto& address) {
+    return h == "*" || (address && address->is_v4() && address->is_unspecified());
   };
-  const auto local = [&](const std::string& h) { return wildcard(h) || IsLoopbackHost(h); };
-  const auto named = [](const std::string& h) { return h == "localhost" ? "127.0.0.1" : h; };
-  return named(host_a) == named(host_b) || (wildcard(host_a) && local(host_b)) ||
-         (wildcard(host_b) && local(host_a));
+  const auto any_v6 = [](const auto& address) {
+    return address && address->is_v6() && address->is_unspecified();
+  };
+  const auto covers = [&](const std::string& wild, const auto& wild_address,
+                          const std::string& other, const auto& other_address) {
+    if (any_v6(wild_address))
+      return any_v4(other, other_address) || any_v6(other_address) || IsLoopbackHost(other);
+    return any_v4(wild, wild_address) &&
+           (any_v4(other, other_address) ||
+            (other_address && other_address->is_v4() && other_address->is_loopback()));
+  };
+  return covers(host_a, address_a, host_b, address_b) ||
+         covers(host_b, address_b, host_a, address_a);
 }
 
 // Whether a name holds a code point that shows as nothing or as a space, or turns the text
@@ -266,6 +302,7 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
   TomlTable control = top.Table("control");
   c.http_enabled = control.Bool("http", c.http_enabled);
   c.http_address = control.String("http_address", c.http_address);
+  if (IsLocalhostName(c.http_address)) c.http_address = "localhost";
   if (c.http_address != "localhost") {
     boost::system::error_code ec;
     (void)boost::asio::ip::make_address(c.http_address, ec);

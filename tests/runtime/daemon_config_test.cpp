@@ -214,6 +214,21 @@ TEST(DaemonConfigTest, NonLoopbackBindsMustBeAskedFor) {
             std::string::npos);
 }
 
+// Host names are case-insensitive: "LOCALHOST" was taken for a remote address (so CURVE
+// was demanded) and then failed to bind; an IPv4-mapped loopback is loopback.
+TEST(DaemonConfigTest, LocalhostInAnyCaseIsTheLoopbackHost) {
+  const DaemonConfig c =
+      ParseDaemonConfig(std::string(kMinimal) +
+                            "[input]\nendpoint = \"tcp://LocalHost:6555\"\n[output]\nendpoint = "
+                            "\"tcp://LOCALHOST:6556\"\n[control]\nhttp_address = \"LOCALHOST\"\n",
+                        "test.toml", MOCAPD_CONFIG_DIR);
+  EXPECT_EQ(c.input_endpoint, "tcp://localhost:6555");
+  EXPECT_EQ(c.output_endpoint, "tcp://localhost:6556");
+  EXPECT_EQ(c.http_address, "localhost");
+  EXPECT_TRUE(IsLocalEndpoint("tcp://[::ffff:127.0.0.1]:5"));
+  EXPECT_FALSE(IsLocalEndpoint("tcp://[::ffff:192.168.1.4]:5"));
+}
+
 // ZeroMQ wrapped a port past 65535 (99999 listened on 34463) and bound an unlogged one for
 // 0: both are refused, naming the field.
 TEST(DaemonConfigTest, AnEndpointsPortIsANumberFrom1To65535) {
@@ -247,6 +262,11 @@ TEST(DaemonConfigTest, TheOutputMayNotUseTheInputsAddress) {
            {"tcp://localhost:5555", "sub", "tcp://0.0.0.0:5555"},
            {"tcp://192.168.1.4:5555", "sub", "tcp://192.168.1.4:5555"},
            {"tcp://127.0.0.1:05555", "sub", "tcp://127.0.0.1:5555"},
+           {"tcp://LOCALHOST:5555", "sub", "tcp://127.0.0.1:5555"},
+           {"tcp://[::ffff:127.0.0.1]:5555", "sub", "tcp://127.0.0.1:5555"},
+           {"tcp://[::1]:5555", "sub", "tcp://[0:0:0:0:0:0:0:1]:5555"},
+           {"tcp://[::1]:5555", "sub", "tcp://[::]:5555"},
+           {"tcp://127.0.0.1:5555", "sub", "tcp://[::]:5555"},
            {"ipc:///tmp/mocap.sock", "sub", "ipc:///tmp/mocap.sock"}}) {
     const std::string error = both(in, pattern, out);
     EXPECT_NE(error.find("field 'output.endpoint': '" + out + "' is the input's address"),
@@ -255,6 +275,11 @@ TEST(DaemonConfigTest, TheOutputMayNotUseTheInputsAddress) {
   }
   EXPECT_EQ(both("tcp://127.0.0.1:5555", "sub", "tcp://127.0.0.1:5556"), "");
   EXPECT_EQ(both("tcp://[::1]:5555", "sub", "tcp://127.0.0.1:5555"), "");
+  // ZeroMQ binds "*" for IPv4 alone (an IPv6 endpoint, "[::]", takes both).
+  EXPECT_EQ(both("tcp://[::1]:5555", "sub", "tcp://*:5555").find("input's address"),
+            std::string::npos);
+  EXPECT_EQ(both("tcp://[::1]:5555", "sub", "tcp://0.0.0.0:5555").find("input's address"),
+            std::string::npos);
   // Another machine's bridge on the port this daemon binds on every interface: two sockets
   // (refused only for want of CURVE on a non-loopback output).
   EXPECT_EQ(both("tcp://192.168.1.4:5555", "sub", "tcp://*:5555").find("input's address"),
