@@ -66,6 +66,11 @@ nlohmann::json ReplayReport::ToJson() const {
                       {"throughput_fps", throughput_fps},
                       {"end_to_end_latency", SummaryJson(end_to_end)},
                       {"processing_latency", SummaryJson(processing)}};
+  if (!lookahead_by_subject.empty()) {
+    nlohmann::json by_subject = nlohmann::json::object();
+    for (const auto& [name, ks] : lookahead_by_subject) by_subject[name] = ks;
+    j["lookahead_frames_by_subject"] = by_subject;
+  }
   if (!processing_per_interval.empty()) {
     j["interval_s"] = interval_s;
     nlohmann::json intervals = nlohmann::json::array();
@@ -89,6 +94,16 @@ nlohmann::json ReplayReport::ToJson() const {
   if (frames_unscored > 0)
     j["accuracy_unscored"] = {{"frames", frames_unscored}, {"reason", unscored_reason}};
   return j;
+}
+
+std::string ReplayReport::LookaheadText() const {
+  if (lookahead_by_subject.empty()) return std::to_string(lookahead);
+  std::string text;
+  for (const auto& [name, ks] : lookahead_by_subject) {
+    text += (text.empty() ? "" : ", ") + name;
+    for (size_t i = 0; i < ks.size(); ++i) text += (i == 0 ? " " : " -> ") + std::to_string(ks[i]);
+  }
+  return text;
 }
 
 std::string ReplayReport::FormatTable() const {
@@ -119,7 +134,7 @@ std::string ReplayReport::FormatTable() const {
           (repaced ? " (sent at " + rate(rate_hz) + " frames/s, " +
                          num(rate_hz / capture_rate_hz, 2) + "x the take's rate, not resampled)"
                    : "") +
-          ", lookahead K = " + std::to_string(lookahead));
+          (listened ? ", lookahead K = " + LookaheadText() : std::string()));
   if (!listened) {
     row("frames sent",
         std::to_string(frames_sent) + " (the daemon's output was not measured: --from \"\")");

@@ -24,8 +24,11 @@ struct ReplayReport {
   double rate_hz = 0.0;          ///< Frames sent per second (the pacing).
   double capture_rate_hz = 0.0;  ///< The rate the frames say they were captured at.
   int subjects = 0;
-  bool listened = false;     ///< The daemon's output was measured (--from given).
-  int lookahead = 0;         ///< K, from the daemon's subject description.
+  bool listened = false;  ///< The daemon's output was measured (--from given).
+  int lookahead = 0;      ///< K, from the daemon's subject description (the first subject's).
+  /// Each subject's K as the descriptions gave it, in order, when not every subject had
+  /// `lookahead` throughout (subjects configured apart, or a reload changed one).
+  std::vector<std::pair<std::string, std::vector<int>>> lookahead_by_subject;
   uint64_t frames_sent = 0;  ///< Over all subjects.
   uint64_t frames_received = 0;
   uint64_t frames_lost = 0;  ///< Sent, never received.
@@ -75,6 +78,8 @@ struct ReplayReport {
   std::string unscored_reason;
   nlohmann::json ToJson() const;
   std::string FormatTable() const;
+  /// "12", or per subject when they differ ("actor1 12, actor2 36"; "actor1 12 -> 20").
+  std::string LookaheadText() const;
 };
 
 /// Groups tail frames (PoseErrorAccumulator::frames_at_least) by their worst joint

@@ -123,10 +123,9 @@ void WaitForPushHandshake(Sockets& s, const ReplayOptions& o) {
 }
 
 // Waits until the daemon subscribed to every subject's topic (PUB) and described every
-// subject (when listening); returns the lookahead the descriptions give.
-int WaitForDaemon(Sockets& s, const std::vector<SubjectLog>& logs, const ScheduleSetup& setup,
-                  const ReplayOptions& o) {
-  int lookahead = 0;
+// subject (when listening), noting each subject's lookahead from its description.
+void WaitForDaemon(Sockets& s, std::vector<SubjectLog>& logs, const ScheduleSetup& setup,
+                   const ReplayOptions& o) {
   const int64_t deadline = SteadyNs() + TimeoutNs(o.connect_timeout_s);
   std::vector<bool> subscribed(logs.size(), o.push), described(logs.size(), !s.in.has_value());
   auto all = [](const std::vector<bool>& v) {
@@ -189,11 +188,10 @@ int WaitForDaemon(Sockets& s, const std::vector<SubjectLog>& logs, const Schedul
               "the built-in humanoid's), or with --marker-set NAME in that set's order, which a "
               "subject calibrated live with that marker_set expects");
         described[k] = true;
-        lookahead = d.lookahead_frames;
+        logs[k].lookahead_since = {{0, d.lookahead_frames}};
       }
     }
   }
-  return lookahead;
 }
 
 // A thread that stamps each skeleton frame on arrival and scores it against the truth.
@@ -246,6 +244,10 @@ class SkeletonReceiver {
       while (in_.recv(topic, zmq::recv_flags::dontwait)) {
         if (!topic.more() || !in_.recv(body)) continue;
         const int64_t now = SteadyNs();
+        if (topic.to_string().starts_with("subject/")) {
+          NoteLookahead(body, now);
+          continue;
+        }
         if (!topic.to_string().starts_with("skeleton/")) continue;
         if (protocol::DecodeSkeletonFrame({static_cast<const uint8_t*>(body.data()), body.size()},
                                           &message) != protocol::DecodeStatus::kOk)
@@ -299,6 +301,20 @@ class SkeletonReceiver {
         scored_.push_back({k, message.frame_number});
       }
     }
+  }
+
+  // A description whose K differs from the one in effect: a reload changed the subject's
+  // lookahead, and its skeletons from now on are held that much (only this thread writes
+  // lookahead_since while the replay runs).
+  void NoteLookahead(const zmq::message_t& body, int64_t now) {
+    protocol::SubjectDescriptionMessage d;
+    if (protocol::DecodeSubjectDescription({static_cast<const uint8_t*>(body.data()), body.size()},
+                                           &d) != protocol::DecodeStatus::kOk)
+      return;
+    for (SubjectLog& log : logs_)
+      if (log.name == d.subject &&
+          (log.lookahead_since.empty() || log.lookahead_since.back().second != d.lookahead_frames))
+        log.lookahead_since.push_back({now, d.lookahead_frames});
   }
 
   zmq::socket_t& in_;
@@ -356,6 +372,21 @@ uint64_t SendAll(zmq::socket_t& out, std::vector<SubjectLog>& logs, const FrameP
   return sent;
 }
 
+// The report's K: the first subject's, and each subject's in turn when they differ.
+void SummariseLookaheads(const std::vector<SubjectLog>& logs, ReplayReport* report) {
+  if (logs.empty() || logs.front().lookahead_since.empty()) return;
+  report->lookahead = logs.front().lookahead_since.front().second;
+  bool one_k = true;
+  for (const SubjectLog& log : logs)
+    for (const auto& [since, k] : log.lookahead_since) one_k = one_k && k == report->lookahead;
+  if (one_k) return;
+  for (const SubjectLog& log : logs) {
+    std::vector<int> ks;
+    for (const auto& [since, k] : log.lookahead_since) ks.push_back(k);
+    report->lookahead_by_subject.emplace_back(log.name, std::move(ks));
+  }
+}
+
 // End-to-end latency (sent -> skeleton) and processing latency (the message that let the
 // frame out -> skeleton) from the logs, into the report.
 void MeasureLatencies(const std::vector<SubjectLog>& logs, double frame_period_s, int64_t start_ns,
@@ -364,7 +395,6 @@ void MeasureLatencies(const std::vector<SubjectLog>& logs, double frame_period_s
   std::vector<double> e2e;
   e2e.reserve(report->frames_sent);
   report->processing_ms.reserve(report->frames_sent);
-  const auto K = static_cast<uint64_t>(report->lookahead);
   for (const SubjectLog& log : logs) {
     for (size_t i = 0; i < log.sent.size(); ++i) {
       const SubjectLog::Sent& s = log.sent[i];
@@ -372,6 +402,8 @@ void MeasureLatencies(const std::vector<SubjectLog>& logs, double frame_period_s
       const int64_t got = log.received_ns.at(s.frame_number);
       if (got == 0) continue;
       e2e.push_back(static_cast<double>(got - s.sent_ns) * 1e-6);
+      // This subject's K when the skeleton came (subjects may differ; a reload changes it).
+      const auto K = static_cast<uint64_t>(log.LookaheadAt(got));
       // What let this frame out: the first later frame numbered at least K on (the
       // daemon fills numbers that never came), or the end of its stream.
       int64_t trigger_ns = 0;
@@ -411,6 +443,13 @@ int64_t SteadyNs() {
       .count();
 }
 
+int SubjectLog::LookaheadAt(int64_t arrival_ns) const {
+  int k = 0;
+  for (const auto& [since, frames] : lookahead_since)
+    if (since <= arrival_ns) k = frames;
+  return k;
+}
+
 ReplayReport RunSchedule(std::vector<SubjectLog>& logs, const FrameProducer& produce,
                          const ScheduleSetup& setup, const ReplayOptions& o) {
   if (!(o.connect_timeout_s >= 0.0) || !(o.drain_timeout_s >= 0.0))
@@ -420,7 +459,7 @@ ReplayReport RunSchedule(std::vector<SubjectLog>& logs, const FrameProducer& pro
   if (sockets.push_handshakes) WaitForPushHandshake(sockets, o);
   ReplayReport report;
   report.subjects = static_cast<int>(logs.size());
-  report.lookahead = WaitForDaemon(sockets, logs, setup, o);
+  WaitForDaemon(sockets, logs, setup, o);
 
   std::optional<SkeletonReceiver> receiver;
   if (sockets.in) receiver.emplace(*sockets.in, logs, setup);
@@ -446,6 +485,7 @@ ReplayReport RunSchedule(std::vector<SubjectLog>& logs, const FrameProducer& pro
   report.stream_checked = receiver->stream_checked();
   report.stream_mismatched = receiver->stream_mismatched();
   report.frames_lost = sent - std::min<uint64_t>(sent, report.frames_received);
+  SummariseLookaheads(logs, &report);
   MeasureLatencies(logs, setup.frame_period_s, start, o.latency_interval_s, &report);
   // Until the last skeleton came back, not until the last frame went out: at --rate max
   // the sender finishes long before the daemon does.

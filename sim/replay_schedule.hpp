@@ -38,6 +38,11 @@ struct SubjectLog {
   /// Frame number -> arrival (0: not yet); holds every frame number that will be sent,
   /// inserted before the run so the receiver thread never changes its shape.
   std::unordered_map<uint64_t, int64_t> received_ns;
+  /// The daemon's lookahead K for this subject, from its descriptions: (arrival, K), the
+  /// first before the run, then each change (a reload) as the receiver heard it.
+  std::vector<std::pair<int64_t, int>> lookahead_since;
+  /// K in effect for a skeleton that arrived at arrival_ns.
+  int LookaheadAt(int64_t arrival_ns) const;
 };
 
 /// Encodes the next message into bytes; false when there is nothing more to send.

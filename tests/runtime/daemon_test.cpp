@@ -1277,6 +1277,39 @@ TEST(DaemonTest, AReplayAtMaxRateCountsThroughputUntilTheLastSkeletonArrives) {
               1e-6 * report.throughput_fps);
 }
 
+// Subjects with their own lookahead are each timed against their own K: the replay took
+// the last description's K for all (actor1 at K = 4 timed against 16 frames on came out
+// negative, or actor2 at K = 16 against 4 came out 12 frames, 100 ms, "late").
+TEST(DaemonTest, AReplayTimesEachSubjectAgainstItsOwnLookahead) {
+  const std::string in = "tcp://127.0.0.1:27381", out = "tcp://127.0.0.1:27382";
+  DaemonConfig config = TestConfig(in, out, 4);
+  SubjectConfig second = config.subjects.front();
+  second.name = "actor2";
+  second.model = MakeHumanoidSubject("actor2");
+  second.cleanup.lookahead = 16;
+  config.subjects.push_back(second);
+  zmq::context_t context;
+  RunningDaemon daemon(context, config);
+  ReplayOptions options;
+  options.to = in;
+  options.push = true;
+  options.from = out;
+  options.subjects = 2;
+  options.connect_timeout_s = 5.0;
+  const ReplaySource source = HumanoidReplaySource("walk", 1.0, 120.0, 0.0, 1);
+  const ReplayReport report = RunReplay(source, options);
+  ASSERT_EQ(report.frames_received, report.frames_sent);
+  ASSERT_EQ(report.lookahead_by_subject.size(), 2u);
+  EXPECT_EQ(report.LookaheadText(), "actor1 4, actor2 16");
+  EXPECT_NE(report.FormatTable().find("lookahead K = actor1 4, actor2 16"), std::string::npos);
+  EXPECT_EQ(report.ToJson()["lookahead_frames_by_subject"]["actor2"], nlohmann::json({16}));
+  ASSERT_FALSE(report.processing_ms.empty());
+  // Timed from the frame that let each skeleton out: never before it was sent, and not a
+  // whole lookahead difference (12 frames, 100 ms) after.
+  EXPECT_GE(*std::min_element(report.processing_ms.begin(), report.processing_ms.end()), 0.0);
+  EXPECT_LT(report.processing.p50_ms, 100.0);
+}
+
 // A replay pushing into a CURVE daemon's PULL input with a key the daemon does not allow
 // stops with an error naming the allow-list, where its frames used to queue for a peer that
 // never took them (and a send could wait for ever); with an allowed key every frame is solved.

@@ -102,5 +102,23 @@ TEST(ReplayReportTest, ATakeSentAtAnotherRateSaysItIsNotResampled) {
   EXPECT_EQ(report.FormatTable().find("not resampled"), std::string::npos);
 }
 
+// A reload that changed a subject's lookahead shows as its Ks in turn; a replay that did
+// not listen (--from "") says nothing of K (it printed "lookahead K = 0").
+TEST(ReplayReportTest, TheLookaheadIsGivenPerSubjectWhenItVariesAndNotAtAllUnmeasured) {
+  ReplayReport report;
+  report.subjects = 2;
+  report.rate_hz = report.capture_rate_hz = 120;
+  report.listened = true;
+  report.lookahead = 12;
+  EXPECT_NE(report.FormatTable().find("lookahead K = 12"), std::string::npos);
+  report.lookahead_by_subject = {{"actor1", {12, 20}}, {"actor2", {12}}};
+  EXPECT_NE(report.FormatTable().find("lookahead K = actor1 12 -> 20, actor2 12"),
+            std::string::npos)
+      << report.FormatTable();
+  EXPECT_EQ(report.ToJson()["lookahead_frames_by_subject"]["actor1"], nlohmann::json({12, 20}));
+  report.listened = false;
+  EXPECT_EQ(report.FormatTable().find("lookahead"), std::string::npos) << report.FormatTable();
+}
+
 }  // namespace
 }  // namespace mocapd
