@@ -114,6 +114,11 @@ std::shared_ptr<const Skeleton> SolvedCharacter(std::shared_ptr<const Skeleton> 
 
 }  // namespace
 
+bool CharacterTravels(const Skeleton& character) {
+  return std::any_of(character.joints().begin(), character.joints().end(),
+                     [](const Joint& j) { return j.type == JointType::kFree; });
+}
+
 void RetargetOptions::Validate() const {
   auto require = [](bool ok, const char* field, const char* rule) {
     if (!ok)
@@ -169,6 +174,8 @@ Retargeter::Retargeter(std::shared_ptr<const Skeleton> source,
   ForwardKinematics(*source_, RestPose(*source_), &source_rest);
   ForwardKinematics(*target_, RestPose(*target_), &target_rest);
   source_root_rest_ = source_rest.R_WJ[static_cast<size_t>(map_.source_root)];
+  in_place_ = !CharacterTravels(*target_);
+  target_root_rest_ = target_rest.p_WJ[static_cast<size_t>(map_.target_root)];
   std::vector<MarkerDefinition> defs;
   std::vector<double> region_weight;
   for (size_t b = 0; b < map_.bones.size(); ++b) {
@@ -400,6 +407,15 @@ const Pose& Retargeter::Retarget(const Pose& source_pose) {
       source_fk_.p_WJ[j] = to_character_world_ * source_fk_.p_WJ[j];
       source_fk_.R_WJ[j] = to_character_world_ * source_fk_.R_WJ[j];
     }
+  }
+  if (in_place_) {
+    // A character that cannot travel reached for the actor's scaled world positions
+    // metres away and bent every joint trying: the actor is moved so that its scaled
+    // pelvis stays where the character's stands, and the body moves about it. A walking
+    // foot then slides back under the body, faster than a contact, so it is not planted.
+    const Vec3 shift =
+        target_root_rest_ / scale_ - source_fk_.p_WJ[static_cast<size_t>(map_.source_root)];
+    for (Vec3& p : source_fk_.p_WJ) p += shift;
   }
   const Vec3& up = map_.target_up;
   // Contacts: the actor's ankles against the lowest ankle height seen so far.

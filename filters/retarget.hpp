@@ -64,6 +64,10 @@ struct RetargetMap {
   std::string report;  ///< Human-readable: what matched what, what was left at rest.
 };
 
+/// Whether a character can travel: some joint of it translates (a root with position
+/// channels, or a pelvis under a fixed root). One that cannot is retargeted in place.
+bool CharacterTravels(const Skeleton& character);
+
 /// The world axis nearest a direction, signed (+Z for a capture's slightly tilted up).
 Vec3 NearestAxis(const Vec3& direction);
 /// An axis as "+x", "-z"...: the nearest axis to `direction`.
@@ -159,6 +163,10 @@ class Retargeter {
   std::span<const double> weights() const { return weights_; }
   /// The leg-length ratio target / source.
   double scale() const { return scale_; }
+  /// The character has no joint that translates (its root only turns): the actor's pelvis
+  /// is held where the character's stands, and the body moves about it (its travel, and
+  /// its rise and fall, left out).
+  bool in_place() const { return in_place_; }
   /// Forgets the history (contacts, warm start, the actor's world).
   void Reset();
   /// The rotation from the actor's world into the character's, found on the first pose
@@ -190,6 +198,8 @@ class Retargeter {
   RetargetMap map_;
   RetargetOptions options_;
   double scale_ = 1.0;
+  bool in_place_ = false;
+  Vec3 target_root_rest_ = Vec3::Zero();  ///< Where an in-place character's pelvis stands.
   std::vector<SurfacePoint> points_;
   std::unique_ptr<MarkerSet> markers_;  ///< Virtual markers on the target.
   int root_marker_ = -1;

@@ -327,7 +327,10 @@ RetargetMap MakeRetargetMap(const Skeleton& source, std::span<const BvhEndSite> 
       (missing.empty() ? "" : "  roles on only one rig (not tracked): " + missing + "\n") +
       (uncovered.empty() ? ""
                          : "  character joints without surface points (solved, not tracked): " +
-                               uncovered + "\n");
+                               uncovered + "\n") +
+      (CharacterTravels(target) ? ""
+                                : "  the character has no joint that translates (its root only "
+                                  "turns): retargeted in place, the actor's travel left out\n");
   return map;
 }
 

@@ -920,9 +920,12 @@ void LogStartup(const DaemonConfig& c, int http_port) {
                        : "model " + s.model_path);
     // The character it drives, and how it matched: the operator saw none of it.
     if (s.character)
-      spdlog::info("    drives character {} ({} joints, {} bones matched, scale {:.3f})",
+      spdlog::info("    drives character {} ({} joints, {} bones matched, scale {:.3f}{})",
                    s.character_path, s.character->num_joints(), s.character_map.bones.size(),
-                   s.character_map.target_leg_length_m / s.character_map.source_leg_length_m);
+                   s.character_map.target_leg_length_m / s.character_map.source_leg_length_m,
+                   CharacterTravels(*s.character)
+                       ? ""
+                       : "; in place: its root only turns, the actor's travel left out");
   }
   if (http_port > 0) {
     spdlog::info(

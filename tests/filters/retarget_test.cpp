@@ -318,6 +318,34 @@ TEST_F(RetargetTest, AOneFrameCharacterUnderAFloorRootTravelsOnItsPelvis) {
 // under a floor-level root joint (Bandai's joint_Root) its height was taken as the leg
 // length, so a one-frame character file (the pelvis where the take starts) and the same
 // rig with its animation (the pelvis at its OFFSET) got two scales (0.928 and 0.965).
+// A character whose root only turns (a BVH root with rotation channels alone) cannot
+// travel: it reached for the walking actor's positions metres away, its joints bent 46 cm
+// out of the actor's pose. It now moves in place: the pose is the actor's (the same joint
+// angles, as for the same rig with a free root), the root stays where it stands.
+TEST_F(RetargetTest, ACharacterWhoseRootOnlyTurnsMovesInPlace) {
+  std::vector<Joint> joints(source_->joints().begin(), source_->joints().end());
+  joints[0].type = JointType::kBall;
+  const auto fixed = std::make_shared<const Skeleton>(std::move(joints));
+  ASSERT_FALSE(CharacterTravels(*fixed));
+  ASSERT_TRUE(CharacterTravels(*source_));
+  const RetargetMap map = MakeRetargetMap(*source_, {}, *fixed, {});
+  EXPECT_NE(map.report.find("retargeted in place"), std::string::npos) << map.report;
+  Retargeter r(source_, fixed, map, NoContacts());
+  EXPECT_TRUE(r.in_place());
+  const Vec3 start = r.kinematics().p_WJ[0];
+  double worst_deg = 0.0, travelled_m = 0.0;
+  for (size_t f = 0; f < motion_.size(); ++f) {
+    const Pose& out = r.Retarget(motion_[f]);
+    if (f >= 12) worst_deg = std::max(worst_deg, MaxRotationDifferenceDeg(out, motion_[f]));
+    travelled_m = std::max(travelled_m, (r.kinematics().p_WJ[0] - start).norm());
+  }
+  // The same bound as the identical rigs' (the solve's pull lags the fastest joint).
+  EXPECT_LT(worst_deg, 4.0);
+  EXPECT_LT(travelled_m, 1e-9);
+  // The actor walked far enough that reaching for it could not have kept the pose.
+  EXPECT_GT((motion_.back().translation[0] - motion_.front().translation[0]).norm(), 1.0);
+}
+
 TEST_F(RetargetTest, TheScaleIsTheLegsLengthWhereverThePelvisStands) {
   for (const double pelvis_height_m : {0.4, 0.9, 1.6}) {
     std::vector<Joint> joints;
