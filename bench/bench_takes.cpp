@@ -2,7 +2,9 @@
 #include "bench/bench_takes.hpp"
 
 #include <algorithm>
+#include <cstdio>
 #include <cstdlib>
+#include <exception>
 #include <filesystem>
 
 #include "formats/marker_layout.hpp"
@@ -87,6 +89,15 @@ C3dTake FillGaps(const C3dTake& in, bool cubic) {
     }
   }
   return out;
+}
+
+int RunReportingErrors(const char* program, int (*body)(int, char**), int argc, char** argv) {
+  try {
+    return body(argc, argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "%s: %s\n", program, e.what());
+    return 1;
+  }
 }
 
 }  // namespace mocapd::bench

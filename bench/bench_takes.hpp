@@ -32,4 +32,8 @@ BenchTake LoadBenchTake(const std::string& bvh_path, double rate_hz);
 /// a gap open at either end holds the nearest sample.
 C3dTake FillGaps(const C3dTake& in, bool cubic);
 
+/// Runs a benchmark's body and turns what it throws (a take that cannot be read, a bad
+/// option value) into "PROGRAM: message" and exit status 1, not std::terminate.
+int RunReportingErrors(const char* program, int (*body)(int, char**), int argc, char** argv);
+
 }  // namespace mocapd::bench

@@ -144,7 +144,7 @@ Outcome Run(const Case& c, const MarkerSetDefinition& set, double wobble_m) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
+int RunProgram(int argc, char** argv) {
   std::vector<std::string> sets, paths;
   std::vector<double> wobbles;
   for (int i = 1; i < argc; ++i) {
@@ -212,4 +212,8 @@ int main(int argc, char** argv) {
     }
   }
   return 0;
+}
+
+int main(int argc, char** argv) {
+  return mocapd::bench::RunReportingErrors("calibration_accuracy", RunProgram, argc, argv);
 }

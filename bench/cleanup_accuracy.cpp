@@ -812,10 +812,5 @@ int Run(int argc, char** argv) {
 }
 
 int main(int argc, char** argv) {
-  try {
-    return Run(argc, argv);
-  } catch (const std::exception& e) {  // a take that cannot be read, a bad trace marker...
-    std::fprintf(stderr, "cleanup_accuracy: %s\n", e.what());
-    return 1;
-  }
+  return mocapd::bench::RunReportingErrors("cleanup_accuracy", Run, argc, argv);
 }

@@ -154,7 +154,7 @@ C3dTake SynthesizedTake(double seconds) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
+int RunProgram(int argc, char** argv) {
   uint64_t seed = 1;
   double fraction = 0.06;
   int lookahead = 12;
@@ -285,4 +285,8 @@ int main(int argc, char** argv) {
     return better ? 0 : 1;
   }
   return 0;
+}
+
+int main(int argc, char** argv) {
+  return mocapd::bench::RunReportingErrors("gapfill_accuracy", RunProgram, argc, argv);
 }

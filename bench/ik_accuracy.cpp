@@ -69,7 +69,7 @@ Result Solve(const bench::BenchTake& take, double noise_m) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
+int RunProgram(int argc, char** argv) {
   double noise_mm = 1.0;
   std::vector<std::string> paths;
   for (int i = 1; i < argc; ++i) {
@@ -117,4 +117,8 @@ int main(int argc, char** argv) {
       "every joint p99 <= 10 deg): %s\n",
       ok ? "PASS" : "FAIL");
   return ok ? 0 : 1;
+}
+
+int main(int argc, char** argv) {
+  return mocapd::bench::RunReportingErrors("ik_accuracy", RunProgram, argc, argv);
 }

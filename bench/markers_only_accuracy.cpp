@@ -98,7 +98,7 @@ RowScore Clean(const SubjectModel& subject, const std::vector<int>& point_of_mar
 
 }  // namespace
 
-int main(int argc, char** argv) {
+int RunProgram(int argc, char** argv) {
   std::string set_name = "plug-in-gait-full";
   std::string severity = "medium";
   int seeds = 2, lookahead = 12;
@@ -189,4 +189,8 @@ int main(int argc, char** argv) {
               severity.c_str(), lookahead, seeds, given_all.position_cm(), given_all.marker_mm(),
               calibrated_all.position_cm(), calibrated_all.marker_mm());
   return 0;
+}
+
+int main(int argc, char** argv) {
+  return mocapd::bench::RunReportingErrors("markers_only_accuracy", RunProgram, argc, argv);
 }

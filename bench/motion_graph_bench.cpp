@@ -92,7 +92,7 @@ std::vector<Pair> ChoosePairs(const MotionLibrary& lib, const GraphConnectivity&
 
 }  // namespace
 
-int main(int argc, char** argv) {
+int RunProgram(int argc, char** argv) {
   GraphBuildOptions build;
   double walk_seconds = 600.0;
   bool quick = false;
@@ -306,4 +306,8 @@ int main(int argc, char** argv) {
   std::printf("  %-36s mean %.2f  worst frame %.2f  (%d jumps)\n", "humanoid walk (other skeleton)",
               r.velocity_difference_cm, r.worst_velocity_difference_cm, r.jumps);
   return 0;
+}
+
+int main(int argc, char** argv) {
+  return mocapd::bench::RunReportingErrors("motion_graph_bench", RunProgram, argc, argv);
 }

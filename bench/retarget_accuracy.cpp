@@ -171,8 +171,13 @@ Scores Run(const bench::BenchTake& take, std::shared_ptr<const Skeleton> charact
 
 }  // namespace
 
-int main(int argc, char** argv) {
+int RunBenchmark(int argc, char** argv) {
   std::vector<std::string> paths(argv + 1, argv + argc);
+  for (const std::string& path : paths)
+    if (path.starts_with("-")) {
+      std::fputs("Usage: retarget_accuracy [TAKE.bvh ...]\n", path == "--help" ? stdout : stderr);
+      return path == "--help" ? 0 : 2;
+    }
   if (paths.empty()) paths = bench::SharedBvhTakes();
   if (paths.empty()) paths.emplace_back("");
   std::map<std::string, Scores> results;
@@ -197,4 +202,8 @@ int main(int argc, char** argv) {
                 Quantile(s.times_us, 0.5), Quantile(s.times_us, 0.99));
   }
   return 0;
+}
+
+int main(int argc, char** argv) {
+  return mocapd::bench::RunReportingErrors("retarget_accuracy", RunBenchmark, argc, argv);
 }

@@ -3,7 +3,9 @@
 // ZeroMQ hops, as a frame and its skeleton make), paced at 120 Hz like a capture feed
 // so the idle wake-ups are included. Prints the round-trip p50/p90/p99/max.
 #include <chrono>
+#include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <string>
 #include <thread>
 #include <vector>
@@ -14,6 +16,10 @@
 int main(int argc, char** argv) {
   const int count = argc > 1 ? std::atoi(argv[1]) : 2400;
   const double rate_hz = argc > 2 ? std::atof(argv[2]) : 120.0;
+  if (count < 1 || !(rate_hz > 0) || !std::isfinite(rate_hz)) {
+    std::fprintf(stderr, "Usage: zmq_loopback_latency [MESSAGES >= 1] [RATE_HZ > 0] [spin]\n");
+    return 2;
+  }
   // "spin": both ends poll without blocking, as the daemon's data plane does with
   // input.busy_poll; otherwise they block in recv like a default consumer.
   const bool spin = argc > 3 && std::string(argv[3]) == "spin";
