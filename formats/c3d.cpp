@@ -615,6 +615,8 @@ class Parser {
            std::to_string(frames) + " frames declared but no points or analog channels to store");
     }
     take.Allocate(static_cast<int>(frames));
+    ReadAnalogParameters(analog_values, static_cast<size_t>(frames), &take.analog);
+    const bool unsigned_analog = take.analog.format == "UNSIGNED";
     const double unit_scale = std::abs(scale);
     for (int64_t f = 0; f < frames; ++f) {
       Require(reader_.Seek(data_start + static_cast<size_t>(f) * frame_bytes), "data", "truncated");
@@ -650,8 +652,56 @@ class Parser {
         take.residuals[idx] = valid ? residual : -1.0f;
         if (valid) take.positions[idx] = Vec3(xyz[0], xyz[1], xyz[2]) * take.metres_per_unit;
       }
+      float* analog = take.analog.values.data() + static_cast<size_t>(f) * analog_values;
+      for (size_t a = 0; a < analog_values; ++a) {
+        bool ok = true;
+        if (take.float_storage) {
+          ok = reader_.ReadF32(&analog[a]);
+        } else {
+          int16_t v = 0;
+          ok = reader_.ReadI16(&v);
+          analog[a] = unsigned_analog ? static_cast<float>(static_cast<uint16_t>(v))
+                                      : static_cast<float>(v);
+        }
+        Require(ok, "data", "truncated analog samples");
+      }
     }
     return take;
+  }
+
+  // What the analog values of each frame are: ANALOG:USED channels of samples_per_frame
+  // samples each, or, where USED does not divide the frame's count, that many channels of
+  // one sample (numbers kept either way, so a write gives back what was read).
+  void ReadAnalogParameters(size_t values_per_frame, size_t frames, C3dTake::Analog* analog) {
+    if (values_per_frame == 0) return;
+    size_t channels = values_per_frame;
+    if (const auto used = Number("ANALOG:USED"); used && *used >= 1 && *used <= 65535 &&
+                                                 *used == std::floor(*used) &&
+                                                 values_per_frame % static_cast<size_t>(*used) == 0)
+      channels = static_cast<size_t>(*used);
+    analog->samples_per_frame = static_cast<int>(values_per_frame / channels);
+    analog->labels = StringsContinued("ANALOG", "LABELS");
+    analog->descriptions = StringsContinued("ANALOG", "DESCRIPTIONS");
+    analog->units = StringsContinued("ANALOG", "UNITS");
+    analog->labels.resize(channels);
+    analog->descriptions.resize(channels);
+    analog->units.resize(channels);
+    for (size_t c = 0; c < channels; ++c)
+      if (analog->labels[c].empty()) analog->labels[c] = "analog_" + std::to_string(c + 1);
+    const std::vector<std::string> format = Strings("ANALOG:FORMAT");
+    if (!format.empty() && format.front() == "UNSIGNED") analog->format = "UNSIGNED";
+    const Parameter* offsets = Find("ANALOG:OFFSET");
+    const bool offsets_unsigned = analog->format == "UNSIGNED" && offsets && offsets->type == 2;
+    for (size_t c = 0; c < channels; ++c) {
+      const std::optional<double> scale = Number("ANALOG:SCALE", c);
+      double offset = Number("ANALOG:OFFSET", c).value_or(0.0);
+      if (offsets_unsigned && offset < 0) offset += 65536;
+      analog->scale.push_back(scale && std::isfinite(*scale) ? *scale : 1.0);
+      analog->offset.push_back(std::isfinite(offset) ? offset : 0.0);
+    }
+    const std::optional<double> gen_scale = Number("ANALOG:GEN_SCALE");
+    analog->gen_scale = gen_scale && std::isfinite(*gen_scale) ? *gen_scale : 1.0;
+    analog->values.assign(frames * values_per_frame, 0.0f);
   }
 
   std::span<const uint8_t> bytes_;
@@ -832,6 +882,7 @@ void C3dTake::Allocate(int frames) {
   residuals.assign(n, -1.0f);
   descriptions.resize(labels.size());
   model_output_kind.resize(labels.size());
+  analog = {};
 }
 
 double MetresPerUnit(const std::string& units) {
@@ -858,6 +909,19 @@ std::vector<uint8_t> EncodeC3d(const C3dTake& take, const C3dEncoding& encoding)
   if (take.positions.size() != static_cast<size_t>(take.num_frames) * points ||
       take.residuals.size() != take.positions.size())
     throw std::invalid_argument("C3D writer: positions/residuals do not match frames x points");
+  const C3dTake::Analog& analog_in = take.analog;
+  if (analog_in.channels() > 0 && (analog_in.samples_per_frame < 1 ||
+                                   analog_in.values.size() != static_cast<size_t>(take.num_frames) *
+                                                                  analog_in.values_per_frame() ||
+                                   analog_in.scale.size() != analog_in.channels() ||
+                                   analog_in.offset.size() != analog_in.channels() ||
+                                   analog_in.descriptions.size() != analog_in.channels() ||
+                                   analog_in.units.size() != analog_in.channels()))
+    throw std::invalid_argument(
+        "C3D writer: the analog channels' values or parameters do not match frames x channels");
+  if (analog_in.values_per_frame() > 65535 || analog_in.channels() > 255)
+    throw std::invalid_argument(
+        "C3D writer: too many analog channels (at most 255, of 65535 values a frame)");
   if (!(take.rate_hz > 0.0)) throw std::invalid_argument("C3D writer: rate must be > 0");
   if (points > 65535) throw std::invalid_argument("C3D writer: too many points");
   if (encoding.integer_storage && !(encoding.integer_scale > 0.0))
@@ -921,9 +985,34 @@ std::vector<uint8_t> EncodeC3d(const C3dTake& take, const C3dEncoding& encoding)
     if (!take.model_output_kind[i].empty())
       outputs[take.model_output_kind[i]].push_back(take.labels[i]);
   for (const auto& [kind, labels] : outputs) WriteStrings(pw, params, order, 1, kind, labels);
-  WriteParameter(pw, params, order, 2, "USED", 2, {}, Int16Data(layout, {0}));
+  const C3dTake::Analog& analog = take.analog;
+  const size_t analog_values = analog.values_per_frame();
+  WriteParameter(pw, params, order, 2, "USED", 2, {},
+                 Int16Data(layout, {static_cast<int16_t>(analog.channels())}));
   WriteParameter(pw, params, order, 2, "RATE", 4, {},
-                 FloatData(layout, {static_cast<float>(take.rate_hz)}));
+                 FloatData(layout, {static_cast<float>(take.rate_hz *
+                                                       std::max(analog.samples_per_frame, 1))}));
+  if (analog_values > 0) {
+    WriteStrings(pw, params, order, 2, "LABELS", analog.labels);
+    WriteStrings(pw, params, order, 2, "DESCRIPTIONS", analog.descriptions);
+    WriteStrings(pw, params, order, 2, "UNITS", analog.units);
+    WriteStrings(pw, params, order, 2, "FORMAT", {analog.format});
+    std::vector<uint8_t> scales, offsets, gen_scale;
+    ByteWriter scale_writer(&scales, layout.order, layout.floats),
+        offset_writer(&offsets, layout.order, layout.floats),
+        gen_writer(&gen_scale, layout.order, layout.floats);
+    for (size_t c = 0; c < analog.channels(); ++c) {
+      scale_writer.WriteF32(static_cast<float>(analog.scale[c]));
+      // An unsigned format's offsets are 16-bit words read as 0..65535.
+      offset_writer.WriteI16(static_cast<int16_t>(
+          static_cast<uint16_t>(static_cast<int64_t>(std::llround(analog.offset[c])) & 0xffff)));
+    }
+    gen_writer.WriteF32(static_cast<float>(analog.gen_scale));
+    const std::vector<int> per_channel = {static_cast<int>(analog.channels())};
+    WriteParameter(pw, params, order, 2, "SCALE", 4, per_channel, scales);
+    WriteParameter(pw, params, order, 2, "OFFSET", 2, per_channel, offsets);
+    WriteParameter(pw, params, order, 2, "GEN_SCALE", 4, {}, gen_scale);
+  }
   // The standard's frame range past the header's 65535 (POINT:FRAMES above is this
   // reader's own way, which other readers may not share): low word, high word.
   if (take.num_frames > 0) {
@@ -958,13 +1047,13 @@ std::vector<uint8_t> EncodeC3d(const C3dTake& take, const C3dEncoding& encoding)
   w.WriteU8(2);
   w.WriteU8(0x50);
   w.WriteU16(static_cast<uint16_t>(points));
-  w.WriteU16(0);
+  w.WriteU16(static_cast<uint16_t>(analog_values));
   w.WriteU16(static_cast<uint16_t>(first));
   w.WriteU16(static_cast<uint16_t>(long_take ? 65535 : first + take.num_frames - 1));
   w.WriteU16(10);
   w.WriteF32(scale);
   w.WriteU16(static_cast<uint16_t>(data_block));
-  w.WriteU16(0);
+  w.WriteU16(static_cast<uint16_t>(analog_values > 0 ? analog.samples_per_frame : 0));
   w.WriteF32(static_cast<float>(take.rate_hz));
   w.PadTo(kBlock);
   out.insert(out.end(), params.begin(), params.end());
@@ -992,6 +1081,18 @@ std::vector<uint8_t> EncodeC3d(const C3dTake& take, const C3dEncoding& encoding)
         w.WriteF32(static_cast<float>(v.z()));
         w.WriteF32(valid ? take.residuals[idx] : -1.0f);
       }
+    }
+    const float* values = analog.values.data() + static_cast<size_t>(f) * analog_values;
+    for (size_t a = 0; a < analog_values; ++a) {
+      if (!encoding.integer_storage) {
+        w.WriteF32(values[a]);
+        continue;
+      }
+      const double v = std::round(values[a]);
+      const bool fits = analog.format == "UNSIGNED" ? v >= 0 && v <= 65535 : std::abs(v) <= 32767;
+      if (!fits)
+        throw std::invalid_argument("C3D writer: an analog sample does not fit 16-bit storage");
+      w.WriteI16(static_cast<int16_t>(static_cast<uint16_t>(static_cast<int64_t>(v) & 0xffff)));
     }
   }
   w.PadTo((out.size() + kBlock - 1) / kBlock * kBlock);

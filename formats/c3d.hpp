@@ -2,8 +2,10 @@
 // header, the parameter section and the 3D point data of Intel, DEC and MIPS files in
 // integer or float storage; writes float Intel files. Positions are converted to metres
 // on read and back to the take's units on write, so a write->read round trip is exact.
+// Analog channels are kept as stored and written back, so a cleaned take keeps them.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <span>
 #include <stdexcept>
@@ -44,6 +46,23 @@ struct C3dTake {
   std::vector<Vec3> positions;
   /// residual[frame * num_points() + point] as stored (file units); negative when missing.
   std::vector<float> residuals;
+  /// Analog channels (force plates, EMG) carried through as the file stored them, so a
+  /// cleaned take keeps them: raw numbers, which ANALOG:SCALE, OFFSET and GEN_SCALE (kept
+  /// here, written back as read) turn into units. A take without analog data has no
+  /// labels and no values.
+  struct Analog {
+    std::vector<std::string> labels, descriptions, units;
+    std::vector<double> scale, offset;  ///< Per channel (offset unsigned where format is).
+    double gen_scale = 1.0;
+    std::string format = "SIGNED";  ///< ANALOG:FORMAT: how integer storage holds the numbers.
+    int samples_per_frame = 0;      ///< Analog samples per point frame.
+    /// values[(frame * samples_per_frame + sample) * channels() + channel].
+    std::vector<float> values;
+    size_t channels() const { return labels.size(); }
+    size_t values_per_frame() const {
+      return channels() * static_cast<size_t>(std::max(samples_per_frame, 0));
+    }
+  } analog;
 
   int num_points() const { return static_cast<int>(labels.size()); }
   const Vec3& at(int frame, int point) const { return positions[Index(frame, point)]; }

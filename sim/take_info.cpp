@@ -31,6 +31,8 @@ TakeInfo InspectTake(const std::string& path) {
     info.rate_hz = take.rate_hz;
     info.units = take.units;
     info.processor = take.processor;
+    info.analog_channels = take.analog.labels;
+    info.analog_samples_per_frame = take.analog.samples_per_frame;
     info.origin_samples_missing = take.origin_samples_missing;
     info.notes = take.notes;
     for (int p = 0; p < take.num_points(); ++p) {
@@ -78,6 +80,14 @@ std::string FormatTakeInfo(const TakeInfo& info) {
   out += line;
   if (info.format == "c3d") {
     out += "  processor " + info.processor + "\n";
+    if (!info.analog_channels.empty()) {
+      std::snprintf(line, sizeof(line), "  analog  %zu channels x %d samples a frame (%.6g Hz):",
+                    info.analog_channels.size(), info.analog_samples_per_frame,
+                    info.rate_hz * info.analog_samples_per_frame);
+      out += line;
+      for (const std::string& label : info.analog_channels) out += " " + label;
+      out += "\n";
+    }
     for (const std::string& note : info.notes) out += "  note    " + note + "\n";
     if (info.origin_samples_missing > 0)
       out += "  " + std::to_string(info.origin_samples_missing) +
@@ -106,6 +116,8 @@ nlohmann::json TakeInfoJson(const TakeInfo& info) {
                       {"units", info.units}};
   if (info.format == "c3d") {
     j["processor"] = info.processor;
+    j["analog"] = {{"channels", info.analog_channels},
+                   {"samples_per_frame", info.analog_samples_per_frame}};
     j["origin_samples_missing"] = info.origin_samples_missing;
     j["notes"] = info.notes;
     j["points"] = nlohmann::json::array();

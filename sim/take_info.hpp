@@ -23,11 +23,13 @@ struct TakeInfo {
   int frames = 0;
   double rate_hz = 0.0;
   std::string units;
-  std::string processor;               ///< C3D only
-  std::vector<PointInfo> points;       ///< C3D only
-  int64_t origin_samples_missing = 0;  ///< C3D only: samples at (0, 0, 0) read as missing
-  std::vector<std::string> notes;      ///< C3D only: the reader's notes (C3dTake::notes)
-  std::vector<std::string> joints;     ///< BVH only: "name (type)"
+  std::string processor;                     ///< C3D only
+  std::vector<std::string> analog_channels;  ///< C3D only: the analog channels' labels.
+  int analog_samples_per_frame = 0;          ///< C3D only.
+  std::vector<PointInfo> points;             ///< C3D only
+  int64_t origin_samples_missing = 0;        ///< C3D only: samples at (0, 0, 0) read as missing
+  std::vector<std::string> notes;            ///< C3D only: the reader's notes (C3dTake::notes)
+  std::vector<std::string> joints;           ///< BVH only: "name (type)"
   int end_sites = 0;
 };
 

@@ -464,6 +464,62 @@ TEST(C3dTest, AnAnalogCountTheDataContradictsGivesWayToTheParametersWithANote) {
   ReadWithOneNote(both, take, "POINT:USED says 1 points, the header 3");
 }
 
+// A take's analog channels (force plates, EMG) come through a read and a write as the
+// file stored them, with what turns them into units: the cleaned C3D of `mocapd process`
+// lost them all (160 values a frame read, 0 written).
+TEST(C3dTest, AnalogChannelsSurviveAWriteAndARead) {
+  C3dTake take = MakeTake(3, 20);
+  C3dTake::Analog& analog = take.analog;
+  analog.labels = {"Fx1", "Fy1", "EMG1"};
+  analog.descriptions = {"force x", "force y", ""};
+  analog.units = {"N", "N", "V"};
+  analog.scale = {0.5, -0.25, 0.0009765625};  // the file holds float32: exact ones
+  analog.offset = {2048, 0, 7};
+  analog.gen_scale = 2.0;
+  analog.samples_per_frame = 4;
+  for (size_t i = 0; i < 20u * analog.values_per_frame(); ++i)
+    analog.values.push_back(static_cast<float>(static_cast<int>(i * 37 % 4001) - 2000));
+  for (auto processor : {C3dEncoding::Processor::kIntel, C3dEncoding::Processor::kDec,
+                         C3dEncoding::Processor::kMips}) {
+    for (bool integer : {false, true}) {
+      C3dEncoding encoding;
+      encoding.processor = processor;
+      encoding.integer_storage = integer;
+      const C3dTake dut = ParseC3d(EncodeC3d(take, encoding), "analog.c3d");
+      SCOPED_TRACE(dut.processor + (integer ? " int" : " float"));
+      ExpectSameTake(take, dut);
+      EXPECT_TRUE(dut.notes.empty());
+      EXPECT_EQ(dut.analog.labels, analog.labels);
+      EXPECT_EQ(dut.analog.descriptions, analog.descriptions);
+      EXPECT_EQ(dut.analog.units, analog.units);
+      EXPECT_EQ(dut.analog.scale, analog.scale);
+      EXPECT_EQ(dut.analog.offset, analog.offset);
+      EXPECT_EQ(dut.analog.gen_scale, analog.gen_scale);
+      EXPECT_EQ(dut.analog.samples_per_frame, 4);
+      EXPECT_EQ(dut.analog.values, analog.values);
+    }
+  }
+  // Read back and written again: the same bytes.
+  const C3dTake once = ParseC3d(EncodeC3d(take), "analog.c3d");
+  EXPECT_EQ(EncodeC3d(once), EncodeC3d(take));
+  // Integer storage of an unsigned format holds 0..65535, and its offsets read unsigned.
+  take.analog.format = "UNSIGNED";
+  take.analog.offset = {40000, 0, 7};
+  for (float& v : take.analog.values) v += 30000.0f;  // 28000..32000: inside either range
+  take.analog.values[5] = 65535.0f;
+  C3dEncoding integer;
+  integer.integer_storage = true;
+  const C3dTake unsigned_read = ParseC3d(EncodeC3d(take, integer), "unsigned.c3d");
+  EXPECT_EQ(unsigned_read.analog.format, "UNSIGNED");
+  EXPECT_EQ(unsigned_read.analog.offset, take.analog.offset);
+  EXPECT_EQ(unsigned_read.analog.values, take.analog.values);
+  take.analog.values[5] = 70000.0f;
+  EXPECT_THROW((void)EncodeC3d(take, integer), std::invalid_argument);
+  // Values that do not match frames x channels x samples are refused, not written short.
+  take.analog.values.pop_back();
+  EXPECT_THROW((void)EncodeC3d(take), std::invalid_argument);
+}
+
 // A C writer ends a label with a NUL and may leave its buffer's bytes after it: the label
 // ends at the NUL ("M0\0XYZ" was read as "M0\0XYZ", matched no subject marker and was
 // written by calibrate as "M0XYZ").

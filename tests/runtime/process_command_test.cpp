@@ -51,6 +51,32 @@ double MeanJointErrorM(const testing::HumanoidFixture& f, const BvhTake& solved)
   return errors.mean_position_error_m();
 }
 
+// A take's analog channels (force plates, EMG) are in the cleaned C3D as they came: the
+// cleaned file held none of them, with no word.
+TEST(ProcessCommandTest, TheCleanedC3dKeepsTheTakesAnalogChannels) {
+  const auto f = testing::MakeHumanoidFixture("walk", 1.0, 120.0);
+  const std::string dir = testing::TempDir("process_analog");
+  WriteFixtureSubject(f, dir + "/actor.toml");
+  C3dTake take = f.take;
+  C3dTake::Analog& analog = take.analog;
+  analog.labels = {"Fz1", "Fz2"};
+  analog.descriptions = analog.units = {"", ""};
+  analog.scale = {0.5, 0.5};
+  analog.offset = {0.0, 0.0};
+  analog.samples_per_frame = 10;
+  for (size_t i = 0; i < static_cast<size_t>(take.num_frames) * 20; ++i)
+    analog.values.push_back(static_cast<float>(i % 977));
+  WriteC3d(dir + "/take.c3d", take);
+  ProcessCommandOptions options = OptionsIn(dir);
+  options.output_c3d = dir + "/cleaned.c3d";
+  std::ostringstream out;
+  (void)RunProcessCommand(options, out);
+  const C3dTake cleaned = ReadC3d(dir + "/cleaned.c3d");
+  EXPECT_EQ(cleaned.analog.labels, analog.labels);
+  EXPECT_EQ(cleaned.analog.samples_per_frame, 10);
+  EXPECT_EQ(cleaned.analog.values, analog.values);
+}
+
 // The command fails with an error containing why (and names, if given) and writes no BVH.
 void ExpectRefusedWritingNothing(const ProcessCommandOptions& options, const std::string& why,
                                  const std::string& names = "") {

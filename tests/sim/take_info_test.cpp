@@ -43,6 +43,29 @@ TEST(TakeInfoTest, CountsMissingSamplesAndGapsPerMarker) {
   EXPECT_NE(FormatTakeInfo(info).find("30.00%"), std::string::npos);
 }
 
+// A C3D's analog channels are named with their rate (a take's force plates were invisible
+// to `info`, and lost without a word by `process --out-c3d`).
+TEST(TakeInfoTest, NamesAC3dsAnalogChannels) {
+  C3dTake take;
+  take.labels = {"A"};
+  take.rate_hz = 100.0;
+  take.Allocate(3);
+  take.analog.labels = {"Fz1", "EMG1"};
+  take.analog.descriptions = take.analog.units = {"", ""};
+  take.analog.scale = {1.0, 1.0};
+  take.analog.offset = {0.0, 0.0};
+  take.analog.samples_per_frame = 10;
+  take.analog.values.assign(3 * 2 * 10, 1.0f);
+  const std::string path = testing::TempDir("info_analog") + "/analog.c3d";
+  WriteC3d(path, take);
+  const TakeInfo info = InspectTake(path);
+  EXPECT_NE(
+      FormatTakeInfo(info).find("analog  2 channels x 10 samples a frame (1000 Hz): Fz1 EMG1"),
+      std::string::npos)
+      << FormatTakeInfo(info);
+  EXPECT_EQ(TakeInfoJson(info)["analog"]["samples_per_frame"], 10);
+}
+
 TEST(TakeInfoTest, DescribesBvhJoints) {
   const TakeInfo info = InspectTake(std::string(MOCAPD_TEST_DATA_DIR) + "/tiny_static_root.bvh");
   EXPECT_EQ(info.format, "bvh");
