@@ -60,19 +60,28 @@ TEST(C3dTest, FloatIntelWriteThenReadIsExact) {
   EXPECT_EQ(EncodeC3d(dut), EncodeC3d(take));
 }
 
-TEST(C3dTest, ReadsDecMipsAndIntegerFiles) {
-  const C3dTake take = MakeTake(5, 12);
+// The take written in every processor's layout and both storages, then read back.
+std::vector<C3dTake> ReadInEveryEncoding(const C3dTake& take) {
+  std::vector<C3dTake> reads;
   for (auto processor : {C3dEncoding::Processor::kIntel, C3dEncoding::Processor::kDec,
                          C3dEncoding::Processor::kMips}) {
     for (bool integer : {false, true}) {
       C3dEncoding encoding;
       encoding.processor = processor;
       encoding.integer_storage = integer;
-      const C3dTake dut = ParseC3d(EncodeC3d(take, encoding), "mem");
-      SCOPED_TRACE(dut.processor + (integer ? " int" : " float"));
-      EXPECT_EQ(dut.float_storage, !integer);
-      ExpectSameTake(take, dut);
+      reads.push_back(ParseC3d(EncodeC3d(take, encoding), "mem"));
     }
+  }
+  return reads;
+}
+
+TEST(C3dTest, ReadsDecMipsAndIntegerFiles) {
+  const C3dTake take = MakeTake(5, 12);
+  const std::vector<C3dTake> reads = ReadInEveryEncoding(take);
+  for (size_t i = 0; i < reads.size(); ++i) {
+    SCOPED_TRACE(reads[i].processor + (reads[i].float_storage ? " float" : " int"));
+    EXPECT_EQ(reads[i].float_storage, i % 2 == 0);  // float, then integer, per processor
+    ExpectSameTake(take, reads[i]);
   }
 }
 
@@ -479,25 +488,18 @@ TEST(C3dTest, AnalogChannelsSurviveAWriteAndARead) {
   analog.samples_per_frame = 4;
   for (size_t i = 0; i < 20u * analog.values_per_frame(); ++i)
     analog.values.push_back(static_cast<float>(static_cast<int>(i * 37 % 4001) - 2000));
-  for (auto processor : {C3dEncoding::Processor::kIntel, C3dEncoding::Processor::kDec,
-                         C3dEncoding::Processor::kMips}) {
-    for (bool integer : {false, true}) {
-      C3dEncoding encoding;
-      encoding.processor = processor;
-      encoding.integer_storage = integer;
-      const C3dTake dut = ParseC3d(EncodeC3d(take, encoding), "analog.c3d");
-      SCOPED_TRACE(dut.processor + (integer ? " int" : " float"));
-      ExpectSameTake(take, dut);
-      EXPECT_TRUE(dut.notes.empty());
-      EXPECT_EQ(dut.analog.labels, analog.labels);
-      EXPECT_EQ(dut.analog.descriptions, analog.descriptions);
-      EXPECT_EQ(dut.analog.units, analog.units);
-      EXPECT_EQ(dut.analog.scale, analog.scale);
-      EXPECT_EQ(dut.analog.offset, analog.offset);
-      EXPECT_EQ(dut.analog.gen_scale, analog.gen_scale);
-      EXPECT_EQ(dut.analog.samples_per_frame, 4);
-      EXPECT_EQ(dut.analog.values, analog.values);
-    }
+  for (const C3dTake& dut : ReadInEveryEncoding(take)) {
+    SCOPED_TRACE(dut.processor + (dut.float_storage ? " float" : " int"));
+    ExpectSameTake(take, dut);
+    EXPECT_TRUE(dut.notes.empty());
+    EXPECT_EQ(dut.analog.labels, analog.labels);
+    EXPECT_EQ(dut.analog.descriptions, analog.descriptions);
+    EXPECT_EQ(dut.analog.units, analog.units);
+    EXPECT_EQ(dut.analog.scale, analog.scale);
+    EXPECT_EQ(dut.analog.offset, analog.offset);
+    EXPECT_EQ(dut.analog.gen_scale, analog.gen_scale);
+    EXPECT_EQ(dut.analog.samples_per_frame, 4);
+    EXPECT_EQ(dut.analog.values, analog.values);
   }
   // Read back and written again: the same bytes.
   const C3dTake once = ParseC3d(EncodeC3d(take), "analog.c3d");
