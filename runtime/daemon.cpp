@@ -930,7 +930,9 @@ void LogStartup(const DaemonConfig& c, int http_port) {
   if (http_port > 0) {
     spdlog::info(
         "control: http://{}:{}/health /subjects /metrics; watchdog {:.2f} s; stats every {:.2f} s",
-        c.http_address, http_port, c.watchdog_timeout_s, c.stats_interval_s);
+        // An IPv6 address goes in brackets in a URL (http://::1:8480/ opens nothing).
+        c.http_address.find(':') == std::string::npos ? c.http_address : "[" + c.http_address + "]",
+        http_port, c.watchdog_timeout_s, c.stats_interval_s);
   } else {
     spdlog::info("control: HTTP disabled; watchdog {:.2f} s", c.watchdog_timeout_s);
   }

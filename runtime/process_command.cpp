@@ -159,6 +159,14 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
     throw std::runtime_error(options.input_c3d + ": the take has no frames: nothing to process");
   for (const std::string& note : take.notes)
     out << "note: " << options.input_c3d << ": " << note << "\n";
+  // Said of the take, before any output: the cleanup's own check named an internal field
+  // (a C3D synthesized from a BVH whose Frame Time was 1e30).
+  if (!(take.rate_hz >= 1.0 && take.rate_hz <= 10000.0)) {
+    char rate[64];
+    std::snprintf(rate, sizeof(rate), "%.6g", take.rate_hz);
+    throw std::runtime_error(options.input_c3d + ": a capture rate of " + rate +
+                             " Hz; the cleanup runs at 1 to 10000 Hz (POINT:RATE)");
+  }
   const MarkerSet& markers = *subject.markers;
   // The map's own message says what is missing, not which take or subject it is about.
   const TakeMarkerMap map = [&] {

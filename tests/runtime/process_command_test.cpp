@@ -283,7 +283,7 @@ TEST(ProcessCommandTest, AnOutputOverTheTakeOrAnotherOutputIsRefusedAndTheTakeKe
 
 // A take the subject cannot be solved from at all gets an error naming the file, never a
 // rest-pose BVH reported as a success.
-TEST(ProcessCommandTest, RefusesATakeWithNoFramesOrNoSeenMarker) {
+TEST(ProcessCommandTest, RefusesATakeWithNoFramesNoSeenMarkerOrAnUnusableRate) {
   const auto f = testing::MakeHumanoidFixture("walk", 1.0, 60.0);
   const std::string dir = testing::TempDir("process_empty");
   WriteFixtureSubject(f, dir + "/actor.toml");
@@ -298,6 +298,10 @@ TEST(ProcessCommandTest, RefusesATakeWithNoFramesOrNoSeenMarker) {
   C3dTake empty = f.take;
   empty.Allocate(0);
   expect_refused(empty, "no frames");
+  // A rate the cleanup cannot run at is said of the take (it named CleanupOptions.rate_hz).
+  C3dTake glacial = f.take;
+  glacial.rate_hz = 1e-30;
+  expect_refused(glacial, "a capture rate of 1e-30 Hz; the cleanup runs at 1 to 10000 Hz");
 }
 
 TEST(ProcessCommandTest, WarnsOfALabelGivenToTwoPointsOrMatchingTwoSubjects) {
