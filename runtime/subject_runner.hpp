@@ -161,7 +161,8 @@ class SubjectRunner {
     return unstable_ && now_ns - last_unstable_event_ns_ <= kUnstableWithinNs;
   }
   /// How far the received samples sit from the model's markers in the solved pose (the
-  /// median over a frame's samples, averaged over about a second), metres; a model that
+  /// distance two thirds of a frame's samples come within, averaged over about a second),
+  /// metres; a model that
   /// does not fit the actor (another subject's, the wrong scale) keeps it high and is
   /// suspect.
   double model_distance_m() const { return model_distance_m_; }
@@ -312,6 +313,7 @@ class SubjectRunner {
   std::vector<Vec3> received_;           ///< Ring like stamps_: each held frame's samples.
   std::vector<double> distances_;        ///< Publish scratch: sample-to-model distances.
   double model_distance_m_ = 0.0;        // running mean over about a second
+  bool model_distance_fresh_ = false;    // the next frame's distance starts the mean (a swap)
   double model_distance_weight_ = 0.01;  // its weight per frame
   double model_suspect_m_ = 0.02;
   bool model_suspect_ = false;
