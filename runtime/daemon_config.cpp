@@ -471,6 +471,14 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
 
   if (!top.Has("subject"))
     top.Fail(nullptr, "subject", "no [[subject]] tables: name at least one subject to solve");
+  // A subject file given as the config (its one [subject] table and its [[joint]]s) read
+  // as "expected [[subject]] tables", which did not say what the file was.
+  if (root["subject"].is_table() && top.Has("joint"))
+    top.Fail(root["subject"].node(), "subject",
+             "this is a subject file (a [subject] table and [[joint]] tables), not a daemon "
+             "config: name it in a config's [[subject]] table as model = \"" +
+                 std::filesystem::path(source_name).filename().string() +
+                 "\" (config/mocapd.toml shows one)");
   // The files the config names, so that no live calibration writes over one: a
   // calibration_out naming the config itself replaced it with a subject file (the next
   // start failed), and one naming another subject's model or output overwrote it.

@@ -99,6 +99,17 @@ TEST(CalibrateCommandTest, WritesASubjectWhoseMarkersMatchTheTruth) {
   ExpectMarkersMatchTheTruth(f, model, motion);
 }
 
+// The command's error, or "no error".
+std::string ErrorOf(const CalibrateCommandOptions& options) {
+  std::ostringstream out;
+  try {
+    RunCalibrateCommand(options, out);
+  } catch (const std::runtime_error& e) {
+    return e.what();
+  }
+  return "no error";
+}
+
 TEST(CalibrateCommandTest, RefusesTakesOfDifferentLengths) {
   const auto f = testing::MakeHumanoidFixture("walk", 2.0, 60.0);
   const std::string dir = testing::TempDir("calibrate_mismatch");
@@ -150,20 +161,30 @@ TEST(CalibrateCommandTest, AnOutputOverATakeIsRefusedAndTheTakeKept) {
   CalibrateCommandOptions options;
   options.markers_c3d = {dir + "/take.c3d", dir + "/other.c3d"};
   options.out_subject = dir + "/other.c3d";
-  std::ostringstream out;
-  try {
-    RunCalibrateCommand(options, out);
-    FAIL() << out.str();
-  } catch (const std::runtime_error& e) {
-    EXPECT_NE(std::string(e.what()).find("--out " + dir +
-                                         "/other.c3d: is the same file as "
-                                         "--markers " +
-                                         dir + "/other.c3d"),
-              std::string::npos)
-        << e.what();
-  }
+  const std::string error = ErrorOf(options);
+  EXPECT_NE(error.find("--out " + dir + "/other.c3d: is the same file as --markers " + dir +
+                       "/other.c3d"),
+            std::string::npos)
+      << error;
   EXPECT_EQ(std::filesystem::file_size(dir + "/other.c3d"), size_before);
   EXPECT_NO_THROW(ReadC3d(dir + "/other.c3d"));
+}
+
+// The same take given twice (however its path is written) weighed its frames double and
+// moved the result with no word: refused, naming both spellings.
+TEST(CalibrateCommandTest, TheSameTakeGivenTwiceIsRefused) {
+  const auto f = testing::MakeHumanoidFixture("walk", 1.0, 60.0);
+  const std::string dir = testing::TempDir("calibrate_twice");
+  WriteC3d(dir + "/take.c3d", f.take);
+  CalibrateCommandOptions options;
+  options.markers_c3d = {dir + "/take.c3d", dir + "/./take.c3d"};
+  options.out_subject = dir + "/s.toml";
+  const std::string error = ErrorOf(options);
+  EXPECT_NE(error.find("--markers " + dir + "/./take.c3d is the take given before as " + dir +
+                       "/take.c3d"),
+            std::string::npos)
+      << error;
+  EXPECT_FALSE(std::filesystem::exists(dir + "/s.toml"));
 }
 
 // A take with no frames is named (of several, which), and one too short to place a marker
@@ -175,21 +196,12 @@ TEST(CalibrateCommandTest, ATakeWithNoOrTooFewFramesIsNamedAsSuch) {
   empty.Allocate(0);
   WriteC3d(dir + "/empty.c3d", empty);
   WriteC3d(dir + "/take.c3d", f.take);
-  const auto error_of = [&](const CalibrateCommandOptions& options) {
-    std::ostringstream out;
-    try {
-      RunCalibrateCommand(options, out);
-    } catch (const std::runtime_error& e) {
-      return std::string(e.what());
-    }
-    return std::string("no error");
-  };
   CalibrateCommandOptions markers_only;
   markers_only.markers_c3d = {dir + "/take.c3d", dir + "/empty.c3d"};
   markers_only.out_subject = dir + "/out.toml";
-  EXPECT_EQ(error_of(markers_only), dir + "/empty.c3d: the take has no frames (" +
-                                        std::to_string(empty.num_points()) +
-                                        " points labelled): nothing to calibrate from");
+  EXPECT_EQ(ErrorOf(markers_only), dir + "/empty.c3d: the take has no frames (" +
+                                       std::to_string(empty.num_points()) +
+                                       " points labelled): nothing to calibrate from");
   const std::vector<Pose> first(f.motion.begin(), f.motion.begin() + 1);
   WriteBvh(dir + "/one.bvh", MakeBvhTake(*f.skeleton, first, 1.0 / 60.0, "cm"));
   C3dTake one = f.take;
@@ -201,9 +213,9 @@ TEST(CalibrateCommandTest, ATakeWithNoOrTooFewFramesIsNamedAsSuch) {
   with_skeleton.skeleton_bvh = dir + "/one.bvh";
   with_skeleton.markers_c3d = {dir + "/one.c3d"};
   with_skeleton.out_subject = dir + "/out.toml";
-  EXPECT_NE(error_of(with_skeleton).find("the take has 1 frames; a marker's placement needs"),
+  EXPECT_NE(ErrorOf(with_skeleton).find("the take has 1 frames; a marker's placement needs"),
             std::string::npos)
-      << error_of(with_skeleton);
+      << ErrorOf(with_skeleton);
   EXPECT_FALSE(std::filesystem::exists(dir + "/out.toml"));
   // A take standing still: which of the takes given (the message named none).
   C3dTake still = f.take;
@@ -216,9 +228,9 @@ TEST(CalibrateCommandTest, ATakeWithNoOrTooFewFramesIsNamedAsSuch) {
   WriteC3d(dir + "/still.c3d", still);
   markers_only.markers_c3d = {dir + "/still.c3d"};
   EXPECT_EQ(
-      error_of(markers_only).rfind("calibrate: " + dir + "/still.c3d: the take shows no motion", 0),
+      ErrorOf(markers_only).rfind("calibrate: " + dir + "/still.c3d: the take shows no motion", 0),
       0u)
-      << error_of(markers_only);
+      << ErrorOf(markers_only);
 }
 
 // A capture whose labels belong to no set (here the default layout's markers renamed

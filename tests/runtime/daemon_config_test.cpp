@@ -7,6 +7,7 @@
 #include <array>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <map>
 #include <sstream>
 #include <vector>
@@ -88,6 +89,13 @@ TEST(DaemonConfigTest, ErrorsNameFileLineAndField) {
             "test.toml:6: field 'output.protocol_version': must be in [1, 2], got 3");
   EXPECT_NE(ErrorOf("format_version = 1\n").find("field 'subject': no [[subject]] tables"),
             std::string::npos);
+  // A subject file given as the config says what it is (it said "expected [[subject]]").
+  std::ifstream subject_file(std::string(MOCAPD_CONFIG_DIR) + "/demo_subject.toml");
+  const std::string subject_text((std::istreambuf_iterator<char>(subject_file)),
+                                 std::istreambuf_iterator<char>());
+  EXPECT_NE(ErrorOf(subject_text).find("field 'subject': this is a subject file"),
+            std::string::npos)
+      << ErrorOf(subject_text);
   EXPECT_NE(ErrorOf("[[subject]]\nname = \"a\"\nmodel = \"demo_subject.toml\"\n")
                 .find("field 'format_version'"),
             std::string::npos);
