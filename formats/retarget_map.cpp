@@ -334,7 +334,20 @@ RetargetMap MakeRetargetMap(const Skeleton& source, std::span<const BvhEndSite> 
   return map;
 }
 
-Skeleton CharacterSkeleton(const BvhTake& character) {
+namespace {
+
+bool HasPositionChannels(const BvhTake& character, int joint) {
+  if (joint < 0 || static_cast<size_t>(joint) >= character.channels.size()) return false;
+  const auto& channels = character.channels[static_cast<size_t>(joint)];
+  return std::count_if(channels.begin(), channels.end(), [](BvhChannel c) {
+           return c == BvhChannel::kXposition || c == BvhChannel::kYposition ||
+                  c == BvhChannel::kZposition;
+         }) == 3;
+}
+
+// The one-frame file's types: a pelvis with position channels under a floor-level root
+// travels.
+Skeleton TypedFromOneFrame(const BvhTake& character) {
   const Skeleton& sk = character.skeleton;
   if (character.frames.size() >= 2) return sk;  // typed by its motion
   int pelvis = -1;
@@ -350,14 +363,32 @@ Skeleton CharacterSkeleton(const BvhTake& character) {
   for (int a = sk.joint(pelvis).parent.value; a >= 0; a = sk.joint(a).parent.value)
     translates_above = translates_above || sk.joint(a).type == JointType::kFree;
   const auto& channels = character.channels[static_cast<size_t>(pelvis)];
-  const auto positions = std::count_if(channels.begin(), channels.end(), [](BvhChannel c) {
-    return c == BvhChannel::kXposition || c == BvhChannel::kYposition ||
-           c == BvhChannel::kZposition;
-  });
-  if (!translates_above || positions != 3 || channels.size() != 6) return sk;
+  if (!translates_above || !HasPositionChannels(character, pelvis) || channels.size() != 6)
+    return sk;
   std::vector<Joint> joints(sk.joints().begin(), sk.joints().end());
   joints[static_cast<size_t>(pelvis)].type = JointType::kFree;
   return Skeleton(std::move(joints));
+}
+
+}  // namespace
+
+Skeleton CharacterSkeleton(const BvhTake& character, CharacterOutput output) {
+  Skeleton sk =
+      output == CharacterOutput::kFile ? TypedFromOneFrame(character) : character.skeleton;
+  if (CharacterTravels(sk)) return sk;
+  // A file whose own motion never moves the root (an idle, a T-pose held for a few frames)
+  // typed it a ball, and the character could not travel, though the file gives it position
+  // channels: the first joint that has them (the root, or a pelvis under it; on the wire
+  // only the root) travels. A rig with none at all is retargeted in place.
+  const int last =
+      output == CharacterOutput::kFile ? sk.num_joints() : std::min(1, sk.num_joints());
+  for (int j = 0; j < last; ++j) {
+    if (!HasPositionChannels(character, j)) continue;
+    std::vector<Joint> joints(sk.joints().begin(), sk.joints().end());
+    joints[static_cast<size_t>(j)].type = JointType::kFree;
+    return Skeleton(std::move(joints));
+  }
+  return sk;
 }
 
 }  // namespace mocapd

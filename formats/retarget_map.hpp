@@ -20,14 +20,19 @@ RetargetMap MakeRetargetMap(const Skeleton& source, std::span<const BvhEndSite> 
                             const Skeleton& target, std::span<const BvhEndSite> target_end_sites,
                             const std::map<std::string, std::string>& overrides = {});
 
+/// Where a retargeted character goes: a BVH file, or the wire, whose local block carries
+/// joint 0's translation only (see protocol/README.md).
+enum class CharacterOutput { kFile, kWire };
+
 /// The skeleton a character file gives the retargeter. A file of one frame (or none)
 /// shows no motion, so its reader types the joints by their channels: the top joint with
 /// position channels translates. Above a pelvis with position channels of its own
 /// (Bandai's floor-level joint_Root over its Hips), that put the character's travel on a
-/// joint its own takes keep still, the Hips held metres from it; the pelvis translates
-/// instead (the retargeter then holds the joints above it at rest). For a character
-/// written to a file; the daemon keeps the reader's typing, as the wire's local block
-/// carries joint 0's translation only (see protocol/README.md).
-Skeleton CharacterSkeleton(const BvhTake& character);
+/// joint its own takes keep still, the Hips held metres from it; for a file, the pelvis
+/// translates instead (the retargeter then holds the joints above it at rest). A file
+/// whose motion never moves its root types it a ball; where that leaves no joint that
+/// translates, the first with position channels does (for the wire, only joint 0).
+Skeleton CharacterSkeleton(const BvhTake& character,
+                           CharacterOutput output = CharacterOutput::kFile);
 
 }  // namespace mocapd

@@ -644,7 +644,8 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
     if (!s.character_path.empty()) {
       try {
         const BvhTake character = ReadBvh(s.character_path);
-        s.character = std::make_shared<const Skeleton>(character.skeleton);
+        s.character =
+            std::make_shared<const Skeleton>(CharacterSkeleton(character, CharacterOutput::kWire));
         s.character_map =
             MakeRetargetMap(*s.model.skeleton, {}, *s.character, character.end_sites, joint_map);
         s.character_end_sites = character.end_sites;

@@ -314,10 +314,6 @@ TEST_F(RetargetTest, AOneFrameCharacterUnderAFloorRootTravelsOnItsPelvis) {
   EXPECT_EQ(CharacterSkeleton(moving).joint(1).type, moving.skeleton.joint(1).type);
 }
 
-// The scale is the legs' length along their bones, wherever the file stood the pelvis:
-// under a floor-level root joint (Bandai's joint_Root) its height was taken as the leg
-// length, so a one-frame character file (the pelvis where the take starts) and the same
-// rig with its animation (the pelvis at its OFFSET) got two scales (0.928 and 0.965).
 // A character whose root only turns (a BVH root with rotation channels alone) cannot
 // travel: it reached for the walking actor's positions metres away, its joints bent 46 cm
 // out of the actor's pose. It now moves in place: the pose is the actor's (the same joint
@@ -346,6 +342,40 @@ TEST_F(RetargetTest, ACharacterWhoseRootOnlyTurnsMovesInPlace) {
   EXPECT_GT((motion_.back().translation[0] - motion_.front().translation[0]).norm(), 1.0);
 }
 
+// A character file whose own frames never move its root (an idle on the spot) reads its
+// root as a fixed frame, though the file gives it position channels: it could not travel,
+// and was bent reaching for the actor. As a character it travels, to a file and on the wire. A rig
+// whose root has rotation channels only stays in place.
+TEST_F(RetargetTest, ACharacterWithRootPositionChannelsTravelsThoughItsFileNeverMovesIt) {
+  // The actor's first frames with the pelvis held as it starts: the limbs move, the root
+  // does not (read as a fixed frame, as Bandai's floor-level joint_Root is).
+  std::vector<Pose> idle(motion_.begin(), motion_.begin() + 30);
+  for (Pose& pose : idle) {
+    pose.translation[0] = motion_.front().translation[0];
+    pose.rotation[0] = motion_.front().rotation[0];
+  }
+  const BvhTake still =
+      ParseBvh(FormatBvh(MakeBvhTake(*source_, idle, 1.0 / 30.0, "cm")), "idle.bvh");
+  ASSERT_NE(still.skeleton.joint(0).type, JointType::kFree);
+  for (const CharacterOutput output : {CharacterOutput::kFile, CharacterOutput::kWire}) {
+    const Skeleton character = CharacterSkeleton(still, output);
+    EXPECT_EQ(character.joint(0).type, JointType::kFree);
+    EXPECT_TRUE(CharacterTravels(character));
+  }
+  std::vector<Joint> joints(source_->joints().begin(), source_->joints().end());
+  joints[0].type = JointType::kBall;
+  const Skeleton rotation_only(std::move(joints));
+  const BvhTake in_place = ParseBvh(
+      FormatBvh(MakeBvhTake(rotation_only, {RestPose(rotation_only), RestPose(rotation_only)},
+                            1.0 / 30.0, "cm")),
+      "in_place.bvh");
+  EXPECT_FALSE(CharacterTravels(CharacterSkeleton(in_place)));
+}
+
+// The scale is the legs' length along their bones, wherever the file stood the pelvis:
+// under a floor-level root joint (Bandai's joint_Root) its height was taken as the leg
+// length, so a one-frame character file (the pelvis where the take starts) and the same
+// rig with its animation (the pelvis at its OFFSET) got two scales (0.928 and 0.965).
 TEST_F(RetargetTest, TheScaleIsTheLegsLengthWhereverThePelvisStands) {
   for (const double pelvis_height_m : {0.4, 0.9, 1.6}) {
     std::vector<Joint> joints;
