@@ -115,8 +115,15 @@ std::shared_ptr<const Skeleton> SolvedCharacter(std::shared_ptr<const Skeleton> 
 }  // namespace
 
 bool CharacterTravels(const Skeleton& character) {
-  return std::any_of(character.joints().begin(), character.joints().end(),
-                     [](const Joint& j) { return j.type == JointType::kFree; });
+  // A free joint under one that turns (a stretchy bone, a prop) does not carry the body.
+  for (int j = 0; j < character.num_joints(); ++j) {
+    if (character.joint(j).type != JointType::kFree) continue;
+    bool carried_by_fixed = true;
+    for (int a = character.joint(j).parent.value; a >= 0; a = character.joint(a).parent.value)
+      carried_by_fixed = carried_by_fixed && character.joint(a).type == JointType::kFixed;
+    if (carried_by_fixed) return true;
+  }
+  return false;
 }
 
 void RetargetOptions::Validate() const {

@@ -64,8 +64,9 @@ struct RetargetMap {
   std::string report;  ///< Human-readable: what matched what, what was left at rest.
 };
 
-/// Whether a character can travel: some joint of it translates (a root with position
-/// channels, or a pelvis under a fixed root). One that cannot is retargeted in place.
+/// Whether a character can travel: a joint translates with nothing but fixed joints above
+/// it (a root with position channels, or a pelvis under a fixed root). One that cannot is
+/// retargeted in place.
 bool CharacterTravels(const Skeleton& character);
 
 /// The world axis nearest a direction, signed (+Z for a capture's slightly tilted up).

@@ -115,6 +115,7 @@ class Parser {
             "header", "truncated");
     header_points_ = points;
     header_analog_ = analog;
+    header_analog_samples_ = analog_per_frame;
     header_first_ = first;
     header_last_ = last;
     header_scale_ = scale;
@@ -670,15 +671,20 @@ class Parser {
   }
 
   // What the analog values of each frame are: ANALOG:USED channels of samples_per_frame
-  // samples each, or, where USED does not divide the frame's count, that many channels of
-  // one sample (numbers kept either way, so a write gives back what was read).
+  // samples each; where USED does not divide the frame's count, the header's samples a
+  // frame say the channels; failing both, that many channels of one sample (numbers kept
+  // either way, so a write gives back what was read).
   void ReadAnalogParameters(size_t values_per_frame, size_t frames, C3dTake::Analog* analog) {
     if (values_per_frame == 0) return;
     size_t channels = values_per_frame;
-    if (const auto used = Number("ANALOG:USED"); used && *used >= 1 && *used <= 65535 &&
-                                                 *used == std::floor(*used) &&
-                                                 values_per_frame % static_cast<size_t>(*used) == 0)
+    std::optional<double> used = Number("ANALOG:USED");
+    // Counts above 32767 are stored as unsigned 16-bit words.
+    if (used && *used < 0 && Find("ANALOG:USED")->type == 2) *used += 65536;
+    if (used && *used >= 1 && *used <= 65535 && *used == std::floor(*used) &&
+        values_per_frame % static_cast<size_t>(*used) == 0)
       channels = static_cast<size_t>(*used);
+    else if (header_analog_samples_ >= 1 && values_per_frame % header_analog_samples_ == 0)
+      channels = values_per_frame / header_analog_samples_;
     analog->samples_per_frame = static_cast<int>(values_per_frame / channels);
     analog->labels = StringsContinued("ANALOG", "LABELS");
     analog->descriptions = StringsContinued("ANALOG", "DESCRIPTIONS");
@@ -689,7 +695,9 @@ class Parser {
     for (size_t c = 0; c < channels; ++c)
       if (analog->labels[c].empty()) analog->labels[c] = "analog_" + std::to_string(c + 1);
     const std::vector<std::string> format = Strings("ANALOG:FORMAT");
-    if (!format.empty() && format.front() == "UNSIGNED") analog->format = "UNSIGNED";
+    if (!format.empty() &&
+        boost::algorithm::to_upper_copy(boost::algorithm::trim_copy(format.front())) == "UNSIGNED")
+      analog->format = "UNSIGNED";
     const Parameter* offsets = Find("ANALOG:OFFSET");
     const bool offsets_unsigned = analog->format == "UNSIGNED" && offsets && offsets->type == 2;
     for (size_t c = 0; c < channels; ++c) {
@@ -712,7 +720,7 @@ class Parser {
   size_t parameters_end_ = 0;  // past the declared blocks and the last entry read
   uint8_t processor_ = kProcessorIntel;
   uint16_t header_points_ = 0, header_analog_ = 0, header_first_ = 1, header_last_ = 0,
-           header_data_block_ = 0;
+           header_data_block_ = 0, header_analog_samples_ = 0;
   float header_scale_ = -1.0f, header_rate_ = 0.0f;
   std::map<std::string, Parameter> params_;
 };
@@ -864,6 +872,7 @@ void SelectActor(C3dTake* take, const std::string& actor, const std::string& pat
     out.model_output_kind.push_back(take->model_output_kind[static_cast<size_t>(p)]);
   }
   out.Allocate(take->num_frames);
+  out.analog = take->analog;  // one actor's points; the force plates are the stage's
   for (int f = 0; f < take->num_frames; ++f) {
     for (size_t k = 0; k < kept.size(); ++k) {
       const auto from = static_cast<size_t>(f) * take->labels.size() + static_cast<size_t>(kept[k]);
@@ -1089,7 +1098,8 @@ std::vector<uint8_t> EncodeC3d(const C3dTake& take, const C3dEncoding& encoding)
         continue;
       }
       const double v = std::round(values[a]);
-      const bool fits = analog.format == "UNSIGNED" ? v >= 0 && v <= 65535 : std::abs(v) <= 32767;
+      const bool fits =
+          analog.format == "UNSIGNED" ? v >= 0 && v <= 65535 : v >= -32768 && v <= 32767;
       if (!fits)
         throw std::invalid_argument("C3D writer: an analog sample does not fit 16-bit storage");
       w.WriteI16(static_cast<int16_t>(static_cast<uint16_t>(static_cast<int64_t>(v) & 0xffff)));

@@ -30,8 +30,9 @@ enum class CharacterOutput { kFile, kWire };
 /// (Bandai's floor-level joint_Root over its Hips), that put the character's travel on a
 /// joint its own takes keep still, the Hips held metres from it; for a file, the pelvis
 /// translates instead (the retargeter then holds the joints above it at rest). A file
-/// whose motion never moves its root types it a ball; where that leaves no joint that
-/// translates, the first with position channels does (for the wire, only joint 0).
+/// whose motion never moves its pelvis types it a fixed frame or a ball; where that leaves
+/// no joint that translates, the pelvis does if it has position channels (for the wire,
+/// only when it is joint 0).
 Skeleton CharacterSkeleton(const BvhTake& character,
                            CharacterOutput output = CharacterOutput::kFile);
 

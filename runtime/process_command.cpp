@@ -159,6 +159,13 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
     throw std::runtime_error(options.input_c3d + ": the take has no frames: nothing to process");
   for (const std::string& note : take.notes)
     out << "note: " << options.input_c3d << ": " << note << "\n";
+  // Said now, not found when the cleaned take's write fails after the whole solve.
+  if (take.analog.channels() > 255 && !options.output_c3d.empty()) {
+    out << "note: " << options.input_c3d << ": its " << take.analog.channels()
+        << " analog channels are more than the cleaned C3D carries (255): " << options.output_c3d
+        << " is written without them\n";
+    take.analog = {};
+  }
   // Said of the take, before any output: the cleanup's own check named an internal field
   // (a C3D synthesized from a BVH whose Frame Time was 1e30).
   if (!(take.rate_hz >= 1.0 && take.rate_hz <= 10000.0)) {

@@ -464,7 +464,7 @@ void SubjectRunner::SwitchModel(OutputSink& sink) {
   ++swaps_;
   // The new model's fit is measured afresh: the template's distance, averaged on, held a
   // well calibrated subject "model suspect" for a second after its cross-fade.
-  model_distance_fresh_ = true;
+  distance_frames_ = 0;
   // The outgoing subject is not needed for the fade: back to the calibration thread.
   EndSwap();
   // Consumers learn the new rest pose before its first frame.
@@ -728,12 +728,16 @@ void SubjectRunner::UpdateModelDistance(int64_t frame, const CleanFrame& out) {
     if (std::isfinite(d)) distances_.push_back(d);
   }
   if (distances_.size() < 3) return;
-  const auto third = distances_.begin() + static_cast<std::ptrdiff_t>(distances_.size() * 2 / 3);
+  // (n - 1) * 2 / 3: of 3 samples the middle one, so one bad sample of few is outvoted.
+  const auto third =
+      distances_.begin() + static_cast<std::ptrdiff_t>((distances_.size() - 1) * 2 / 3);
   std::nth_element(distances_.begin(), third, distances_.end());
-  model_distance_m_ = model_distance_fresh_ ? *third
-                                            : model_distance_m_ + model_distance_weight_ *
-                                                                      (*third - model_distance_m_);
-  model_distance_fresh_ = false;
+  // After a swap the mean starts afresh: a plain mean of the frames so far until it has as
+  // many as the running mean spans, so no single first frame stands for the new model.
+  ++distance_frames_;
+  const double weight =
+      std::max(model_distance_weight_, 1.0 / static_cast<double>(distance_frames_));
+  model_distance_m_ += weight * (*third - model_distance_m_);
   // A live subject's template is an approximation until its calibration swaps in.
   if (model_distance_m_ > model_suspect_m_ && !(live_ && swaps_ == 0)) model_suspect_ = true;
   if (model_distance_m_ < 0.75 * model_suspect_m_) model_suspect_ = false;

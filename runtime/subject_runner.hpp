@@ -313,7 +313,7 @@ class SubjectRunner {
   std::vector<Vec3> received_;           ///< Ring like stamps_: each held frame's samples.
   std::vector<double> distances_;        ///< Publish scratch: sample-to-model distances.
   double model_distance_m_ = 0.0;        // running mean over about a second
-  bool model_distance_fresh_ = false;    // the next frame's distance starts the mean (a swap)
+  int64_t distance_frames_ = 0;          // frames in the mean since the start or a swap
   double model_distance_weight_ = 0.01;  // its weight per frame
   double model_suspect_m_ = 0.02;
   bool model_suspect_ = false;

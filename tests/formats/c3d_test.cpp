@@ -504,6 +504,14 @@ TEST(C3dTest, AnalogChannelsSurviveAWriteAndARead) {
   // Read back and written again: the same bytes.
   const C3dTake once = ParseC3d(EncodeC3d(take), "analog.c3d");
   EXPECT_EQ(EncodeC3d(once), EncodeC3d(take));
+  // One actor's points chosen from a take of two: the stage's analog channels stay (they
+  // were dropped with the other actor's points).
+  C3dTake two_actors = take;
+  two_actors.labels = {"Ann:M0", "Ann:M1", "Bob:M0"};
+  SelectActor(&two_actors, "Ann", "two.c3d");
+  ASSERT_EQ(two_actors.num_points(), 2);
+  EXPECT_EQ(two_actors.analog.values, analog.values);
+  EXPECT_NO_THROW((void)EncodeC3d(two_actors));
   // Integer storage of an unsigned format holds 0..65535, and its offsets read unsigned.
   take.analog.format = "UNSIGNED";
   take.analog.offset = {40000, 0, 7};
