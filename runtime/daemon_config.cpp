@@ -2,6 +2,7 @@
 #include "runtime/daemon_config.hpp"
 
 #include <algorithm>
+#include <boost/algorithm/string/predicate.hpp>
 #include <boost/asio/ip/address.hpp>
 #include <cctype>
 #include <cmath>
@@ -42,9 +43,7 @@ bool SplitTcp(const std::string& endpoint, std::string* host, std::string* port)
 // Host names are case-insensitive: "LOCALHOST" is the loopback host too (it was taken as
 // a remote address, and then failed to bind).
 bool IsLocalhostName(const std::string& host) {
-  return host.size() == 9 && std::equal(host.begin(), host.end(), "localhost", [](char a, char b) {
-           return std::tolower(static_cast<unsigned char>(a)) == b;
-         });
+  return boost::algorithm::iequals(host, "localhost");
 }
 
 // The address a host literal names, an IPv4-mapped IPv6 one (::ffff:127.0.0.1) as its IPv4

@@ -6,7 +6,6 @@
 #include <boost/beast/core.hpp>
 #include <boost/beast/http.hpp>
 #include <boost/beast/websocket/rfc6455.hpp>
-#include <cctype>
 #include <chrono>
 #include <stdexcept>
 #include <string_view>
@@ -142,10 +141,7 @@ class Session : public std::enable_shared_from_this<Session> {
       name = name.substr(0, colon);
     }
     if (name.ends_with('.')) name.remove_suffix(1);  // the absolute form, "localhost."
-    if (name.size() == 9 && std::equal(name.begin(), name.end(), "localhost", [](char a, char b) {
-          return std::tolower(static_cast<unsigned char>(a)) == b;
-        }))
-      return true;
+    if (boost::algorithm::iequals(name, "localhost")) return true;
     boost::system::error_code ec;
     const auto address = boost::asio::ip::make_address(std::string(name), ec);
     return !ec && address.is_loopback();
