@@ -99,8 +99,9 @@ bool SameSocketAddress(const std::string& a, const std::string& b) {
   if (!SplitTcp(a, &host_a, &port_a) || !SplitTcp(b, &host_b, &port_b)) return a == b;
   if (std::stoi(port_a) != std::stoi(port_b)) return false;  // digits, checked by Endpoint
   const auto address_a = HostAddress(host_a), address_b = HostAddress(host_b);
-  if (address_a && address_b ? *address_a == *address_b
-                             : !address_a && !address_b && host_a == host_b)
+  if (address_a && address_b
+          ? *address_a == *address_b
+          : !address_a && !address_b && boost::algorithm::iequals(host_a, host_b))
     return true;
   const auto any_v4 = [](const std::string& h, const auto& address) {
     return h == "*" || (address && address->is_v4() && address->is_unspecified());

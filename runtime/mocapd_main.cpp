@@ -72,13 +72,17 @@ int main(int argc, char** argv) {
       ->check(CLI::TypeValidator<int>())
       ->check(CLI::Range(1, mocapd::kMaxInterleavedSolves))
       ->capture_default_str();
-  cal_cmd->add_option("--report", cal.report_json,
-                      "Markers alone: write the calibration report (JSON)");
+  cal_cmd
+      ->add_option("--report", cal.report_json,
+                   "Markers alone: write the calibration report (JSON)")
+      ->check(mocapd::kNonEmptyPath);
   cal_cmd
       ->add_option("--skeleton", cal.skeleton_bvh,
                    "Optional: BVH with the hierarchy and the motion of the captured take")
       ->check(CLI::ExistingFile);
-  cal_cmd->add_option("--out", cal.out_subject, "Subject model to write (TOML)")->required();
+  cal_cmd->add_option("--out", cal.out_subject, "Subject model to write (TOML)")
+      ->required()
+      ->check(mocapd::kNonEmptyPath);
   cal_cmd->add_option("--name", cal.subject_name, "Subject name (default: the output file's stem)");
   cal_cmd->add_option("--bvh-units", cal.bvh_units,
                       "BVH length unit: mm, cm, m or in (default: guess)");
@@ -101,14 +105,19 @@ int main(int argc, char** argv) {
   proc_cmd->add_option("--actor", proc.actor,
                        "Of a take holding several actors' markers (Justin:LASI, Copy:LASI): "
                        "whose to solve, by label prefix (--out-c3d then holds that actor's)");
-  proc_cmd->add_option("--out-bvh", proc.output_bvh, "Solved skeleton to write (BVH)")->required();
-  proc_cmd->add_option("--out-c3d", proc.output_c3d,
-                       "Cleaned markers to write (C3D; untouched samples are kept bit for bit)");
+  proc_cmd->add_option("--out-bvh", proc.output_bvh, "Solved skeleton to write (BVH)")
+      ->required()
+      ->check(mocapd::kNonEmptyPath);
+  proc_cmd
+      ->add_option("--out-c3d", proc.output_c3d,
+                   "Cleaned markers to write (C3D; untouched samples are kept bit for bit)")
+      ->check(mocapd::kNonEmptyPath);
   proc_cmd->add_option("--lookahead", proc.lookahead, "Frames of lookahead K (delay)")
       ->check(CLI::TypeValidator<int>())
       ->check(CLI::Range(0, 1000))
       ->capture_default_str();
-  proc_cmd->add_option("--report", proc.report_json, "Write the summary as JSON");
+  proc_cmd->add_option("--report", proc.report_json, "Write the summary as JSON")
+      ->check(mocapd::kNonEmptyPath);
   proc_cmd
       ->add_option("--retarget", proc.retarget_bvh,
                    "Also retarget onto this character (BVH: hierarchy and rest pose)")
@@ -118,13 +127,16 @@ int main(int argc, char** argv) {
       ->add_option("--out-character-bvh", proc.output_character_bvh,
                    "The retargeted character's motion (BVH; default SOLVED.character.bvh "
                    "beside --out-bvh)")
-      ->needs(retarget_option);
+      ->needs(retarget_option)
+      ->check(mocapd::kNonEmptyPath);
   proc_cmd->add_flag("--allow-partial", proc.allow_partial,
                      "Solve a take that labels fewer than half the subject's markers (refused "
                      "otherwise: most likely the wrong subject or marker set)");
-  proc_cmd->add_option("--plot", proc.plot_dir,
-                       "Write SVG plots to this directory: markers.svg, solve.svg (and "
-                       "joint_error.svg with --truth-bvh)");
+  proc_cmd
+      ->add_option("--plot", proc.plot_dir,
+                   "Write SVG plots to this directory: markers.svg, solve.svg (and "
+                   "joint_error.svg with --truth-bvh)")
+      ->check(mocapd::kNonEmptyPath);
   proc_cmd
       ->add_option("--truth-bvh", proc.truth_bvh,
                    "The take's true motion (mocap-sim synth --truth-bvh): report and plot the "
@@ -158,7 +170,8 @@ int main(int argc, char** argv) {
       "Write a CURVE key pair: OUT.key (public: give it to the peers) and OUT.key_secret "
       "(secret, mode 0600), ZeroMQ certificates as czmq and pyzmq's zmq.auth read them");
   keygen_cmd->add_option("--out", keygen_out, "Path without extension, e.g. keys/mocapd")
-      ->required();
+      ->required()
+      ->check(mocapd::kNonEmptyPath);
 
   CLI11_PARSE(app, argc, argv);
   try {

@@ -19,4 +19,12 @@ inline const CLI::Validator kFiniteNumber(
     },
     "FLOAT");
 
+/// For file and folder options: CLI11 takes `--out ""` as a value, and an empty path was
+/// then either an error that did not name the option or the option silently ignored.
+inline const CLI::Validator kNonEmptyPath(
+    [](std::string& text) -> std::string {
+      return text.empty() ? "a path is needed, not \"\"" : "";
+    },
+    "PATH");
+
 }  // namespace mocapd

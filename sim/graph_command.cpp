@@ -49,14 +49,18 @@ GraphCommands::GraphCommands(CLI::App& app) : state_(std::make_unique<State>()) 
 
   s.build = s.graph->add_subcommand("build", "Build a motion graph over BVH takes of one skeleton");
   s.build->add_option("TAKES", s.takes, "BVH takes")->required()->check(CLI::ExistingFile);
-  s.build->add_option("--out", s.out, "Graph file to write (JSON)")->required();
+  s.build->add_option("--out", s.out, "Graph file to write (JSON)")
+      ->required()
+      ->check(kNonEmptyPath);
   s.build->add_option("--rate", s.rate_hz, "Graph rate in Hz (default: the first take's)")
       ->check(mocapd::kFiniteNumber)
       ->check(CLI::Range(1.0, 1000.0));
   s.build->add_option("--units", s.units, "BVH length unit: mm, cm, m or in (default: guess)");
-  s.build->add_option("--subject-out", s.subject_out,
-                      "Also write the subject a daemon needs for `replay --graph` of this graph "
-                      "(the takes' skeleton with the default marker layout)");
+  s.build
+      ->add_option("--subject-out", s.subject_out,
+                   "Also write the subject a daemon needs for `replay --graph` of this graph "
+                   "(the takes' skeleton with the default marker layout)")
+      ->check(kNonEmptyPath);
   s.build
       ->add_option("--transitions-per-pair", s.options.transitions_per_pair,
                    "Best transitions kept per ordered pair of takes")
@@ -90,16 +94,20 @@ GraphCommands::GraphCommands(CLI::App& app) : state_(std::make_unique<State>()) 
   s.synth->add_option("--from", s.from,
                       "First frame, TAKE:FRAME (default: the first take's frame 0)");
   s.synth->add_option("--to", s.to, "Last frame, TAKE:FRAME (default: anywhere)");
-  s.synth->add_option("--out", s.out, "BVH to write")->required();
-  s.synth->add_option("--path-out", s.path_out, "Also write the path taken (JSON)");
+  s.synth->add_option("--out", s.out, "BVH to write")->required()->check(kNonEmptyPath);
+  s.synth->add_option("--path-out", s.path_out, "Also write the path taken (JSON)")
+      ->check(kNonEmptyPath);
 
   s.match = s.graph->add_subcommand(
       "match", "Retrieve the graph path that best follows a query motion (any humanoid skeleton)");
   s.match->add_option("QUERY", s.query, "Query BVH")->required()->check(CLI::ExistingFile);
   s.match->add_option("--graph", s.graph_path, "Graph file")->required()->check(CLI::ExistingFile);
   s.match->add_option("--query-units", s.query_units, "Query BVH unit (default: guess)");
-  s.match->add_option("--out", s.out, "BVH of the retrieved motion to write")->required();
-  s.match->add_option("--path-out", s.path_out, "Also write the path taken (JSON)");
+  s.match->add_option("--out", s.out, "BVH of the retrieved motion to write")
+      ->required()
+      ->check(kNonEmptyPath);
+  s.match->add_option("--path-out", s.path_out, "Also write the path taken (JSON)")
+      ->check(kNonEmptyPath);
 }
 
 GraphCommands::~GraphCommands() = default;

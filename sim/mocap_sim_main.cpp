@@ -1,5 +1,5 @@
 // mocap-sim: the replay simulator's command line. Subcommands:
-//   info   summarise a C3D or BVH take
+//   info   summarise a C3D or BVH take or a recording
 //   synth  place a virtual marker set on a BVH (or the built-in humanoid) and write the marker take
 //   replay publish a take's (or a recording's) marker frames to the daemon in real time and measure
 //          what comes back
@@ -289,8 +289,8 @@ int main(int argc, char** argv) {
 
   std::string info_path;
   bool info_json = false;
-  CLI::App* info = app.add_subcommand("info", "Summarise a C3D or BVH take");
-  info->add_option("FILE", info_path, "Take file (.c3d or .bvh)")
+  CLI::App* info = app.add_subcommand("info", "Summarise a C3D or BVH take or a recording");
+  info->add_option("FILE", info_path, "Take file (.c3d or .bvh) or recording (mocap-sim record)")
       ->required()
       ->check(CLI::ExistingFile);
   info->add_flag("--json", info_json, "Print JSON instead of a table");
@@ -310,14 +310,18 @@ int main(int argc, char** argv) {
       ->check(mocapd::kFiniteNumber)
       ->check(CLI::Range(0.1, 3600.0))
       ->capture_default_str();
-  synth_cmd->add_option("--out", synth.out, "Marker take to write (.c3d)")->required();
+  synth_cmd->add_option("--out", synth.out, "Marker take to write (.c3d)")
+      ->required()
+      ->check(mocapd::kNonEmptyPath);
   synth_cmd
       ->add_option("--rate", synth.rate_hz,
                    "Output rate in Hz (default: the source's); motion is slerp-resampled")
       ->check(mocapd::kFiniteNumber)
       ->check(CLI::Range(1.0, 2000.0));
-  synth_cmd->add_option("--subject-out", synth.subject_out,
-                        "Also write the subject model (skeleton + markers)");
+  synth_cmd
+      ->add_option("--subject-out", synth.subject_out,
+                   "Also write the subject model (skeleton + markers)")
+      ->check(mocapd::kNonEmptyPath);
   synth_cmd
       ->add_option("--layout", synth.layout,
                    "Marker layout TOML (default: built-in ~60-marker set)")
@@ -332,8 +336,9 @@ int main(int argc, char** argv) {
                    "Soft-tissue wobble of markers on fleshy segments, mm (pose-correlated)")
       ->check(mocapd::kFiniteNumber)
       ->check(CLI::Range(0.0, 100.0));
-  synth_cmd->add_option("--truth-bvh", synth.truth_bvh,
-                        "Also write the resampled ground-truth motion");
+  synth_cmd
+      ->add_option("--truth-bvh", synth.truth_bvh, "Also write the resampled ground-truth motion")
+      ->check(mocapd::kNonEmptyPath);
   synth_cmd->add_option("--bvh-units", synth.bvh_units,
                         "BVH length unit: mm, cm, m or in (default: guess)");
   synth_cmd->add_option("--noise-mm", synth.noise_mm, "Gaussian marker noise (sigma, mm)")
@@ -344,8 +349,10 @@ int main(int argc, char** argv) {
       ->add_option("--corrupt", synth.corrupt,
                    "Corrupt the take: light | medium | heavy (about 5 / 15 / 30 % of samples)")
       ->check(CLI::IsMember({"light", "medium", "heavy"}));
-  synth_cmd->add_option("--truth", synth.truth_mask,
-                        "With --corrupt: write the ground-truth corruption mask (JSON)");
+  synth_cmd
+      ->add_option("--truth", synth.truth_mask,
+                   "With --corrupt: write the ground-truth corruption mask (JSON)")
+      ->check(mocapd::kNonEmptyPath);
 
   ReplayCommand replay;
   CLI::App* replay_cmd = app.add_subcommand(
@@ -446,8 +453,10 @@ int main(int argc, char** argv) {
                    "Stamp frames with non-drop SMPTE timecode at this many fps (protocol 2)")
       ->check(CLI::TypeValidator<int>())
       ->check(CLI::Range(0, 256));
-  replay_cmd->add_option("--report", replay.report, "Write the report as JSON");
-  replay_cmd->add_option("--plot", replay.plot, "Write a processing-latency histogram (SVG)");
+  replay_cmd->add_option("--report", replay.report, "Write the report as JSON")
+      ->check(mocapd::kNonEmptyPath);
+  replay_cmd->add_option("--plot", replay.plot, "Write a processing-latency histogram (SVG)")
+      ->check(mocapd::kNonEmptyPath);
   replay_cmd
       ->add_option("--connect-timeout", replay.options.connect_timeout_s,
                    "Seconds to wait for the daemon")
@@ -481,7 +490,9 @@ int main(int argc, char** argv) {
       "record", "Record a capture publisher's marker stream with its timing (crash-safe)");
   record_cmd->add_option("--from", record.from, "The capture publisher (PUB) to subscribe to")
       ->capture_default_str();
-  record_cmd->add_option("--out", record.out, "Recording to write (.mcr)")->required();
+  record_cmd->add_option("--out", record.out, "Recording to write (.mcr)")
+      ->required()
+      ->check(mocapd::kNonEmptyPath);
   record_cmd->add_option("--subjects", record_subjects,
                          "Comma-separated subjects to record (default: all)");
   record_cmd

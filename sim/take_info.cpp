@@ -10,6 +10,8 @@
 
 #include "formats/bvh.hpp"
 #include "formats/c3d.hpp"
+#include "protocol/messages.hpp"
+#include "sim/recording.hpp"
 
 namespace mocapd {
 
@@ -20,11 +22,87 @@ std::string FileExtension(const std::string& path) {
   return boost::algorithm::to_lower_copy(path.substr(dot + 1));
 }
 
+namespace {
+
+// Follows one subject's frame numbers: a v2 session id that changes, or v1 numbers that
+// start again below the first of the session, begin a new capture session; within one,
+// numbers skipped are frames lost before the recorder.
+struct StreamTracker {
+  RecordedStreamInfo info;
+  uint64_t session_id = 0;
+  uint64_t session_first = 0;
+  int64_t first_ns = 0;
+
+  void Add(const protocol::MarkerFrameMessage& frame, int64_t arrival_ns) {
+    const uint64_t n = frame.frame_number;
+    const bool new_session = info.frames == 0 ||
+                             (frame.version >= 2 && frame.stream.session_id != session_id) ||
+                             (frame.version < 2 && n < session_first);
+    if (new_session) {
+      ++info.sessions;
+      session_id = frame.stream.session_id;
+      session_first = n;
+    } else if (n > info.last_frame) {
+      info.frames_skipped += static_cast<int64_t>(n - info.last_frame - 1);
+    } else {
+      ++info.frames_out_of_order;
+    }
+    if (info.frames == 0) {
+      info.first_frame = n;
+      first_ns = arrival_ns;
+    }
+    if (new_session || n > info.last_frame) info.last_frame = n;
+    ++info.frames;
+    info.markers = std::max(info.markers, static_cast<int>(frame.positions.size()));
+    info.rate_hz = frame.rate_hz;
+    info.protocol_version = std::max(info.protocol_version, static_cast<int>(frame.version));
+    info.seconds = static_cast<double>(arrival_ns - first_ns) * 1e-9;
+  }
+};
+
+void InspectRecording(const std::string& path, TakeInfo* info) {
+  const Recording recording = ReadRecording(path);
+  info->format = "recording";
+  info->units = "m";
+  info->messages = static_cast<int64_t>(recording.messages.size());
+  info->ignored_tail_bytes = recording.ignored_tail_bytes;
+  std::vector<StreamTracker> streams;
+  auto stream_of = [&](const std::string& subject) -> StreamTracker& {
+    for (StreamTracker& s : streams)
+      if (s.info.subject == subject) return s;
+    streams.emplace_back();
+    streams.back().info.subject = subject;
+    return streams.back();
+  };
+  protocol::MarkerFrameMessage frame;
+  protocol::EndOfStreamMessage end;
+  for (const RecordedMessage& m : recording.messages) {
+    if (protocol::DecodeMarkerFrame(m.message, &frame) == protocol::DecodeStatus::kOk) {
+      stream_of(frame.subject).Add(frame, m.offset_ns);
+      ++info->frames;
+    } else if (protocol::DecodeEndOfStream(m.message, &end) == protocol::DecodeStatus::kOk) {
+      ++stream_of(end.subject).info.end_of_stream;
+    } else {
+      ++info->undecodable_messages;
+    }
+  }
+  for (const StreamTracker& s : streams) info->streams.push_back(s.info);
+  if (!info->streams.empty()) info->rate_hz = info->streams.front().rate_hz;
+  if (!recording.messages.empty())
+    info->seconds = static_cast<double>(recording.messages.back().offset_ns -
+                                        recording.messages.front().offset_ns) *
+                    1e-9;
+}
+
+}  // namespace
+
 TakeInfo InspectTake(const std::string& path) {
   TakeInfo info;
   info.path = path;
   const std::string ext = FileExtension(path);
-  if (ext == "c3d") {
+  if (IsRecordingFile(path)) {
+    InspectRecording(path, &info);
+  } else if (ext == "c3d") {
     const C3dTake take = ReadC3d(path);
     info.format = "c3d";
     info.frames = take.num_frames;
@@ -65,8 +143,9 @@ TakeInfo InspectTake(const std::string& path) {
     info.end_sites = static_cast<int>(take.end_sites.size());
   } else {
     throw std::invalid_argument(path + ": unknown take format '." + ext +
-                                "' (expected .c3d or .bvh)");
+                                "' (expected .c3d, .bvh or a recording made by mocap-sim record)");
   }
+  if (info.format != "recording" && info.rate_hz > 0) info.seconds = info.frames / info.rate_hz;
   return info;
 }
 
@@ -75,8 +154,8 @@ std::string FormatTakeInfo(const TakeInfo& info) {
   std::string out;
   std::snprintf(line, sizeof(line),
                 "%s\n  format  %s\n  frames  %d\n  rate    %.6g Hz (%.3f s)\n  units   %s\n",
-                info.path.c_str(), info.format.c_str(), info.frames, info.rate_hz,
-                info.rate_hz > 0 ? info.frames / info.rate_hz : 0.0, info.units.c_str());
+                info.path.c_str(), info.format.c_str(), info.frames, info.rate_hz, info.seconds,
+                info.units.c_str());
   out += line;
   if (info.format == "c3d") {
     out += "  processor " + info.processor + "\n";
@@ -100,6 +179,28 @@ std::string FormatTakeInfo(const TakeInfo& info) {
                     p.kind.c_str(), 100.0 * p.missing_fraction, p.gaps, p.longest_gap);
       out += line;
     }
+  } else if (info.format == "recording") {
+    std::snprintf(line, sizeof(line), "  messages %lld (%lld neither a marker frame nor an end)\n",
+                  static_cast<long long>(info.messages),
+                  static_cast<long long>(info.undecodable_messages));
+    out += line;
+    if (info.ignored_tail_bytes > 0)
+      out += "  note    ends in an interrupted record (" + std::to_string(info.ignored_tail_bytes) +
+             " bytes ignored)\n";
+    std::snprintf(line, sizeof(line), "  %-16s %8s %9s %9s %8s %9s %8s %7s %8s %4s %3s\n",
+                  "subject", "frames", "first", "last", "skipped", "reordered", "sessions",
+                  "markers", "rate Hz", "ends", "v");
+    out += line;
+    for (const RecordedStreamInfo& s : info.streams) {
+      std::snprintf(
+          line, sizeof(line), "  %-16s %8lld %9llu %9llu %8lld %9lld %8d %7d %8.6g %4d %3d\n",
+          s.subject.c_str(), static_cast<long long>(s.frames),
+          static_cast<unsigned long long>(s.first_frame),
+          static_cast<unsigned long long>(s.last_frame), static_cast<long long>(s.frames_skipped),
+          static_cast<long long>(s.frames_out_of_order), s.sessions, s.markers, s.rate_hz,
+          s.end_of_stream, s.protocol_version);
+      out += line;
+    }
   } else {
     out += "  joints  " + std::to_string(info.joints.size()) + " (+" +
            std::to_string(info.end_sites) + " end sites)\n";
@@ -109,11 +210,8 @@ std::string FormatTakeInfo(const TakeInfo& info) {
 }
 
 nlohmann::json TakeInfoJson(const TakeInfo& info) {
-  nlohmann::json j = {{"path", info.path},
-                      {"format", info.format},
-                      {"frames", info.frames},
-                      {"rate_hz", info.rate_hz},
-                      {"units", info.units}};
+  nlohmann::json j = {{"path", info.path},       {"format", info.format},   {"frames", info.frames},
+                      {"rate_hz", info.rate_hz}, {"seconds", info.seconds}, {"units", info.units}};
   if (info.format == "c3d") {
     j["processor"] = info.processor;
     j["analog"] = {{"channels", info.analog_channels},
@@ -127,6 +225,24 @@ nlohmann::json TakeInfoJson(const TakeInfo& info) {
                              {"missing_fraction", p.missing_fraction},
                              {"gaps", p.gaps},
                              {"longest_gap", p.longest_gap}});
+  } else if (info.format == "recording") {
+    j["messages"] = info.messages;
+    j["undecodable_messages"] = info.undecodable_messages;
+    j["ignored_tail_bytes"] = info.ignored_tail_bytes;
+    j["streams"] = nlohmann::json::array();
+    for (const RecordedStreamInfo& s : info.streams)
+      j["streams"].push_back({{"subject", s.subject},
+                              {"frames", s.frames},
+                              {"first_frame", s.first_frame},
+                              {"last_frame", s.last_frame},
+                              {"frames_skipped", s.frames_skipped},
+                              {"frames_out_of_order", s.frames_out_of_order},
+                              {"sessions", s.sessions},
+                              {"markers", s.markers},
+                              {"rate_hz", s.rate_hz},
+                              {"end_of_stream", s.end_of_stream},
+                              {"protocol_version", s.protocol_version},
+                              {"seconds", s.seconds}});
   } else {
     j["joints"] = info.joints;
     j["end_sites"] = info.end_sites;

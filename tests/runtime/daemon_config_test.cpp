@@ -271,6 +271,7 @@ TEST(DaemonConfigTest, TheOutputMayNotUseTheInputsAddress) {
            {"tcp://192.168.1.4:5555", "sub", "tcp://192.168.1.4:5555"},
            {"tcp://127.0.0.1:05555", "sub", "tcp://127.0.0.1:5555"},
            {"tcp://LOCALHOST:5555", "sub", "tcp://127.0.0.1:5555"},
+           {"tcp://Stage-PC:5555", "sub", "tcp://stage-pc:5555"},  // DNS names: any case
            {"tcp://[::ffff:127.0.0.1]:5555", "sub", "tcp://127.0.0.1:5555"},
            {"tcp://[::1]:5555", "sub", "tcp://[0:0:0:0:0:0:0:1]:5555"},
            {"tcp://[::1]:5555", "sub", "tcp://[::]:5555"},

@@ -6,6 +6,8 @@
 #include <nlohmann/json.hpp>
 
 #include "formats/c3d.hpp"
+#include "protocol/messages.hpp"
+#include "sim/recording.hpp"
 #include "tests/support/test_takes.hpp"
 
 namespace mocapd {
@@ -74,6 +76,63 @@ TEST(TakeInfoTest, DescribesBvhJoints) {
   EXPECT_EQ(info.joints[1], "Hips (free)");
   EXPECT_EQ(info.end_sites, 1);
   EXPECT_EQ(TakeInfoJson(info)["joints"][0], "joint_Root (fixed)");
+}
+
+// A recording's summary is what a user checks before replaying it: which subjects, how
+// many frames, and which frames the capture lost before they reached the recorder.
+TEST(TakeInfoTest, SummarisesARecordingsStreamsWithTheirSkippedFramesAndSessions) {
+  const std::string path = testing::TempDir("take_info_recording") + "/capture.rec";
+  {
+    RecordingWriter w(path);
+    std::vector<uint8_t> bytes;
+    int64_t t = 0;
+    auto frame = [&](const std::string& subject, uint16_t version, uint64_t session,
+                     uint64_t number, int markers) {
+      protocol::MarkerFrameMessage m;
+      m.version = version;
+      m.stream.session_id = session;
+      m.subject = subject;
+      m.frame_number = number;
+      m.rate_hz = 120.0f;
+      m.positions.assign(static_cast<size_t>(markers), Vec3::Zero());
+      m.valid.assign(static_cast<size_t>(markers), 1);
+      protocol::EncodeMarkerFrame(m, &bytes);
+      w.Append(t += 8'333'333, "markers/" + subject + "/", bytes);
+    };
+    // actor1 (v2): 10, 11, 14 (two skipped), 14 again, then a new session from 1.
+    for (uint64_t n : {10, 11, 14, 14}) frame("actor1", 2, 7, n, 3);
+    for (uint64_t n : {1, 2}) frame("actor1", 2, 8, n, 3);
+    // actor2 (v1 has no session id): 100, 101, 103, then the numbers start again at 5.
+    for (uint64_t n : {100, 101, 103, 5, 6}) frame("actor2", 1, 0, n, 4);
+    protocol::EncodeEndOfStream({"actor1", 2}, &bytes);
+    w.Append(t += 1000, "markers/actor1/", bytes);
+    w.Append(t += 1000, "markers/actor1/", std::vector<uint8_t>{1, 2, 3});
+  }
+  const TakeInfo info = InspectTake(path);
+  EXPECT_EQ(info.format, "recording");
+  EXPECT_EQ(info.frames, 11);
+  EXPECT_EQ(info.messages, 13);
+  EXPECT_EQ(info.undecodable_messages, 1);
+  EXPECT_DOUBLE_EQ(info.rate_hz, 120.0);
+  ASSERT_EQ(info.streams.size(), 2u);
+  const RecordedStreamInfo& a1 = info.streams[0];
+  EXPECT_EQ(a1.subject, "actor1");
+  EXPECT_EQ(a1.frames, 6);
+  EXPECT_EQ(a1.frames_skipped, 2);
+  EXPECT_EQ(a1.frames_out_of_order, 1);
+  EXPECT_EQ(a1.sessions, 2);
+  EXPECT_EQ(a1.end_of_stream, 1);
+  EXPECT_EQ(a1.markers, 3);
+  EXPECT_EQ(a1.protocol_version, 2);
+  const RecordedStreamInfo& a2 = info.streams[1];
+  EXPECT_EQ(a2.frames_skipped, 1);
+  EXPECT_EQ(a2.sessions, 2);
+  EXPECT_EQ(a2.first_frame, 100u);
+  EXPECT_EQ(a2.last_frame, 6u);
+  EXPECT_EQ(a2.protocol_version, 1);
+  const std::string table = FormatTakeInfo(info);
+  EXPECT_NE(table.find("actor2"), std::string::npos) << table;
+  EXPECT_EQ(TakeInfoJson(info)["streams"][0]["frames_skipped"], 2);
 }
 
 TEST(TakeInfoTest, UnknownExtensionIsRejected) {
