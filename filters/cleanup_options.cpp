@@ -20,7 +20,7 @@ using F = CleanupOptionField;
 constexpr const char* kPipeline = "pipeline";
 constexpr const char* kDetectors = "pipeline.detectors";
 const std::array kFields = {
-    F{"rate_hz", nullptr, "rate_hz", kNone, 1, 10000, &O::rate_hz},
+    F{"rate_hz", nullptr, "rate_hz", kNone, kMinCaptureRateHz, kMaxCaptureRateHz, &O::rate_hz},
     F{"lookahead", kPipeline, "lookahead", kNone, 0, 1000, &O::lookahead},
     F{"window_s", kPipeline, "window_ms", kMs, 1, 1e7, &O::window_s},
     F{"capture_volume_m", kPipeline, "capture_volume_m", kNone, 1, 1e6, &O::capture_volume_m},

@@ -12,6 +12,11 @@
 
 namespace mocapd {
 
+/// The capture rates the cleanup runs at (rate_hz's bounds), which the file readers and
+/// the synthesizer hold a take's rate to before any work is done on it.
+inline constexpr double kMinCaptureRateHz = 1.0;
+inline constexpr double kMaxCaptureRateHz = 10000.0;
+
 struct CleanupOptions {
   double rate_hz = 120.0;
   int lookahead = 12;     ///< K: frames of delay; 0 allowed.

@@ -14,6 +14,7 @@
 #include <boost/algorithm/string/case_conv.hpp>
 #include <boost/algorithm/string/predicate.hpp>
 
+#include "filters/cleanup_options.hpp"
 #include "filters/rotation.hpp"
 #include "formats/c3d.hpp"
 #include "formats/file_paths.hpp"
@@ -70,6 +71,7 @@ class Tokens {
   int line() const {
     return done() ? (tokens_.empty() ? 1 : tokens_.back().line) : tokens_[pos_].line;
   }
+  int last_line() const { return pos_ > 0 ? tokens_[pos_ - 1].line : 0; }
   const std::string& Peek() const {
     static const std::string kEnd;
     return done() ? kEnd : tokens_[pos_].text;
@@ -108,7 +110,7 @@ class Tokens {
   [[noreturn]] void Fail(const std::string& what) const { FailAt(line(), what); }
   // At the token just read (not the next one, which may be lines further on).
   [[noreturn]] void FailAtLast(const std::string& what) const {
-    FailAt(pos_ > 0 ? tokens_[pos_ - 1].line : line(), what);
+    FailAt(pos_ > 0 ? last_line() : line(), what);
   }
   [[noreturn]] void FailAt(int at, const std::string& what) const {
     throw BvhError(source_ + ":" + std::to_string(at) + ": " + what);
@@ -280,6 +282,16 @@ BvhTake ParseBvh(const std::string& text, const std::string& source_name,
   const std::string frame_time_text = t.Peek();
   const double frame_time = ExactFrameTime(t.Number("the frame time"), frame_time_text);
   if (!(frame_time > 0.0)) t.FailAtLast("frame time must be > 0");
+  // A take's rate must be one the cleanup runs at (a Frame Time of 1e30 was read as
+  // 1e-30 Hz, and resampling it kept one frame of 146). A single pose (a character's rest
+  // pose) has no rate to speak of, so its frame time is not judged.
+  if (num_frames > 1 &&
+      !(frame_time >= 1.0 / kMaxCaptureRateHz && frame_time <= 1.0 / kMinCaptureRateHz)) {
+    char rate[96];
+    std::snprintf(rate, sizeof(rate), "frame time %.6g s is a rate of %.6g Hz, outside %g to %g Hz",
+                  frame_time, 1.0 / frame_time, kMinCaptureRateHz, kMaxCaptureRateHz);
+    t.FailAtLast(rate);
+  }
 
   size_t total_channels = 0;
   for (const RawJoint& j : raw) total_channels += j.channels.size();
@@ -294,6 +306,12 @@ BvhTake ParseBvh(const std::string& text, const std::string& source_name,
   // is what the user has to find.
   std::string first_odd_row;
   for (size_t f = 0; f < num_frames; ++f) {
+    // A frame that starts where the last one ended is a row short and a row long that
+    // happen to add up: read on, it put values of one frame in another (markers 8 m off).
+    // A frame wrapped over several lines is read, as long as each frame starts a line.
+    if (f > 0 && !t.done() && t.line() == t.last_line())
+      t.Fail("frame " + std::to_string(f + 1) + " of " + std::to_string(num_frames) +
+             " does not start a line" + first_odd_row);
     const int row_line = t.line();
     for (size_t c = 0; c < total_channels; ++c) {
       if (t.done())
@@ -315,6 +333,7 @@ BvhTake ParseBvh(const std::string& text, const std::string& source_name,
 
   BvhTake take;
   take.units = options.units.empty() ? GuessUnits(raw) : options.units;
+  take.units_guessed = options.units.empty();
   try {
     take.metres_per_unit = MetresPerUnit(take.units);
   } catch (const std::invalid_argument& e) {

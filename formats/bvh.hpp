@@ -40,6 +40,9 @@ struct BvhTake {
   double frame_time_s = 1.0 / 30.0;
   std::string units = "cm";
   double metres_per_unit = 0.01;
+  /// The units were guessed from the skeleton's size (no unit given): a guess cannot tell
+  /// inches from centimetres, so commands say it was one.
+  bool units_guessed = false;
 
   int num_frames() const { return static_cast<int>(frames.size()); }
   double rate_hz() const { return 1.0 / frame_time_s; }

@@ -326,7 +326,7 @@ class Parser {
     try {
       take.metres_per_unit = MetresPerUnit(take.units);
     } catch (const std::invalid_argument& e) {
-      Fail("parameters", Find("POINT:UNITS")->offset, e.what());
+      Fail("parameters", Find("POINT:UNITS")->offset, std::string("POINT:UNITS: ") + e.what());
     }
 
     const int64_t header_frames =
@@ -896,10 +896,14 @@ void C3dTake::Allocate(int frames) {
 
 double MetresPerUnit(const std::string& units) {
   const std::string u = boost::algorithm::to_upper_copy(boost::algorithm::trim_copy(units));
-  if (u == "MM") return 1e-3;
-  if (u == "CM") return 1e-2;
-  if (u == "M") return 1.0;
-  if (u == "IN" || u == "INCH" || u == "INCHES") return 0.0254;
+  // Exporters spell units out as well ("millimeters", "Meter"), in either spelling.
+  const auto is = [&u](std::initializer_list<const char*> names) {
+    return std::any_of(names.begin(), names.end(), [&u](const char* n) { return u == n; });
+  };
+  if (is({"MM", "MILLIMETER", "MILLIMETERS", "MILLIMETRE", "MILLIMETRES"})) return 1e-3;
+  if (is({"CM", "CENTIMETER", "CENTIMETERS", "CENTIMETRE", "CENTIMETRES"})) return 1e-2;
+  if (is({"M", "METER", "METERS", "METRE", "METRES"})) return 1.0;
+  if (is({"IN", "INCH", "INCHES"})) return 0.0254;
   throw std::invalid_argument("unknown length unit '" + units + "' (expected mm, cm, m or in)");
 }
 

@@ -7,6 +7,8 @@
 #include <sstream>
 #include <stdexcept>
 
+#include <unistd.h>
+
 namespace mocapd {
 namespace {
 
@@ -29,6 +31,26 @@ bool SameFile(const std::string& a, const std::string& b) {
   return !ec && ca == cb;
 }
 
+// An existing file (or device: /dev/null) must be writable itself; a new one needs its
+// folder to exist and take it.
+void CheckWritable(const NamedPath& out) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  if (fs::is_directory(out.path, ec))
+    throw std::runtime_error(out.option + " " + out.path + ": is a folder, not a file");
+  if (fs::exists(out.path, ec)) {
+    if (access(out.path.c_str(), W_OK) != 0)
+      throw std::runtime_error(out.option + " " + out.path + ": cannot be written (read-only)");
+    return;
+  }
+  const fs::path parent = fs::absolute(out.path, ec).parent_path();
+  if (!fs::is_directory(parent, ec))
+    throw std::runtime_error(out.option + " " + out.path + ": the folder " + parent.string() +
+                             " does not exist");
+  if (access(parent.c_str(), W_OK) != 0)
+    throw std::runtime_error(out.option + " " + out.path + ": cannot write in " + parent.string());
+}
+
 }  // namespace
 
 std::string ReadWholeFile(const std::string& path) {
@@ -43,11 +65,11 @@ std::string ReadWholeFile(const std::string& path) {
   return std::move(bytes).str();
 }
 
-void RefuseOutputsOverInputs(std::span<const NamedPath> inputs,
-                             std::span<const NamedPath> outputs) {
+void CheckOutputPaths(std::span<const NamedPath> inputs, std::span<const NamedPath> outputs) {
   for (size_t o = 0; o < outputs.size(); ++o) {
     const NamedPath& out = outputs[o];
     if (out.path.empty()) continue;
+    CheckWritable(out);
     for (const NamedPath& in : inputs)
       if (!in.path.empty() && SameFile(out.path, in.path))
         throw std::runtime_error(out.option + " " + out.path + ": is the same file as " +

@@ -1,7 +1,7 @@
 // Paths the readers and commands share: a whole file read with errors that name it, and
-// the refusal, before any work, of an output that names one of the command's inputs or
-// another output (mocapd process / calibrate, mocap-sim synth / replay, the graph
-// commands): a mistyped --out-c3d once replaced a raw capture with its cleaned copy, with
+// the refusal, before any work, of an output that cannot be written or that names one of
+// the command's inputs or another output (mocapd process / calibrate, mocap-sim synth / replay, the
+// graph commands): a mistyped --out-c3d once replaced a raw capture with its cleaned copy, with
 // exit status 0.
 #pragma once
 
@@ -22,8 +22,10 @@ struct NamedPath {
 };
 
 /// Throws std::runtime_error naming both options when an output is the same file as an
-/// input or as an earlier output (".", "..", symbolic and hard links resolved). Empty paths
-/// (an option not given) are skipped.
-void RefuseOutputsOverInputs(std::span<const NamedPath> inputs, std::span<const NamedPath> outputs);
+/// input or as an earlier output (".", "..", symbolic and hard links resolved), and naming
+/// the option when an output cannot be written: its folder missing or read-only, or the
+/// path itself a folder. Called before any work, so a long replay or calibration is not
+/// run to fail at its end. Empty paths (an option not given) are skipped.
+void CheckOutputPaths(std::span<const NamedPath> inputs, std::span<const NamedPath> outputs);
 
 }  // namespace mocapd

@@ -10,6 +10,7 @@
 
 #include <boost/algorithm/string/case_conv.hpp>
 #include <boost/algorithm/string/predicate.hpp>
+#include <boost/algorithm/string/trim.hpp>
 
 #include "formats/toml_reader.hpp"
 
@@ -102,9 +103,9 @@ std::optional<int> MarkerSetDefinition::Find(const std::string& label) const {
 
 std::string BareLabel(const std::string& label) {
   const size_t colon = label.rfind(':');
-  std::string bare = colon == std::string::npos ? label : label.substr(colon + 1);
-  while (!bare.empty() && std::isspace(static_cast<unsigned char>(bare.back()))) bare.pop_back();
-  return bare;
+  // Padding on either side: C3D labels are padded with trailing spaces, and some
+  // exporters centre them or write "Actor 1: LASI".
+  return boost::algorithm::trim_copy(colon == std::string::npos ? label : label.substr(colon + 1));
 }
 
 MarkerSetDefinition ParseMarkerSet(const std::string& text, const std::string& source_name) {

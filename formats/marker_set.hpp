@@ -55,7 +55,7 @@ const std::vector<MarkerSetDefinition>& BuiltInMarkerSets();
 /// built-in names when neither.
 MarkerSetDefinition FindMarkerSet(const std::string& name_or_path);
 
-/// A label without a subject prefix ("Actor1:LASI" -> "LASI").
+/// A label without a subject prefix or padding ("Actor1:LASI", " LASI " -> "LASI").
 std::string BareLabel(const std::string& label);
 
 /// Why a C3D point is not used as a marker, or kMarker.

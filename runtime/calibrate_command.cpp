@@ -253,7 +253,7 @@ int RunCalibrateCommand(const CalibrateCommandOptions& options, std::ostream& ou
   if (std::filesystem::is_regular_file(options.marker_set))
     inputs.push_back({"--marker-set", options.marker_set});
   const NamedPath outputs[] = {{"--out", options.out_subject}, {"--report", options.report_json}};
-  RefuseOutputsOverInputs(inputs, outputs);
+  CheckOutputPaths(inputs, outputs);
   if (options.skeleton_bvh.empty()) return CalibrateFromMarkersOnly(options, out);
   if (options.markers_c3d.size() != 1)
     throw std::runtime_error(

@@ -76,19 +76,24 @@ int main(int argc, char** argv) {
       ->add_option("--report", cal.report_json,
                    "Markers alone: write the calibration report (JSON)")
       ->check(mocapd::kNonEmptyPath);
-  cal_cmd
-      ->add_option("--skeleton", cal.skeleton_bvh,
-                   "Optional: BVH with the hierarchy and the motion of the captured take")
-      ->check(CLI::ExistingFile);
+  CLI::Option* skeleton_option =
+      cal_cmd
+          ->add_option("--skeleton", cal.skeleton_bvh,
+                       "Optional: BVH with the hierarchy and the motion of the captured take")
+          ->check(CLI::ExistingFile);
   cal_cmd->add_option("--out", cal.out_subject, "Subject model to write (TOML)")
       ->required()
       ->check(mocapd::kNonEmptyPath);
   cal_cmd->add_option("--name", cal.subject_name, "Subject name (default: the output file's stem)");
-  cal_cmd->add_option("--bvh-units", cal.bvh_units,
-                      "BVH length unit: mm, cm, m or in (default: guess)");
+  // Both concern the --skeleton calibration alone: given without it they were ignored.
+  cal_cmd
+      ->add_option("--bvh-units", cal.bvh_units,
+                   "With --skeleton: its length unit, mm, cm, m or in (default: guess)")
+      ->needs(skeleton_option);
   cal_cmd
       ->add_option("--max-residual-mm", max_rms_mm,
-                   "Reject markers whose best fit leaves more RMS than this")
+                   "With --skeleton: reject markers whose best fit leaves more RMS than this")
+      ->needs(skeleton_option)
       ->check(mocapd::kFiniteNumber)
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
@@ -137,15 +142,18 @@ int main(int argc, char** argv) {
                    "Write SVG plots to this directory: markers.svg, solve.svg (and "
                    "joint_error.svg with --truth-bvh)")
       ->check(mocapd::kNonEmptyPath);
+  CLI::Option* truth_option =
+      proc_cmd
+          ->add_option("--truth-bvh", proc.truth_bvh,
+                       "The take's true motion (mocap-sim synth --truth-bvh): report and plot the "
+                       "joint error")
+          ->check(CLI::ExistingFile);
   proc_cmd
-      ->add_option("--truth-bvh", proc.truth_bvh,
-                   "The take's true motion (mocap-sim synth --truth-bvh): report and plot the "
-                   "joint error")
-      ->check(CLI::ExistingFile);
-  proc_cmd->add_option("--truth-units", proc.truth_units,
-                       "The truth BVH's length unit: mm, cm, m or in (default: guessed from its "
-                       "bones, which cannot tell in from cm; mocap-sim synth writes the truth in "
-                       "the subject's bvh_units)");
+      ->add_option("--truth-units", proc.truth_units,
+                   "The truth BVH's length unit: mm, cm, m or in (default: guessed from its "
+                   "bones, which cannot tell in from cm; mocap-sim synth writes the truth in "
+                   "the subject's bvh_units)")
+      ->needs(truth_option);
   std::vector<std::string> joint_map_args;
   proc_cmd
       ->add_option("--joint-map", joint_map_args,

@@ -10,8 +10,6 @@
 #include <nlohmann/json.hpp>
 #include <optional>
 
-#include <unistd.h>
-
 #include "filters/pose_error.hpp"
 #include "formats/bvh.hpp"
 #include "formats/c3d.hpp"
@@ -78,26 +76,9 @@ void WritePlots(const ProcessCommandOptions& options, const PlotData& data,
 }
 
 // Fails before the take is solved, not after (the solved BVH written, the user waiting a
-// take's length): an output whose folder is missing or read-only, a plot folder that is a
-// file.
-void CheckOutputs(const ProcessCommandOptions& options) {
+// take's length): a plot folder that is a file. The output files are CheckOutputPaths'.
+void CheckPlotFolder(const ProcessCommandOptions& options) {
   namespace fs = std::filesystem;
-  auto writable = [](const std::string& option, const std::string& path) {
-    if (path.empty()) return;
-    const fs::path parent = fs::absolute(path).parent_path();
-    std::error_code ec;
-    if (!fs::is_directory(parent, ec))
-      throw std::runtime_error(option + " " + path + ": the folder " + parent.string() +
-                               " does not exist");
-    if (fs::is_directory(path, ec))
-      throw std::runtime_error(option + " " + path + ": is a folder, not a file");
-    if (access(parent.c_str(), W_OK) != 0)
-      throw std::runtime_error(option + " " + path + ": cannot write in " + parent.string());
-  };
-  writable("--out-bvh", options.output_bvh);
-  writable("--out-c3d", options.output_c3d);
-  writable("--out-character-bvh", CharacterOutputPath(options));
-  writable("--report", options.report_json);
   std::error_code ec;
   if (!options.plot_dir.empty() && fs::exists(options.plot_dir, ec) &&
       !fs::is_directory(options.plot_dir, ec))
@@ -151,7 +132,7 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
                                             : "--out-character-bvh",
        CharacterOutputPath(options)},
       {"--report", options.report_json}};
-  RefuseOutputsOverInputs(inputs, outputs);
+  CheckOutputPaths(inputs, outputs);
   const SubjectModel subject = ReadSubjectModel(options.subject);
   C3dTake take = ReadC3d(options.input_c3d);
   SelectActor(&take, options.actor, options.input_c3d);
@@ -168,7 +149,7 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
   }
   // Said of the take, before any output: the cleanup's own check named an internal field
   // (a C3D synthesized from a BVH whose Frame Time was 1e30).
-  if (!(take.rate_hz >= 1.0 && take.rate_hz <= 10000.0)) {
+  if (!(take.rate_hz >= kMinCaptureRateHz && take.rate_hz <= kMaxCaptureRateHz)) {
     char rate[64];
     std::snprintf(rate, sizeof(rate), "%.6g", take.rate_hz);
     throw std::runtime_error(options.input_c3d + ": a capture rate of " + rate +
@@ -204,7 +185,7 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
         std::to_string(markers.num_markers()) + " markers (" + options.subject +
         ") are labelled in the take: is it this subject's take, with its marker set? "
         "(--allow-partial solves it anyway)");
-  CheckOutputs(options);
+  CheckPlotFolder(options);
   // The character is read and matched before the take is solved, so a bad one costs no
   // solve and leaves no half-written output.
   std::optional<BvhTake> character;

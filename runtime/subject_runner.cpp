@@ -193,7 +193,8 @@ std::optional<CharacterInfo> SubjectRunner::character_info() const {
 
 uint64_t SubjectRunner::pending() const { return static_cast<uint64_t>(pushed_ - published_); }
 
-void SubjectRunner::CountDrop(DropReason reason, int64_t receive_ns) {
+void SubjectRunner::CountDrop(DropReason reason, int64_t receive_ns,
+                              const protocol::MarkerFrameMessage& frame) {
   // A drop right after a frame taken (and, in Accept, a frame taken right after drops):
   // input switching between what the subject takes and what it cannot (two bridges with
   // different marker orders taking turns) lost half its frames with /health ok, since no
@@ -206,12 +207,30 @@ void SubjectRunner::CountDrop(DropReason reason, int64_t receive_ns) {
   // start an hour later) are no half second of them, unless the rejection already stands.
   const bool after_silence =
       consecutive_dropped_ > 0 && receive_ns - last_dropped_ns_ > kRejectingAfterNs;
+  // A frame that failed to decode has no number to trust.
+  const bool numbered = reason != DropReason::kMalformed && reason != DropReason::kNonFinite;
   if (consecutive_dropped_ == 0 || (after_silence && !rejecting())) {
     consecutive_dropped_ = 0;
     first_dropped_ns_ = receive_ns;
+    first_dropped_number_ = frame.frame_number;
+    first_dropped_numbered_ = numbered;
+    first_dropped_session_ = frame.stream.session_id;
+    dropped_capture_span_ns_ = 0;
   }
   ++consecutive_dropped_;
   last_dropped_ns_ = receive_ns;
+  // At the rate the frame says it was captured at where the cleanup could run at it (a
+  // rate_mismatch frame's own), else at the subject's.
+  const double capture_hz = frame.rate_hz >= kMinCaptureRateHz && frame.rate_hz <= kMaxCaptureRateHz
+                                ? static_cast<double>(frame.rate_hz)
+                                : rate_hz_;
+  if (numbered && first_dropped_numbered_ && frame.frame_number > first_dropped_number_ &&
+      frame.stream.session_id == first_dropped_session_) {
+    const double span_s =
+        static_cast<double>(frame.frame_number - first_dropped_number_) / capture_hz;
+    dropped_capture_span_ns_ =
+        std::max(dropped_capture_span_ns_, static_cast<int64_t>(std::min(span_s, 1e6) * 1e9));
+  }
   last_drop_ = reason;
 }
 
@@ -242,7 +261,7 @@ std::optional<DropReason> SubjectRunner::Drop(const protocol::MarkerFrameMessage
       Ahead(frame.frame_number, next_frame_number_) <= static_cast<uint64_t>(max_gap_frames_) &&
       frame.stream.session_id == counters_.last_stream.session_id)
     ++dropped_ahead_;
-  CountDrop(reason, receive_ns);
+  CountDrop(reason, receive_ns, frame);
   return reason;
 }
 

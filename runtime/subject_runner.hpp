@@ -144,10 +144,14 @@ class SubjectRunner {
   protocol::SubjectState state() const { return state_; }
   /// Every frame received over the last half second (10 at least) was dropped: the reason
   /// of the last. Judged by the time the drops span, not their count: counted at the
-  /// subject's rate, a 60 Hz sender into a 360 Hz subject was flagged after 3 s.
+  /// subject's rate, a 60 Hz sender into a 360 Hz subject was flagged after 3 s. That time
+  /// is the longer of their arrival and their capture (their frame numbers at the rate
+  /// they were sent at): a backlog or a replay at full speed arrives in a burst, and 480
+  /// frames of a 100 Hz take, every one dropped, left /health ok.
   std::optional<DropReason> rejecting() const {
     return consecutive_dropped_ >= kRejectingMinFrames &&
-                   last_dropped_ns_ - first_dropped_ns_ >= kRejectingAfterNs
+                   std::max(last_dropped_ns_ - first_dropped_ns_, dropped_capture_span_ns_) >=
+                       kRejectingAfterNs
                ? std::optional<DropReason>(last_drop_)
                : std::nullopt;
   }
@@ -243,7 +247,7 @@ class SubjectRunner {
   void Publish(int64_t trigger_receive_ns, OutputSink& sink);
   void UpdateModelDistance(int64_t frame, const CleanFrame& out);
   void Resynchronise(OutputSink& sink);
-  void CountDrop(DropReason reason, int64_t receive_ns);
+  void CountDrop(DropReason reason, int64_t receive_ns, const protocol::MarkerFrameMessage& frame);
   void ShowLive(const CleanFrame& out, int64_t index, const Stamp& stamp, uint64_t publish_ns);
   void ScaleTemplate(std::span<const Vec3> positions, OutputSink& sink);
   /// Trades the published subject (pipeline, model, retargeter, description) for
@@ -309,6 +313,10 @@ class SubjectRunner {
   uint64_t dropped_ahead_ = 0;    ///< Drops since the last frame taken numbered past it.
   int64_t first_dropped_ns_ = 0;  ///< Receive times of the first and last of those drops.
   int64_t last_dropped_ns_ = 0;
+  uint64_t first_dropped_number_ = 0;  ///< Frame number and session of the first of them.
+  uint64_t first_dropped_session_ = 0;
+  bool first_dropped_numbered_ = false;  ///< It decoded: its number can be trusted.
+  int64_t dropped_capture_span_ns_ = 0;  ///< The capture time their frame numbers span.
   DropReason last_drop_ = DropReason::kMalformed;
   std::vector<Vec3> received_;           ///< Ring like stamps_: each held frame's samples.
   std::vector<double> distances_;        ///< Publish scratch: sample-to-model distances.

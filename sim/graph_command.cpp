@@ -158,7 +158,7 @@ int GraphCommands::Run() {
       inputs.push_back({"--graph " + s.graph_path + "'s take", take.path});
   const NamedPath outputs[] = {
       {"--out", s.out}, {"--subject-out", s.subject_out}, {"--path-out", s.path_out}};
-  RefuseOutputsOverInputs(inputs, outputs);
+  CheckOutputPaths(inputs, outputs);
   if (s.build->parsed()) {
     const MotionLibrary lib = LoadMotionLibrary(s.takes, s.rate_hz, s.units);
     GraphBuildReport report;

@@ -8,6 +8,7 @@
 #include <CLI/CLI.hpp>
 #include <atomic>
 #include <csignal>
+#include <cstdio>
 #include <exception>
 #include <filesystem>
 #include <fstream>
@@ -16,6 +17,7 @@
 #include <random>
 #include <stdexcept>
 
+#include "filters/cleanup_options.hpp"
 #include "formats/bvh.hpp"
 #include "formats/c3d.hpp"
 #include "formats/file_paths.hpp"
@@ -64,7 +66,7 @@ int RunSynth(const SynthOptions& o) {
                                        {"--subject-out", o.subject_out},
                                        {"--truth-bvh", o.truth_bvh},
                                        {"--truth", o.truth_mask}};
-  mocapd::RefuseOutputsOverInputs(inputs, outputs);
+  mocapd::CheckOutputPaths(inputs, outputs);
   mocapd::BvhTake source;
   if (!o.bvh.empty()) {
     mocapd::BvhReadOptions read;
@@ -82,6 +84,14 @@ int RunSynth(const SynthOptions& o) {
     source = mocapd::MakeBvhTake(std::move(sk), std::move(frames), 1.0 / rate, "cm");
   }
   const double rate = o.rate_hz > 0 ? o.rate_hz : source.rate_hz();
+  // The reader holds a take of several frames to the cleanup's rates; one frame has no
+  // rate to judge, and its Frame Time would become the C3D's.
+  if (!(rate >= mocapd::kMinCaptureRateHz && rate <= mocapd::kMaxCaptureRateHz)) {
+    char text[64];
+    std::snprintf(text, sizeof(text), "%.6g", rate);
+    throw std::runtime_error(o.bvh + ": a rate of " + text +
+                             " Hz (its Frame Time); give the take's rate with --rate");
+  }
   std::vector<mocapd::Pose> motion =
       mocapd::ResampleMotion(source.skeleton, source.frames, source.rate_hz(), rate);
   mocapd::HumanoidRoles roles;
@@ -125,6 +135,10 @@ int RunSynth(const SynthOptions& o) {
   mocapd::WriteC3d(o.out, take);
   std::cout << "wrote " << o.out << ": " << take.num_frames << " frames at " << rate << " Hz, "
             << markers->num_markers() << " markers\n";
+  if (source.units_guessed && !o.bvh.empty())
+    std::cout << "note: " << o.bvh << "'s length unit taken as " << source.units
+              << ", guessed from its bones (--bvh-units says otherwise: a guess cannot tell in "
+                 "from cm)\n";
   if (!o.subject_out.empty()) {
     mocapd::SubjectModel model;
     model.name = "synthetic";
@@ -170,7 +184,7 @@ int RunReplayCommand(ReplayCommand& c) {
                                            {"--curve-key", c.options.curve_key_file},
                                            {"--curve-server-key", c.options.curve_server_key_file}};
   const mocapd::NamedPath outputs[] = {{"--report", c.report}, {"--plot", c.plot}};
-  mocapd::RefuseOutputsOverInputs(inputs, outputs);
+  mocapd::CheckOutputPaths(inputs, outputs);
   mocapd::ReplaySource source;
   if (!c.take.empty() + !c.humanoid.empty() + !c.graph.empty() > 1)
     throw std::invalid_argument("replay: give one of a TAKE file, --humanoid or --graph");
@@ -182,7 +196,7 @@ int RunReplayCommand(ReplayCommand& c) {
     // The takes the graph names are read as it plays: inputs too.
     for (const mocapd::GraphTakeRef& take : graph_source.graph->takes)
       inputs.push_back({"--graph " + c.graph + "'s take", take.path});
-    mocapd::RefuseOutputsOverInputs(inputs, outputs);
+    mocapd::CheckOutputPaths(inputs, outputs);
   }
   const bool recording = !c.take.empty() && mocapd::IsRecordingFile(c.take);
   if (recording) {
@@ -306,10 +320,12 @@ int main(int argc, char** argv) {
                    "motion, for calibration)")
       ->check(CLI::IsMember({"walk", "reach", "turn", "mixed", "rom"}))
       ->excludes(bvh_opt);
+  // A BVH's length is its own: --seconds beside it was ignored.
   synth_cmd->add_option("--seconds", synth.seconds, "Length of built-in humanoid motion")
       ->check(mocapd::kFiniteNumber)
       ->check(CLI::Range(0.1, 3600.0))
-      ->capture_default_str();
+      ->capture_default_str()
+      ->excludes(bvh_opt);
   synth_cmd->add_option("--out", synth.out, "Marker take to write (.c3d)")
       ->required()
       ->check(mocapd::kNonEmptyPath);
@@ -352,7 +368,8 @@ int main(int argc, char** argv) {
   synth_cmd
       ->add_option("--truth", synth.truth_mask,
                    "With --corrupt: write the ground-truth corruption mask (JSON)")
-      ->check(mocapd::kNonEmptyPath);
+      ->check(mocapd::kNonEmptyPath)
+      ->needs("--corrupt");
 
   ReplayCommand replay;
   CLI::App* replay_cmd = app.add_subcommand(

@@ -138,6 +138,7 @@ TakeInfo InspectTake(const std::string& path) {
     info.frames = take.num_frames();
     info.rate_hz = take.rate_hz();
     info.units = take.units;
+    info.units_guessed = take.units_guessed;
     for (const Joint& j : take.skeleton.joints())
       info.joints.push_back(j.name + " (" + to_string(j.type) + ")");
     info.end_sites = static_cast<int>(take.end_sites.size());
@@ -155,7 +156,7 @@ std::string FormatTakeInfo(const TakeInfo& info) {
   std::snprintf(line, sizeof(line),
                 "%s\n  format  %s\n  frames  %d\n  rate    %.6g Hz (%.3f s)\n  units   %s\n",
                 info.path.c_str(), info.format.c_str(), info.frames, info.rate_hz, info.seconds,
-                info.units.c_str());
+                (info.units + (info.units_guessed ? " (guessed from its bones)" : "")).c_str());
   out += line;
   if (info.format == "c3d") {
     out += "  processor " + info.processor + "\n";
@@ -245,6 +246,7 @@ nlohmann::json TakeInfoJson(const TakeInfo& info) {
                               {"seconds", s.seconds}});
   } else {
     j["joints"] = info.joints;
+    j["units_guessed"] = info.units_guessed;
     j["end_sites"] = info.end_sites;
   }
   return j;

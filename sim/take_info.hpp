@@ -50,6 +50,7 @@ struct TakeInfo {
   std::vector<PointInfo> points;             ///< C3D only
   int64_t origin_samples_missing = 0;        ///< C3D only: samples at (0, 0, 0) read as missing
   std::vector<std::string> notes;            ///< C3D only: the reader's notes (C3dTake::notes)
+  bool units_guessed = false;                ///< BVH only: from the bones' size, not given.
   std::vector<std::string> joints;           ///< BVH only: "name (type)"
   int end_sites = 0;
   std::vector<RecordedStreamInfo> streams;  ///< Recording only, in order of appearance.

@@ -359,17 +359,44 @@ TEST(BvhTest, MalformedFilesGetErrorsNamingTheLine) {
   std::string short_row = good;
   short_row.erase(short_row.find(" 10 80 -170"), 4);
   ExpectError(short_row,
-              "bad.bvh:36: frame 3 of 3 is truncated: expected 24 values; frame 1 (line 34) "
-              "has 23 on its line");
+              "bad.bvh:35: frame 2 of 3 does not start a line; frame 1 (line 34) has 23 on its "
+              "line");
   std::string long_row = good;
   long_row.insert(long_row.find(" 15 85 175"), " 9");
   ExpectError(long_row,
-              "bad.bvh:36: unexpected data after frame 3: '160'; frame 2 (line 35) has more "
+              "bad.bvh:35: frame 3 of 3 does not start a line; frame 2 (line 35) has more "
               "than 24 on its line");
+  // A row short and the next one long add up to the frames the header counts: read on,
+  // frame 2 took frame 3's first value and frame 3 the extra one (markers 8 m off).
+  std::string short_then_long = short_row;
+  short_then_long.insert(short_then_long.find(" 15 85 175"), " 9");
+  ExpectError(short_then_long,
+              "bad.bvh:35: frame 2 of 3 does not start a line; frame 1 (line 34) has 23 on its "
+              "line");
+  // A frame wrapped over two lines, each frame starting its own, is the same take.
+  std::string wrapped = good;
+  for (size_t at = wrapped.find("MOTION"); (at = wrapped.find(" 10 80", at)) != std::string::npos;
+       at += 7)
+    wrapped[at] = '\n';
+  EXPECT_NO_THROW(ParseBvh(wrapped, "wrapped.bvh")) << wrapped;
   // An error on the last token of a line names that line, not the next token's.
   std::string zero_time = good;
   zero_time.replace(zero_time.find("0.0333333"), 9, "0");
   ExpectError(zero_time, "bad.bvh:33: frame time must be > 0");
+  // A rate the cleanup cannot run at (1e30 read as 1e-30 Hz, one frame of 146 resampled).
+  std::string huge_time = good;
+  huge_time.replace(huge_time.find("0.0333333"), 9, "1e30");
+  ExpectError(huge_time,
+              "bad.bvh:33: frame time 1e+30 s is a rate of 1e-30 Hz, outside 1 to 10000 Hz");
+  std::string tiny_time = good;
+  tiny_time.replace(tiny_time.find("0.0333333"), 9, "1e-9");
+  ExpectError(tiny_time, "bad.bvh:33: frame time 1e-09 s is a rate of 1e+09 Hz");
+  // One pose (a character's rest pose) has no rate: its frame time is not judged.
+  EXPECT_NO_THROW(
+      ParseBvh("HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\nCHANNELS 3 Zrotation Xrotation "
+               "Yrotation\nEnd Site\n{\nOFFSET 0 1 0\n}\n}\nMOTION\nFrames: 1\nFrame "
+               "Time: 1e30\n0 0 0\n",
+               "rest.bvh"));
   ExpectError(good + " 7", "unexpected data after frame 3");
   std::string unclosed = good.substr(0, good.find("MOTION"));
   unclosed.erase(unclosed.rfind('}'));

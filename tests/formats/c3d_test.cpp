@@ -731,6 +731,25 @@ TEST(C3dTest, UnitsAreTrimmedBothSidesAndATakeFromFrameZeroKeepsItsNumbering) {
   EXPECT_TRUE(read.notes.empty());
 }
 
+// An unknown POINT:UNITS is named as such, not only by its byte offset.
+TEST(C3dTest, AnUnknownUnitNamesPointUnits) {
+  C3dTake take = MakeTake(2, 5);
+  take.units = "metres";  // the writer knows it; the bytes are then changed to "parsec"
+  std::vector<uint8_t> bytes = EncodeC3d(take);
+  const std::string metres = "metres";
+  const auto at = std::search(bytes.begin(), bytes.end(), metres.begin(), metres.end());
+  ASSERT_NE(at, bytes.end());
+  std::copy_n(std::string("parsec").begin(), 6, at);
+  try {
+    (void)ParseC3d(bytes, "odd.c3d");
+    ADD_FAILURE() << "read";
+  } catch (const C3dError& e) {
+    EXPECT_NE(std::string(e.what()).find("POINT:UNITS: unknown length unit 'parsec'"),
+              std::string::npos)
+        << e.what();
+  }
+}
+
 // A writer that counted its parameter blocks wrong (one, for a section of several): the
 // entries linked on past it were cut off in silence, labels and units among them. They
 // are read to the last, up to the data section, with a note; what follows the last entry
@@ -791,6 +810,10 @@ TEST(C3dTest, MetresPerUnitKnowsTheUsualUnits) {
   EXPECT_DOUBLE_EQ(MetresPerUnit(" mm"), 1e-3);
   EXPECT_DOUBLE_EQ(MetresPerUnit("in"), 0.0254);
   EXPECT_THROW(MetresPerUnit("parsec"), std::invalid_argument);
+  // Spelled out, as some exporters write POINT:UNITS (they were refused).
+  EXPECT_DOUBLE_EQ(MetresPerUnit("millimeters"), 1e-3);
+  EXPECT_DOUBLE_EQ(MetresPerUnit("Meter"), 1.0);
+  EXPECT_DOUBLE_EQ(MetresPerUnit("centimetres"), 1e-2);
 }
 
 }  // namespace

@@ -1,4 +1,5 @@
-// Tests for the refusal of an output that names an input or another output.
+// Tests for the refusal of an output that names an input or another output, or that
+// cannot be written.
 #include "formats/file_paths.hpp"
 
 #include <gtest/gtest.h>
@@ -8,17 +9,19 @@
 #include <stdexcept>
 #include <string>
 
+#include <unistd.h>
+
 #include "tests/support/test_takes.hpp"
 
 namespace mocapd {
 namespace {
 
-// The error RefuseOutputsOverInputs throws, or "" when it accepts.
+// The error CheckOutputPaths throws, or "" when it accepts.
 std::string Refusal(std::initializer_list<NamedPath> inputs,
                     std::initializer_list<NamedPath> outputs) {
   try {
-    RefuseOutputsOverInputs(std::span(inputs.begin(), inputs.size()),
-                            std::span(outputs.begin(), outputs.size()));
+    CheckOutputPaths(std::span(inputs.begin(), inputs.size()),
+                     std::span(outputs.begin(), outputs.size()));
   } catch (const std::runtime_error& e) {
     return e.what();
   }
@@ -80,6 +83,25 @@ TEST_F(OutputPathsTest, DistinctFilesAndOptionsNotGivenAreAccepted) {
                      {"--report", ""},
                      {"--plot", ""}}),
             "");
+}
+
+// Found before the work, not after it: `replay --report /missing/r.json` ran the whole
+// replay and then failed, and `calibrate --out` in a missing folder solved the subject first.
+TEST_F(OutputPathsTest, AnOutputThatCannotBeWrittenIsRefusedNamingItsOption) {
+  EXPECT_EQ(Refusal({}, {{"--report", dir_ + "/missing/r.json"}}),
+            "--report " + dir_ + "/missing/r.json: the folder " + dir_ + "/missing does not exist");
+  EXPECT_EQ(Refusal({}, {{"--out", dir_}}), "--out " + dir_ + ": is a folder, not a file");
+  // A device is written, not replaced: two outputs discarded to /dev/null are fine.
+  EXPECT_EQ(Refusal({}, {{"--out-bvh", "/dev/null"}, {"--report", "/dev/null"}}), "");
+  // Read-only is only read-only to a user who is not root (CI runs as root).
+  if (geteuid() != 0) {
+    const std::string locked = dir_ + "/locked.json";
+    std::ofstream(locked) << "{}";
+    std::filesystem::permissions(locked, std::filesystem::perms::owner_read);
+    EXPECT_EQ(Refusal({}, {{"--report", locked}}),
+              "--report " + locked + ": cannot be written (read-only)");
+    std::filesystem::remove(locked);
+  }
 }
 
 }  // namespace

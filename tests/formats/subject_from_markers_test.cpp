@@ -106,6 +106,19 @@ TEST_F(SubjectFromMarkersTest, RangeOfMotionGivesJointCentresThatFollowTheTruth)
   EXPECT_LT(cal.solve.median_residual_m, 0.006);
 }
 
+// Labels padded on the left (" LASI", as one exporter writes them) or prefixed with a space
+// after the colon ("Actor 1: LASI") are the set's own: they were left unrecognised, the
+// markers placed by clustering and named with their padding.
+TEST_F(SubjectFromMarkersTest, PaddedAndSpacedLabelsAreRecognisedAsTheSetsOwn) {
+  for (size_t p = 0; p < take_.labels.size(); ++p)
+    take_.labels[p] = (p % 2 == 0 ? "  " : "Actor 1: ") + take_.labels[p] + " ";
+  const MarkersOnlyCalibration cal = Calibrate();
+  EXPECT_EQ(cal.marker_set, "plug-in-gait-full");
+  ASSERT_EQ(cal.markers.size(), markers_.markers().size());
+  for (const std::string& name : cal.markers)
+    EXPECT_EQ(name, BareLabel(name)) << "'" << name << "'";
+}
+
 // Frames no body gives: one whose markers all read 1e30 (or 1 km off), one whose markers
 // all jumped 10 m and back. Counted, the first failed the calibration ("only 0 of 41
 // markers fit") and the second moved bones by 11 cm with exit 0; left out, the joint

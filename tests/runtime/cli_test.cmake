@@ -205,3 +205,12 @@ execute_process(COMMAND ${MOCAP_SIM} synth --humanoid walk --out "" RESULT_VARIA
 if(rc EQUAL 0 OR NOT err MATCHES "--out: a path is needed")
   message(FATAL_ERROR "synth --out \"\" was not refused: rc=${rc} err=${err}")
 endif()
+# An output that cannot be written is refused before the work: a replay ran to its end
+# and then failed to write its report.
+execute_process(COMMAND ${MOCAP_SIM} replay --humanoid walk --seconds 1 --rate max --from ""
+                        --to tcp://127.0.0.1:1 --report ${WORK_DIR}/missing/r.json
+                RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+if(rc EQUAL 0 OR NOT err MATCHES "--report ${WORK_DIR}/missing/r.json: the folder ${WORK_DIR}/missing does not exist"
+   OR out MATCHES "replaying")
+  message(FATAL_ERROR "replay --report in a missing folder was not refused first: rc=${rc} out=${out} err=${err}")
+endif()

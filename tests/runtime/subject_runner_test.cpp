@@ -745,6 +745,36 @@ TEST_F(SubjectRunnerTest, ASubjectWhoseFramesAreAllDroppedIsRejectingInput) {
   EXPECT_FALSE(runner.rejecting().has_value());
 }
 
+// A take replayed as fast as it can go, or a backlog, arrives in a burst: a 100 Hz take
+// into a 120 Hz subject, 480 frames in 48 ms, every one dropped as rate_mismatch, left
+// /health ok, since no half second of arrivals was all drops. The frames' numbers at the
+// rate they were sent at say how much capture was lost: 0.39 s is not flagged, 0.5 s is.
+TEST_F(SubjectRunnerTest, ABurstOfDroppedFramesIsJudgedByTheCaptureTheyHold) {
+  SubjectRunner runner(subject_, daemon_);
+  const auto at_100_hz = [&](uint64_t number) {
+    protocol::MarkerFrameMessage m = Frame(static_cast<int>(number % 200), 1000 + number, 0);
+    m.rate_hz = 100.0f;
+    return m;
+  };
+  for (uint64_t n = 0; n < 40; ++n)
+    ASSERT_TRUE(runner.Accept(at_100_hz(n), 1'000'000 + static_cast<int64_t>(n) * 100'000, sink_)
+                    .has_value());
+  EXPECT_FALSE(runner.rejecting().has_value());
+  for (uint64_t n = 40; n < 480; ++n)
+    ASSERT_TRUE(runner.Accept(at_100_hz(n), 1'000'000 + static_cast<int64_t>(n) * 100'000, sink_)
+                    .has_value());
+  ASSERT_TRUE(runner.rejecting().has_value());
+  EXPECT_EQ(*runner.rejecting(), DropReason::kRateMismatch);
+  runner.PublishStatus(50'000'000, sink_);
+  ASSERT_FALSE(sink_.statuses.empty());
+  EXPECT_EQ(sink_.statuses.back().problems, protocol::kProblemRejectingInput);
+  // Numbers that do not move (a sender that never counts) are judged by arrival alone.
+  SubjectRunner unnumbered(subject_, daemon_);
+  for (int f = 0; f < 480; ++f)
+    ASSERT_TRUE(unnumbered.Accept(at_100_hz(0), int64_t{f} * 100'000, sink_).has_value());
+  EXPECT_FALSE(unnumbered.rejecting().has_value());
+}
+
 // Two bridges with different marker orders taking turns every 30 frames at 120 Hz: half
 // the input dropped as model_mismatch, and never half a second of nothing but drops, so
 // never rejecting: /health said ok. Each switch between frames taken and frames dropped is

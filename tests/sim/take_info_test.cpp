@@ -76,6 +76,10 @@ TEST(TakeInfoTest, DescribesBvhJoints) {
   EXPECT_EQ(info.joints[1], "Hips (free)");
   EXPECT_EQ(info.end_sites, 1);
   EXPECT_EQ(TakeInfoJson(info)["joints"][0], "joint_Root (fixed)");
+  // No unit in a BVH: the guess (which cannot tell in from cm) is said to be one.
+  EXPECT_TRUE(info.units_guessed);
+  EXPECT_NE(FormatTakeInfo(info).find("units   cm (guessed from its bones)"), std::string::npos)
+      << FormatTakeInfo(info);
 }
 
 // A recording's summary is what a user checks before replaying it: which subjects, how
