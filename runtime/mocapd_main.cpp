@@ -53,7 +53,7 @@ int main(int argc, char** argv) {
       ->add_option("--markers", cal.markers_c3d,
                    "C3D marker take(s) of the actor (repeat for several takes)")
       ->required()
-      ->check(CLI::ExistingFile);
+      ->check(mocapd::kExistingFile);
   cal_cmd->add_option("--actor", cal.actor,
                       "Of takes holding several actors' markers (Justin:LASI, Copy:LASI): "
                       "whose to use, by label prefix");
@@ -80,7 +80,7 @@ int main(int argc, char** argv) {
       cal_cmd
           ->add_option("--skeleton", cal.skeleton_bvh,
                        "Optional: BVH with the hierarchy and the motion of the captured take")
-          ->check(CLI::ExistingFile);
+          ->check(mocapd::kExistingFile);
   cal_cmd->add_option("--out", cal.out_subject, "Subject model to write (TOML)")
       ->required()
       ->check(mocapd::kNonEmptyPath);
@@ -103,10 +103,10 @@ int main(int argc, char** argv) {
       app.add_subcommand("process", "Clean a recorded take frame by frame and solve the skeleton");
   proc_cmd->add_option("--subject", proc.subject, "Subject model (TOML)")
       ->required()
-      ->check(CLI::ExistingFile);
+      ->check(mocapd::kExistingFile);
   proc_cmd->add_option("--in", proc.input_c3d, "Marker take (C3D)")
       ->required()
-      ->check(CLI::ExistingFile);
+      ->check(mocapd::kExistingFile);
   proc_cmd->add_option("--actor", proc.actor,
                        "Of a take holding several actors' markers (Justin:LASI, Copy:LASI): "
                        "whose to solve, by label prefix (--out-c3d then holds that actor's)");
@@ -126,7 +126,7 @@ int main(int argc, char** argv) {
   proc_cmd
       ->add_option("--retarget", proc.retarget_bvh,
                    "Also retarget onto this character (BVH: hierarchy and rest pose)")
-      ->check(CLI::ExistingFile);
+      ->check(mocapd::kExistingFile);
   CLI::Option* retarget_option = proc_cmd->get_option("--retarget");
   proc_cmd
       ->add_option("--out-character-bvh", proc.output_character_bvh,
@@ -147,7 +147,7 @@ int main(int argc, char** argv) {
           ->add_option("--truth-bvh", proc.truth_bvh,
                        "The take's true motion (mocap-sim synth --truth-bvh): report and plot the "
                        "joint error")
-          ->check(CLI::ExistingFile);
+          ->check(mocapd::kExistingFile);
   proc_cmd
       ->add_option("--truth-units", proc.truth_units,
                    "The truth BVH's length unit: mm, cm, m or in (default: guessed from its "
@@ -166,7 +166,7 @@ int main(int argc, char** argv) {
   CLI::App* run_cmd =
       app.add_subcommand("run", "Run the daemon: clean and solve live marker frames from ZeroMQ");
   run_cmd->add_option("--config", run_config, "Daemon config (TOML)")
-      ->check(CLI::ExistingFile)
+      ->check(mocapd::kExistingFile)
       ->capture_default_str();
   run_cmd->add_option("--log-level", log_level, "trace | debug | info | warn | error")
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error"}))

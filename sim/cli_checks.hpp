@@ -27,4 +27,20 @@ inline const CLI::Validator kNonEmptyPath(
     },
     "PATH");
 
+/// CLI::ExistingFile, but an empty path says so: it was "File does not exist: " (no name).
+inline const CLI::Validator kExistingFile(
+    [](std::string& text) -> std::string {
+      if (text.empty()) return "a path is needed, not \"\"";
+      return CLI::ExistingFile(text);
+    },
+    "FILE");
+
+/// For ZeroMQ endpoints the command binds or connects to: "" failed as "cannot bind : Invalid
+/// argument".
+inline const CLI::Validator kNonEmptyEndpoint(
+    [](std::string& text) -> std::string {
+      return text.empty() ? "an endpoint is needed (tcp://HOST:PORT, ipc://PATH), not \"\"" : "";
+    },
+    "ENDPOINT");
+
 }  // namespace mocapd

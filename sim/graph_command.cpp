@@ -48,7 +48,7 @@ GraphCommands::GraphCommands(CLI::App& app) : state_(std::make_unique<State>()) 
   s.graph->require_subcommand(1);
 
   s.build = s.graph->add_subcommand("build", "Build a motion graph over BVH takes of one skeleton");
-  s.build->add_option("TAKES", s.takes, "BVH takes")->required()->check(CLI::ExistingFile);
+  s.build->add_option("TAKES", s.takes, "BVH takes")->required()->check(kExistingFile);
   s.build->add_option("--out", s.out, "Graph file to write (JSON)")
       ->required()
       ->check(kNonEmptyPath);
@@ -82,7 +82,7 @@ GraphCommands::GraphCommands(CLI::App& app) : state_(std::make_unique<State>()) 
 
   s.synth = s.graph->add_subcommand(
       "synth", "Synthesize motion covering a distance in a time, from and to given frames");
-  s.synth->add_option("--graph", s.graph_path, "Graph file")->required()->check(CLI::ExistingFile);
+  s.synth->add_option("--graph", s.graph_path, "Graph file")->required()->check(kExistingFile);
   s.synth->add_option("--distance", s.distance_m, "Distance the root travels, metres")
       ->required()
       ->check(mocapd::kFiniteNumber)
@@ -100,8 +100,8 @@ GraphCommands::GraphCommands(CLI::App& app) : state_(std::make_unique<State>()) 
 
   s.match = s.graph->add_subcommand(
       "match", "Retrieve the graph path that best follows a query motion (any humanoid skeleton)");
-  s.match->add_option("QUERY", s.query, "Query BVH")->required()->check(CLI::ExistingFile);
-  s.match->add_option("--graph", s.graph_path, "Graph file")->required()->check(CLI::ExistingFile);
+  s.match->add_option("QUERY", s.query, "Query BVH")->required()->check(kExistingFile);
+  s.match->add_option("--graph", s.graph_path, "Graph file")->required()->check(kExistingFile);
   s.match->add_option("--query-units", s.query_units, "Query BVH unit (default: guess)");
   s.match->add_option("--out", s.out, "BVH of the retrieved motion to write")
       ->required()

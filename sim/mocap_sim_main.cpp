@@ -306,14 +306,14 @@ int main(int argc, char** argv) {
   CLI::App* info = app.add_subcommand("info", "Summarise a C3D or BVH take or a recording");
   info->add_option("FILE", info_path, "Take file (.c3d or .bvh) or recording (mocap-sim record)")
       ->required()
-      ->check(CLI::ExistingFile);
+      ->check(mocapd::kExistingFile);
   info->add_flag("--json", info_json, "Print JSON instead of a table");
 
   SynthOptions synth;
   CLI::App* synth_cmd =
       app.add_subcommand("synth", "Synthesize a marker take (C3D) from skeletal motion");
   auto* bvh_opt = synth_cmd->add_option("--bvh", synth.bvh, "Source motion (any humanoid BVH)")
-                      ->check(CLI::ExistingFile);
+                      ->check(mocapd::kExistingFile);
   synth_cmd
       ->add_option("--humanoid", synth.humanoid_motion,
                    "Use the built-in humanoid: walk | reach | turn | mixed | rom (range of "
@@ -341,7 +341,7 @@ int main(int argc, char** argv) {
   synth_cmd
       ->add_option("--layout", synth.layout,
                    "Marker layout TOML (default: built-in ~60-marker set)")
-      ->check(CLI::ExistingFile);
+      ->check(mocapd::kExistingFile);
   auto* set_opt = synth_cmd->add_option(
       "--marker-set", synth.marker_set,
       "Place an industry marker set instead of a layout: plug-in-gait-full, plug-in-gait-lower, "
@@ -380,7 +380,7 @@ int main(int argc, char** argv) {
       ->add_option("TAKE", replay.take,
                    "Take to replay: .c3d (recorded markers) or .bvh (markers synthesized); "
                    "default: --humanoid")
-      ->check(CLI::ExistingFile);
+      ->check(mocapd::kExistingFile);
   replay_cmd
       ->add_option("--humanoid", replay.humanoid,
                    "Replay the built-in humanoid: walk | reach | turn | mixed")
@@ -390,7 +390,7 @@ int main(int argc, char** argv) {
                    "Stream endless motion from a motion graph (a file from `graph build`, or "
                    "'humanoid' for one over the built-in humanoid's motions): each subject on its "
                    "own seeded walk, for --seconds at --synth-rate")
-      ->check(CLI::ExistingFile | CLI::IsMember({"humanoid"}));
+      ->check(mocapd::kExistingFile | CLI::IsMember({"humanoid"}));
   replay_cmd
       ->add_option("--seconds", replay.seconds,
                    "Length of the built-in humanoid's take (or the graph stream)")
@@ -412,7 +412,7 @@ int main(int argc, char** argv) {
   replay_cmd
       ->add_option("--subject", replay.subject,
                    "Subject model giving a C3D's marker order (default: the built-in humanoid)")
-      ->check(CLI::ExistingFile);
+      ->check(mocapd::kExistingFile);
   replay_cmd
       ->add_option("--marker-set", replay.marker_set,
                    "Send a C3D's markers in this set's order (a daemon calibrating the subject "
@@ -424,7 +424,8 @@ int main(int argc, char** argv) {
   replay_cmd
       ->add_option("--to", replay.options.to,
                    "Endpoint for marker frames (PUB binds; with --push, connects)")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(mocapd::kNonEmptyEndpoint);
   replay_cmd->add_flag("--push", replay.options.push,
                        "PUSH to a daemon whose input is a PULL socket");
   bool no_end_of_stream = false;
@@ -495,18 +496,19 @@ int main(int argc, char** argv) {
   replay_cmd
       ->add_option("--curve-key", replay.options.curve_key_file,
                    "CURVE: this replay's key pair (FILE.key_secret from mocapd keygen)")
-      ->check(CLI::ExistingFile);
+      ->check(mocapd::kExistingFile);
   replay_cmd
       ->add_option("--curve-server-key", replay.options.curve_server_key_file,
                    "CURVE: the daemon's public key (FILE.key); needs --curve-key")
-      ->check(CLI::ExistingFile);
+      ->check(mocapd::kExistingFile);
 
   mocapd::RecordOptions record;
   std::string record_subjects;
   CLI::App* record_cmd = app.add_subcommand(
       "record", "Record a capture publisher's marker stream with its timing (crash-safe)");
   record_cmd->add_option("--from", record.from, "The capture publisher (PUB) to subscribe to")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(mocapd::kNonEmptyEndpoint);
   record_cmd->add_option("--out", record.out, "Recording to write (.mcr)")
       ->required()
       ->check(mocapd::kNonEmptyPath);
@@ -519,11 +521,11 @@ int main(int argc, char** argv) {
   record_cmd
       ->add_option("--curve-key", record.curve_key_file,
                    "CURVE: this recorder's key pair (FILE.key_secret from mocapd keygen)")
-      ->check(CLI::ExistingFile);
+      ->check(mocapd::kExistingFile);
   record_cmd
       ->add_option("--curve-server-key", record.curve_server_key_file,
                    "CURVE: the publisher's public key (FILE.key); needs --curve-key")
-      ->check(CLI::ExistingFile);
+      ->check(mocapd::kExistingFile);
 
   mocapd::GraphCommands graph_commands(app);
 

@@ -214,3 +214,14 @@ if(rc EQUAL 0 OR NOT err MATCHES "--report ${WORK_DIR}/missing/r.json: the folde
    OR out MATCHES "replaying")
   message(FATAL_ERROR "replay --report in a missing folder was not refused first: rc=${rc} out=${out} err=${err}")
 endif()
+# An empty input path or endpoint is named as empty ("File does not exist: " named nothing;
+# "cannot bind : Invalid argument").
+execute_process(COMMAND ${MOCAPD} process --subject "" --in ${WORK_DIR}/pig_bad.c3d --out-bvh ${WORK_DIR}/e.bvh
+                RESULT_VARIABLE rc ERROR_VARIABLE err)
+if(rc EQUAL 0 OR NOT err MATCHES "--subject: a path is needed")
+  message(FATAL_ERROR "process --subject \"\" was not refused as empty: rc=${rc} err=${err}")
+endif()
+execute_process(COMMAND ${MOCAP_SIM} replay --humanoid walk --to "" --from "" RESULT_VARIABLE rc ERROR_VARIABLE err)
+if(rc EQUAL 0 OR NOT err MATCHES "--to: an endpoint is needed")
+  message(FATAL_ERROR "replay --to \"\" was not refused as empty: rc=${rc} err=${err}")
+endif()
