@@ -54,16 +54,19 @@ int main(int argc, char** argv) {
                    "C3D marker take(s) of the actor (repeat for several takes)")
       ->required()
       ->check(mocapd::kExistingFile);
-  cal_cmd->add_option("--actor", cal.actor,
-                      "Of takes holding several actors' markers (Justin:LASI, Copy:LASI): "
-                      "whose to use, by label prefix");
+  cal_cmd
+      ->add_option("--actor", cal.actor,
+                   "Of takes holding several actors' markers (Justin:LASI, Copy:LASI): "
+                   "whose to use, by label prefix")
+      ->check(mocapd::kNonEmptyValue);
   cal_cmd
       ->add_option("--marker-set", cal.marker_set,
                    "auto (recognise from the labels; labels of no set are placed by "
                    "clustering), none (clustering alone), a built-in set (plug-in-gait-full, "
                    "plug-in-gait-lower, cmu-41, optitrack-baseline, qualisys-sports) or a set "
                    "file")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(mocapd::kNonEmptyValue);
   cal_cmd
       ->add_option("--subsets", cal.interleaved_solves,
                    "Markers alone: also solve this many interleaved subsets of the frames and "
@@ -84,12 +87,14 @@ int main(int argc, char** argv) {
   cal_cmd->add_option("--out", cal.out_subject, "Subject model to write (TOML)")
       ->required()
       ->check(mocapd::kNonEmptyPath);
-  cal_cmd->add_option("--name", cal.subject_name, "Subject name (default: the output file's stem)");
+  cal_cmd->add_option("--name", cal.subject_name, "Subject name (default: the output file's stem)")
+      ->check(mocapd::kNonEmptyValue);
   // Both concern the --skeleton calibration alone: given without it they were ignored.
   cal_cmd
       ->add_option("--bvh-units", cal.bvh_units,
                    "With --skeleton: its length unit, mm, cm, m or in (default: guess)")
-      ->needs(skeleton_option);
+      ->needs(skeleton_option)
+      ->check(mocapd::kLengthUnit);
   cal_cmd
       ->add_option("--max-residual-mm", max_rms_mm,
                    "With --skeleton: reject markers whose best fit leaves more RMS than this")
@@ -107,9 +112,11 @@ int main(int argc, char** argv) {
   proc_cmd->add_option("--in", proc.input_c3d, "Marker take (C3D)")
       ->required()
       ->check(mocapd::kExistingFile);
-  proc_cmd->add_option("--actor", proc.actor,
-                       "Of a take holding several actors' markers (Justin:LASI, Copy:LASI): "
-                       "whose to solve, by label prefix (--out-c3d then holds that actor's)");
+  proc_cmd
+      ->add_option("--actor", proc.actor,
+                   "Of a take holding several actors' markers (Justin:LASI, Copy:LASI): "
+                   "whose to solve, by label prefix (--out-c3d then holds that actor's)")
+      ->check(mocapd::kNonEmptyValue);
   proc_cmd->add_option("--out-bvh", proc.output_bvh, "Solved skeleton to write (BVH)")
       ->required()
       ->check(mocapd::kNonEmptyPath);
@@ -153,7 +160,8 @@ int main(int argc, char** argv) {
                    "The truth BVH's length unit: mm, cm, m or in (default: guessed from its "
                    "bones, which cannot tell in from cm; mocap-sim synth writes the truth in "
                    "the subject's bvh_units)")
-      ->needs(truth_option);
+      ->needs(truth_option)
+      ->check(mocapd::kLengthUnit);
   std::vector<std::string> joint_map_args;
   proc_cmd
       ->add_option("--joint-map", joint_map_args,

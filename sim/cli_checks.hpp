@@ -3,7 +3,10 @@
 
 #include <CLI/CLI.hpp>
 #include <cmath>
+#include <stdexcept>
 #include <string>
+
+#include "formats/c3d.hpp"
 
 namespace mocapd {
 
@@ -42,5 +45,26 @@ inline const CLI::Validator kNonEmptyEndpoint(
       return text.empty() ? "an endpoint is needed (tcp://HOST:PORT, ipc://PATH), not \"\"" : "";
     },
     "ENDPOINT");
+
+/// For text options whose empty value would be taken as not given (--actor "" solved
+/// every actor's markers as one; --marker-set "" placed the default layout).
+inline const CLI::Validator kNonEmptyValue(
+    [](std::string& text) -> std::string {
+      return text.empty() ? "a value is needed, not \"\"" : "";
+    },
+    "TEXT");
+
+/// For length-unit options: checked when the command line is read, by the readers' own
+/// table (an unknown unit was found only once its file was read, and "" meant "guess").
+inline const CLI::Validator kLengthUnit(
+    [](std::string& text) -> std::string {
+      try {
+        (void)MetresPerUnit(text);
+        return {};
+      } catch (const std::invalid_argument& e) {
+        return e.what();
+      }
+    },
+    "UNIT");
 
 }  // namespace mocapd

@@ -55,7 +55,8 @@ GraphCommands::GraphCommands(CLI::App& app) : state_(std::make_unique<State>()) 
   s.build->add_option("--rate", s.rate_hz, "Graph rate in Hz (default: the first take's)")
       ->check(mocapd::kFiniteNumber)
       ->check(CLI::Range(1.0, 1000.0));
-  s.build->add_option("--units", s.units, "BVH length unit: mm, cm, m or in (default: guess)");
+  s.build->add_option("--units", s.units, "BVH length unit: mm, cm, m or in (default: guess)")
+      ->check(kLengthUnit);
   s.build
       ->add_option("--subject-out", s.subject_out,
                    "Also write the subject a daemon needs for `replay --graph` of this graph "
@@ -102,7 +103,8 @@ GraphCommands::GraphCommands(CLI::App& app) : state_(std::make_unique<State>()) 
       "match", "Retrieve the graph path that best follows a query motion (any humanoid skeleton)");
   s.match->add_option("QUERY", s.query, "Query BVH")->required()->check(kExistingFile);
   s.match->add_option("--graph", s.graph_path, "Graph file")->required()->check(kExistingFile);
-  s.match->add_option("--query-units", s.query_units, "Query BVH unit (default: guess)");
+  s.match->add_option("--query-units", s.query_units, "Query BVH unit (default: guess)")
+      ->check(kLengthUnit);
   s.match->add_option("--out", s.out, "BVH of the retrieved motion to write")
       ->required()
       ->check(kNonEmptyPath);

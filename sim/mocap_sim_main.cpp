@@ -342,10 +342,12 @@ int main(int argc, char** argv) {
       ->add_option("--layout", synth.layout,
                    "Marker layout TOML (default: built-in ~60-marker set)")
       ->check(mocapd::kExistingFile);
-  auto* set_opt = synth_cmd->add_option(
-      "--marker-set", synth.marker_set,
-      "Place an industry marker set instead of a layout: plug-in-gait-full, plug-in-gait-lower, "
-      "cmu-41, optitrack-baseline, qualisys-sports, or a set file");
+  auto* set_opt = synth_cmd
+                      ->add_option("--marker-set", synth.marker_set,
+                                   "Place an industry marker set instead of a layout: "
+                                   "plug-in-gait-full, plug-in-gait-lower, "
+                                   "cmu-41, optitrack-baseline, qualisys-sports, or a set file")
+                      ->check(mocapd::kNonEmptyValue);
   set_opt->excludes("--layout");
   synth_cmd
       ->add_option("--soft-tissue-mm", synth.soft_tissue_mm,
@@ -355,8 +357,10 @@ int main(int argc, char** argv) {
   synth_cmd
       ->add_option("--truth-bvh", synth.truth_bvh, "Also write the resampled ground-truth motion")
       ->check(mocapd::kNonEmptyPath);
-  synth_cmd->add_option("--bvh-units", synth.bvh_units,
-                        "BVH length unit: mm, cm, m or in (default: guess)");
+  synth_cmd
+      ->add_option("--bvh-units", synth.bvh_units,
+                   "BVH length unit: mm, cm, m or in (default: guess)")
+      ->check(mocapd::kLengthUnit);
   synth_cmd->add_option("--noise-mm", synth.noise_mm, "Gaussian marker noise (sigma, mm)")
       ->check(mocapd::kFiniteNumber)
       ->check(CLI::Range(0.0, 100.0));
@@ -418,9 +422,12 @@ int main(int argc, char** argv) {
                    "Send a C3D's markers in this set's order (a daemon calibrating the subject "
                    "live with this marker_set expects it): plug-in-gait-full, cmu-41, ... or a "
                    "set file")
-      ->excludes("--subject");
-  replay_cmd->add_option("--bvh-units", replay.bvh_units,
-                         "BVH length unit: mm, cm, m or in (default: guess)");
+      ->excludes("--subject")
+      ->check(mocapd::kNonEmptyValue);
+  replay_cmd
+      ->add_option("--bvh-units", replay.bvh_units,
+                   "BVH length unit: mm, cm, m or in (default: guess)")
+      ->check(mocapd::kLengthUnit);
   replay_cmd
       ->add_option("--to", replay.options.to,
                    "Endpoint for marker frames (PUB binds; with --push, connects)")

@@ -225,3 +225,21 @@ execute_process(COMMAND ${MOCAP_SIM} replay --humanoid walk --to "" --from "" RE
 if(rc EQUAL 0 OR NOT err MATCHES "--to: an endpoint is needed")
   message(FATAL_ERROR "replay --to \"\" was not refused as empty: rc=${rc} err=${err}")
 endif()
+# Units and names checked when the command line is read: an unknown unit was found only
+# when its file was read, --truth-units without --truth-bvh was ignored, and an empty
+# --actor or --marker-set was taken as not given.
+execute_process(COMMAND ${MOCAP_SIM} synth --humanoid walk --bvh-units furlong --out ${WORK_DIR}/u.c3d
+                RESULT_VARIABLE rc ERROR_VARIABLE err)
+if(rc EQUAL 0 OR NOT err MATCHES "--bvh-units: unknown length unit 'furlong'")
+  message(FATAL_ERROR "synth --bvh-units furlong was not refused: rc=${rc} err=${err}")
+endif()
+execute_process(COMMAND ${MOCAPD} process --subject ${WORK_DIR}/markers_only.toml --in ${WORK_DIR}/pig_bad.c3d
+                        --out-bvh ${WORK_DIR}/u.bvh --truth-units mm RESULT_VARIABLE rc ERROR_VARIABLE err)
+if(rc EQUAL 0 OR NOT err MATCHES "--truth-units requires --truth-bvh")
+  message(FATAL_ERROR "process --truth-units without --truth-bvh was not refused: rc=${rc} err=${err}")
+endif()
+execute_process(COMMAND ${MOCAPD} calibrate --markers ${WORK_DIR}/rom.c3d --out ${WORK_DIR}/u.toml --actor ""
+                RESULT_VARIABLE rc ERROR_VARIABLE err)
+if(rc EQUAL 0 OR NOT err MATCHES "--actor: a value is needed")
+  message(FATAL_ERROR "calibrate --actor \"\" was not refused: rc=${rc} err=${err}")
+endif()
