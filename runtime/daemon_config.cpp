@@ -96,6 +96,15 @@ std::string Endpoint(TomlTable& t, const std::string& key, const std::string& fa
 // binds "*" for IPv4 alone unless the endpoint is IPv6 ("[::]" takes both).
 bool SameSocketAddress(const std::string& a, const std::string& b) {
   std::string host_a, port_a, host_b, port_b;
+  if (a.rfind("ipc://", 0) == 0 && b.rfind("ipc://", 0) == 0) {
+    // One socket file however its path is written ("./", "..", a link): the output's bind
+    // took the input's file, no frame arrived, and /health said ok.
+    namespace fs = std::filesystem;
+    std::error_code ec_a, ec_b;
+    const fs::path pa = fs::weakly_canonical(fs::absolute(a.substr(6)), ec_a);
+    const fs::path pb = fs::weakly_canonical(fs::absolute(b.substr(6)), ec_b);
+    return ec_a || ec_b ? a == b : pa == pb;
+  }
   if (!SplitTcp(a, &host_a, &port_a) || !SplitTcp(b, &host_b, &port_b)) return a == b;
   if (std::stoi(port_a) != std::stoi(port_b)) return false;  // digits, checked by Endpoint
   const auto address_a = HostAddress(host_a), address_b = HostAddress(host_b);

@@ -34,6 +34,15 @@ bool LeftUnattributed(DropReason reason) {
 
 }  // namespace
 
+std::string PrintableName(std::string_view name) {
+  // JSON's escapes for control characters and U+FFFD for bytes that are no UTF-8: a
+  // sender's name must neither end a log line early (a forged line after it) nor be
+  // invalid text.
+  const std::string quoted = nlohmann::json(std::string(name))
+                                 .dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
+  return quoted.substr(1, quoted.size() - 2);
+}
+
 std::string FormatPrometheusMetrics(const DaemonStats& stats) {
   using prometheus::BuildCounter;
   using prometheus::BuildGauge;
@@ -321,7 +330,7 @@ std::string FormatSubjectsJson(const DaemonStats& stats) {
                               {"frames_published", s.counters.character_frames_published}};
     subjects.push_back(std::move(subject));
   }
-  return subjects.dump(2) + "\n";
+  return subjects.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
 }
 
 std::string RejectionDetail(const SubjectStats& s) {
@@ -400,7 +409,9 @@ std::string FormatHealthJson(const DaemonStats& stats, bool data_plane_alive) {
       {"last_unknown_subject", stats.last_unknown_subject},
       {"problems", problems},
       {"subjects", subjects}};
-  return health.dump(2) + "\n";
+  // A sender's bytes (the last unknown subject's name) may be no UTF-8: replaced, not a
+  // type_error that made every later /health a 500 until another name came.
+  return health.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
 }
 
 }  // namespace mocapd

@@ -276,9 +276,16 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
   // within 0.1 %. A capture locked to video runs 0.1 % slow, which every rule of the cleanup
   // takes in its stride; at one tolerance alone, the float rounding of how a sender wrote
   // the rate decided (119.88 dropped, 120000/1001 taken).
-  const double ntsc_hz = rate_hz_ * 1000.0 / 1001.0;
+  // A subject configured at an NTSC rate (119.88) takes frames that give its nominal rate
+  // (120, 1001/1000 of it) likewise: they were dropped, while 120 took 119.88.
+  // Only where the configured rate is itself an NTSC one (not whole, and 1001/1000 of it
+  // is): for 120, 120.12 is another rate.
+  const double ntsc_hz = rate_hz_ * 1000.0 / 1001.0, nominal_hz = rate_hz_ * 1001.0 / 1000.0;
+  const bool configured_ntsc = std::abs(rate_hz_ - std::round(rate_hz_)) > 1e-4 * rate_hz_ &&
+                               std::abs(nominal_hz - std::round(nominal_hz)) <= 1e-4 * nominal_hz;
   if (std::abs(frame.rate_hz - rate_hz_) > 1e-3 * rate_hz_ &&
-      std::abs(frame.rate_hz - ntsc_hz) > 1e-3 * ntsc_hz) {
+      std::abs(frame.rate_hz - ntsc_hz) > 1e-3 * ntsc_hz &&
+      (!configured_ntsc || std::abs(frame.rate_hz - nominal_hz) > 1e-3 * nominal_hz)) {
     mismatched_rate_hz_ = frame.rate_hz;
     return drop(DropReason::kRateMismatch);
   }

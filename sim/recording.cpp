@@ -111,7 +111,14 @@ uint64_t RecordStream(const RecordOptions& o,
     const auto now = std::chrono::steady_clock::now();
     if (o.stop != nullptr && o.stop->load()) break;
     if (o.seconds > 0 && now - start >= std::chrono::duration<double>(o.seconds)) break;
-    zmq::poll(&item, 1, std::chrono::milliseconds(20));
+    // Ctrl-C, the way a recording is stopped, interrupts the wait: the loop's check of
+    // stop ends it (it was "error: Interrupted system call", exit 1, no summary).
+    try {
+      zmq::poll(&item, 1, std::chrono::milliseconds(20));
+    } catch (const zmq::error_t& e) {
+      if (e.num() != EINTR) throw;
+      continue;
+    }
     while (in.recv(topic, zmq::recv_flags::dontwait)) {
       const auto arrived = std::chrono::steady_clock::now();
       if (!topic.more()) continue;  // capture topics always carry a message part

@@ -24,25 +24,31 @@ std::string FileExtension(const std::string& path) {
 
 namespace {
 
-// Follows one subject's frame numbers: a v2 session id that changes, or v1 numbers that
-// start again below the first of the session, begin a new capture session; within one,
-// numbers skipped are frames lost before the recorder.
+// Follows one subject's frame numbers: a v2 session id that changes, a change of protocol
+// version, or v1 numbers that start again behind the session's first begin a new capture
+// session; within one, numbers skipped are frames lost before the recorder. Numbers are
+// compared as the daemon compares them, modulo 2^64: a counter that wraps goes on.
 struct StreamTracker {
   RecordedStreamInfo info;
   uint64_t session_id = 0;
   uint64_t session_first = 0;
+  int version = 0;
   int64_t first_ns = 0;
+
+  static bool Behind(uint64_t n, uint64_t than) { return n != than && than - n < (1ull << 63); }
 
   void Add(const protocol::MarkerFrameMessage& frame, int64_t arrival_ns) {
     const uint64_t n = frame.frame_number;
-    const bool new_session = info.frames == 0 ||
+    const bool new_session = info.frames == 0 || frame.version != version ||
                              (frame.version >= 2 && frame.stream.session_id != session_id) ||
-                             (frame.version < 2 && n < session_first);
+                             (frame.version < 2 && Behind(n, session_first));
+    const bool ahead = !new_session && n != info.last_frame && !Behind(n, info.last_frame);
     if (new_session) {
       ++info.sessions;
       session_id = frame.stream.session_id;
       session_first = n;
-    } else if (n > info.last_frame) {
+      version = frame.version;
+    } else if (ahead) {
       info.frames_skipped += static_cast<int64_t>(n - info.last_frame - 1);
     } else {
       ++info.frames_out_of_order;
@@ -50,12 +56,15 @@ struct StreamTracker {
     if (info.frames == 0) {
       info.first_frame = n;
       first_ns = arrival_ns;
+      info.min_protocol_version = frame.version;
     }
-    if (new_session || n > info.last_frame) info.last_frame = n;
+    if (new_session || ahead) info.last_frame = n;
     ++info.frames;
     info.markers = std::max(info.markers, static_cast<int>(frame.positions.size()));
     info.rate_hz = frame.rate_hz;
     info.protocol_version = std::max(info.protocol_version, static_cast<int>(frame.version));
+    info.min_protocol_version =
+        std::min(info.min_protocol_version, static_cast<int>(frame.version));
     info.seconds = static_cast<double>(arrival_ns - first_ns) * 1e-9;
   }
 };
@@ -82,6 +91,10 @@ void InspectRecording(const std::string& path, TakeInfo* info) {
       ++info->frames;
     } else if (protocol::DecodeEndOfStream(m.message, &end) == protocol::DecodeStatus::kOk) {
       ++stream_of(end.subject).info.end_of_stream;
+    } else if (protocol::MessageType type{};
+               protocol::PeekType(m.message, &type) == protocol::DecodeStatus::kOk &&
+               type == protocol::MessageType::kMarkerFrame) {
+      ++info->undecodable_marker_frames;
     } else {
       ++info->undecodable_messages;
     }
@@ -181,25 +194,32 @@ std::string FormatTakeInfo(const TakeInfo& info) {
       out += line;
     }
   } else if (info.format == "recording") {
-    std::snprintf(line, sizeof(line), "  messages %lld (%lld neither a marker frame nor an end)\n",
+    std::snprintf(line, sizeof(line),
+                  "  messages %lld (%lld marker frames that do not decode, %lld neither a marker "
+                  "frame nor an end)\n",
                   static_cast<long long>(info.messages),
+                  static_cast<long long>(info.undecodable_marker_frames),
                   static_cast<long long>(info.undecodable_messages));
     out += line;
     if (info.ignored_tail_bytes > 0)
       out += "  note    ends in an interrupted record (" + std::to_string(info.ignored_tail_bytes) +
              " bytes ignored)\n";
-    std::snprintf(line, sizeof(line), "  %-16s %8s %9s %9s %8s %9s %8s %7s %8s %4s %3s\n",
+    std::snprintf(line, sizeof(line), "  %-16s %8s %9s %9s %8s %9s %8s %7s %8s %4s %5s\n",
                   "subject", "frames", "first", "last", "skipped", "reordered", "sessions",
                   "markers", "rate Hz", "ends", "v");
     out += line;
     for (const RecordedStreamInfo& s : info.streams) {
       std::snprintf(
-          line, sizeof(line), "  %-16s %8lld %9llu %9llu %8lld %9lld %8d %7d %8.6g %4d %3d\n",
+          line, sizeof(line), "  %-16s %8lld %9llu %9llu %8lld %9lld %8d %7d %8.6g %4d %5s\n",
           s.subject.c_str(), static_cast<long long>(s.frames),
           static_cast<unsigned long long>(s.first_frame),
           static_cast<unsigned long long>(s.last_frame), static_cast<long long>(s.frames_skipped),
           static_cast<long long>(s.frames_out_of_order), s.sessions, s.markers, s.rate_hz,
-          s.end_of_stream, s.protocol_version);
+          s.end_of_stream,
+          (s.min_protocol_version == s.protocol_version
+               ? std::to_string(s.protocol_version)
+               : std::to_string(s.min_protocol_version) + "+" + std::to_string(s.protocol_version))
+              .c_str());
       out += line;
     }
   } else {
@@ -228,6 +248,7 @@ nlohmann::json TakeInfoJson(const TakeInfo& info) {
                              {"longest_gap", p.longest_gap}});
   } else if (info.format == "recording") {
     j["messages"] = info.messages;
+    j["undecodable_marker_frames"] = info.undecodable_marker_frames;
     j["undecodable_messages"] = info.undecodable_messages;
     j["ignored_tail_bytes"] = info.ignored_tail_bytes;
     j["streams"] = nlohmann::json::array();
@@ -243,6 +264,7 @@ nlohmann::json TakeInfoJson(const TakeInfo& info) {
                               {"rate_hz", s.rate_hz},
                               {"end_of_stream", s.end_of_stream},
                               {"protocol_version", s.protocol_version},
+                              {"min_protocol_version", s.min_protocol_version},
                               {"seconds", s.seconds}});
   } else {
     j["joints"] = info.joints;

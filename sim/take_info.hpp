@@ -33,8 +33,9 @@ struct RecordedStreamInfo {
   int markers = 0;  ///< The most markers in one frame.
   double rate_hz = 0.0;
   int end_of_stream = 0;
-  int protocol_version = 0;  ///< The newest version among its frames.
-  double seconds = 0.0;      ///< From its first frame's arrival to its last's.
+  int protocol_version = 0;      ///< The newest version among its frames.
+  int min_protocol_version = 0;  ///< The oldest (a sender that mixes them: a new session each).
+  double seconds = 0.0;          ///< From its first frame's arrival to its last's.
 };
 
 struct TakeInfo {
@@ -55,6 +56,7 @@ struct TakeInfo {
   int end_sites = 0;
   std::vector<RecordedStreamInfo> streams;  ///< Recording only, in order of appearance.
   int64_t messages = 0;                     ///< Recording only.
+  int64_t undecodable_marker_frames = 0;    ///< Recording only: marker frames that fail.
   int64_t undecodable_messages = 0;         ///< Recording only: neither a marker frame nor an end.
   size_t ignored_tail_bytes = 0;            ///< Recording only: an interrupted last record.
 };

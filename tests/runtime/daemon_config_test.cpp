@@ -276,7 +276,8 @@ TEST(DaemonConfigTest, TheOutputMayNotUseTheInputsAddress) {
            {"tcp://[::1]:5555", "sub", "tcp://[0:0:0:0:0:0:0:1]:5555"},
            {"tcp://[::1]:5555", "sub", "tcp://[::]:5555"},
            {"tcp://127.0.0.1:5555", "sub", "tcp://[::]:5555"},
-           {"ipc:///tmp/mocap.sock", "sub", "ipc:///tmp/mocap.sock"}}) {
+           {"ipc:///tmp/mocap.sock", "sub", "ipc:///tmp/mocap.sock"},
+           {"ipc:///tmp/mocap.sock", "pull", "ipc:///tmp/./sub/../mocap.sock"}}) {
     const std::string error = both(in, pattern, out);
     EXPECT_NE(error.find("field 'output.endpoint': '" + out + "' is the input's address"),
               std::string::npos)

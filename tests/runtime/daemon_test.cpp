@@ -1029,6 +1029,38 @@ TEST(DaemonTest, TheLogAndHealthNameTheUnknownSubjectThatCame) {
       << text;
 }
 
+// A name is bytes the sender chose: one that is no UTF-8 made every later /health a 500
+// (nlohmann's type_error 316), and one holding a newline forged a line in the log.
+TEST(DaemonTest, AnUnknownSubjectsNameCannotBreakHealthOrForgeALogLine) {
+  const testing::HumanoidFixture f = testing::MakeHumanoidFixture("walk", 1.0, 120.0);
+  CapturedLog log;
+  {
+    zmq::context_t context;
+    RunningDaemon daemon(context, TestConfig("inproc://bytes-in", "inproc://bytes-out", 4));
+    Sender sender(context, "inproc://bytes-in", f.take, MakeHumanoidSubject("actor1"),
+                  zmq::socket_type::push);
+    sender.message_.subject = "evil\n[error] forged";
+    for (int t = 0; t < 5; ++t) sender.Send(t, static_cast<uint64_t>(t));
+    ASSERT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) {
+      return s.unattributed_dropped[static_cast<size_t>(DropReason::kUnknownSubject)] == 5;
+    }));
+    std::this_thread::sleep_for(300ms);  // logged before the next name replaces it
+    sender.message_.subject = "\xff\xfe\x80";
+    for (int t = 5; t < 10; ++t) sender.Send(t, static_cast<uint64_t>(t));
+    ASSERT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) {
+      return s.unattributed_dropped[static_cast<size_t>(DropReason::kUnknownSubject)] == 10;
+    }));
+    std::this_thread::sleep_for(300ms);
+    const auto [status, body] = HttpGet(daemon->http_port(), "/health");
+    EXPECT_EQ(status, 200) << body;
+    const auto health = nlohmann::json::parse(body);
+    EXPECT_EQ(health["last_unknown_subject"], "\xEF\xBF\xBD\xEF\xBF\xBD\xEF\xBF\xBD");
+  }
+  const std::string text = log.Text();
+  EXPECT_NE(text.find("the last for 'evil\\n[error] forged'"), std::string::npos) << text;
+  EXPECT_EQ(text.find("\n[error] forged"), std::string::npos) << text;
+}
+
 // Drops are logged at most once per log interval per reason, so a line can come after
 // the drops stopped: it says how long there have been none (it read as if they went on).
 TEST(DaemonTest, ADropLineHeldBackByTheLogIntervalSaysTheDropsStopped) {

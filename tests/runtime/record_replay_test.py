@@ -34,6 +34,9 @@ def record(mocap_sim, work, name, seconds, kill_after=None):
         recorder.send_signal(signal.SIGINT)
     out, _ = recorder.communicate(timeout=30)
     print(out)
+    if kill_after is None:
+        # Ctrl-C is how a recording is stopped: it ended in "Interrupted system call", exit 1.
+        assert recorder.returncode == 0 and "wrote " + path in out, (recorder.returncode, out)
     return path
 
 
@@ -54,6 +57,11 @@ def replay(mocapd, mocap_sim, config_dir, work, path):
 def main(mocapd, mocap_sim, config_dir, work):
     os.makedirs(work, exist_ok=True)
     full = record(mocap_sim, work, "full.mcr", 3)
+    info = json.loads(subprocess.run([mocap_sim, "info", full, "--json"], capture_output=True, text=True,
+                                     check=True).stdout)
+    assert info["format"] == "recording" and info["frames"] == 360, info
+    stream = info["streams"][0]
+    assert stream["frames"] == 360 and stream["frames_skipped"] == 0 and stream["sessions"] == 1, stream
     r, _ = replay(mocapd, mocap_sim, config_dir, work, full)
     assert r["frames_sent"] == 360 and r["frames_received"] == 360 and r["frames_lost"] == 0, r
     cut = record(mocap_sim, work, "killed.mcr", 3, kill_after=1.5)

@@ -189,6 +189,16 @@ TEST_F(SubjectRunnerTest, FramesForAnotherModelOrRateAreNeverApplied) {
     m.frame_number = ntsc.counters().frames_in;
     EXPECT_FALSE(ntsc.Accept(m, 0, ntsc_sink).has_value()) << near;
   }
+  // Configured at the NTSC rate, the nominal one is taken too (120 was dropped by 119.88).
+  SubjectConfig at_ntsc = subject_;
+  at_ntsc.rate_hz = 119.88;
+  SubjectRunner configured_ntsc(at_ntsc, daemon_);
+  for (const float near : {120.0f, 119.88f, 120000.0f / 1001.0f}) {
+    protocol::MarkerFrameMessage m = Frame(0, 0, 0);
+    m.rate_hz = near;
+    m.frame_number = configured_ntsc.counters().frames_in;
+    EXPECT_FALSE(configured_ntsc.Accept(m, 0, ntsc_sink).has_value()) << near;
+  }
   // The warning and /health say which rate came against which was configured (they gave
   // the reason's name alone).
   EXPECT_DOUBLE_EQ(runner.mismatched_rate_hz(), 240.0);

@@ -91,7 +91,7 @@ TEST(TakeInfoTest, SummarisesARecordingsStreamsWithTheirSkippedFramesAndSessions
     std::vector<uint8_t> bytes;
     int64_t t = 0;
     auto frame = [&](const std::string& subject, uint16_t version, uint64_t session,
-                     uint64_t number, int markers) {
+                     uint64_t number, int markers, size_t cut = 0) {
       protocol::MarkerFrameMessage m;
       m.version = version;
       m.stream.session_id = session;
@@ -101,6 +101,7 @@ TEST(TakeInfoTest, SummarisesARecordingsStreamsWithTheirSkippedFramesAndSessions
       m.positions.assign(static_cast<size_t>(markers), Vec3::Zero());
       m.valid.assign(static_cast<size_t>(markers), 1);
       protocol::EncodeMarkerFrame(m, &bytes);
+      bytes.resize(bytes.size() - cut);
       w.Append(t += 8'333'333, "markers/" + subject + "/", bytes);
     };
     // actor1 (v2): 10, 11, 14 (two skipped), 14 again, then a new session from 1.
@@ -108,17 +109,25 @@ TEST(TakeInfoTest, SummarisesARecordingsStreamsWithTheirSkippedFramesAndSessions
     for (uint64_t n : {1, 2}) frame("actor1", 2, 8, n, 3);
     // actor2 (v1 has no session id): 100, 101, 103, then the numbers start again at 5.
     for (uint64_t n : {100, 101, 103, 5, 6}) frame("actor2", 1, 0, n, 4);
+    // actor3 (v2): a counter that wraps past 2^64 - 1 goes on; a v1 frame between is a
+    // new session, as the daemon takes it.
+    for (uint64_t n : {UINT64_MAX - 1, UINT64_MAX, uint64_t{0}, uint64_t{1}})
+      frame("actor3", 2, 9, n, 2);
+    frame("actor3", 1, 0, 2, 2);
     protocol::EncodeEndOfStream({"actor1", 2}, &bytes);
     w.Append(t += 1000, "markers/actor1/", bytes);
     w.Append(t += 1000, "markers/actor1/", std::vector<uint8_t>{1, 2, 3});
+    // A marker frame cut short: counted as a marker frame that does not decode.
+    frame("actor1", 2, 8, 3, 3, /*cut=*/5);
   }
   const TakeInfo info = InspectTake(path);
   EXPECT_EQ(info.format, "recording");
-  EXPECT_EQ(info.frames, 11);
-  EXPECT_EQ(info.messages, 13);
+  EXPECT_EQ(info.frames, 16);
+  EXPECT_EQ(info.messages, 19);
   EXPECT_EQ(info.undecodable_messages, 1);
+  EXPECT_EQ(info.undecodable_marker_frames, 1);
   EXPECT_DOUBLE_EQ(info.rate_hz, 120.0);
-  ASSERT_EQ(info.streams.size(), 2u);
+  ASSERT_EQ(info.streams.size(), 3u);
   const RecordedStreamInfo& a1 = info.streams[0];
   EXPECT_EQ(a1.subject, "actor1");
   EXPECT_EQ(a1.frames, 6);
@@ -134,6 +143,13 @@ TEST(TakeInfoTest, SummarisesARecordingsStreamsWithTheirSkippedFramesAndSessions
   EXPECT_EQ(a2.first_frame, 100u);
   EXPECT_EQ(a2.last_frame, 6u);
   EXPECT_EQ(a2.protocol_version, 1);
+  const RecordedStreamInfo& a3 = info.streams[2];
+  EXPECT_EQ(a3.frames_skipped, 0);
+  EXPECT_EQ(a3.frames_out_of_order, 0);
+  EXPECT_EQ(a3.sessions, 2);
+  EXPECT_EQ(a3.last_frame, 2u);
+  EXPECT_EQ(a3.min_protocol_version, 1);
+  EXPECT_EQ(a3.protocol_version, 2);
   const std::string table = FormatTakeInfo(info);
   EXPECT_NE(table.find("actor2"), std::string::npos) << table;
   EXPECT_EQ(TakeInfoJson(info)["streams"][0]["frames_skipped"], 2);
