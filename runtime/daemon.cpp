@@ -361,6 +361,9 @@ struct Daemon::DataPlane final : OutputSink {
       std::tie(s.mismatched_model_hash, s.mismatched_marker_count) = r.mismatched_model();
       s.character = r.character_info();
       s.model_suspect = r.model_suspect();
+      s.unobserved_for_s = r.unobserved_since_ns() < 0
+                               ? 0.0
+                               : static_cast<double>(now - r.unobserved_since_ns()) * 1e-9;
       s.unstable_input = r.unstable_input(now);
       s.model_distance_mm = r.model_distance_m() * 1e3;
       s.worker = index;

@@ -50,6 +50,8 @@ struct SubjectStats {
   size_t mismatched_marker_count = 0;      ///< ...and marker count.
   std::optional<CharacterInfo> character;  ///< The character it drives, if any.
   bool model_suspect = false;              ///< Received samples persistently far from the model.
+  /// How long every frame published has had no marker observed (0: the last one had one).
+  double unobserved_for_s = 0.0;
   /// 5 re-synchronisations, repeated frames or switches between taken and dropped frames
   /// within 2 s (two senders, a session id per frame).
   bool unstable_input = false;

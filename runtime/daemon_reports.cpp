@@ -380,6 +380,15 @@ std::string FormatHealthJson(const DaemonStats& stats, bool data_plane_alive) {
       problems.push_back("subject '" + s.name + "': every frame dropped (" +
                          to_string(s.rejecting_reason) + ")" + RejectionDetail(s));
     if (s.unstable_input) problems.push_back("subject '" + s.name + "': " + kUnstableInputText);
+    // Half a second, as for the drops: an actor occluded for a few frames is no problem;
+    // a bridge whose every marker is flagged invalid, or sits outside the capture volume,
+    // left /health ok while the pose was guessed from nothing (or the subject lost).
+    if (s.unobserved_for_s >= 0.5)
+      problems.push_back(fmt::format(
+          "subject '{}': no marker observed for {:.1f} s (none sent, flagged invalid, or "
+          "outside the capture volume): the pose is {}",
+          s.name, s.unobserved_for_s,
+          s.state == protocol::SubjectState::kLost ? "held (lost)" : "guessed"));
     if (s.model_suspect) {
       char line[160];
       std::snprintf(line, sizeof(line),

@@ -597,9 +597,16 @@ void SubjectRunner::Publish(int64_t trigger_receive_ns, OutputSink& sink) {
     ++counters_.frames_published;
   }
   const uint64_t publish_ns = WallClockNs();
-  bool repaired = false;
-  for (MarkerStatus s : out.status) repaired |= s != MarkerStatus::kObserved;
+  bool repaired = false, observed = false;
+  for (MarkerStatus s : out.status) {
+    repaired |= s != MarkerStatus::kObserved;
+    observed |= s == MarkerStatus::kObserved;
+  }
   const bool lost = out.final_solve.status == IkStatus::kTooFewMarkers;
+  if (observed)
+    unobserved_since_ns_ = -1;
+  else if (unobserved_since_ns_ < 0)
+    unobserved_since_ns_ = trigger_receive_ns;
   state_ = lost       ? protocol::SubjectState::kLost
            : repaired ? protocol::SubjectState::kRepairing
                       : protocol::SubjectState::kTracking;

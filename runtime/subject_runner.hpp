@@ -180,6 +180,10 @@ class SubjectRunner {
   int64_t last_receive_ns() const { return last_receive_ns_; }
   /// When a frame for this subject last arrived, taken or dropped (-1: never).
   int64_t last_input_ns() const { return last_input_ns_; }
+  /// Receive time of the frame that published the first of the current run of frames in
+  /// which no marker was observed (-1: the last frame published had one): a pose guessed
+  /// from nothing, whether the subject reads lost or repairing.
+  int64_t unobserved_since_ns() const { return unobserved_since_ns_; }
   const SubjectCounters& counters() const { return counters_; }
   const CleanupCounters& cleanup_counters() const { return pipeline_->counters(); }
   /// Carries the counters of a runner this one replaces (a reload changed its model).
@@ -306,6 +310,7 @@ class SubjectRunner {
   bool unstable_ = false;
   int64_t last_receive_ns_ = -1;
   int64_t last_input_ns_ = -1;
+  int64_t unobserved_since_ns_ = -1;
   protocol::SubjectState state_ = protocol::SubjectState::kWaiting;
   static constexpr uint64_t kRejectingMinFrames = 10;
   static constexpr int64_t kRejectingAfterNs = 500'000'000;

@@ -539,6 +539,43 @@ TEST_F(SubjectRunnerTest, TwoBridgesOnOneSubjectInsertNothingAndAreFlaggedUnstab
   EXPECT_EQ(lossy.counters().restarts, 0u);
 }
 
+// A bridge whose every marker is flagged invalid (its valid bit inverted): the subject is
+// lost frame after frame, and /health said ok. Lost for half a second, it is a problem;
+// a few frames (an actor occluded for a moment) are not.
+TEST_F(SubjectRunnerTest, NoMarkerObservedForHalfASecondMakesHealthDegraded) {
+  SubjectRunner runner(subject_, daemon_);
+  int64_t receive_ns = 0;
+  for (int f = 0; f < 30; ++f, receive_ns += 8'333'333)
+    ASSERT_FALSE(runner.Accept(Frame(f, f, 0), receive_ns, sink_).has_value());
+  EXPECT_LT(runner.unobserved_since_ns(), 0);
+  for (int f = 30; f < 150; ++f, receive_ns += 8'333'333) {
+    protocol::MarkerFrameMessage m = Frame(f, f, 0);
+    std::fill(m.valid.begin(), m.valid.end(), uint8_t{0});
+    std::fill(m.positions.begin(), m.positions.end(), Vec3::Constant(kNaN));  // as decoded
+    ASSERT_FALSE(runner.Accept(m, receive_ns, sink_).has_value());
+  }
+  // Published K frames behind: the first unobserved frame out was triggered by frame 30 + K.
+  const int64_t lookahead = subject_.cleanup.lookahead;
+  EXPECT_EQ(runner.unobserved_since_ns(), (30 + lookahead) * 8'333'333) << lookahead;
+  const auto health_of = [](double unobserved_for_s) {
+    SubjectStats stats;
+    stats.name = "actor1";
+    stats.state = protocol::SubjectState::kRepairing;
+    stats.unobserved_for_s = unobserved_for_s;
+    DaemonStats daemon_stats;
+    daemon_stats.subjects.push_back(stats);
+    return FormatHealthJson(daemon_stats, true);
+  };
+  EXPECT_NE(health_of(0.3).find("\"ok\""), std::string::npos) << health_of(0.3);
+  EXPECT_NE(health_of(0.6).find("\"degraded\""), std::string::npos) << health_of(0.6);
+  EXPECT_NE(health_of(0.6).find("subject 'actor1': no marker observed for 0.6 s"),
+            std::string::npos);
+  // Markers again: observed once the lookahead has passed them out.
+  for (int f = 150; f < 180; ++f, receive_ns += 8'333'333)
+    ASSERT_FALSE(runner.Accept(Frame(f, f, 0), receive_ns, sink_).has_value());
+  EXPECT_LT(runner.unobserved_since_ns(), 0);
+}
+
 // A bridge writing a new session id into every frame restarts the subject at every frame:
 // the cleanup never had its lookahead, and nothing said so but the log.
 TEST_F(SubjectRunnerTest, ASessionIdPerFrameIsFlaggedUnstableOnTheWireToo) {
