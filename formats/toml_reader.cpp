@@ -67,6 +67,39 @@ void TomlTable::Fail(const toml::node* node, const std::string& key,
                            "': " + what);
 }
 
+namespace {
+
+// Edits (insert, delete, replace) from one key to another, for "did you mean".
+size_t EditDistance(std::string_view a, std::string_view b) {
+  std::vector<size_t> row(b.size() + 1);
+  for (size_t j = 0; j <= b.size(); ++j) row[j] = j;
+  for (size_t i = 1; i <= a.size(); ++i) {
+    size_t diagonal = row[0];
+    row[0] = i;
+    for (size_t j = 1; j <= b.size(); ++j) {
+      const size_t above = row[j];
+      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diagonal + (a[i - 1] != b[j - 1])});
+      diagonal = above;
+    }
+  }
+  return row[b.size()];
+}
+
+}  // namespace
+
+// A required key that is missing beside one spelt nearly like it ("modle" for "model"):
+// the message named the missing key alone, not the typo or its line.
+void TomlTable::FailMissing(const std::string& key, const std::string& what) const {
+  for (const auto& [other, node] : table_) {
+    const std::string_view name = other.str();
+    if (known_.count(std::string(name)) == 0 && key.size() >= 3 && EditDistance(name, key) <= 2)
+      Fail(&node, key,
+           what + " (is '" + std::string(name) + "' on line " +
+               std::to_string(node.source().begin.line) + " meant for it?)");
+  }
+  Fail(nullptr, key, what);
+}
+
 const toml::node* TomlTable::Find(const std::string& key) {
   known_.insert(key);
   return table_.get(key);
@@ -108,7 +141,7 @@ bool TomlTable::Bool(const std::string& key, bool fallback) {
 std::string TomlTable::String(const std::string& key, const std::string& fallback, bool required) {
   const toml::node* node = Find(key);
   if (node == nullptr) {
-    if (required) Fail(nullptr, key, "missing");
+    if (required) FailMissing(key, "missing");
     return fallback;
   }
   if (!node->is_string()) Fail(node, key, "expected a string");
@@ -129,7 +162,7 @@ std::string TomlTable::Choice(const std::string& key, const std::string& fallbac
 std::vector<double> TomlTable::Numbers(const std::string& key, size_t size, bool required) {
   const toml::node* node = Find(key);
   if (node == nullptr) {
-    if (required) Fail(nullptr, key, "missing");
+    if (required) FailMissing(key, "missing");
     return {};
   }
   const toml::array* a = node->as_array();
@@ -184,7 +217,7 @@ std::vector<TomlTable> TomlTable::Tables(const std::string& key, bool required) 
   const toml::node* node = Find(key);
   std::vector<TomlTable> out;
   if (node == nullptr) {
-    if (required) Fail(nullptr, key, "missing: expected one or more [[" + Join(key) + "]] tables");
+    if (required) FailMissing(key, "missing: expected one or more [[" + Join(key) + "]] tables");
     return out;
   }
   const toml::array* list = node->as_array();

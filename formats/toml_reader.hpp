@@ -71,6 +71,8 @@ class TomlTable {
   const toml::table& table() const { return table_; }
 
  private:
+  /// A required key that is missing: names a key spelt nearly like it, and its line.
+  [[noreturn]] void FailMissing(const std::string& key, const std::string& what) const;
   std::string Join(const std::string& key) const { return path_.empty() ? key : path_ + "." + key; }
   const toml::table& table_;
   std::string path_;

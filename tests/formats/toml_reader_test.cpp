@@ -65,6 +65,20 @@ TEST(TomlReaderTest, UnknownKeysAreErrorsInNestedTablesAndArraysOfTables) {
             "l.toml:1: field 'missing': missing: expected one or more [[missing]] tables");
 }
 
+// A required key spelt wrong ("modle" for "model") was reported as missing, with neither
+// the typo nor its line: the unknown-key check that would name it comes after.
+TEST(TomlReaderTest, AMissingRequiredKeyNamesTheTypoBesideIt) {
+  const toml::table doc =
+      ParseToml("[[subject]]\nname = \"a\"\n\nmodle = \"x.toml\"\n", "typo.toml");
+  TomlTable top(doc, "", "typo.toml");
+  std::vector<TomlTable> subjects = top.Tables("subject", true);
+  EXPECT_EQ(ErrorOf([&] { (void)subjects[0].String("model", "", true); }),
+            "typo.toml:4: field 'subject[0].model': missing (is 'modle' on line 4 meant for it?)");
+  // A key unlike any present is missing, as before.
+  EXPECT_EQ(ErrorOf([&] { (void)subjects[0].String("rate_hz_x", "", true); }),
+            "typo.toml:1: field 'subject[0].rate_hz_x': missing");
+}
+
 TEST(TomlReaderTest, SyntaxErrorsAndMissingFilesNameTheFile) {
   EXPECT_EQ(ErrorOf([] { (void)ParseToml("a = 1\nb = \n", "s.toml"); }).rfind("s.toml:2: ", 0), 0u);
   EXPECT_EQ(ErrorOf([] { (void)ReadTomlFile("/nonexistent/x.toml"); }),
