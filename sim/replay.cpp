@@ -166,7 +166,8 @@ ReplayReport RunReplay(const ReplaySource& source, const ReplayOptions& o) {
     log.offset = Vec3(kActorSpacingM * k, 0.0, 0.0);
     log.sent.reserve(total + static_cast<size_t>(o.loops));
     log.received_ns.reserve(total);
-    for (size_t seq = 0; seq < total; ++seq) log.received_ns.emplace(seq, 0);
+    for (size_t seq = 0; seq < total; ++seq)
+      log.received_ns.emplace(replay::SubjectLog::FrameKey{0, seq}, 0);
     if (!o.corrupt.empty()) {
       CorruptionOptions c;
       c.severity = ParseCorruptionSeverity(o.corrupt);
@@ -318,7 +319,8 @@ ReplayReport RunGraphReplay(const GraphReplaySource& source, double seconds, dou
     log.offset = Vec3(kGraphActorSpacingM * k, 0.0, 0.0);
     log.sent.reserve(static_cast<size_t>(total) + 1);
     log.received_ns.reserve(static_cast<size_t>(total));
-    for (uint64_t seq = 0; seq < total; ++seq) log.received_ns.emplace(seq, 0);
+    for (uint64_t seq = 0; seq < total; ++seq)
+      log.received_ns.emplace(replay::SubjectLog::FrameKey{0, seq}, 0);
     actors.push_back(
         std::make_unique<GraphActor>(ReplayGraphActor(source, o.seed, k, rate_hz, o.corrupt)));
   }
@@ -381,6 +383,7 @@ ReplayReport RunRecordingReplay(const Recording& recording, const std::string& d
   // The subjects and frames in the recording: every marker frame and end of stream.
   std::vector<replay::SubjectLog> logs;
   std::vector<std::pair<size_t, uint64_t>> index(recording.messages.size(), {SIZE_MAX, 0});
+  std::vector<uint64_t> session(recording.messages.size(), 0);
   std::vector<bool> is_end(recording.messages.size(), false);
   protocol::MarkerFrameMessage frame;
   protocol::EndOfStreamMessage end;
@@ -393,6 +396,7 @@ ReplayReport RunRecordingReplay(const Recording& recording, const std::string& d
       subject = frame.subject;
       number = frame.frame_number;
       rate_hz = frame.rate_hz;
+      session[i] = frame.version >= protocol::kVersion2 ? frame.stream.session_id : 0;
     } else if (protocol::DecodeEndOfStream(bytes, &end) == protocol::DecodeStatus::kOk) {
       subject = end.subject;
       number = end.last_frame_number;
@@ -407,7 +411,8 @@ ReplayReport RunRecordingReplay(const Recording& recording, const std::string& d
       logs.back().name = subject;
       logs.back().topic = "markers/" + subject + "/";
     }
-    if (!is_end[i]) logs[k].received_ns.emplace(number, 0);
+    if (!is_end[i])
+      logs[k].received_ns.emplace(replay::SubjectLog::FrameKey{session[i], number}, 0);
     index[i] = {k, number};
   }
   if (logs.empty()) throw std::runtime_error("replay: the recording holds no marker frames");
@@ -422,6 +427,7 @@ ReplayReport RunRecordingReplay(const Recording& recording, const std::string& d
         const replay::SubjectLog& log = logs[closing];
         if (log.sent.empty() || log.sent.back().end_of_stream) continue;
         next->subject = closing;
+        next->session = log.sent.back().session;
         next->frame_number = log.sent.back().frame_number;
         next->end_of_stream = true;
         next->due_ns = -1;
@@ -433,6 +439,7 @@ ReplayReport RunRecordingReplay(const Recording& recording, const std::string& d
     }
     const RecordedMessage& m = recording.messages[i];
     next->subject = index[i].first;
+    next->session = session[i];
     next->frame_number = index[i].second;
     next->end_of_stream = is_end[i];
     next->due_ns = max_rate ? -1 : m.offset_ns - recording.messages.front().offset_ns;
@@ -441,6 +448,7 @@ ReplayReport RunRecordingReplay(const Recording& recording, const std::string& d
     return true;
   };
   replay::ScheduleSetup setup;
+  setup.key_by_session = true;
   setup.frame_period_s = rate_hz > 0 ? 1.0 / rate_hz : 1.0 / 120.0;
   if (rate_hz > 0) setup.capture_rate_hz = rate_hz;
   ReplayReport report = replay::RunSchedule(logs, produce, setup, o);

@@ -255,7 +255,8 @@ class SkeletonReceiver {
         size_t k = 0;
         while (k < logs_.size() && logs_[k].name != message.subject) ++k;
         if (k == logs_.size()) continue;
-        const auto slot = logs_[k].received_ns.find(message.frame_number);
+        const auto slot = logs_[k].received_ns.find(
+            {setup_.key_by_session ? message.stream.session_id : 0, message.frame_number});
         if (slot == logs_[k].received_ns.end())
           continue;  // not one we sent (inserted by the daemon)
         if (slot->second != 0) {
@@ -349,7 +350,7 @@ uint64_t SendAll(zmq::socket_t& out, std::vector<SubjectLog>& logs, const FrameP
           Clock::time_point(std::chrono::nanoseconds(start + next.due_ns)));
     SubjectLog& log = logs[next.subject];
     const int64_t now = SteadyNs();
-    log.sent.push_back({next.frame_number, now, next.end_of_stream});
+    log.sent.push_back({next.session, next.frame_number, now, next.end_of_stream});
     if (!out.send(zmq::buffer(log.topic), zmq::send_flags::sndmore)) {
       const std::string seconds = ConnectTimeoutText(o);
       throw std::runtime_error("replay: could not queue a frame for " + o.to + " for " + seconds +
@@ -399,7 +400,7 @@ void MeasureLatencies(const std::vector<SubjectLog>& logs, double frame_period_s
     for (size_t i = 0; i < log.sent.size(); ++i) {
       const SubjectLog::Sent& s = log.sent[i];
       if (s.end_of_stream) continue;
-      const int64_t got = log.received_ns.at(s.frame_number);
+      const int64_t got = log.received_ns.at({s.session, s.frame_number});
       if (got == 0) continue;
       e2e.push_back(static_cast<double>(got - s.sent_ns) * 1e-6);
       // This subject's K when the skeleton came (subjects may differ; a reload changes it).
@@ -409,10 +410,11 @@ void MeasureLatencies(const std::vector<SubjectLog>& logs, double frame_period_s
       int64_t trigger_ns = 0;
       for (size_t j = i; j < log.sent.size(); ++j) {
         const SubjectLog::Sent& later = log.sent[j];
-        if (later.end_of_stream || later.frame_number < s.frame_number ||
+        // A new capture session lets the old one's held frames out, as an end does.
+        const bool ends = later.end_of_stream || later.session != s.session;
+        if (ends || later.frame_number < s.frame_number ||
             later.frame_number >= s.frame_number + K) {
-          if (later.end_of_stream || later.frame_number >= s.frame_number + K)
-            trigger_ns = later.sent_ns;
+          if (ends || later.frame_number >= s.frame_number + K) trigger_ns = later.sent_ns;
           break;
         }
       }

@@ -19,6 +19,7 @@ namespace mocapd::replay {
 /// One message to send, produced in order by a FrameProducer.
 struct Outgoing {
   size_t subject = 0;
+  uint64_t session = 0;  ///< Its capture session where frames are told apart by it (0: not).
   uint64_t frame_number = 0;
   bool end_of_stream = false;
   int64_t due_ns = 0;  ///< Since the start; < 0: as soon as possible.
@@ -30,14 +31,28 @@ struct SubjectLog {
   std::string topic;
   Vec3 offset = Vec3::Zero();  ///< Where this actor stands (takes: for the truth).
   struct Sent {
+    uint64_t session;
     uint64_t frame_number;
     int64_t sent_ns;
     bool end_of_stream;
   };
   std::vector<Sent> sent;
-  /// Frame number -> arrival (0: not yet); holds every frame number that will be sent,
-  /// inserted before the run so the receiver thread never changes its shape.
-  std::unordered_map<uint64_t, int64_t> received_ns;
+  /// A frame by its capture session and number: a recording of a capture that restarted
+  /// holds the same numbers twice, and matched by number alone its second session read
+  /// as lost and duplicated.
+  struct FrameKey {
+    uint64_t session = 0;
+    uint64_t frame_number = 0;
+    bool operator==(const FrameKey&) const = default;
+  };
+  struct FrameKeyHash {
+    size_t operator()(const FrameKey& k) const {
+      return std::hash<uint64_t>{}(k.frame_number ^ (k.session * 0x9E3779B97F4A7C15ull));
+    }
+  };
+  /// Frame -> arrival (0: not yet); holds every frame that will be sent, inserted before
+  /// the run so the receiver thread never changes its shape.
+  std::unordered_map<FrameKey, int64_t, FrameKeyHash> received_ns;
   /// The daemon's lookahead K for this subject, from its descriptions: (arrival, K), the
   /// first before the run, then each change (a reload) as the receiver heard it.
   std::vector<std::pair<int64_t, int>> lookahead_since;
@@ -64,6 +79,9 @@ struct ScheduleSetup {
   /// The stream block a subject's frame was sent with, which a v2 daemon must echo (empty:
   /// not checked).
   std::function<protocol::StreamInfo(size_t subject, uint64_t frame_number)> sent_stream;
+  /// Skeletons are matched to sent frames by session id and number (a recording, whose
+  /// capture may have restarted), not by number alone.
+  bool key_by_session = false;
 };
 
 /// Runs the schedule: handshake with the daemon (it subscribed to every subject's topic

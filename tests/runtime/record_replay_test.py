@@ -14,13 +14,19 @@ import time
 from daemon_harness import Daemon, free_ports
 
 
-def record(mocap_sim, work, name, seconds, kill_after=None):
+def record(mocap_sim, work, name, seconds, kill_after=None, captures=1):
     (port,) = free_ports(1)
     endpoint = f"tcp://127.0.0.1:{port}"
     path = os.path.join(work, name)
     recorder = subprocess.Popen([mocap_sim, "record", "--from", endpoint, "--out", path], stdout=subprocess.PIPE,
                                 stderr=subprocess.STDOUT, text=True)
     time.sleep(0.3)
+    # Each further capture is the capture restarting: its frame numbers start again from 0
+    # under a new session id.
+    for _ in range(captures - 1):
+        r = subprocess.run([mocap_sim, "replay", "--humanoid", "walk", "--seconds", str(seconds), "--to", endpoint,
+                            "--from", ""], capture_output=True, text=True, timeout=60)
+        assert r.returncode == 0, r.stdout + r.stderr
     sender = subprocess.Popen([mocap_sim, "replay", "--humanoid", "walk", "--seconds", str(seconds), "--corrupt", "medium",
                                "--to", endpoint, "--from", ""], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     if kill_after is not None:
@@ -67,6 +73,15 @@ def main(mocapd, mocap_sim, config_dir, work):
     cut = record(mocap_sim, work, "killed.mcr", 3, kill_after=1.5)
     r, out = replay(mocapd, mocap_sim, config_dir, work, cut)
     assert 60 < r["frames_sent"] < 360 and r["frames_lost"] == 0, r
+    # A capture that restarted: the same frame numbers in two sessions. Matched by number
+    # alone, the replay called 120 frames lost and 120 duplicated, and exited 2.
+    restarted = record(mocap_sim, work, "restarted.mcr", 1, captures=2)
+    info = json.loads(subprocess.run([mocap_sim, "info", restarted, "--json"], capture_output=True, text=True,
+                                     check=True).stdout)
+    assert info["streams"][0]["sessions"] == 2 and info["streams"][0]["frames"] == 240, info
+    r, _ = replay(mocapd, mocap_sim, config_dir, work, restarted)
+    assert r["frames_sent"] == 240 and r["frames_received"] == 240, r
+    assert r["frames_lost"] == 0 and r["frames_duplicated"] == 0, r
     print("record / replay test passed")
 
 
