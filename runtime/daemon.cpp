@@ -197,14 +197,36 @@ struct Daemon::DataPlane final : OutputSink {
     return nullptr;
   }
 
-  void Drop(DropReason reason) { ++stats.unattributed_dropped[static_cast<size_t>(reason)]; }
+  void Drop(DropReason reason) {
+    ++stats.unattributed_dropped[static_cast<size_t>(reason)];
+    if (reason != DropReason::kUnknownSubject) unattributed_reason = reason;
+  }
   void DropUnknown(const std::string& subject) {
     stats.last_unknown_subject.assign(subject);  // reserved for the longest name: no allocation
     Drop(DropReason::kUnknownSubject);
   }
 
-  // One message from the input socket, all of its parts already received into parts.
+  // One message from the input socket: handled, then whether it is one more of a run of
+  // messages dropped before any subject could be named (judged over half a second of
+  // arrivals, at least 10, as a subject's drops are).
   void Handle(size_t part_count, const zmq::message_t& message, int64_t receive_ns) {
+    unattributed_reason.reset();
+    HandleMessage(part_count, message, receive_ns);
+    if (!unattributed_reason) {
+      unattributed_run = 0;
+      stats.rejecting_unattributed = false;
+      return;
+    }
+    if (unattributed_run++ == 0) unattributed_run_first_ns = receive_ns;
+    stats.rejecting_unattributed_reason = *unattributed_reason;
+    stats.rejecting_unattributed =
+        unattributed_run >= 10 && receive_ns - unattributed_run_first_ns >= 500'000'000;
+  }
+  std::optional<DropReason> unattributed_reason;  // set by Drop while a message is handled
+  uint64_t unattributed_run = 0;
+  int64_t unattributed_run_first_ns = 0;
+
+  void HandleMessage(size_t part_count, const zmq::message_t& message, int64_t receive_ns) {
     ++stats.messages_in;
     // One part (the message), or two (a topic, then the message).
     if (part_count > 2) return Drop(DropReason::kMalformed);

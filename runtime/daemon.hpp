@@ -73,6 +73,12 @@ struct DaemonStats {
   uint64_t control_messages = 0;  ///< Accepted end-of-stream messages (not frames).
   /// Drops not attributable to a configured subject (malformed, unknown subject, ...).
   std::array<uint64_t, kDropReasonCount> unattributed_dropped{};
+  /// Every input message for half a second (10 at least) was dropped before a subject
+  /// could be named (oversized, malformed, not a marker frame), the last for this reason:
+  /// a sender whose every frame was too large left /health ok. Cleared by the next message
+  /// that reaches a subject. Unknown subjects are named by last_unknown_subject instead.
+  bool rejecting_unattributed = false;
+  DropReason rejecting_unattributed_reason = DropReason::kMalformed;
   /// The name the last unknown_subject drop carried: a sender's typo ("Actor1" for
   /// "actor1") was counted but named nowhere.
   std::string last_unknown_subject;

@@ -397,6 +397,10 @@ std::string FormatHealthJson(const DaemonStats& stats, bool data_plane_alive) {
       problems.push_back(line);
     }
   }
+  if (stats.rejecting_unattributed)
+    problems.push_back(std::string("every input message dropped for over 0.5 s before a subject "
+                                   "could be named (the last: ") +
+                       to_string(stats.rejecting_unattributed_reason) + ")");
   // A data plane reading a backlog is busy, not dead; one flushing its lookahead on the
   // way out is stopping.
   const char* status = stats.stopping      ? "stopping"

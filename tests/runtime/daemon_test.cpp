@@ -1003,6 +1003,33 @@ TEST(DaemonTest, HealthNamesASubjectWhoseFramesAreAllDropped) {
       << text;
 }
 
+// A sender whose every frame is larger than max_message_bytes: dropped before a subject
+// is named, so no subject was flagged and /health said ok. Half a second of nothing but
+// such drops is a problem.
+TEST(DaemonTest, InputDroppedWholeBeforeAnySubjectIsNamedMakesHealthDegraded) {
+  const testing::HumanoidFixture f = testing::MakeHumanoidFixture("walk", 1.0, 120.0);
+  zmq::context_t context;
+  DaemonConfig config = TestConfig("inproc://big-in", "inproc://big-out", 2);
+  config.max_message_bytes = 512;
+  RunningDaemon daemon(context, config);
+  Sender sender(context, "inproc://big-in", f.take, MakeHumanoidSubject("actor1"),
+                zmq::socket_type::push);
+  for (int t = 0; t < 40; ++t) {
+    sender.Send(t, static_cast<uint64_t>(t));  // about 800 bytes: each one too large
+    std::this_thread::sleep_for(20ms);
+  }
+  ASSERT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) {
+    return s.unattributed_dropped[static_cast<size_t>(DropReason::kOversized)] == 40;
+  }));
+  std::this_thread::sleep_for(200ms);
+  const auto health = nlohmann::json::parse(HttpGet(daemon->http_port(), "/health").second);
+  EXPECT_EQ(health["status"], "degraded") << health.dump();
+  EXPECT_EQ(health["problems"][0],
+            "every input message dropped for over 0.5 s before a subject could be named (the "
+            "last: oversized)")
+      << health.dump();
+}
+
 // A sender that spells its subject another way ("Actor1" for "actor1"): every frame is
 // dropped as unknown_subject, which the log counted and /health did not mention, and
 // neither said which name came. Both name it now.
