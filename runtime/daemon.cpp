@@ -207,8 +207,7 @@ struct Daemon::DataPlane final : OutputSink {
   }
 
   // One message from the input socket: handled, then whether it is one more of a run of
-  // messages dropped before any subject could be named (judged over half a second of
-  // arrivals, at least 10, as a subject's drops are).
+  // messages dropped before any subject could be named (judged as a subject's drops are).
   void Handle(size_t part_count, const zmq::message_t& message, int64_t receive_ns) {
     unattributed_reason.reset();
     HandleMessage(part_count, message, receive_ns);
@@ -220,7 +219,8 @@ struct Daemon::DataPlane final : OutputSink {
     if (unattributed_run++ == 0) unattributed_run_first_ns = receive_ns;
     stats.rejecting_unattributed_reason = *unattributed_reason;
     stats.rejecting_unattributed =
-        unattributed_run >= 10 && receive_ns - unattributed_run_first_ns >= 500'000'000;
+        unattributed_run >= SubjectRunner::kRejectingMinFrames &&
+        receive_ns - unattributed_run_first_ns >= SubjectRunner::kRejectingAfterNs;
   }
   std::optional<DropReason> unattributed_reason;  // set by Drop while a message is handled
   uint64_t unattributed_run = 0;

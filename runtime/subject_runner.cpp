@@ -276,10 +276,9 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
   // within 0.1 %. A capture locked to video runs 0.1 % slow, which every rule of the cleanup
   // takes in its stride; at one tolerance alone, the float rounding of how a sender wrote
   // the rate decided (119.88 dropped, 120000/1001 taken).
-  // A subject configured at an NTSC rate (119.88) takes frames that give its nominal rate
-  // (120, 1001/1000 of it) likewise: they were dropped, while 120 took 119.88.
-  // Only where the configured rate is itself an NTSC one (not whole, and 1001/1000 of it
-  // is): for 120, 120.12 is another rate.
+  // A subject configured at an NTSC rate (119.88: not whole, and 1001/1000 of it is) takes
+  // its nominal rate too (120 was dropped, while a 120 subject took 119.88); for 120, 120.12
+  // is another rate.
   const double ntsc_hz = rate_hz_ * 1000.0 / 1001.0, nominal_hz = rate_hz_ * 1001.0 / 1000.0;
   const bool configured_ntsc = std::abs(rate_hz_ - std::round(rate_hz_)) > 1e-4 * rate_hz_ &&
                                std::abs(nominal_hz - std::round(nominal_hz)) <= 1e-4 * nominal_hz;

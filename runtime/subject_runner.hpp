@@ -142,6 +142,11 @@ class SubjectRunner {
     return pending() - (counters_.frames_inserted - counters_.inserted_published);
   }
   protocol::SubjectState state() const { return state_; }
+  /// How long nothing but drops must go on (and over how many frames at least) before the
+  /// input is called rejected; the daemon holds its own drops before any subject is named
+  /// to the same.
+  static constexpr uint64_t kRejectingMinFrames = 10;
+  static constexpr int64_t kRejectingAfterNs = 500'000'000;
   /// Every frame received over the last half second (10 at least) was dropped: the reason
   /// of the last. Judged by the time the drops span, not their count: counted at the
   /// subject's rate, a 60 Hz sender into a 360 Hz subject was flagged after 3 s. That time
@@ -312,8 +317,6 @@ class SubjectRunner {
   int64_t last_input_ns_ = -1;
   int64_t unobserved_since_ns_ = -1;
   protocol::SubjectState state_ = protocol::SubjectState::kWaiting;
-  static constexpr uint64_t kRejectingMinFrames = 10;
-  static constexpr int64_t kRejectingAfterNs = 500'000'000;
   uint64_t consecutive_dropped_ = 0;
   uint64_t dropped_ahead_ = 0;    ///< Drops since the last frame taken numbered past it.
   int64_t first_dropped_ns_ = 0;  ///< Receive times of the first and last of those drops.

@@ -22,37 +22,32 @@ inline const CLI::Validator kFiniteNumber(
     },
     "FLOAT");
 
-/// For file and folder options: CLI11 takes `--out ""` as a value, and an empty path was
-/// then either an error that did not name the option or the option silently ignored.
-inline const CLI::Validator kNonEmptyPath(
-    [](std::string& text) -> std::string {
-      return text.empty() ? "a path is needed, not \"\"" : "";
-    },
-    "PATH");
+/// A check that refuses an empty value: CLI11 takes `--out ""` as a value.
+inline CLI::Validator NonEmpty(const std::string& needed, const std::string& type) {
+  return CLI::Validator(
+      [needed](std::string& text) { return text.empty() ? needed + ", not \"\"" : std::string(); },
+      type);
+}
+
+/// For file and folder options: an empty path was either an error that did not name the
+/// option or the option silently ignored (--plot "").
+inline const CLI::Validator kNonEmptyPath = NonEmpty("a path is needed", "PATH");
 
 /// CLI::ExistingFile, but an empty path says so: it was "File does not exist: " (no name).
 inline const CLI::Validator kExistingFile(
-    [](std::string& text) -> std::string {
-      if (text.empty()) return "a path is needed, not \"\"";
-      return CLI::ExistingFile(text);
+    [](std::string& text) {
+      return text.empty() ? std::string("a path is needed, not \"\"") : CLI::ExistingFile(text);
     },
     "FILE");
 
 /// For ZeroMQ endpoints the command binds or connects to: "" failed as "cannot bind : Invalid
 /// argument".
-inline const CLI::Validator kNonEmptyEndpoint(
-    [](std::string& text) -> std::string {
-      return text.empty() ? "an endpoint is needed (tcp://HOST:PORT, ipc://PATH), not \"\"" : "";
-    },
-    "ENDPOINT");
+inline const CLI::Validator kNonEmptyEndpoint =
+    NonEmpty("an endpoint is needed (tcp://HOST:PORT, ipc://PATH)", "ENDPOINT");
 
-/// For text options whose empty value would be taken as not given (--actor "" solved
-/// every actor's markers as one; --marker-set "" placed the default layout).
-inline const CLI::Validator kNonEmptyValue(
-    [](std::string& text) -> std::string {
-      return text.empty() ? "a value is needed, not \"\"" : "";
-    },
-    "TEXT");
+/// For text options whose empty value would be taken as not given (--actor "", and
+/// --marker-set "", which placed the default layout).
+inline const CLI::Validator kNonEmptyValue = NonEmpty("a value is needed", "TEXT");
 
 /// For length-unit options: checked when the command line is read, by the readers' own
 /// table (an unknown unit was found only once its file was read, and "" meant "guess").

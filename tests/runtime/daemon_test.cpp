@@ -1030,6 +1030,17 @@ TEST(DaemonTest, InputDroppedWholeBeforeAnySubjectIsNamedMakesHealthDegraded) {
       << health.dump();
 }
 
+// Sends frames [first, end) under a subject name the daemon does not know and waits until
+// it has dropped end of them as unknown_subject in all.
+void SendUnknown(Sender& sender, Daemon& daemon, const std::string& name, int first, int end) {
+  sender.message_.subject = name;
+  for (int t = first; t < end; ++t) sender.Send(t, static_cast<uint64_t>(t));
+  ASSERT_TRUE(WaitForStats(daemon, [end](const DaemonStats& s) {
+    return s.unattributed_dropped[static_cast<size_t>(DropReason::kUnknownSubject)] ==
+           static_cast<uint64_t>(end);
+  }));
+}
+
 // A sender that spells its subject another way ("Actor1" for "actor1"): every frame is
 // dropped as unknown_subject, which the log counted and /health did not mention, and
 // neither said which name came. Both name it now.
@@ -1041,11 +1052,7 @@ TEST(DaemonTest, TheLogAndHealthNameTheUnknownSubjectThatCame) {
     RunningDaemon daemon(context, TestConfig("inproc://typo-in", "inproc://typo-out", 4));
     Sender sender(context, "inproc://typo-in", f.take, MakeHumanoidSubject("actor1"),
                   zmq::socket_type::push);
-    sender.message_.subject = "Actor1";
-    for (int t = 0; t < 20; ++t) sender.Send(t, static_cast<uint64_t>(t));
-    ASSERT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) {
-      return s.unattributed_dropped[static_cast<size_t>(DropReason::kUnknownSubject)] == 20;
-    }));
+    SendUnknown(sender, *daemon, "Actor1", 0, 20);
     std::this_thread::sleep_for(300ms);  // snapshots and control-plane ticks to log it
     const auto health = nlohmann::json::parse(HttpGet(daemon->http_port(), "/health").second);
     EXPECT_EQ(health["unknown_subject_dropped"], 20);
@@ -1066,17 +1073,9 @@ TEST(DaemonTest, AnUnknownSubjectsNameCannotBreakHealthOrForgeALogLine) {
     RunningDaemon daemon(context, TestConfig("inproc://bytes-in", "inproc://bytes-out", 4));
     Sender sender(context, "inproc://bytes-in", f.take, MakeHumanoidSubject("actor1"),
                   zmq::socket_type::push);
-    sender.message_.subject = "evil\n[error] forged";
-    for (int t = 0; t < 5; ++t) sender.Send(t, static_cast<uint64_t>(t));
-    ASSERT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) {
-      return s.unattributed_dropped[static_cast<size_t>(DropReason::kUnknownSubject)] == 5;
-    }));
+    SendUnknown(sender, *daemon, "evil\n[error] forged", 0, 5);
     std::this_thread::sleep_for(300ms);  // logged before the next name replaces it
-    sender.message_.subject = "\xff\xfe\x80";
-    for (int t = 5; t < 10; ++t) sender.Send(t, static_cast<uint64_t>(t));
-    ASSERT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) {
-      return s.unattributed_dropped[static_cast<size_t>(DropReason::kUnknownSubject)] == 10;
-    }));
+    SendUnknown(sender, *daemon, "\xff\xfe\x80", 5, 10);
     std::this_thread::sleep_for(300ms);
     const auto [status, body] = HttpGet(daemon->http_port(), "/health");
     EXPECT_EQ(status, 200) << body;
