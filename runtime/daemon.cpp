@@ -387,6 +387,7 @@ struct Daemon::DataPlane final : OutputSink {
                                ? 0.0
                                : static_cast<double>(now - r.unobserved_since_ns()) * 1e-9;
       s.unstable_input = r.unstable_input(now);
+      s.unstable_cause = r.unstable_cause();
       s.model_distance_mm = r.model_distance_m() * 1e3;
       s.worker = index;
       s.config_rank = r.rank();
@@ -1149,7 +1150,7 @@ void Daemon::Run(bool handle_signals) {
             spdlog::info("subject '{}': no longer dropping every frame ({} accepted so far)",
                          s.name, s.counters.frames_accepted);
           if (s.unstable_input && (before == nullptr || !before->unstable_input))
-            spdlog::warn("subject '{}': {}", s.name, kUnstableInputText);
+            spdlog::warn("subject '{}': {}", s.name, UnstableInputText(s));
           if (!s.unstable_input && before != nullptr && before->unstable_input)
             spdlog::info(
                 "subject '{}': input stable again (no re-synchronisation, repeated "

@@ -55,6 +55,7 @@ struct SubjectStats {
   /// 5 re-synchronisations, repeated frames or switches between taken and dropped frames
   /// within 2 s (two senders, a session id per frame).
   bool unstable_input = false;
+  UnstableCause unstable_cause;    ///< What the recent events mostly were.
   double model_distance_mm = 0.0;  ///< Median sample-to-model distance, over about a second.
   int worker = 0;                  ///< The data-plane thread that solves it.
   int config_rank = 0;             ///< Its place in the config's subject list.
@@ -193,8 +194,9 @@ std::string PrintableName(std::string_view name);
 /// mismatch: the frames' rate against the configured one; a model mismatch: the frames'
 /// hash and marker count against the model's); empty if nothing to add.
 std::string RejectionDetail(const SubjectStats& s);
-/// What /health and the log say of a subject whose input is unstable.
-extern const char* const kUnstableInputText;
+/// What /health and the log say of a subject whose input is unstable: the rule, what the
+/// events mostly were, and the likeliest sender fault for that.
+std::string UnstableInputText(const SubjectStats& s);
 /// The log line for a subject's re-synchronisation: where its frame numbers (and v2
 /// sessions) jumped from and to, and how many restarts there were since the last report
 /// (a v1 packet late by over restart_backjump makes two: back, then forward again).

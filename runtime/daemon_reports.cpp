@@ -348,10 +348,40 @@ std::string RejectionDetail(const SubjectStats& s) {
   return detail;
 }
 
-const char* const kUnstableInputText =
-    "input unstable: 5 re-synchronisations, repeated frames or switches between taken and "
-    "dropped frames within 2 s (two senders for one subject? a session id that changes every "
-    "frame?)";
+std::string UnstableInputText(const SubjectStats& s) {
+  const UnstableCause& cause = s.unstable_cause;
+  std::string mostly, likely;
+  switch (cause.kind) {
+    case UnstableCause::Kind::kResynchronisation:
+      mostly = "re-synchronisations";
+      likely = "two senders for one subject? a session id that changes every frame?";
+      break;
+    case UnstableCause::Kind::kRepeatedFrame:
+      mostly = fmt::format("frames it had taken already, sent again ({})", to_string(cause.reason));
+      likely = "two senders for one subject?";
+      break;
+    case UnstableCause::Kind::kTakenAndDropped:
+      mostly = fmt::format("frames dropped as {} between frames taken", to_string(cause.reason));
+      switch (cause.reason) {
+        case DropReason::kNonFinite:
+          likely = "a sender writing NaN or Inf into some frames?";
+          break;
+        case DropReason::kModelMismatch:
+          likely = "two senders with different marker sets for one subject?";
+          break;
+        case DropReason::kRateMismatch:
+          likely = "two senders at different rates for one subject?";
+          break;
+        case DropReason::kOversized: likely = "some frames over input.max_message_bytes?"; break;
+        default: likely = "a sender writing some frames wrongly?"; break;
+      }
+      break;
+  }
+  return fmt::format(
+      "input unstable: 5 re-synchronisations, repeated frames or switches between taken and "
+      "dropped frames within 2 s, mostly {} ({})",
+      mostly, likely);
+}
 
 std::string RestartLogLine(const SubjectStats& s, uint64_t restarts_since_last_report) {
   const SubjectCounters& c = s.counters;
@@ -374,12 +404,14 @@ std::string FormatHealthJson(const DaemonStats& stats, bool data_plane_alive) {
   nlohmann::json problems = nlohmann::json::array();
   for (const SubjectStats& s : stats.subjects) {
     subjects[s.name] = protocol::to_string(s.state);
-    if (s.state == protocol::SubjectState::kStalled)
+    // Frames arriving, every one dropped: "input stalled" beside the rejection read as a
+    // silent sender, which it is not.
+    if (s.state == protocol::SubjectState::kStalled && !s.rejecting_input)
       problems.push_back("subject '" + s.name + "': input stalled");
     if (s.rejecting_input)
       problems.push_back("subject '" + s.name + "': every frame dropped (" +
                          to_string(s.rejecting_reason) + ")" + RejectionDetail(s));
-    if (s.unstable_input) problems.push_back("subject '" + s.name + "': " + kUnstableInputText);
+    if (s.unstable_input) problems.push_back("subject '" + s.name + "': " + UnstableInputText(s));
     // Half a second, as for the drops: an actor occluded for a few frames is no problem;
     // a bridge whose every marker is flagged invalid, or sits outside the capture volume,
     // left /health ok while the pose was guessed from nothing (or the subject lost).

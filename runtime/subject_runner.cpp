@@ -199,7 +199,8 @@ void SubjectRunner::CountDrop(DropReason reason, int64_t receive_ns,
   // input switching between what the subject takes and what it cannot (two bridges with
   // different marker orders taking turns) lost half its frames with /health ok, since no
   // half second was all drops. Repeated frames note their own event, one per frame.
-  if (started_ && consecutive_dropped_ == 0 && !IsRepeat(reason)) NoteUnstableEvent(receive_ns);
+  if (started_ && consecutive_dropped_ == 0 && !IsRepeat(reason))
+    NoteUnstableEvent(receive_ns, {UnstableCause::Kind::kTakenAndDropped, reason});
   last_input_ns_ = receive_ns;
   ++counters_.frames_in;
   ++counters_.dropped[static_cast<size_t>(reason)];
@@ -234,15 +235,34 @@ void SubjectRunner::CountDrop(DropReason reason, int64_t receive_ns,
   last_drop_ = reason;
 }
 
-void SubjectRunner::NoteUnstableEvent(int64_t receive_ns) {
+void SubjectRunner::NoteUnstableEvent(int64_t receive_ns, UnstableCause cause) {
   // Flagged until kUnstableWithinNs pass with no such event at all, so the flag does not
   // flap and "stable again" is true when it is said.
   if (receive_ns - last_unstable_event_ns_ > kUnstableWithinNs) unstable_ = false;
   last_unstable_event_ns_ = receive_ns;
   unstable_events_ns_[next_unstable_slot_] = receive_ns;
+  unstable_causes_[next_unstable_slot_] = cause;
   next_unstable_slot_ = (next_unstable_slot_ + 1) % kUnstableEvents;
   const int64_t oldest = unstable_events_ns_[next_unstable_slot_];  // of the last five
   if (oldest >= 0 && receive_ns - oldest <= kUnstableWithinNs) unstable_ = true;
+}
+
+UnstableCause SubjectRunner::unstable_cause() const {
+  UnstableCause commonest;
+  size_t most = 0;
+  // From the latest back, so the latest of equally common causes is kept.
+  for (size_t back = 1; back <= kUnstableEvents; ++back) {
+    const size_t slot = (next_unstable_slot_ + kUnstableEvents - back) % kUnstableEvents;
+    if (unstable_events_ns_[slot] < 0) break;
+    size_t count = 0;
+    for (size_t other = 0; other < kUnstableEvents; ++other)
+      count += unstable_events_ns_[other] >= 0 && unstable_causes_[other] == unstable_causes_[slot];
+    if (count > most) {
+      most = count;
+      commonest = unstable_causes_[slot];
+    }
+  }
+  return commonest;
 }
 
 void SubjectRunner::InheritCounters(const SubjectRunner& previous) {
@@ -342,7 +362,9 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
                            (back >= static_cast<uint64_t>(restart_backjump_frames_) ||
                             (back > 0 && frame.capture_time_ns > last_capture_ns_));
       if (!restart) {
-        NoteUnstableEvent(receive_ns);
+        NoteUnstableEvent(receive_ns,
+                          {UnstableCause::Kind::kRepeatedFrame,
+                           back == 0 ? DropReason::kDuplicate : DropReason::kOutOfOrder});
         // ++frames_in happens in the drop, so the last frame number stays the newest.
         return drop(back == 0 ? DropReason::kDuplicate : DropReason::kOutOfOrder);
       }
@@ -357,7 +379,8 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
   }
   ++counters_.frames_in;
   ++counters_.frames_accepted;
-  if (started_ && consecutive_dropped_ > 0 && !IsRepeat(last_drop_)) NoteUnstableEvent(receive_ns);
+  if (started_ && consecutive_dropped_ > 0 && !IsRepeat(last_drop_))
+    NoteUnstableEvent(receive_ns, {UnstableCause::Kind::kTakenAndDropped, last_drop_});
   consecutive_dropped_ = 0;
   dropped_ahead_ = 0;
   started_ = true;
@@ -365,10 +388,9 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
   last_input_ns_ = receive_ns;
   if (consecutive && frame.capture_time_ns != 0 && last_capture_ns_ != 0) {
     const double step_s = ClockStepS(frame.capture_time_ns, last_capture_ns_);
-    clock_pair_seen_ = true;
-    clock_agreeing_pairs_ = std::abs(step_s * rate_hz_ - 1.0) <= 0.5
-                                ? std::min(clock_agreeing_pairs_ + 1, kClockPairs)
-                                : 0;
+    const bool agrees = std::abs(step_s * rate_hz_ - 1.0) <= 0.5;
+    clock_disagreed_ = clock_disagreed_ || !agrees;
+    clock_agreeing_pairs_ = agrees ? std::min(clock_agreeing_pairs_ + 1, kClockPairs) : 0;
   }
   last_capture_ns_ = frame.capture_time_ns;
   counters_.last_frame_number = frame.frame_number;
@@ -381,7 +403,7 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
   if (resynchronised_) {
     counters_.resync_frame = frame.frame_number;
     counters_.resync_session = frame.stream.session_id;
-    NoteUnstableEvent(receive_ns);
+    NoteUnstableEvent(receive_ns, {UnstableCause::Kind::kResynchronisation});
   }
   resynchronised_ = false;
   if (state_ == protocol::SubjectState::kWaiting || state_ == protocol::SubjectState::kStalled)

@@ -43,6 +43,15 @@ enum class DropReason : uint8_t {
 inline constexpr int kDropReasonCount = 9;
 const char* to_string(DropReason reason);
 
+/// What made input unstable: a re-synchronisation, a repeated frame (duplicate or out of
+/// order: `reason`), or a switch between frames taken and frames dropped as `reason`.
+struct UnstableCause {
+  enum class Kind : uint8_t { kResynchronisation, kRepeatedFrame, kTakenAndDropped };
+  Kind kind = Kind::kResynchronisation;
+  DropReason reason = DropReason::kMalformed;  ///< (not for a re-synchronisation)
+  bool operator==(const UnstableCause&) const = default;
+};
+
 /// Where a runner's output goes (the data plane's PUB socket, or a test's recorder).
 class OutputSink {
  public:
@@ -169,6 +178,9 @@ class SubjectRunner {
   bool unstable_input(int64_t now_ns) const {
     return unstable_ && now_ns - last_unstable_event_ns_ <= kUnstableWithinNs;
   }
+  /// The commonest cause among the last kUnstableEvents events (the latest of equals): a
+  /// sender writing NaN into some frames was told "two senders for one subject?".
+  UnstableCause unstable_cause() const;
   /// How far the received samples sit from the model's markers in the solved pose (the
   /// distance two thirds of a frame's samples come within, averaged over about a second),
   /// metres; a model that
@@ -298,18 +310,21 @@ class SubjectRunner {
   std::optional<Interrupted> interrupted_;
   uint64_t next_frame_number_ = 0;
   uint64_t last_capture_ns_ = 0;
-  // The sender's capture clock, judged on consecutive frames: trusted while none has been
-  // seen or the last kClockPairs of them each stepped a frame period (+-50 %). A forward
-  // jump in frame numbers that a trusted clock does not share was no loss; a clock in
-  // other units, or stamped at bursty sends, is not judged.
+  // The sender's capture clock, judged on consecutive frames: trusted while every pair seen
+  // stepped a frame period (+-50 %), or once the last kClockPairs did again. A forward jump
+  // in frame numbers that a trusted clock does not share was no loss; a clock in other
+  // units, or stamped at bursty sends, is not judged. Trusted before any disagreement, not
+  // only after kClockPairs agreed: a second bridge joining in the first frames had its
+  // 100-frame lead bridged with 99 inserted frames.
   static constexpr int kClockPairs = 8;
-  bool clock_pair_seen_ = false;
+  bool clock_disagreed_ = false;
   int clock_agreeing_pairs_ = 0;
-  bool clock_trusted() const { return !clock_pair_seen_ || clock_agreeing_pairs_ >= kClockPairs; }
-  void NoteUnstableEvent(int64_t receive_ns);
+  bool clock_trusted() const { return !clock_disagreed_ || clock_agreeing_pairs_ >= kClockPairs; }
+  void NoteUnstableEvent(int64_t receive_ns, UnstableCause cause);
   static constexpr size_t kUnstableEvents = 5;
   static constexpr int64_t kUnstableWithinNs = 2'000'000'000;
   std::array<int64_t, kUnstableEvents> unstable_events_ns_{-1, -1, -1, -1, -1};  // a ring
+  std::array<UnstableCause, kUnstableEvents> unstable_causes_{};                 // beside it
   size_t next_unstable_slot_ = 0;
   int64_t last_unstable_event_ns_ = 0;
   bool unstable_ = false;

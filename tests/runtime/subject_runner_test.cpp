@@ -209,6 +209,21 @@ TEST_F(SubjectRunnerTest, FramesForAnotherModelOrRateAreNeverApplied) {
   stats.rate_hz = 120.0;
   EXPECT_EQ(RejectionDetail(stats),
             ": the frames say 240 Hz, the subject is configured for 120 Hz (rate_hz)");
+  // Stalled, since nothing was taken, but frames keep coming: /health names the rejection
+  // alone ("input stalled" beside it read as a sender gone quiet).
+  {
+    SubjectStats stalled = stats;
+    stalled.name = "actor1";
+    stalled.state = protocol::SubjectState::kStalled;
+    DaemonStats daemon_stats;
+    daemon_stats.subjects.push_back(stalled);
+    std::string health = FormatHealthJson(daemon_stats, true);
+    EXPECT_NE(health.find("every frame dropped (rate_mismatch)"), std::string::npos) << health;
+    EXPECT_EQ(health.find("input stalled"), std::string::npos) << health;
+    daemon_stats.subjects[0].rejecting_input = false;
+    health = FormatHealthJson(daemon_stats, true);
+    EXPECT_NE(health.find("subject 'actor1': input stalled"), std::string::npos) << health;
+  }
   // ...and which marker set came against the model's (a hash written as 0 was told apart
   // from another bridge's set by nothing).
   // The last was the frame one marker short.
@@ -500,6 +515,23 @@ TEST_F(SubjectRunnerTest, TwoBridgesOnOneSubjectInsertNothingAndAreFlaggedUnstab
   }
   EXPECT_EQ(from_start.counters().frames_inserted, 0u);
   EXPECT_EQ(from_start.counters().frames_skipped, 0u);
+  // The second bridge joins at the fourth frame, before eight pairs could vouch for the
+  // clock: each pair seen had stepped a frame, so the clock is trusted already (99 frames
+  // were inserted for the bridge's first frame and the other's then dropped out of order).
+  for (int joins_after : {1, 4, 8}) {
+    SubjectRunner early(subject_, daemon_);
+    RecordingSink sink_early;
+    for (int f = 0; f < joins_after; ++f)
+      ASSERT_FALSE(early.Accept(Frame(f, f, ns(f)), 0, sink_early).has_value());
+    for (int f = joins_after; f < 60; ++f) {
+      early.Accept(Frame(f, f, ns(f)), 0, sink_early);
+      early.Accept(Frame(f, f + 100, ns(f)), 0, sink_early);
+    }
+    EXPECT_EQ(early.counters().frames_inserted, 0u) << "joined after " << joins_after;
+    EXPECT_EQ(early.counters().frames_skipped, 0u) << "joined after " << joins_after;
+    EXPECT_EQ(early.counters().dropped[static_cast<size_t>(DropReason::kOutOfOrder)], 0u)
+        << "joined after " << joins_after;
+  }
   // The second bridge stamps a moment before the first: a clock gone back shares no jump.
   SubjectRunner lagging(subject_, daemon_);
   for (int f = 0; f < 60; ++f) {
@@ -841,6 +873,8 @@ TEST_F(SubjectRunnerTest, InputSwitchingBetweenTakenAndDroppedFramesIsFlaggedUns
   EXPECT_FALSE(runner.rejecting().has_value());
   EXPECT_TRUE(runner.unstable_input(receive_ns));
   EXPECT_EQ(runner.counters().dropped[static_cast<size_t>(DropReason::kModelMismatch)], 120u);
+  EXPECT_EQ(runner.unstable_cause(),
+            (UnstableCause{UnstableCause::Kind::kTakenAndDropped, DropReason::kModelMismatch}));
   runner.PublishStatus(receive_ns, sink_);
   ASSERT_FALSE(sink_.statuses.empty());
   EXPECT_EQ(sink_.statuses.back().problems, protocol::kProblemUnstableInput);
@@ -859,6 +893,61 @@ TEST_F(SubjectRunnerTest, InputSwitchingBetweenTakenAndDroppedFramesIsFlaggedUns
     EXPECT_FALSE(now_and_then.unstable_input(receive_ns)) << n;
   }
   EXPECT_EQ(now_and_then.counters().dropped[static_cast<size_t>(DropReason::kModelMismatch)], 8u);
+}
+
+// A sender writing NaN into every 20th frame at 120 Hz: flagged unstable, as it should be,
+// but /health and the log asked "two senders for one subject?" and named no NaN.
+TEST_F(SubjectRunnerTest, UnstableInputNamesWhatItsEventsMostlyWere) {
+  constexpr int64_t kPeriod = 8'333'333;
+  SubjectRunner runner(subject_, daemon_);
+  int64_t receive_ns = 0;
+  for (uint64_t n = 0; n < 360; ++n, receive_ns += kPeriod) {
+    const protocol::MarkerFrameMessage m = Frame(static_cast<int>(n % 200), n, 0);
+    if (n % 20 == 10)
+      runner.Drop(m, DropReason::kNonFinite, receive_ns);
+    else
+      runner.Accept(m, receive_ns, sink_);
+  }
+  ASSERT_TRUE(runner.unstable_input(receive_ns));
+  EXPECT_EQ(runner.unstable_cause(),
+            (UnstableCause{UnstableCause::Kind::kTakenAndDropped, DropReason::kNonFinite}));
+  SubjectStats stats;
+  stats.name = "actor1";
+  stats.unstable_input = true;
+  stats.unstable_cause = runner.unstable_cause();
+  DaemonStats daemon_stats;
+  daemon_stats.subjects.push_back(stats);
+  const std::string health = FormatHealthJson(daemon_stats, true);
+  EXPECT_NE(health.find("mostly frames dropped as non_finite between frames taken"),
+            std::string::npos)
+      << health;
+  EXPECT_NE(health.find("NaN"), std::string::npos) << health;
+  EXPECT_EQ(health.find("two senders"), std::string::npos) << health;
+
+  // A new session id in every frame: re-synchronisations, and the hint is the session id.
+  SubjectRunner per_frame(subject_, daemon_);
+  receive_ns = 0;
+  for (int f = 0; f < 20; ++f, receive_ns += kPeriod) {
+    protocol::MarkerFrameMessage m = Frame(f, f, 0);
+    m.stream = Session(static_cast<uint64_t>(1000 + f));
+    per_frame.Accept(m, receive_ns, sink_);
+  }
+  ASSERT_TRUE(per_frame.unstable_input(receive_ns));
+  stats.unstable_cause = per_frame.unstable_cause();
+  EXPECT_EQ(stats.unstable_cause.kind, UnstableCause::Kind::kResynchronisation);
+  EXPECT_NE(UnstableInputText(stats).find("a session id that changes every frame"),
+            std::string::npos);
+
+  // Every frame sent twice: repeated frames.
+  SubjectRunner twice(subject_, daemon_);
+  receive_ns = 0;
+  for (int f = 0; f < 20; ++f, receive_ns += kPeriod) {
+    twice.Accept(Frame(f, f, 0), receive_ns, sink_);
+    twice.Accept(Frame(f, f, 0), receive_ns + 1000, sink_);
+  }
+  ASSERT_TRUE(twice.unstable_input(receive_ns));
+  EXPECT_EQ(twice.unstable_cause(),
+            (UnstableCause{UnstableCause::Kind::kRepeatedFrame, DropReason::kDuplicate}));
 }
 
 // The model's marker names match the bridge's, so every frame is accepted, but its bones
