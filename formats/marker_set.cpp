@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cmath>
 #include <fstream>
 #include <set>
 #include <sstream>
@@ -229,20 +230,29 @@ MarkerSetMatch MatchMarkerSet(const MarkerSetDefinition& set, std::span<const st
   return match;
 }
 
+namespace {
+double RequiredShare(const MarkerSetMatch& m) {
+  return m.required > 0 ? static_cast<double>(m.required_found) / m.required : 0.0;
+}
+}  // namespace
+
+bool ExplainsLabelsBetter(const MarkerSetMatch& a, const MarkerSetMatch& b) {
+  const int explained_a = a.matched - (a.required - a.required_found);
+  const int explained_b = b.matched - (b.required - b.required_found);
+  if (explained_a != explained_b) return explained_a > explained_b;
+  const double share_a = RequiredShare(a), share_b = RequiredShare(b);
+  if (std::abs(share_a - share_b) > 1e-9) return share_a > share_b;
+  return a.matched > b.matched;
+}
+
 MarkerSetMatch RecognizeMarkerSet(std::span<const MarkerSetDefinition> sets,
                                   std::span<const std::string> labels) {
   MarkerSetMatch best;
   best.marker_of_label.assign(labels.size(), -1);
-  double best_share = 0.0;
   for (const MarkerSetDefinition& set : sets) {
     MarkerSetMatch m = MatchMarkerSet(set, labels);
-    const double share = m.required > 0 ? static_cast<double>(m.required_found) / m.required : 0.0;
-    if (share < kMarkerSetMinRequiredShare) continue;
-    if (best.set == nullptr || share > best_share + 1e-9 ||
-        (share > best_share - 1e-9 && m.matched > best.matched)) {
-      best = std::move(m);
-      best_share = share;
-    }
+    if (RequiredShare(m) < kMarkerSetMinRequiredShare) continue;
+    if (best.set == nullptr || ExplainsLabelsBetter(m, best)) best = std::move(m);
   }
   return best;
 }

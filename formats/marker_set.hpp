@@ -80,9 +80,15 @@ struct MarkerSetMatch {
 MarkerSetMatch MatchMarkerSet(const MarkerSetDefinition& set, std::span<const std::string> labels);
 /// The share of a set's required markers the labels must hold for the set to explain them.
 inline constexpr double kMarkerSetMinRequiredShare = 0.6;
-/// Picks the set that best explains the labels: the largest share of its required
-/// markers present (at least kMarkerSetMinRequiredShare), ties to the larger set.
-/// set == nullptr if none.
+/// Whether match a explains a capture's labels better than b: more labels recognised less
+/// required markers absent, then the larger share of its required markers present, then
+/// more labels recognised. Ranked by share first, a lower-body set all present beat the
+/// full-body set one label short (a studio's extra head marker), and the upper body's
+/// 23 markers were placed as the studio's own: calibration failed.
+bool ExplainsLabelsBetter(const MarkerSetMatch& a, const MarkerSetMatch& b);
+/// Picks the set that best explains the labels (ExplainsLabelsBetter) among those with at
+/// least kMarkerSetMinRequiredShare of their required markers present. set == nullptr if
+/// none.
 MarkerSetMatch RecognizeMarkerSet(std::span<const MarkerSetDefinition> sets,
                                   std::span<const std::string> labels);
 

@@ -265,12 +265,9 @@ MarkersOnlyCalibration CalibrateFromMarkers(std::span<const C3dTake> raw_takes,
     // A named set the labels do not explain is the wrong set: it was used anyway, CMU's
     // 41 markers read as Plug-in Gait's (every pelvis and tibia marker missing) gave a
     // 67 cm thigh and 34-39 cm clavicles with exit 0.
-    const auto share = [](const MarkerSetMatch& m) {
-      return m.required > 0 ? static_cast<double>(m.required_found) / m.required : 0.0;
-    };
     const MarkerSetMatch recognised = RecognizeMarkerSet(BuiltInMarkerSets(), markers);
     if (recognised.set != nullptr && recognised.set->name != chosen.name &&
-        share(recognised) > share(match) + 1e-9)
+        ExplainsLabelsBetter(recognised, match))
       throw std::runtime_error(
           "calibrate: the take's labels fit marker set '" + recognised.set->name + "' (" +
           std::to_string(recognised.required_found) + " of its " +
