@@ -65,14 +65,14 @@ class TomlTable {
 
   /// Throws for the first key present that no accessor asked for.
   void RejectUnknown() const;
+  /// A required key that is missing: names a key spelt nearly like it, and its line.
+  [[noreturn]] void FailMissing(const std::string& key, const std::string& what) const;
 
   const std::string& source() const { return source_; }
   const std::string& path() const { return path_; }
   const toml::table& table() const { return table_; }
 
  private:
-  /// A required key that is missing: names a key spelt nearly like it, and its line.
-  [[noreturn]] void FailMissing(const std::string& key, const std::string& what) const;
   std::string Join(const std::string& key) const { return path_.empty() ? key : path_ + "." + key; }
   const toml::table& table_;
   std::string path_;

@@ -783,7 +783,10 @@ void Daemon::ApplyReload(DaemonConfig config) {
   keep_running("input.subscribe", &DaemonConfig::subscribe_all);
   keep_running("input.workers", &DaemonConfig::workers);
   keep_running("input.pin_workers", &DaemonConfig::pin_workers);
+  // Set on the sockets when they open; a reload that changed them said "applying" only.
+  keep_running("input.receive_high_water_mark", &DaemonConfig::receive_high_water_mark);
   keep_running("output.endpoint", &DaemonConfig::output_endpoint);
+  keep_running("output.send_high_water_mark", &DaemonConfig::send_high_water_mark);
   keep_running("control.http_port", &DaemonConfig::http_port);
   keep_running("control.http_address", &DaemonConfig::http_address);
   keep_running("control.http", &DaemonConfig::http_enabled);
@@ -806,6 +809,13 @@ void Daemon::ApplyReload(DaemonConfig config) {
         "reload: {} changed, which takes effect only after a restart; the sockets, the "
         "workers and the HTTP endpoint stay as they are",
         restart_only);
+  // A new split applies at once; said, since the subjects it adds or removes were
+  // otherwise logged without their cause.
+  if (config.shard_index != old.shard_index || config.shard_count != old.shard_count)
+    spdlog::info("reload: input.shard {}/{} -> {}/{}: solving {} of {} configured subjects",
+                 old.shard_index, old.shard_count, config.shard_index, config.shard_count,
+                 config.subjects.size(),
+                 config.subjects.size() + config.other_shards_subjects.size());
   AssignWorkers(config);
   // Every worker's part is built before any is posted: a reload applies everywhere or
   // nowhere.

@@ -536,13 +536,16 @@ DaemonConfig ParseDaemonConfig(const std::string& text, const std::string& sourc
                "'" + s.model_path + "' is " + other + ": a live calibration writes over it");
       named_files.push_back({same_file(s.model_path), "subject '" + s.name + "''s model", false});
     }
-    if (!s.live.enabled && s.model_path.empty())
-      t.Fail(nullptr, t.Has("marker_set") ? "marker_set" : "model",
-             t.Has("marker_set")
-                 ? "a marker_set is for a subject calibrated live: add calibrate = \"live\" (or "
-                   "give a model instead)"
-                 : "missing: give the subject's model file, or calibrate = \"live\" with a "
-                   "marker_set");
+    if (!s.live.enabled && s.model_path.empty()) {
+      if (t.Has("marker_set"))
+        t.Fail(nullptr, "marker_set",
+               "a marker_set is for a subject calibrated live: add calibrate = \"live\" (or "
+               "give a model instead)");
+      // Through FailMissing, so 'modle = ...' is named with its line.
+      t.FailMissing("model",
+                    "missing: give the subject's model file, or calibrate = \"live\" with a "
+                    "marker_set");
+    }
     if (s.live.enabled && !s.model_path.empty())
       t.Fail(table->get("model"), "model",
              "give a model or calibrate = \"live\", not both (a live calibration starts from "

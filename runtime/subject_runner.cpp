@@ -268,6 +268,8 @@ UnstableCause SubjectRunner::unstable_cause() const {
 void SubjectRunner::InheritCounters(const SubjectRunner& previous) {
   counters_ = previous.counters_;
   last_input_ns_ = previous.last_input_ns_;
+  last_receive_ns_ = previous.last_receive_ns_;
+  state_ = previous.state_;
   started_ = false;
 }
 

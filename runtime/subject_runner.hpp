@@ -199,11 +199,19 @@ class SubjectRunner {
   int64_t last_input_ns() const { return last_input_ns_; }
   /// Receive time of the frame that published the first of the current run of frames in
   /// which no marker was observed (-1: the last frame published had one): a pose guessed
-  /// from nothing, whether the subject reads lost or repairing.
-  int64_t unobserved_since_ns() const { return unobserved_since_ns_; }
+  /// from nothing, whether the subject reads lost or repairing. -1 too once the stream ended
+  /// or stalled: nothing is published or guessed then (an actor who left the volume before
+  /// an end of stream held /health degraded for good).
+  int64_t unobserved_since_ns() const {
+    return state_ == protocol::SubjectState::kWaiting || state_ == protocol::SubjectState::kStalled
+               ? -1
+               : unobserved_since_ns_;
+  }
   const SubjectCounters& counters() const { return counters_; }
   const CleanupCounters& cleanup_counters() const { return pipeline_->counters(); }
-  /// Carries the counters of a runner this one replaces (a reload changed its model).
+  /// Carries the counters of a runner this one replaces (a reload changed its model), and
+  /// its input's state: a stalled subject stays stalled, and a live one is watched for a
+  /// stall from its last frame (rebuilt as waiting, a dead sender's subject read ok).
   void InheritCounters(const SubjectRunner& previous);
   const protocol::SubjectDescriptionMessage& description() const { return description_; }
   /// From now on, hands a published frame to the browser view's slot while someone

@@ -101,6 +101,12 @@ TEST(DaemonConfigTest, ErrorsNameFileLineAndField) {
             std::string::npos);
   EXPECT_NE(ErrorOf("format_version = 1\n[[subject]\n").find("test.toml:2:"),
             std::string::npos);  // TOML syntax
+  // A subject's model misspelt: named with its line (the README's example said so, while
+  // the daemon gave the [[subject]] line and no hint).
+  EXPECT_EQ(ErrorOf("format_version = 1\n[[subject]]\nname = \"a\"\nrate_hz = 120\n"
+                    "modle = \"demo_subject.toml\"\n"),
+            "test.toml:5: field 'subject[0].model': missing: give the subject's model file, or "
+            "calibrate = \"live\" with a marker_set (is 'modle' on line 5 meant for it?)");
 }
 
 TEST(DaemonConfigTest, ShardsSplitTheSubjectListSoEachIsSolvedOnce) {

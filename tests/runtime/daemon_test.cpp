@@ -635,8 +635,19 @@ TEST(DaemonTest, ARestartOnlyChangeIsWarnedAgainstTheRunningSockets) {
     ASSERT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) { return s.reloads == 2; }));
     daemon->Reload(running);
     ASSERT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) { return s.reloads == 3; }));
+    // The high-water marks are set when the sockets open: a reload that changed them was
+    // applied silently with no effect.
+    DaemonConfig marks = running;
+    marks.receive_high_water_mark = 77;
+    marks.send_high_water_mark = 88;
+    daemon->Reload(marks);
+    ASSERT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) { return s.reloads == 4; }));
   }
   const std::string text = log.Text();
+  EXPECT_NE(text.find("reload: input.receive_high_water_mark, output.send_high_water_mark "
+                      "changed, which takes effect only after a restart"),
+            std::string::npos)
+      << text;
   const std::string warning =
       "reload: output.endpoint changed, which takes effect only after a restart";
   size_t count = 0;

@@ -606,6 +606,17 @@ TEST_F(SubjectRunnerTest, NoMarkerObservedForHalfASecondMakesHealthDegraded) {
   for (int f = 150; f < 180; ++f, receive_ns += 8'333'333)
     ASSERT_FALSE(runner.Accept(Frame(f, f, 0), receive_ns, sink_).has_value());
   EXPECT_LT(runner.unobserved_since_ns(), 0);
+  // The actor leaves the volume, then the take ends: nothing is guessed while the subject
+  // waits (it held /health degraded, the seconds growing, after the take had ended).
+  for (int f = 180; f < 300; ++f, receive_ns += 8'333'333) {
+    protocol::MarkerFrameMessage m = Frame(f, f, 0);
+    std::fill(m.valid.begin(), m.valid.end(), uint8_t{0});
+    std::fill(m.positions.begin(), m.positions.end(), Vec3::Constant(kNaN));
+    ASSERT_FALSE(runner.Accept(m, receive_ns, sink_).has_value());
+  }
+  EXPECT_GE(runner.unobserved_since_ns(), 0);
+  runner.EndOfStream(sink_);
+  EXPECT_LT(runner.unobserved_since_ns(), 0);
 }
 
 // A bridge writing a new session id into every frame restarts the subject at every frame:
@@ -756,6 +767,38 @@ TEST_F(SubjectRunnerTest, WatchdogMarksAStalledSubjectOnceAndPublishesIt) {
   EXPECT_EQ(runner.counters().resumes, 2u);
   EXPECT_EQ(runner.counters().resume_frame, 40u);
   EXPECT_DOUBLE_EQ(runner.counters().resume_silence_s, 1.19);
+}
+
+// A reload that changes a subject rebuilds its runner. Rebuilt as waiting with no input
+// time, a stalled subject read ok in /health while its sender was still dead, and one whose
+// sender died just before the reload was never watched for a stall.
+TEST_F(SubjectRunnerTest, ARebuiltSubjectKeepsItsStallAndIsWatchedForOne) {
+  SubjectRunner stalled(subject_, daemon_);
+  ASSERT_FALSE(stalled.Accept(Frame(0, 0, 0), 1'000'000'000, sink_).has_value());
+  ASSERT_TRUE(stalled.CheckStall(2'000'000'000, 500'000'000, sink_));
+  SubjectRunner rebuilt(subject_, daemon_);
+  rebuilt.InheritCounters(stalled);
+  EXPECT_EQ(rebuilt.state(), protocol::SubjectState::kStalled);
+  EXPECT_EQ(rebuilt.counters().stalls, 1u);
+  ASSERT_FALSE(rebuilt.Accept(Frame(1, 1, 0), 3'000'000'000, sink_).has_value());
+  EXPECT_EQ(rebuilt.counters().resumes, 1u);  // the log says the input resumed
+
+  SubjectRunner live(subject_, daemon_);
+  ASSERT_FALSE(live.Accept(Frame(0, 0, 0), 1'000'000'000, sink_).has_value());
+  SubjectRunner rebuilt_live(subject_, daemon_);
+  rebuilt_live.InheritCounters(live);
+  EXPECT_FALSE(rebuilt_live.CheckStall(1'400'000'000, 500'000'000, sink_));
+  EXPECT_TRUE(rebuilt_live.CheckStall(1'600'000'000, 500'000'000, sink_));
+  EXPECT_EQ(rebuilt_live.state(), protocol::SubjectState::kStalled);
+
+  // A subject whose take ended stays waiting: silence is no stall.
+  SubjectRunner ended(subject_, daemon_);
+  ASSERT_FALSE(ended.Accept(Frame(0, 0, 0), 1'000'000'000, sink_).has_value());
+  ended.EndOfStream(sink_);
+  SubjectRunner rebuilt_ended(subject_, daemon_);
+  rebuilt_ended.InheritCounters(ended);
+  EXPECT_EQ(rebuilt_ended.state(), protocol::SubjectState::kWaiting);
+  EXPECT_FALSE(rebuilt_ended.CheckStall(10'000'000'000, 500'000'000, sink_));
 }
 
 // A stalled subject must not keep its last K frames until a next stream arrives that
