@@ -1,6 +1,8 @@
 // `mocapd process` implementation.
 #include "runtime/process_command.hpp"
 
+#include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -305,6 +307,16 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
   std::vector<double> residuals, sum_sq(observed.size(), 0.0);
   std::vector<int> residual_count(observed.size(), 0);
   std::optional<int> first_solved;
+  // The world axis the subject's hips point up along, voted by every solved frame: judged
+  // on the first frame alone, a take that opened leaning 45-60 degrees had its whole upright
+  // walk written 85 degrees over.
+  std::optional<RetargetMap> own_map;
+  try {
+    own_map = MakeRetargetMap(*subject.skeleton, {}, *subject.skeleton, {});
+  } catch (const std::invalid_argument&) {
+    // No humanoid: its world is the capture's.
+  }
+  std::array<int64_t, 6> up_votes{};  // +x, -x, +y, -y, +z, -z
   auto collect = [&]() {
     const CleanFrame& frame = pipeline.output();
     const auto f = static_cast<int>(frame.frame);
@@ -328,6 +340,13 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
       if (!first_solved) ++summary.frames_before_first_solve;
     } else if (!first_solved) {
       first_solved = f;
+    }
+    if (solved_here && own_map) {
+      const Vec3 up =
+          solved.R_WJ[static_cast<size_t>(own_map->source_root)] * own_map->source_hips_up;
+      Eigen::Index axis = 0;
+      up.cwiseAbs().maxCoeff(&axis);
+      ++up_votes[static_cast<size_t>(2 * axis + (up[axis] > 0 ? 0 : 1))];
     }
     // An unsolved frame's pose is a held one, not a fit: no residual to report.
     for (size_t m = 0; m < observed.size() && solved_here; ++m) {
@@ -447,14 +466,12 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
   // keeps the capture's world.
   Mat3 upright = Mat3::Identity();
   Vec3 rest_up = Vec3::UnitY();
-  try {
-    const RetargetMap own = MakeRetargetMap(*subject.skeleton, {}, *subject.skeleton, {});
-    KinematicsWorkspace first(*subject.skeleton);
-    ForwardKinematics(*subject.skeleton, poses[static_cast<size_t>(*first_solved)], &first);
-    upright = CaptureToTargetWorld(own, first);
-    rest_up = own.target_up;
-  } catch (const std::invalid_argument&) {
-    // No humanoid: its world is the capture's.
+  if (own_map) {
+    const auto most = static_cast<Eigen::Index>(std::max_element(up_votes.begin(), up_votes.end()) -
+                                                up_votes.begin());
+    const Vec3 capture_up = (most % 2 == 0 ? 1.0 : -1.0) * Vec3::Unit(most / 2);
+    upright = Quat::FromTwoVectors(capture_up, own_map->target_up).toRotationMatrix();
+    rest_up = own_map->target_up;
   }
   if (!upright.isIdentity()) {
     for (Pose& pose : poses) TurnPoseWorld(*subject.skeleton, upright, &pose);

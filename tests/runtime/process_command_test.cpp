@@ -196,6 +196,28 @@ TEST(ProcessCommandTest, ACaptureStandingOnZIsWrittenStandingAsTheSubjectsRestPo
   // The same capture on +Y is written as it is.
   WriteC3d(dir + "/take.c3d", f.take);
   EXPECT_FALSE(RunProcessCommand(options, out).solve_turned);
+  // ...and so is one that opens bent 60 degrees over and straightens within half a second:
+  // judged on its first frame, the whole upright take was written turned onto its side.
+  C3dTake leaning = f.take;
+  const int lean_frames = 30;
+  for (int fr = 0; fr < lean_frames; ++fr) {
+    Vec3 centre = Vec3::Zero();
+    int seen = 0;
+    for (int p = 0; p < leaning.num_points(); ++p)
+      if (leaning.valid(fr, p)) {
+        centre += leaning.at(fr, p);
+        ++seen;
+      }
+    centre /= seen;
+    const Mat3 lean =
+        Eigen::AngleAxisd(M_PI / 3 * (1.0 - static_cast<double>(fr) / lean_frames), Vec3::UnitX())
+            .toRotationMatrix();
+    for (int p = 0; p < leaning.num_points(); ++p)
+      if (leaning.valid(fr, p)) leaning.at(fr, p) = centre + lean * (leaning.at(fr, p) - centre);
+  }
+  WriteC3d(dir + "/take.c3d", leaning);
+  std::ostringstream leaning_out;
+  EXPECT_FALSE(RunProcessCommand(options, leaning_out).solve_turned) << leaning_out.str();
 }
 
 // Fewer than half the subject's markers labelled in the take is most likely the wrong
