@@ -25,6 +25,13 @@ void GapRepair::Repair(const CleanupWindow& window, int64_t tau, int64_t newest,
     Vec3 snap = Vec3::Zero();
     if (max_reference_step_change <= 0.0 || !has_reference_before) return snap;
     for (int64_t g = from; g <= to; ++g) {
+      // From a reference that was no solve (the rest pose, before the subject was first
+      // solved) there is no step: held as a snap, it put a fill's first frames back where
+      // the rest pose stood, 1.6 m from the body (a take with an empty first frame).
+      if (!window.at(g - 1).reference_solved) {
+        *velocity = Vec3::Zero();
+        continue;
+      }
       const Vec3 step = window.at(g).reference[m] - window.at(g - 1).reference[m];
       const Vec3 change = step - *velocity;
       const Vec3 excess = change - ClampNorm(change, max_reference_step_change);
