@@ -1266,6 +1266,22 @@ void Daemon::Run(bool handle_signals) {
   }
   StopCalibrations();
   StopProxy();
+  // A calibration still collecting is lost with the process: said, with what it lacked
+  // (a stop said nothing of it, and no subject file was written).
+  for (const auto& calibration : calibrations_->All()) {
+    const LiveCalibrationStatus status = calibration->Status();
+    if (status.state != LiveCalibrationState::kWaiting &&
+        status.state != LiveCalibrationState::kCollecting)
+      continue;
+    std::string not_ready;  // known once refined
+    for (const JointReadiness& j : status.joints)
+      if (!j.ready && status.refinements > 0) not_ready += (not_ready.empty() ? "" : ", ") + j.name;
+    spdlog::warn(
+        "subject '{}': live calibration not finished at stop ({}, {:.0f} s of motion, {} "
+        "refinements{}{}): nothing written",
+        calibration->subject(), to_string(status.state), status.collected_s, status.refinements,
+        not_ready.empty() ? "" : "; joints not ready: ", not_ready);
+  }
   const DaemonStats final_stats = Stats();
   spdlog::info("mocapd stopped: {} messages in, {} frames published, {} dropped, {} pending ({})",
                final_stats.messages_in, final_stats.published_total(), final_stats.dropped_total(),

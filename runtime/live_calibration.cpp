@@ -136,6 +136,7 @@ std::optional<SubjectModel> LiveCalibration::CalibratedModel() const {
 
 bool LiveCalibration::Refine(bool force) {
   if (done_ || !started_.load(std::memory_order_acquire)) return false;
+  const bool stream_ended = stream_ended_.exchange(false, std::memory_order_acq_rel);
   const double kept_hz = subject_.rate_hz / sample_every_;
   const double height = height_m_.load();
   // A copy of what was kept, oldest first, as a take the calibration reads.
@@ -154,9 +155,14 @@ bool LiveCalibration::Refine(bool force) {
       EncodeStatus();
     }
     const bool enough = collected >= subject_.live.min_seconds;
+    if (stream_ended && !enough)
+      spdlog::info(
+          "subject '{}': the stream ended after {:.1f} s of motion, short of "
+          "calibration_min_s ({:.0f} s); the live calibration goes on with the next stream",
+          subject_.name, collected, subject_.live.min_seconds);
     // A refinement every few seconds of new motion: each costs a bundle adjustment.
     const bool due = static_cast<double>(kept - kept_at_last_refinement_) / kept_hz >= 3.0;
-    if (!force && (!enough || !due)) return false;
+    if (!force && (!enough || (!due && !stream_ended))) return false;
     if (count == 0) return false;
     take.labels = subject_.live.labels;
     take.model_output_kind.assign(take.labels.size(), "");
@@ -175,8 +181,10 @@ bool LiveCalibration::Refine(bool force) {
   }
   kept_at_last_refinement_ = kept;
   const double collected = take.num_frames / kept_hz;
-  // Measured on everything offered, not on what the storage still holds.
-  const bool last_chance = static_cast<double>(kept) / kept_hz >= subject_.live.max_seconds;
+  // Measured on everything offered, not on what the storage still holds. An ended stream
+  // with enough motion is the last chance too: nothing more comes.
+  const bool last_chance = static_cast<double>(kept) / kept_hz >= subject_.live.max_seconds ||
+                           (stream_ended && collected >= subject_.live.min_seconds);
 
   MarkersOnlyOptions options;
   options.marker_set = subject_.live.marker_set;

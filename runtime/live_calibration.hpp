@@ -98,6 +98,11 @@ class LiveCalibration {
   /// A sample the calibration may use: finite and inside any capture volume (exporters
   /// write 1e30 or FLT_MAX for "not seen").
   static bool Plausible(const Vec3& p) { return p.allFinite() && p.cwiseAbs().maxCoeff() < 1e4; }
+  /// The stream ended (an end-of-stream message): the next refinement is the last, if
+  /// calibration_min_s of motion was collected. Nothing more will come before another
+  /// stream, and a take shorter than calibration_max_s whose every joint never became
+  /// ready (a range of motion that does not move the toes) was never calibrated.
+  void StreamEnded() { stream_ended_.store(true, std::memory_order_release); }
   /// The calibrated subject, once there is one (a runner built after it starts from it).
   std::optional<SubjectModel> CalibratedModel() const;
   /// A calibrated subject waits to be swapped in.
@@ -137,6 +142,7 @@ class LiveCalibration {
   size_t kept_ = 0;           ///< Frames written so far (the ring holds the newest).
   uint64_t offered_ = 0;
   std::atomic<bool> started_{false};
+  std::atomic<bool> stream_ended_{false};
   std::atomic<double> height_m_{0.0};
   size_t kept_at_last_refinement_ = 0;
   std::vector<Vec3> last_centres_;  ///< Per joint, in the pelvis frame at rest.

@@ -564,6 +564,7 @@ void SubjectRunner::EndOfStream(OutputSink& sink) {
   interrupted_.reset();
   // An ended stream is waiting for the next one, not stalled: the watchdog stays quiet.
   state_ = protocol::SubjectState::kWaiting;
+  if (live_) live_->StreamEnded();
   // A stream whose every frame was dropped and then ended is no fixed sender: the rejection
   // stands until a frame is taken (it was cleared here, and logged as over).
   ++counters_.ends_of_stream;

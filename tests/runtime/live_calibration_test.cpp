@@ -7,6 +7,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <random>
@@ -390,6 +391,42 @@ TEST_F(LiveCalibrationTest, AStreamWithoutMotionFailsAtTheTimeLimitAndKeepsTheSc
   EXPECT_NE(status.message.find("no motion"), std::string::npos) << status.message;
   EXPECT_EQ(runner.swaps(), 0);
   EXPECT_EQ(sink.skeletons.size() + runner.pending(), static_cast<size_t>(5 * kRate));
+}
+
+// A take shorter than calibration_max_s whose joints never all became ready (the README's
+// own 30 s range of motion, its toes never moved) stayed collecting for ever: nothing was
+// written, and a stop threw it away. An end of stream is the last chance once
+// calibration_min_s was collected; before that, collecting goes on with the next stream.
+TEST_F(LiveCalibrationTest, AnEndOfStreamFinishesACalibrationThatHasItsMinimumOfMotion) {
+  LiveSubject live(*this,
+                   "calibration_min_s = 2\n"
+                   "calibration_max_s = 600\n");
+  SubjectRunner& runner = live.runner;
+  LiveCalibration* calibration = live.calibration.get();
+  RecordingSink sink;
+  int f = 0;
+  // One second, then an end: short of the minimum, it goes on collecting.
+  for (; f < static_cast<int>(kRate); ++f)
+    ASSERT_FALSE(runner.Accept(Frame(live.subject, f), 0, sink).has_value());
+  runner.EndOfStream(sink);
+  EXPECT_FALSE(calibration->Refine());
+  EXPECT_EQ(calibration->Status().state, LiveCalibrationState::kCollecting);
+  // Three seconds more in a second stream: refined, not every joint ready yet.
+  for (; f < static_cast<int>(4 * kRate); ++f) {
+    ASSERT_FALSE(runner.Accept(Frame(live.subject, f), 0, sink).has_value());
+    if (f % static_cast<int>(kRate) == 0) (void)calibration->Refine();
+  }
+  LiveCalibrationStatus status = calibration->Status();
+  ASSERT_EQ(status.state, LiveCalibrationState::kCollecting) << status.message;
+  ASSERT_GT(status.refinements, 0);
+  EXPECT_TRUE(std::any_of(status.joints.begin(), status.joints.end(),
+                          [](const JointReadiness& j) { return !j.ready; }));
+  runner.EndOfStream(sink);
+  EXPECT_TRUE(calibration->Refine());
+  status = calibration->Status();
+  EXPECT_EQ(status.state, LiveCalibrationState::kCalibrated) << status.message;
+  ASSERT_FALSE(status.written_to.empty());
+  EXPECT_NO_THROW(ReadSubjectModel(status.written_to));
 }
 
 TEST_F(LiveCalibrationTest, TheTemplatesHeightComesFromOneFrameOfMarkersOnTheSameSegments) {
