@@ -33,6 +33,53 @@ std::string TrimRight(std::string s) {
   return s;
 }
 
+// Whether EncodeC3d writes this parameter itself (from the take's fields): such a one read
+// from a file is not kept as one of its other parameters.
+bool WrittenByWriter(const std::string& group, const std::string& name) {
+  // NAME, or NAME followed by a number (LABELS2: a continuation).
+  const auto is = [&name](std::initializer_list<const char*> bases) {
+    for (const char* base : bases) {
+      const std::string_view b(base);
+      if (!name.starts_with(b)) continue;
+      const std::string_view rest = std::string_view(name).substr(b.size());
+      if (std::all_of(rest.begin(), rest.end(), [](char c) { return c >= '0' && c <= '9'; }))
+        return true;
+    }
+    return false;
+  };
+  if (group == "POINT")
+    return is({"USED", "SCALE", "RATE", "FRAMES", "LONG_FRAMES", "DATA_START", "UNITS", "LABELS",
+               "DESCRIPTIONS", "ANGLES", "POWERS", "FORCES", "MOMENTS", "SCALARS", "REACTIONS"});
+  if (group == "ANALOG")
+    return is({"USED", "RATE", "LABELS", "DESCRIPTIONS", "UNITS", "FORMAT", "SCALE", "OFFSET",
+               "GEN_SCALE"});
+  if (group == "TRIAL") return is({"ACTUAL_START_FIELD", "ACTUAL_END_FIELD"});
+  return false;
+}
+
+// A parameter's numbers (int16s or floats) re-encoded from one byte order and float
+// format to another; characters and bytes as they are.
+std::vector<uint8_t> RecodeParameterData(std::span<const uint8_t> data, int8_t type,
+                                         ByteOrder from_order, FloatFormat from_floats,
+                                         ByteOrder to_order, FloatFormat to_floats) {
+  if (type != 2 && type != 4) return {data.begin(), data.end()};
+  std::vector<uint8_t> out;
+  ByteReader r(data, from_order, from_floats);
+  ByteWriter w(&out, to_order, to_floats);
+  for (size_t i = 0; i < data.size() / static_cast<size_t>(type); ++i) {
+    if (type == 2) {
+      int16_t v = 0;
+      (void)r.ReadI16(&v);
+      w.WriteI16(v);
+    } else {
+      float v = 0.0f;
+      (void)r.ReadF32(&v);
+      w.WriteF32(v);
+    }
+  }
+  return out;
+}
+
 struct Parameter {
   int8_t type = 0;  // -1 char, 1 byte, 2 int16, 4 float
   std::vector<int> dims;
@@ -48,7 +95,9 @@ class Parser {
   C3dTake Parse() {
     ReadHeader();
     ReadParameters();
-    return ReadData();
+    C3dTake take = ReadData();
+    KeepOtherParameters(&take);
+    return take;
   }
 
  private:
@@ -220,6 +269,21 @@ class Parser {
     }
   }
 
+  // Every parameter the writer does not make itself, in Intel order and IEEE floats.
+  void KeepOtherParameters(C3dTake* take) const {
+    const ByteOrder order = processor_ == kProcessorMips ? ByteOrder::kBig : ByteOrder::kLittle;
+    const FloatFormat floats = processor_ == kProcessorDec ? FloatFormat::kVax : FloatFormat::kIeee;
+    for (const auto& [key, p] : params_) {
+      const size_t colon = key.find(':');
+      C3dParameter kept{key.substr(0, colon), key.substr(colon + 1), p.type, p.dims, {}};
+      // A parameter whose group entry is missing has no name to write it under.
+      if (kept.group.starts_with("GROUP") || WrittenByWriter(kept.group, kept.name)) continue;
+      kept.data = RecodeParameterData(p.data, p.type, order, floats, ByteOrder::kLittle,
+                                      FloatFormat::kIeee);
+      take->other_parameters.push_back(std::move(kept));
+    }
+  }
+
   const Parameter* Find(const std::string& key) const {
     auto it = params_.find(key);
     return it == params_.end() ? nullptr : &it->second;
@@ -304,6 +368,7 @@ class Parser {
       Fail("parameters", Find("POINT:SCALE") ? Find("POINT:SCALE")->offset : 0,
            "POINT:SCALE is " + std::to_string(scale) + ", expected a non-zero number");
     take.float_storage = scale < 0.0;
+    take.point_scale = std::abs(scale);
     take.rate_hz = Number("POINT:RATE").value_or(header_rate_);
     if (!(take.rate_hz > 0.0) || !std::isfinite(take.rate_hz))
       Fail("parameters", Find("POINT:RATE") ? Find("POINT:RATE")->offset : 0,
@@ -472,6 +537,7 @@ class Parser {
         take.notes.emplace_back(note);
         scale = header_scale_;
         take.float_storage = scale < 0.0;
+        take.point_scale = std::abs(scale);
         value_size = header_word;
       }
     }
@@ -636,8 +702,9 @@ class Parser {
           int16_t v[4];
           for (int16_t& x : v) ok = ok && reader_.ReadI16(&x);
           for (int k = 0; k < 3; ++k) xyz[k] = v[k] * unit_scale;
-          // Low byte: residual in units of |scale|; the sign of the word marks invalid.
-          residual = v[3] < 0 ? -1.0f : static_cast<float>((v[3] & 0xff) * unit_scale);
+          // The word as stored (camera mask, residual in units of |scale|), as a float file
+          // holds it; its sign marks invalid.
+          residual = v[3] < 0 ? -1.0f : static_cast<float>(v[3]);
         }
         Require(ok, "data", "truncated frame");
         const size_t idx = static_cast<size_t>(f) * used + p;
@@ -951,8 +1018,12 @@ std::vector<uint8_t> EncodeC3d(const C3dTake& take, const C3dEncoding& encoding)
   }
   const ByteOrder order = layout.order;
   const double units_per_metre = 1.0 / MetresPerUnit(take.units);
-  // Negative scale marks float storage; its magnitude still scales residuals.
-  const auto scale = static_cast<float>(encoding.integer_storage ? encoding.integer_scale : -0.1);
+  // Negative scale marks float storage; its magnitude still scales residuals: the take's,
+  // so each residual word keeps its meaning.
+  const double residual_unit =
+      std::isfinite(take.point_scale) && take.point_scale > 0.0 ? take.point_scale : 0.1;
+  const auto scale =
+      static_cast<float>(encoding.integer_storage ? encoding.integer_scale : -residual_unit);
 
   std::vector<uint8_t> params;
   ByteWriter pw(&params, layout.order, layout.floats);
@@ -1037,6 +1108,28 @@ std::vector<uint8_t> EncodeC3d(const C3dTake& take, const C3dEncoding& encoding)
     WriteParameter(pw, params, order, 3, "ACTUAL_START_FIELD", 2, {2}, words(first));
     WriteParameter(pw, params, order, 3, "ACTUAL_END_FIELD", 2, {2}, words(last));
   }
+  // The file's other parameters, as read; new groups numbered after the three above.
+  std::map<std::string, int8_t> group_ids = {{"POINT", 1}, {"ANALOG", 2}, {"TRIAL", 3}};
+  for (const C3dParameter& p : take.other_parameters) {
+    const bool of_analog = p.group == "ANALOG" || p.group == "FORCE_PLATFORM";
+    const size_t width = static_cast<size_t>(std::abs(static_cast<int>(p.type)));
+    size_t count = 1;
+    for (int d : p.dims) count *= static_cast<size_t>(std::max(d, 0));
+    if ((of_analog && analog_values == 0) || p.group.empty() || p.group.size() > 127 ||
+        p.name.empty() || p.name.size() > 127 || p.dims.size() > 7 ||
+        (p.type != -1 && p.type != 1 && p.type != 2 && p.type != 4) ||
+        p.data.size() != count * width || p.data.size() > 32000)
+      continue;
+    auto id = group_ids.find(p.group);
+    if (id == group_ids.end()) {
+      if (group_ids.size() >= 127) continue;
+      id = group_ids.emplace(p.group, static_cast<int8_t>(group_ids.size() + 1)).first;
+      WriteGroup(pw, id->second, p.group);
+    }
+    WriteParameter(pw, params, order, id->second, p.name, p.type, p.dims,
+                   RecodeParameterData(p.data, p.type, ByteOrder::kLittle, FloatFormat::kIeee,
+                                       layout.order, layout.floats));
+  }
   // Terminate the list: an entry whose name length is 0.
   pw.WriteU8(0);
   pw.WriteU8(0);
@@ -1085,9 +1178,9 @@ std::vector<uint8_t> EncodeC3d(const C3dTake& take, const C3dEncoding& encoding)
                 "C3D writer: coordinate does not fit 16-bit integer storage");
           w.WriteI16(static_cast<int16_t>(steps));
         }
-        const double residual_steps =
-            std::clamp(std::round(take.residuals[idx] / encoding.integer_scale), 0.0, 255.0);
-        w.WriteI16(valid ? static_cast<int16_t>(residual_steps) : int16_t{-1});
+        const double word =
+            std::clamp(std::round(static_cast<double>(take.residuals[idx])), 0.0, 32767.0);
+        w.WriteI16(valid ? static_cast<int16_t>(word) : int16_t{-1});
       } else {
         w.WriteF32(static_cast<float>(v.x()));
         w.WriteF32(static_cast<float>(v.y()));

@@ -23,6 +23,15 @@ class C3dError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+/// A parameter of a C3D file kept as it was read (see C3dTake::other_parameters): numbers in
+/// Intel byte order, floats in IEEE, whatever the file's processor.
+struct C3dParameter {
+  std::string group, name;  ///< Upper case, as the reader keys them.
+  int8_t type = -1;         ///< -1 char, 1 byte, 2 int16, 4 float.
+  std::vector<int> dims;
+  std::vector<uint8_t> data;
+};
+
 struct C3dTake {
   std::vector<std::string> labels;  ///< One per point (trimmed); generated if the file has none.
   std::vector<std::string> descriptions;  ///< One per point, may be empty strings.
@@ -44,8 +53,20 @@ struct C3dTake {
   bool float_storage = true;
   /// positions[frame * num_points() + point], metres, world frame; NaN when missing.
   std::vector<Vec3> positions;
-  /// residual[frame * num_points() + point] as stored (file units); negative when missing.
+  /// residual[frame * num_points() + point]: the sample's fourth word as the file stored it
+  /// (camera mask in the high byte, residual in units of point_scale in the low byte: a
+  /// float file holds it as a float, an integer file as an int16); negative when missing.
   std::vector<float> residuals;
+  /// |POINT:SCALE|: the unit of the residual byte (and of integer storage). Written back,
+  /// so a sample's residual means what it meant (it was rewritten as 0.1: a 2.00 mm
+  /// residual at scale 1 became 0.20 mm).
+  double point_scale = 0.1;
+  /// The file's parameters that the writer does not make itself (FORCE_PLATFORM, EVENT,
+  /// SUBJECTS, a manufacturer's groups, POINT:X_SCREEN...), written back as they were read,
+  /// so a cleaned take keeps its force plates' geometry and its gait events (they were
+  /// dropped in silence). Parameters of the analog data and the force plates go only with
+  /// analog channels written.
+  std::vector<C3dParameter> other_parameters;
   /// Analog channels (force plates, EMG) carried through as the file stored them, so a
   /// cleaned take keeps them: raw numbers, which ANALOG:SCALE, OFFSET and GEN_SCALE (kept
   /// here, written back as read) turn into units. A take without analog data has no

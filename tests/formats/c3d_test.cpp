@@ -473,6 +473,74 @@ TEST(C3dTest, AnAnalogCountTheDataContradictsGivesWayToTheParametersWithANote) {
   ReadWithOneNote(both, take, "POINT:USED says 1 points, the header 3");
 }
 
+// Little-endian bytes of floats or int16s, as C3dParameter holds them.
+template <typename T>
+std::vector<uint8_t> LittleEndian(std::initializer_list<T> values) {
+  std::vector<uint8_t> out(values.size() * sizeof(T));
+  size_t at = 0;
+  for (T v : values) {
+    std::memcpy(out.data() + at, &v, sizeof(T));
+    at += sizeof(T);
+  }
+  return out;
+}
+
+// The groups a cleanup does not touch (force plates' geometry, gait events, the subjects)
+// were dropped from every C3D written, and POINT:SCALE was rewritten as -0.1, so a residual
+// word of 2 at scale 1 (2.00 mm) read back as 0.20 mm. Both now come through in every
+// encoding, and the force plates go only with analog channels to describe.
+TEST(C3dTest, OtherParametersAndResidualWordsComeThroughAWriteAndARead) {
+  C3dTake take = MakeTake(3, 10);
+  take.point_scale = 1.0;
+  for (float& r : take.residuals)
+    if (r >= 0.0f) r = static_cast<float>(0x7f02);  // cameras 0x7f, residual 2 units
+  const std::string events = "Foot Strike" + std::string("Foot Off   ");
+  take.other_parameters = {
+      {"EVENT", "USED", 2, {}, LittleEndian<int16_t>({2})},
+      {"EVENT", "LABELS", -1, {11, 2}, std::vector<uint8_t>(events.begin(), events.end())},
+      {"EVENT", "TIMES", 4, {2, 2}, LittleEndian<float>({0.0f, 1.5f, 0.0f, 2.25f})},
+      {"FORCE_PLATFORM", "CORNERS", 4, {3, 2}, LittleEndian<float>({300, 250, 0, -300, 250, 0})},
+      {"POINT", "X_SCREEN", -1, {2}, {'+', 'X'}},
+      {"SUBJECTS", "IS_STATIC", 1, {}, {0}},
+  };
+  const auto kept = [](const C3dTake& t, const std::string& key) -> const C3dParameter* {
+    for (const C3dParameter& p : t.other_parameters)
+      if (p.group + ":" + p.name == key) return &p;
+    return nullptr;
+  };
+  for (const C3dTake& dut : ReadInEveryEncoding(take)) {
+    SCOPED_TRACE(dut.processor + (dut.float_storage ? " float" : " int"));
+    for (const char* key :
+         {"EVENT:USED", "EVENT:LABELS", "EVENT:TIMES", "POINT:X_SCREEN", "SUBJECTS:IS_STATIC"}) {
+      const C3dParameter* p = kept(dut, key);
+      const C3dParameter* q = kept(take, key);
+      ASSERT_NE(p, nullptr) << key;
+      EXPECT_EQ(p->type, q->type) << key;
+      EXPECT_EQ(p->dims, q->dims) << key;
+      EXPECT_EQ(p->data, q->data) << key;
+    }
+    EXPECT_EQ(kept(dut, "FORCE_PLATFORM:CORNERS"), nullptr);  // no analog channels written
+    if (dut.float_storage) {
+      EXPECT_EQ(dut.point_scale, 1.0);
+    }
+    for (size_t i = 0; i < take.residuals.size(); ++i)
+      ASSERT_EQ(dut.residuals[i], take.residuals[i]);
+  }
+  // With analog channels, the force plates' parameters come too; read, then written again,
+  // the same bytes.
+  take.analog.labels = {"Fz1"};
+  take.analog.descriptions = {""};
+  take.analog.units = {"N"};
+  take.analog.scale = {1.0};
+  take.analog.offset = {0};
+  take.analog.samples_per_frame = 1;
+  take.analog.values.assign(10, 1.0f);
+  const C3dTake once = ParseC3d(EncodeC3d(take), "plates.c3d");
+  ASSERT_NE(kept(once, "FORCE_PLATFORM:CORNERS"), nullptr);
+  EXPECT_EQ(kept(once, "FORCE_PLATFORM:CORNERS")->data, kept(take, "FORCE_PLATFORM:CORNERS")->data);
+  EXPECT_EQ(EncodeC3d(ParseC3d(EncodeC3d(once), "again.c3d")), EncodeC3d(once));
+}
+
 // A take's analog channels (force plates, EMG) come through a read and a write as the
 // file stored them, with what turns them into units: the cleaned C3D of `mocapd process`
 // lost them all (160 values a frame read, 0 written).
