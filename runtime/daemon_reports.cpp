@@ -429,6 +429,26 @@ std::string FormatHealthJson(const DaemonStats& stats, bool data_plane_alive) {
       problems.push_back(line);
     }
   }
+  // A configured subject that has never received a frame while another has streamed two
+  // seconds: most likely its sender names it otherwise ("Actor3" for "actor3"), which a
+  // subscribing daemon never even sees. It read "waiting", as a take that ended does, and
+  // /health said ok.
+  const bool another_streams =
+      std::any_of(stats.subjects.begin(), stats.subjects.end(), [](const SubjectStats& s) {
+        return s.rate_hz > 0.0 && static_cast<double>(s.counters.frames_in) >= 2.0 * s.rate_hz &&
+               s.since_last_input_s >= 0.0 && s.since_last_input_s < 1.0;
+      });
+  for (const SubjectStats& s : stats.subjects)
+    if (another_streams && s.counters.frames_in == 0 && s.since_last_input_s < 0.0)
+      problems.push_back(
+          "subject '" + s.name +
+          "': no frame received while other subjects stream (a sender naming it otherwise? "
+          "names match exactly, case included; " +
+          (stats.last_unknown_subject.empty()
+               ? std::string("with input.subscribe = \"all\", /health names the last unknown "
+                             "name received)")
+               : "the last unknown name received: '" + PrintableName(stats.last_unknown_subject) +
+                     "')"));
   if (stats.rejecting_unattributed)
     problems.push_back(std::string("every input message dropped for over 0.5 s before a subject "
                                    "could be named (the last: ") +

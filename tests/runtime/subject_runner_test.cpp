@@ -938,6 +938,38 @@ TEST_F(SubjectRunnerTest, InputSwitchingBetweenTakenAndDroppedFramesIsFlaggedUns
   EXPECT_EQ(now_and_then.counters().dropped[static_cast<size_t>(DropReason::kModelMismatch)], 8u);
 }
 
+// A third bridge naming its actor "Actor3" for "actor3": a subscribing daemon never sees its
+// frames, actor3 read "waiting" like a take that ended, and /health said ok while the other
+// actors streamed.
+TEST(DaemonHealthTest, AConfiguredSubjectSilentWhileOthersStreamIsAProblem) {
+  DaemonStats stats;
+  SubjectStats streaming;
+  streaming.name = "actor1";
+  streaming.rate_hz = 120.0;
+  streaming.counters.frames_in = 600;
+  streaming.since_last_input_s = 0.01;
+  SubjectStats silent;
+  silent.name = "actor3";
+  silent.rate_hz = 120.0;
+  stats.subjects = {streaming, silent};
+  std::string health = FormatHealthJson(stats, true);
+  EXPECT_NE(health.find("\"degraded\""), std::string::npos) << health;
+  EXPECT_NE(health.find("subject 'actor3': no frame received while other subjects stream"),
+            std::string::npos)
+      << health;
+  EXPECT_EQ(health.find("subject 'actor1'"), std::string::npos) << health;
+  stats.last_unknown_subject = "Actor3";
+  health = FormatHealthJson(stats, true);
+  EXPECT_NE(health.find("the last unknown name received: 'Actor3'"), std::string::npos) << health;
+  // Not while the others have streamed under two seconds, nor once they stopped: a stage
+  // whose actors start one after another, or a day's takes ended.
+  stats.subjects[0].counters.frames_in = 100;
+  EXPECT_NE(FormatHealthJson(stats, true).find("\"ok\""), std::string::npos);
+  stats.subjects[0].counters.frames_in = 600;
+  stats.subjects[0].since_last_input_s = 5.0;
+  EXPECT_NE(FormatHealthJson(stats, true).find("\"ok\""), std::string::npos);
+}
+
 // A sender writing NaN into every 20th frame at 120 Hz: flagged unstable, as it should be,
 // but /health and the log asked "two senders for one subject?" and named no NaN.
 TEST_F(SubjectRunnerTest, UnstableInputNamesWhatItsEventsMostlyWere) {
