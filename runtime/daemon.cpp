@@ -434,6 +434,7 @@ struct Daemon::DataPlane final : OutputSink {
     }
     for (auto& r : runners) {
       r->Flush(*this);
+      r->StopPublishing();
       r->PublishStatus(SteadyNs(), *this);
     }
     stats.running = false;

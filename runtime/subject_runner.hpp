@@ -209,6 +209,9 @@ class SubjectRunner {
   }
   const SubjectCounters& counters() const { return counters_; }
   const CleanupCounters& cleanup_counters() const { return pipeline_->counters(); }
+  /// The daemon stops: nothing more is published, so the last status says waiting (it
+  /// said tracking, and a display showed the actor live after the daemon had exited).
+  void StopPublishing() { state_ = protocol::SubjectState::kWaiting; }
   /// Carries the counters of a runner this one replaces (a reload changed its model), and
   /// its input's state: a stalled subject stays stalled, and a live one is watched for a
   /// stall from its last frame (rebuilt as waiting, a dead sender's subject read ok).

@@ -159,6 +159,7 @@ class Subscriber {
   std::map<std::string, std::vector<protocol::SkeletonFrameMessage>> characters;
   std::map<std::string, protocol::SubjectDescriptionMessage> character_descriptions;
   int statuses = 0;
+  std::map<std::string, protocol::SubjectState> last_state;  ///< From each status message.
   int undecodable = 0;
 
  private:
@@ -189,6 +190,9 @@ class Subscriber {
           descriptions[m.subject] = m;
         } else if (t.starts_with("status/")) {
           ++statuses;
+          protocol::SubjectStatusMessage m;
+          if (protocol::DecodeSubjectStatus(bytes, &m) == protocol::DecodeStatus::kOk)
+            last_state[m.subject] = m.state;
         } else if (t.starts_with("character/")) {
           protocol::SkeletonFrameMessage m;
           protocol::SubjectDescriptionMessage d;
@@ -440,6 +444,12 @@ TEST(DaemonTest, ShutdownPublishesEverythingTheLookaheadHolds) {
   EXPECT_TRUE(sub.WaitFor([&] { return sub.skeletons["actor1"].size() == 25; }));
   EXPECT_EQ(daemon->Stats().published_total(), 25u);
   EXPECT_TRUE(daemon->Stats().Balanced());
+  // The last status says the subject is no longer tracked: it said "tracking", and a stage
+  // display kept showing the actor live after the daemon had exited.
+  EXPECT_TRUE(sub.WaitFor([&] {
+    return sub.last_state.contains("actor1") &&
+           sub.last_state["actor1"] == protocol::SubjectState::kWaiting;
+  }));
 }
 
 TEST(DaemonTest, EndOfStreamPublishesTheLookaheadAtOnceAndTheNextTakeStartsAfresh) {
