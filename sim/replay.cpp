@@ -214,6 +214,7 @@ ReplayReport RunReplay(const ReplaySource& source, const ReplayOptions& o) {
   replay::ScheduleSetup setup;
   setup.marker_hash = marker_hash;
   setup.check_hash = true;
+  setup.check_rate = true;
   setup.skeleton = source.skeleton.get();
   setup.frame_period_s = 1.0 / rate;
   setup.capture_rate_hz = source.rate_hz;
@@ -358,6 +359,7 @@ ReplayReport RunGraphReplay(const GraphReplaySource& source, double seconds, dou
   replay::ScheduleSetup setup;
   setup.marker_hash = marker_hash;
   setup.check_hash = true;
+  setup.check_rate = true;
   setup.skeleton = source.library->skeleton.get();
   setup.frame_period_s = 1.0 / send_rate;
   setup.capture_rate_hz = rate_hz;

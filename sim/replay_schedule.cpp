@@ -187,6 +187,23 @@ void WaitForDaemon(Sockets& s, std::vector<SubjectLog>& logs, const ScheduleSetu
               "(default: "
               "the built-in humanoid's), or with --marker-set NAME in that set's order, which a "
               "subject calibrated live with that marker_set expects");
+        // Frames at another rate are all dropped as rate_mismatch: said here, as the
+        // hash is (the replay ended "frames lost 360", exit 2, and nothing said why).
+        // Lenient as the daemon is strict: within 0.1 % of the subject's rate, its NTSC
+        // rate or its nominal one.
+        const double subject_hz = d.rate_hz, frames_hz = setup.capture_rate_hz;
+        const auto near = [&](double hz) { return std::abs(frames_hz - hz) <= 1e-3 * hz; };
+        if (setup.check_rate && subject_hz > 0.0 && !near(subject_hz) &&
+            !near(subject_hz * 1000.0 / 1001.0) && !near(subject_hz * 1001.0 / 1000.0)) {
+          char line[320];
+          std::snprintf(line, sizeof(line),
+                        "replay: the daemon's subject '%s' is configured for %g Hz, and this "
+                        "replay's frames are captured at %g Hz: the daemon would drop every one "
+                        "as rate_mismatch (resample the take with mocap-sim synth --rate, or "
+                        "set the subject's rate_hz)",
+                        logs[k].name.c_str(), subject_hz, frames_hz);
+          throw std::runtime_error(line);
+        }
         described[k] = true;
         logs[k].lookahead_since = {{0, d.lookahead_frames}};
       }

@@ -69,7 +69,10 @@ using TruthLookup =
 /// What a schedule needs beyond its producer.
 struct ScheduleSetup {
   uint64_t marker_hash = 0;
-  bool check_hash = false;              ///< Refuse a daemon whose subject has another marker set.
+  bool check_hash = false;  ///< Refuse a daemon whose subject has another marker set.
+  /// Refuse a daemon whose subject is configured for another rate than capture_rate_hz (not
+  /// for a recording, whose subjects may each have their own).
+  bool check_rate = false;
   TruthLookup truth;                    ///< May be empty.
   const Skeleton* skeleton = nullptr;   ///< The truth's skeleton (nullptr: no accuracy).
   double frame_period_s = 1.0 / 120.0;  ///< A frame later than this is "late".

@@ -1333,6 +1333,32 @@ TEST(DaemonTest, AReplayRefusesATimecodeRateItsFramesByteCannotCount) {
   EXPECT_THROW((void)RunReplay(source, options), std::invalid_argument);
 }
 
+// A take captured at 120 Hz into a subject configured for 100 Hz: every frame dropped as
+// rate_mismatch, and the replay said only "frames lost", exit 2. It refuses at the
+// handshake, naming both rates, as it does another marker set.
+TEST(DaemonTest, AReplayRefusesADaemonSubjectAtAnotherRate) {
+  const std::string in = "tcp://127.0.0.1:27371", out = "tcp://127.0.0.1:27372";
+  DaemonConfig config = TestConfig(in, out, 12);
+  config.subjects[0].rate_hz = 100.0;
+  zmq::context_t context;
+  RunningDaemon daemon(context, config);
+  ReplayOptions options;
+  options.to = in;
+  options.push = true;
+  options.from = out;
+  options.connect_timeout_s = 5.0;
+  const ReplaySource source = HumanoidReplaySource("walk", 0.5, 120.0, 0.0, 1);
+  try {
+    (void)RunReplay(source, options);
+    ADD_FAILURE() << "replayed into a subject at another rate";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("configured for 100 Hz, and this replay's frames are "
+                                         "captured at 120 Hz"),
+              std::string::npos)
+        << e.what();
+  }
+}
+
 // At --rate max the sender is done long before the daemon: the throughput counts until
 // the last skeleton came back (it divided by the sending time, 287 173 frames/s for a take
 // received at about 17 700/s).
