@@ -1303,6 +1303,16 @@ TEST(DaemonTest, LocalhostAndIpv6LoopbackEndpointsBind) {
   EXPECT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) { return s.messages_in == 1; }));
 }
 
+// A replay pushing to a daemon's input and hearing its output (from: "" for none).
+ReplayOptions PushingReplay(const std::string& to, const std::string& from) {
+  ReplayOptions options;
+  options.to = to;
+  options.push = true;
+  options.from = from;
+  options.connect_timeout_s = 5.0;
+  return options;
+}
+
 TEST(DaemonTest, AReplayRefusesANegativeTimeout) {
   const ReplaySource source = HumanoidReplaySource("walk", 0.5, 120.0, 0.0, 1);
   for (const bool connect : {true, false}) {
@@ -1342,11 +1352,7 @@ TEST(DaemonTest, AReplayRefusesADaemonSubjectAtAnotherRate) {
   config.subjects[0].rate_hz = 100.0;
   zmq::context_t context;
   RunningDaemon daemon(context, config);
-  ReplayOptions options;
-  options.to = in;
-  options.push = true;
-  options.from = out;
-  options.connect_timeout_s = 5.0;
+  ReplayOptions options = PushingReplay(in, out);
   const ReplaySource source = HumanoidReplaySource("walk", 0.5, 120.0, 0.0, 1);
   try {
     (void)RunReplay(source, options);
@@ -1366,12 +1372,8 @@ TEST(DaemonTest, AReplayAtMaxRateCountsThroughputUntilTheLastSkeletonArrives) {
   const std::string in = "tcp://127.0.0.1:27361", out = "tcp://127.0.0.1:27362";
   zmq::context_t context;
   RunningDaemon daemon(context, TestConfig(in, out, 12));
-  ReplayOptions options;
-  options.to = in;
-  options.push = true;
-  options.from = out;
+  ReplayOptions options = PushingReplay(in, out);
   options.rate_hz = -1.0;
-  options.connect_timeout_s = 5.0;
   const ReplaySource source = HumanoidReplaySource("walk", 2.0, 120.0, 0.0, 1);
   const ReplayReport report = RunReplay(source, options);
   ASSERT_EQ(report.frames_received, report.frames_sent);
@@ -1395,12 +1397,8 @@ TEST(DaemonTest, AReplayTimesEachSubjectAgainstItsOwnLookahead) {
   config.subjects.push_back(second);
   zmq::context_t context;
   RunningDaemon daemon(context, config);
-  ReplayOptions options;
-  options.to = in;
-  options.push = true;
-  options.from = out;
+  ReplayOptions options = PushingReplay(in, out);
   options.subjects = 2;
-  options.connect_timeout_s = 5.0;
   const ReplaySource source = HumanoidReplaySource("walk", 1.0, 120.0, 0.0, 1);
   const ReplayReport report = RunReplay(source, options);
   ASSERT_EQ(report.frames_received, report.frames_sent);
@@ -1425,12 +1423,8 @@ TEST(DaemonTest, AReplayPushingWithARefusedKeyStopsAndNamesTheAllowList) {
   const std::string in = "tcp://127.0.0.1:27351", out = "tcp://127.0.0.1:27352";
   zmq::context_t context;
   RunningDaemon daemon(context, keys.Apply(TestConfig(in, out, 4)));
-  ReplayOptions options;
-  options.to = in;
-  options.push = true;
-  options.from = "";
+  ReplayOptions options = PushingReplay(in, "");
   options.rate_hz = -1.0;
-  options.connect_timeout_s = 5.0;
   options.curve_server_key_file = keys.dir + "/daemon.key";
   options.curve_key_file = keys.dir + "/stranger.key_secret";
   const ReplaySource source = HumanoidReplaySource("walk", 0.5, 120.0, 0.0, 1);
