@@ -109,6 +109,8 @@ SubjectRunner::SubjectRunner(const SubjectConfig& config, const DaemonConfig& da
   model_distance_weight_ = std::min(1.0, 1.0 / config.rate_hz);
   model_suspect_m_ = daemon.model_suspect_mm * 1e-3;
   received_.assign(stamps_.size() * markers, Vec3::Constant(kNaN));
+  hole_from_.assign(markers, Vec3::Constant(kNaN));
+  hole_remainder_ = hole_guide_ = hole_from_;
   distances_.reserve(markers);
   skeleton_message_.subject = name_;
   skeleton_message_.model_hash = skeleton_hash_;
@@ -265,6 +267,47 @@ UnstableCause SubjectRunner::unstable_cause() const {
   return commonest;
 }
 
+bool SubjectRunner::PrepareHoleGuide(std::span<const Vec3> from, std::span<const Vec3> to) {
+  Vec3 from_centre = Vec3::Zero(), to_centre = Vec3::Zero();
+  int shared = 0;
+  for (size_t m = 0; m < from.size(); ++m)
+    if (from[m].allFinite() && to[m].allFinite()) {
+      from_centre += from[m];
+      to_centre += to[m];
+      ++shared;
+    }
+  if (shared < 3) return false;
+  from_centre /= shared;
+  to_centre /= shared;
+  Mat3 covariance = Mat3::Zero();
+  for (size_t m = 0; m < from.size(); ++m)
+    if (from[m].allFinite() && to[m].allFinite())
+      covariance += (to[m] - to_centre) * (from[m] - from_centre).transpose();
+  // Kabsch: the rotation taking the first cloud onto the second, never a reflection.
+  const Eigen::JacobiSVD<Mat3> svd(covariance, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Mat3 fix = Mat3::Identity();
+  fix(2, 2) = (svd.matrixU() * svd.matrixV().transpose()).determinant() < 0.0 ? -1.0 : 1.0;
+  const Mat3 turn = svd.matrixU() * fix * svd.matrixV().transpose();
+  if (!turn.allFinite()) return false;
+  hole_turn_ = Quat(turn).normalized();
+  hole_from_centre_ = from_centre;
+  hole_to_centre_ = to_centre;
+  for (size_t m = 0; m < from.size(); ++m) {
+    const bool both = from[m].allFinite() && to[m].allFinite();
+    hole_from_[m] = both ? from[m] : Vec3::Constant(kNaN);
+    hole_remainder_[m] =
+        both ? Vec3(to[m] - (turn * (from[m] - from_centre) + to_centre)) : Vec3::Constant(kNaN);
+  }
+  return true;
+}
+
+void SubjectRunner::FillHoleGuide(double t) {
+  const Quat turn = Quat::Identity().slerp(t, hole_turn_);
+  const Vec3 centre = hole_from_centre_ + t * (hole_to_centre_ - hole_from_centre_);
+  for (size_t m = 0; m < hole_guide_.size(); ++m)
+    hole_guide_[m] = turn * (hole_from_[m] - hole_from_centre_) + centre + t * hole_remainder_[m];
+}
+
 void SubjectRunner::InheritCounters(const SubjectRunner& previous) {
   counters_ = previous.counters_;
   last_input_ns_ = previous.last_input_ns_;
@@ -348,10 +391,21 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
         // this frame.
         Resynchronise(sink);
       } else {
+        // Longer than the lookahead, the hole is guided from the last frame taken (the
+        // newest pushed) to this one; within it, the cleanup's own fills bridge it.
+        const size_t markers = missing_.size();
+        const bool guided =
+            pushed_ > 0 && missing > static_cast<uint64_t>(pipeline_->options().lookahead) &&
+            PrepareHoleGuide(
+                std::span<const Vec3>(
+                    received_.data() + static_cast<size_t>(pushed_ - 1) % stamps_.size() * markers,
+                    markers),
+                frame.positions);
         for (uint64_t k = 0; k < missing; ++k) {
-          Stamp inserted{next_frame_number_, 0, true, counters_.last_stream};
+          Stamp inserted{next_frame_number_, 0, true, guided, counters_.last_stream};
           inserted.stream.has_timecode = false;  // not known without the capture's clock
-          Push(missing_, inserted, receive_ns, sink);
+          if (guided) FillHoleGuide(static_cast<double>(k + 1) / static_cast<double>(missing + 1));
+          Push(guided ? hole_guide_ : missing_, inserted, receive_ns, sink);
           ++counters_.frames_inserted;
         }
       }
@@ -421,8 +475,9 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
       shadow_has_output_ = false;
     }
   }
-  Push(frame.positions, Stamp{frame.frame_number, frame.capture_time_ns, false, frame.stream},
-       receive_ns, sink);
+  Push(frame.positions,
+       Stamp{frame.frame_number, frame.capture_time_ns, false, false, frame.stream}, receive_ns,
+       sink);
   return std::nullopt;
 }
 
@@ -626,6 +681,11 @@ void SubjectRunner::Publish(int64_t trigger_receive_ns, OutputSink& sink) {
     repaired |= s != MarkerStatus::kObserved;
     observed |= s == MarkerStatus::kObserved;
   }
+  // A hole's guided samples were never captured: the frame is repaired throughout.
+  if (stamp.guided) {
+    repaired = true;
+    observed = false;
+  }
   const bool lost = out.final_solve.status == IkStatus::kTooFewMarkers;
   if (observed)
     unobserved_since_ns_ = -1;
@@ -648,7 +708,7 @@ void SubjectRunner::Publish(int64_t trigger_receive_ns, OutputSink& sink) {
   s.root_translation = pose->translation[0];
   for (size_t j = 0; j < s.rotations.size(); ++j) s.rotations[j] = pose->rotation[j];
   ForwardKinematics(*skeleton_, *pose, &kinematics_);
-  UpdateModelDistance(index, out);
+  if (!stamp.guided) UpdateModelDistance(index, out);
   if (publish_globals_) {
     for (size_t j = 0; j < s.rotations.size(); ++j) {
       s.global_rotations[j] = Quat(kinematics_.R_WJ[j]);
@@ -666,8 +726,9 @@ void SubjectRunner::Publish(int64_t trigger_receive_ns, OutputSink& sink) {
     c.publish_time_ns = publish_ns;
     for (size_t m = 0; m < c.positions.size(); ++m) {
       c.positions[m] = out.markers[m];
-      c.status[m] = static_cast<uint8_t>(out.status[m]);
-      c.reason[m] = static_cast<uint8_t>(out.reason[m]);
+      const bool guided_sample = stamp.guided && out.status[m] == MarkerStatus::kObserved;
+      c.status[m] = static_cast<uint8_t>(guided_sample ? MarkerStatus::kRepaired : out.status[m]);
+      c.reason[m] = static_cast<uint8_t>(guided_sample ? MaskReason::kMissing : out.reason[m]);
     }
     protocol::EncodeCleanedMarkers(c, &buffer_);
     sink.Send(cleaned_topic_, buffer_);

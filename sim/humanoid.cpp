@@ -3,6 +3,7 @@
 // Human Movement", 4th ed., table 4.1); the gait is a sum of sinusoids per joint.
 #include "sim/humanoid.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
@@ -196,7 +197,14 @@ std::vector<Pose> MakeHumanoidMotion(const Skeleton& skeleton, HumanoidMotion mo
   const Pose rest = RestPose(skeleton);
   double yaw = 0.0;
   Vec3 position = rest.translation[hips];
+  const Vec3 start = position;
   const double dt = 1.0 / rate_hz;
+  // A stage is finite: a walker past kStageRadiusM from where it started, heading away,
+  // turns back (at up to kTurnBackRadPerS, eased in and out). A 120 s walk went straight on
+  // to 156 m, past the default capture volume (100 m), and the replay scored every marker
+  // gated as missing (982 cm mean error). Takes of up to about 23 s never reach it.
+  constexpr double kStageRadiusM = 30.0, kTurnBackRadPerS = 1.2, kTurnEaseRadPerS2 = 2.4;
+  double turn_back = 0.0;
   for (size_t f = 0; f < frames; ++f) {
     const double t = static_cast<double>(f) * dt;
     // How much of each behaviour is active at time t.
@@ -219,6 +227,15 @@ std::vector<Pose> MakeHumanoidMotion(const Skeleton& skeleton, HumanoidMotion mo
     }
     const double phase = 2.0 * M_PI * 0.95 * t;  // ~1.9 steps per second
     Pose pose = rest;
+    {
+      Vec3 away = position - start;
+      away.y() = 0.0;
+      const Vec3 heading = AxisAngle(Y, yaw) * Vec3::UnitZ();
+      const bool turning_back = away.norm() > kStageRadiusM && heading.dot(away) > 0.0;
+      const double wanted = turning_back ? kTurnBackRadPerS : 0.0;
+      turn_back += std::clamp(wanted - turn_back, -kTurnEaseRadPerS2 * dt, kTurnEaseRadPerS2 * dt);
+      turn_rate += turn_back;
+    }
     yaw += turn_rate * dt;
     const double speed = 1.3 * walk * (leg_length / 0.86);
     position += AxisAngle(Y, yaw) * Vec3(0, 0, speed * dt);

@@ -150,6 +150,41 @@ TEST_F(SubjectRunnerTest, MissingFrameNumbersBecomeRepairedFrames) {
   ExpectBalanced(runner);
 }
 
+// A hole of 0.75 s in a walk's frame numbers, far longer than the lookahead: bridged with
+// empty frames, the skeleton held still through it and then swept to the far end over the
+// lookahead's frames (1.6 m in 12 frames for 1.5 s). Both ends are known when the hole is
+// bridged, so the body moves between them as it walked, no step a frame larger than a
+// walk's, and every inserted frame still says it was repaired.
+TEST_F(SubjectRunnerTest, AHoleLongerThanTheLookaheadMovesTheBodyAcrossItWithoutAJump) {
+  SubjectRunner runner(subject_, daemon_);
+  for (int f = 0; f < 240; ++f) {
+    if (f >= 60 && f < 150) continue;
+    ASSERT_FALSE(runner.Accept(Frame(f, f, 0), 0, sink_).has_value());
+  }
+  runner.Flush(sink_);
+  ASSERT_EQ(sink_.skeletons.size(), 240u);
+  EXPECT_EQ(runner.counters().frames_inserted, 90u);
+  const size_t root = 0;
+  double worst_step = 0.0, worst_error = 0.0, walk_step = 0.0;
+  for (size_t f = 1; f < 240; ++f) {
+    const Vec3 truth_step =
+        fixture_.motion[f].translation[root] - fixture_.motion[f - 1].translation[root];
+    walk_step = std::max(walk_step, truth_step.norm());
+    const Vec3 step = sink_.skeletons[f].root_translation - sink_.skeletons[f - 1].root_translation;
+    worst_step = std::max(worst_step, step.norm());
+    worst_error = std::max(
+        worst_error,
+        (sink_.skeletons[f].root_translation - fixture_.motion[f].translation[root]).norm());
+  }
+  EXPECT_LT(worst_step, 2.0 * walk_step) << "a walk steps at most " << walk_step << " m a frame";
+  EXPECT_LT(worst_error, 0.05);
+  for (size_t f = 60; f < 150; ++f) {
+    EXPECT_NE(sink_.skeletons[f].subject_state, protocol::SubjectState::kTracking) << f;
+    for (uint8_t s : sink_.cleaned[f].status) ASSERT_NE(s, 0) << f;  // none "observed"
+  }
+  ExpectBalanced(runner);
+}
+
 TEST_F(SubjectRunnerTest, DuplicatesAndLateFramesAreDroppedAndCounted) {
   SubjectRunner runner(subject_, daemon_);
   for (int f = 0; f < 30; ++f)
