@@ -602,10 +602,19 @@ class Parser {
                            ", so POINT:FRAMES is read");
       frames = point_frames;
     }
+    // POINT:FRAMES longer than the header's count, the data holding it: read, and said (the
+    // two disagreeing was settled in silence).
+    if (frame_bytes > 0 && !header_capped && header_frames > 0 && point_frames > header_frames &&
+        frames == point_frames && holds(point_frames, used))
+      take.notes.push_back("the header counts " + std::to_string(header_frames) +
+                           " frames, POINT:FRAMES " + std::to_string(point_frames) +
+                           ": the data holds " + std::to_string(point_frames) +
+                           ", so POINT:FRAMES is read");
     // A header capped at 65535 counts at least that many: a smaller POINT:FRAMES (a 16-bit
-    // count wrapped, or 0) dropped every frame past it, or all of them. The data's whole
+    // count wrapped, or 0) dropped every frame past it, or all of them, and one capped at
+    // 65535 too dropped the rest (54 s of a 72000-frame take, exit 0). The data's whole
     // frames are read then, less the last block's padding, with a note.
-    if (frame_bytes > 0 && header_capped && header_frames > 0 && frames < header_frames &&
+    if (frame_bytes > 0 && header_capped && header_frames > 0 && frames <= header_frames &&
         holds(header_frames, used)) {
       auto whole = static_cast<int64_t>(available / frame_bytes);
       // A writer pads the last block with zeros: an all-zero frame that lies wholly in the
@@ -619,11 +628,13 @@ class Parser {
                            [](uint8_t b) { return b == 0; });
       };
       while (whole > header_frames && is_padding(whole - 1)) --whole;
-      take.notes.push_back("the header's frame count is capped at 65535 and POINT:FRAMES says " +
-                           std::to_string(point_frames < 0 ? 0 : point_frames) +
-                           ", and no count reaches past it: the " + std::to_string(whole) +
-                           " whole frames the data holds are read");
-      frames = whole;
+      if (whole != frames) {
+        take.notes.push_back("the header's frame count is capped at 65535 and POINT:FRAMES says " +
+                             std::to_string(point_frames < 0 ? 0 : point_frames) +
+                             ", and no count reaches past it: the " + std::to_string(whole) +
+                             " whole frames the data holds are read");
+        frames = whole;
+      }
     }
     if (frames < 0) frames = 0;
     if (frame_bytes > 0 && static_cast<size_t>(frames) > available / frame_bytes) {
@@ -1178,9 +1189,14 @@ std::vector<uint8_t> EncodeC3d(const C3dTake& take, const C3dEncoding& encoding)
                 "C3D writer: coordinate does not fit 16-bit integer storage");
           w.WriteI16(static_cast<int16_t>(steps));
         }
-        const double word =
-            std::clamp(std::round(static_cast<double>(take.residuals[idx])), 0.0, 32767.0);
-        w.WriteI16(valid ? static_cast<int16_t>(word) : int16_t{-1});
+        // The camera mask as it was; the residual byte re-counted in this file's unit (its
+        // scale is the positions' integer step, not the take's point_scale).
+        const auto word =
+            static_cast<int>(std::clamp(static_cast<double>(take.residuals[idx]), 0.0, 32767.0));
+        const double residual = std::clamp(
+            std::round((word & 0xff) * residual_unit / encoding.integer_scale), 0.0, 255.0);
+        w.WriteI16(valid ? static_cast<int16_t>((word & 0x7f00) | static_cast<int>(residual))
+                         : int16_t{-1});
       } else {
         w.WriteF32(static_cast<float>(v.x()));
         w.WriteF32(static_cast<float>(v.y()));

@@ -266,6 +266,8 @@ MarkersOnlyCalibration CalibrateFromMarkers(std::span<const C3dTake> raw_takes,
     // 41 markers read as Plug-in Gait's (every pelvis and tibia marker missing) gave a
     // 67 cm thigh and 34-39 cm clavicles with exit 0.
     const MarkerSetMatch recognised = RecognizeMarkerSet(BuiltInMarkerSets(), markers);
+    // Even a set the take holds whole: the lower-body set of a full-body take placed the
+    // upper body's 23 markers as the studio's own, and the calibration failed on them.
     if (recognised.set != nullptr && recognised.set->name != chosen.name &&
         ExplainsLabelsBetter(recognised, match))
       throw std::runtime_error(

@@ -1,6 +1,7 @@
 // Marker-to-label mapping for recorded takes.
 #include "formats/take_frames.hpp"
 
+#include <algorithm>
 #include <stdexcept>
 
 namespace mocapd {
@@ -28,6 +29,15 @@ TakeMarkerMap::TakeMarkerMap(const MarkerSet& markers, const C3dTake& take, int 
                       std::to_string(min_matched) + "); missing:";
     for (const auto& n : unmatched_) msg += " " + n;
     for (const auto& n : ambiguous_) msg += " " + n;
+    // A file with no labels at all: say so, not only which of the subject's are missing.
+    const bool unlabelled =
+        !take.labels.empty() &&
+        std::all_of(take.labels.begin(), take.labels.end(),
+                    [](const std::string& label) { return label.starts_with("unlabeled_"); });
+    if (unlabelled)
+      msg += " (the take's " + std::to_string(take.labels.size()) +
+             " points carry no labels: its POINT:LABELS is missing or empty, so they read as "
+             "unlabeled_1..)";
     throw std::invalid_argument(msg);
   }
 }

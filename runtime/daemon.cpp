@@ -1268,8 +1268,14 @@ void Daemon::Run(bool handle_signals) {
   StopCalibrations();
   StopProxy();
   // A calibration still collecting is lost with the process: said, with what it lacked
-  // (a stop said nothing of it, and no subject file was written).
+  // (a stop said nothing of it, and no subject file was written). One whose stream ended
+  // just before the stop first gets the refinement that end is owed.
   for (const auto& calibration : calibrations_->All()) {
+    try {
+      (void)calibration->RefineIfStreamEnded();
+    } catch (const std::exception& e) {
+      spdlog::error("subject '{}': live calibration: {}", calibration->subject(), e.what());
+    }
     const LiveCalibrationStatus status = calibration->Status();
     if (status.state != LiveCalibrationState::kWaiting &&
         status.state != LiveCalibrationState::kCollecting)

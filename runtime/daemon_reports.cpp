@@ -405,8 +405,9 @@ std::string FormatHealthJson(const DaemonStats& stats, bool data_plane_alive) {
   for (const SubjectStats& s : stats.subjects) {
     subjects[s.name] = protocol::to_string(s.state);
     // Frames arriving, every one dropped: "input stalled" beside the rejection read as a
-    // silent sender, which it is not.
-    if (s.state == protocol::SubjectState::kStalled && !s.rejecting_input)
+    // silent sender, which it is not. A rejected sender that then fell silent is stalled.
+    const bool frames_arriving = s.since_last_input_s >= 0.0 && s.since_last_input_s < 0.5;
+    if (s.state == protocol::SubjectState::kStalled && !(s.rejecting_input && frames_arriving))
       problems.push_back("subject '" + s.name + "': input stalled");
     if (s.rejecting_input)
       problems.push_back("subject '" + s.name + "': every frame dropped (" +

@@ -55,6 +55,8 @@ LiveCalibration::LiveCalibration(const SubjectConfig& subject, const DaemonConfi
 }
 
 void LiveCalibration::Started(double height_m) {
+  // An end of a stream that never started to collect is no end of this one.
+  stream_ended_.store(false, std::memory_order_release);
   height_m_.store(height_m);
   started_.store(true, std::memory_order_release);
 }

@@ -103,6 +103,11 @@ class LiveCalibration {
   /// stream, and a take shorter than calibration_max_s whose every joint never became
   /// ready (a range of motion that does not move the toes) was never calibrated.
   void StreamEnded() { stream_ended_.store(true, std::memory_order_release); }
+  /// The refinement an ended stream is owed, if it has not had it yet (a stop right after
+  /// a take's end came before the calibration thread's next pass, and nothing was written).
+  bool RefineIfStreamEnded() {
+    return stream_ended_.load(std::memory_order_acquire) ? Refine() : false;
+  }
   /// The calibrated subject, once there is one (a runner built after it starts from it).
   std::optional<SubjectModel> CalibratedModel() const;
   /// A calibrated subject waits to be swapped in.

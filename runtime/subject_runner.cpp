@@ -268,36 +268,62 @@ UnstableCause SubjectRunner::unstable_cause() const {
 }
 
 bool SubjectRunner::PrepareHoleGuide(std::span<const Vec3> from, std::span<const Vec3> to) {
-  Vec3 from_centre = Vec3::Zero(), to_centre = Vec3::Zero();
-  int shared = 0;
-  for (size_t m = 0; m < from.size(); ++m)
-    if (from[m].allFinite() && to[m].allFinite()) {
-      from_centre += from[m];
-      to_centre += to[m];
-      ++shared;
-    }
-  if (shared < 3) return false;
-  from_centre /= shared;
-  to_centre /= shared;
-  Mat3 covariance = Mat3::Zero();
-  for (size_t m = 0; m < from.size(); ++m)
-    if (from[m].allFinite() && to[m].allFinite())
-      covariance += (to[m] - to_centre) * (from[m] - from_centre).transpose();
-  // Kabsch: the rotation taking the first cloud onto the second, never a reflection.
-  const Eigen::JacobiSVD<Mat3> svd(covariance, Eigen::ComputeFullU | Eigen::ComputeFullV);
-  Mat3 fix = Mat3::Identity();
-  fix(2, 2) = (svd.matrixU() * svd.matrixV().transpose()).determinant() < 0.0 ? -1.0 : 1.0;
-  const Mat3 turn = svd.matrixU() * fix * svd.matrixV().transpose();
-  if (!turn.allFinite()) return false;
-  hole_turn_ = Quat(turn).normalized();
-  hole_from_centre_ = from_centre;
-  hole_to_centre_ = to_centre;
+  // Only samples the cleanup would take as positions at all: a sender's 1e30 for "not
+  // seen" would throw the whole body's fit off.
+  const double volume = pipeline_->options().capture_volume_m;
+  const auto usable = [volume](const Vec3& p) {
+    return p.allFinite() && p.cwiseAbs().maxCoeff() <= volume;
+  };
   for (size_t m = 0; m < from.size(); ++m) {
-    const bool both = from[m].allFinite() && to[m].allFinite();
+    const bool both = usable(from[m]) && usable(to[m]);
     hole_from_[m] = both ? from[m] : Vec3::Constant(kNaN);
-    hole_remainder_[m] =
-        both ? Vec3(to[m] - (turn * (from[m] - from_centre) + to_centre)) : Vec3::Constant(kNaN);
+    hole_guide_[m] = both ? to[m] : Vec3::Constant(kNaN);  // the far end, for the fit
   }
+  // The rigid fit, then once more without the samples it leaves far off (a ghost, a swapped
+  // label): they would tilt the whole body's path.
+  Mat3 turn = Mat3::Identity();
+  for (int pass = 0; pass < 2; ++pass) {
+    Vec3 from_centre = Vec3::Zero(), to_centre = Vec3::Zero();
+    int shared = 0;
+    for (size_t m = 0; m < from.size(); ++m)
+      if (hole_from_[m].allFinite()) {
+        from_centre += hole_from_[m];
+        to_centre += hole_guide_[m];
+        ++shared;
+      }
+    if (shared < 3) return false;
+    from_centre /= shared;
+    to_centre /= shared;
+    Mat3 covariance = Mat3::Zero();
+    for (size_t m = 0; m < from.size(); ++m)
+      if (hole_from_[m].allFinite())
+        covariance += (hole_guide_[m] - to_centre) * (hole_from_[m] - from_centre).transpose();
+    // Kabsch: the rotation taking the first cloud onto the second, never a reflection.
+    const Eigen::JacobiSVD<Mat3> svd(covariance, Eigen::ComputeFullU | Eigen::ComputeFullV);
+    Mat3 fix = Mat3::Identity();
+    fix(2, 2) = (svd.matrixU() * svd.matrixV().transpose()).determinant() < 0.0 ? -1.0 : 1.0;
+    turn = svd.matrixU() * fix * svd.matrixV().transpose();
+    if (!turn.allFinite()) return false;
+    hole_from_centre_ = from_centre;
+    hole_to_centre_ = to_centre;
+    for (size_t m = 0; m < from.size(); ++m)
+      hole_remainder_[m] =
+          hole_from_[m].allFinite()
+              ? Vec3(hole_guide_[m] - (turn * (hole_from_[m] - from_centre) + to_centre))
+              : Vec3::Constant(kNaN);
+    if (pass == 1) break;
+    // Far off: beyond three times the median remainder and a limb's length in the hole.
+    distances_.clear();
+    for (const Vec3& r : hole_remainder_)
+      if (r.allFinite()) distances_.push_back(r.norm());
+    const auto middle = distances_.begin() + static_cast<std::ptrdiff_t>(distances_.size() / 2);
+    std::nth_element(distances_.begin(), middle, distances_.end());
+    const double far = std::max(3.0 * *middle, 0.5);
+    for (size_t m = 0; m < from.size(); ++m)
+      if (hole_remainder_[m].allFinite() && hole_remainder_[m].norm() > far)
+        hole_from_[m] = Vec3::Constant(kNaN);
+  }
+  hole_turn_ = Quat(turn).normalized();
   return true;
 }
 
@@ -608,6 +634,7 @@ void SubjectRunner::Resynchronise(OutputSink& sink) {
   counters_.resync_from_session = counters_.last_stream.session_id;
   resynchronised_ = true;
   interrupted_.reset();
+  unobserved_since_ns_ = -1;  // the new stream is judged afresh
 }
 
 void SubjectRunner::EndOfStream(OutputSink& sink) {
@@ -620,6 +647,11 @@ void SubjectRunner::EndOfStream(OutputSink& sink) {
   // An ended stream is waiting for the next one, not stalled: the watchdog stays quiet.
   state_ = protocol::SubjectState::kWaiting;
   if (live_) live_->StreamEnded();
+  // The next stream is judged afresh: its first frames are not "unobserved for" the
+  // minutes since this one ended, and its clock is not distrusted for this one's.
+  unobserved_since_ns_ = -1;
+  clock_disagreed_ = false;
+  clock_agreeing_pairs_ = 0;
   // A stream whose every frame was dropped and then ended is no fixed sender: the rejection
   // stands until a frame is taken (it was cleared here, and logged as over).
   ++counters_.ends_of_stream;
@@ -798,8 +830,9 @@ void SubjectRunner::ShowLive(const CleanFrame& out, int64_t index, const Stamp& 
   std::copy(received, received + static_cast<ptrdiff_t>(markers), v->raw.begin());
   for (size_t m = 0; m < markers; ++m) {
     v->cleaned[m] = out.markers[m];
-    v->status[m] = static_cast<uint8_t>(out.status[m]);
-    v->reason[m] = static_cast<uint8_t>(out.reason[m]);
+    const bool guided_sample = stamp.guided && out.status[m] == MarkerStatus::kObserved;
+    v->status[m] = static_cast<uint8_t>(guided_sample ? MarkerStatus::kRepaired : out.status[m]);
+    v->reason[m] = static_cast<uint8_t>(guided_sample ? MaskReason::kMissing : out.reason[m]);
   }
   std::copy(kinematics_.p_WJ.begin(), kinematics_.p_WJ.end(), v->joints.begin());
   if (published_character_ != nullptr)
@@ -816,6 +849,7 @@ bool SubjectRunner::CheckStall(int64_t now_ns, int64_t timeout_ns, OutputSink& s
   // must not wait for a feed that may never come back to see them.
   Flush(sink);
   state_ = protocol::SubjectState::kStalled;
+  unobserved_since_ns_ = -1;
   ++counters_.stalls;
   counters_.stall_silence_s = static_cast<double>(now_ns - last_receive_ns_) * 1e-9;
   counters_.stall_last_frame = counters_.last_frame_number;

@@ -193,8 +193,14 @@ void WaitForDaemon(Sockets& s, std::vector<SubjectLog>& logs, const ScheduleSetu
         // rate or its nominal one.
         const double subject_hz = d.rate_hz, frames_hz = setup.capture_rate_hz;
         const auto near = [&](double hz) { return std::abs(frames_hz - hz) <= 1e-3 * hz; };
+        // As the daemon takes them: the configured rate, its NTSC rate, and the nominal
+        // one only for a subject configured at an NTSC rate (119.88 takes 120).
+        const double nominal_hz = subject_hz * 1001.0 / 1000.0;
+        const bool configured_ntsc =
+            std::abs(subject_hz - std::round(subject_hz)) > 1e-4 * subject_hz &&
+            std::abs(nominal_hz - std::round(nominal_hz)) <= 1e-4 * nominal_hz;
         if (setup.check_rate && subject_hz > 0.0 && !near(subject_hz) &&
-            !near(subject_hz * 1000.0 / 1001.0) && !near(subject_hz * 1001.0 / 1000.0)) {
+            !near(subject_hz * 1000.0 / 1001.0) && !(configured_ntsc && near(nominal_hz))) {
           char line[320];
           std::snprintf(line, sizeof(line),
                         "replay: the daemon's subject '%s' is configured for %g Hz, and this "

@@ -523,8 +523,14 @@ TEST(C3dTest, OtherParametersAndResidualWordsComeThroughAWriteAndARead) {
     if (dut.float_storage) {
       EXPECT_EQ(dut.point_scale, 1.0);
     }
-    for (size_t i = 0; i < take.residuals.size(); ++i)
-      ASSERT_EQ(dut.residuals[i], take.residuals[i]);
+    // In every encoding, each sample's cameras and its residual in millimetres.
+    for (size_t i = 0; i < take.residuals.size(); ++i) {
+      ASSERT_EQ(dut.residuals[i] < 0.0f, take.residuals[i] < 0.0f) << i;
+      if (take.residuals[i] < 0.0f) continue;
+      const auto word = static_cast<int>(dut.residuals[i]);
+      ASSERT_EQ(word >> 8, 0x7f) << i;
+      ASSERT_NEAR((word & 0xff) * dut.point_scale, 2.0, 1e-6) << i;
+    }
   }
   // With analog channels, the force plates' parameters come too; read, then written again,
   // the same bytes.
@@ -767,7 +773,8 @@ TEST(C3dTest, AStalePointFramesAndARewrittenPointUsedAreBothReconciled) {
 TEST(C3dTest, ACappedHeaderReadsEveryFrameTheDataHoldsWhenNoCountIsWider) {
   const C3dTake take = MakeTake(1, 70000);
   const std::vector<uint8_t> encoded = EncodeC3d(take);
-  for (const float point_frames : {4464.0f, 0.0f}) {
+  // 65535: capped like the header (the frames past it were dropped).
+  for (const float point_frames : {4464.0f, 0.0f, 65535.0f}) {
     SCOPED_TRACE(point_frames);
     std::vector<uint8_t> bytes = encoded;
     const std::string trial = "ACTUAL_END_FIELD";
@@ -784,6 +791,21 @@ TEST(C3dTest, ACappedHeaderReadsEveryFrameTheDataHoldsWhenNoCountIsWider) {
               std::string::npos)
         << read.notes[0];
   }
+}
+
+// A header counting 1000 frames against POINT:FRAMES's 1200, the data holding 1200: the
+// 1200 are read, as before, and the disagreement is said (it was settled in silence).
+TEST(C3dTest, AHeaderCountShorterThanPointFramesIsNoted) {
+  const C3dTake take = MakeTake(2, 1200);
+  std::vector<uint8_t> bytes = EncodeC3d(take);
+  const uint16_t last = 1000;
+  std::memcpy(&bytes[8], &last, 2);  // the header's last frame (first is 1)
+  const C3dTake read = ParseC3d(bytes, "counts.c3d");
+  EXPECT_EQ(read.num_frames, 1200);
+  ASSERT_EQ(read.notes.size(), 1u);
+  EXPECT_EQ(read.notes[0],
+            "the header counts 1000 frames, POINT:FRAMES 1200: the data holds 1200, so "
+            "POINT:FRAMES is read");
 }
 
 // " mm" was refused as an unknown unit while "mm " was read; a take numbered from 0

@@ -472,6 +472,10 @@ TEST_F(SubjectFromMarkersTest, BadInputIsAClearErrorAndCalibratesNothing) {
   // named set they hold too little of.
   EXPECT_NE(error_of(take_, "cmu-41").find("fit marker set 'plug-in-gait-full'"), std::string::npos)
       << error_of(take_, "cmu-41");
+  // Even a set the take holds whole: the lower-body set of a full-body take.
+  EXPECT_NE(error_of(take_, "plug-in-gait-lower").find("fit marker set 'plug-in-gait-full'"),
+            std::string::npos)
+      << error_of(take_, "plug-in-gait-lower");
   C3dTake a_third = take_;
   for (size_t p = a_third.labels.size() / 3; p < a_third.labels.size(); ++p)
     a_third.labels[p] = "X" + std::to_string(p);

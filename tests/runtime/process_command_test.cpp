@@ -171,6 +171,20 @@ TEST(ProcessCommandTest, RefusesATakeWithoutTheSubjectsMarkers) {
         << e.what();
     EXPECT_NE(std::string(e.what()).find("(subject " + options.subject + ")"), std::string::npos)
         << e.what();
+    EXPECT_EQ(std::string(e.what()).find("carry no labels"), std::string::npos) << e.what();
+  }
+  // A file without POINT:LABELS: its points read as unlabeled_N, and the refusal says so
+  // (it listed the subject's markers as missing, nothing more).
+  other.labels = {"", ""};
+  WriteC3d(dir + "/take.c3d", other);
+  try {
+    RunProcessCommand(options, out);
+    FAIL() << "no error";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("the take's 2 points carry no labels: its POINT:LABELS "
+                                         "is missing or empty"),
+              std::string::npos)
+        << e.what();
   }
 }
 

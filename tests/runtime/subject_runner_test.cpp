@@ -159,7 +159,14 @@ TEST_F(SubjectRunnerTest, AHoleLongerThanTheLookaheadMovesTheBodyAcrossItWithout
   SubjectRunner runner(subject_, daemon_);
   for (int f = 0; f < 240; ++f) {
     if (f >= 60 && f < 150) continue;
-    ASSERT_FALSE(runner.Accept(Frame(f, f, 0), 0, sink_).has_value());
+    protocol::MarkerFrameMessage m = Frame(f, f, 0);
+    // The far end carries a sender's "not seen" 1e30 and a ghost 3 m off under one label:
+    // neither may steer the whole body's path through the hole.
+    if (f == 150) {
+      m.positions[3] = Vec3::Constant(1e30);
+      m.positions[7] += Vec3(3.0, 0.0, 0.0);
+    }
+    ASSERT_FALSE(runner.Accept(m, 0, sink_).has_value());
   }
   runner.Flush(sink_);
   ASSERT_EQ(sink_.skeletons.size(), 240u);
@@ -250,11 +257,17 @@ TEST_F(SubjectRunnerTest, FramesForAnotherModelOrRateAreNeverApplied) {
     SubjectStats stalled = stats;
     stalled.name = "actor1";
     stalled.state = protocol::SubjectState::kStalled;
+    stalled.since_last_input_s = 0.01;
     DaemonStats daemon_stats;
     daemon_stats.subjects.push_back(stalled);
     std::string health = FormatHealthJson(daemon_stats, true);
     EXPECT_NE(health.find("every frame dropped (rate_mismatch)"), std::string::npos) << health;
     EXPECT_EQ(health.find("input stalled"), std::string::npos) << health;
+    // The rejected sender then fell silent: stalled as well.
+    daemon_stats.subjects[0].since_last_input_s = 3.0;
+    health = FormatHealthJson(daemon_stats, true);
+    EXPECT_NE(health.find("subject 'actor1': input stalled"), std::string::npos) << health;
+    daemon_stats.subjects[0].since_last_input_s = 0.01;
     daemon_stats.subjects[0].rejecting_input = false;
     health = FormatHealthJson(daemon_stats, true);
     EXPECT_NE(health.find("subject 'actor1': input stalled"), std::string::npos) << health;
@@ -644,13 +657,18 @@ TEST_F(SubjectRunnerTest, NoMarkerObservedForHalfASecondMakesHealthDegraded) {
   // The actor leaves the volume, then the take ends: nothing is guessed while the subject
   // waits (it held /health degraded, the seconds growing, after the take had ended).
   for (int f = 180; f < 300; ++f, receive_ns += 8'333'333) {
-    protocol::MarkerFrameMessage m = Frame(f, f, 0);
+    protocol::MarkerFrameMessage m = Frame(f % 200, f, 0);  // the fixture holds 240 frames
     std::fill(m.valid.begin(), m.valid.end(), uint8_t{0});
     std::fill(m.positions.begin(), m.positions.end(), Vec3::Constant(kNaN));
     ASSERT_FALSE(runner.Accept(m, receive_ns, sink_).has_value());
   }
   EXPECT_GE(runner.unobserved_since_ns(), 0);
   runner.EndOfStream(sink_);
+  EXPECT_LT(runner.unobserved_since_ns(), 0);
+  // The next take, minutes later: its first frames are not "unobserved for" those minutes.
+  receive_ns += 300'000'000'000;
+  for (int f = 0; f < 30; ++f, receive_ns += 8'333'333)
+    ASSERT_FALSE(runner.Accept(Frame(f, f, 0), receive_ns, sink_).has_value());
   EXPECT_LT(runner.unobserved_since_ns(), 0);
 }
 
