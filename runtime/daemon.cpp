@@ -818,6 +818,18 @@ void Daemon::ApplyReload(DaemonConfig config) {
                  config.subjects.size(),
                  config.subjects.size() + config.other_shards_subjects.size());
   AssignWorkers(config);
+  // The workers were counted at start-up from the subjects then: subjects added by a
+  // reload share them while cores stand idle, which was said nowhere.
+  {
+    const int cores = std::max(1u, std::thread::hardware_concurrency());
+    const int could = std::clamp(static_cast<int>(config.subjects.size()), 1, cores);
+    const bool can_spread =
+        config.input_pattern == InputPattern::kSub && !config.subscribe_all && config.workers == 0;
+    if (can_spread && static_cast<int>(planes_.size()) < could)
+      spdlog::info(
+          "reload: {} subjects on {} worker{} (counted at start-up; a restart would use {})",
+          config.subjects.size(), planes_.size(), planes_.size() == 1 ? "" : "s", could);
+  }
   // Every worker's part is built before any is posted: a reload applies everywhere or
   // nowhere.
   std::vector<std::unique_ptr<DataPlane::PendingReload>> parts;

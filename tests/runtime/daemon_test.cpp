@@ -666,6 +666,29 @@ TEST(DaemonTest, ARestartOnlyChangeIsWarnedAgainstTheRunningSockets) {
   EXPECT_EQ(count, 2u) << text;
 }
 
+// Workers are counted at start-up from the subjects then: five more added by a reload all
+// went onto the one worker, a core idle, and nothing said so.
+TEST(DaemonTest, SubjectsAddedByAReloadOntoFewerWorkersThanCoresAreLogged) {
+  if (std::thread::hardware_concurrency() < 2) GTEST_SKIP() << "one core: one worker anyway";
+  CapturedLog log;
+  {
+    zmq::context_t context;
+    DaemonConfig running = TestConfig("inproc://spread-in", "inproc://spread-out", 4);
+    running.input_pattern = InputPattern::kSub;
+    RunningDaemon daemon(context, running);
+    DaemonConfig more = running;
+    more.subjects.resize(3, running.subjects[0]);
+    more.subjects[1].name = "actor2";
+    more.subjects[2].name = "actor3";
+    daemon->Reload(more);
+    ASSERT_TRUE(WaitForStats(*daemon, [](const DaemonStats& s) { return s.reloads == 1; }));
+  }
+  EXPECT_NE(log.Text().find("reload: 3 subjects on 1 worker (counted at start-up; a restart "
+                            "would use "),
+            std::string::npos)
+      << log.Text();
+}
+
 // A subscribing daemon with two data-plane workers and these subjects.
 DaemonConfig TwoWorkerConfig(const std::string& capture, const std::string& output, int lookahead,
                              const std::vector<std::string>& names) {
