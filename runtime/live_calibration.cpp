@@ -222,6 +222,7 @@ bool LiveCalibration::Refine(bool force) {
          j = skeleton.joint(j).parent.is_valid() ? skeleton.joint(j).parent.value : -1)
       observable[static_cast<size_t>(j)] = 1;
   bool ready = true;
+  std::string not_ready;  // for the log, when the last chance calibrates anyway
   {
     std::lock_guard status(status_mutex_);
     ++status_.refinements;
@@ -237,6 +238,7 @@ bool LiveCalibration::Refine(bool force) {
       r.ready = report.method == "root" || report.directions_covered >= kReadyDirections ||
                 !observable[j];
       ready = ready && r.ready;
+      if (!r.ready) not_ready += (not_ready.empty() ? "" : ", ") + r.name;
     }
     EncodeStatus();
   }
@@ -287,9 +289,11 @@ bool LiveCalibration::Refine(bool force) {
   done_ = true;
   spdlog::info(
       "subject '{}': calibrated live from {:.0f} s of motion ({} refinements, median "
-      "residual {:.1f} mm){}{}",
+      "residual {:.1f} mm){}{}{}{}",
       subject_.name, collected, status_.refinements, calibration.solve.median_residual_m * 1e3,
-      written.empty() ? "" : ", written to ", written);
+      written.empty() ? "" : ", written to ", written,
+      not_ready.empty() ? "" : "; the motion did not show, so the template's prior placed: ",
+      not_ready);
   return true;
 }
 
