@@ -395,6 +395,14 @@ DecodeStatus DecodeSkeletonFrame(std::span<const uint8_t> bytes, SkeletonFrameMe
   return DecodeStatus::kOk;
 }
 
+bool CaptureRateAccepted(double frame_hz, double subject_hz) {
+  const auto near = [frame_hz](double hz) { return std::abs(frame_hz - hz) <= 1e-3 * hz; };
+  const double ntsc_hz = subject_hz * 1000.0 / 1001.0, nominal_hz = subject_hz * 1001.0 / 1000.0;
+  const bool configured_ntsc = std::abs(subject_hz - std::round(subject_hz)) > 1e-4 * subject_hz &&
+                               std::abs(nominal_hz - std::round(nominal_hz)) <= 1e-4 * nominal_hz;
+  return near(subject_hz) || near(ntsc_hz) || (configured_ntsc && near(nominal_hz));
+}
+
 SubjectDescriptionMessage DescribeSubject(const std::string& subject, const Skeleton& skeleton,
                                           const MarkerSet& markers, float rate_hz,
                                           int lookahead_frames) {

@@ -235,6 +235,13 @@ SubjectDescriptionMessage DescribeSubject(const std::string& subject, const Skel
                                           const MarkerSet& markers, float rate_hz,
                                           int lookahead_frames);
 
+/// Whether a subject configured at subject_hz takes frames that say frame_hz: its rate, or
+/// its NTSC rate (1000/1001 of it: 119.88 for 120), each within 0.1 %; and, for a subject
+/// configured at an NTSC rate (not whole, and 1001/1000 of it is), its nominal rate too
+/// (119.88 takes 120; 120 does not take 120.12). The daemon's rule, which the replay checks
+/// at its handshake.
+bool CaptureRateAccepted(double frame_hz, double subject_hz);
+
 /// Reads the message type after validating the header. Returns kOk and sets type.
 DecodeStatus PeekType(std::span<const uint8_t> bytes, MessageType* type);
 /// Decodes into message, reusing its storage (no allocation once it has held a message

@@ -595,6 +595,13 @@ struct Daemon::OutputProxy {
   std::thread thread;
 };
 
+// The workers a daemon starts with when input.workers is 0: one per core, at most one per
+// subject.
+static int AutoWorkers(size_t subjects) {
+  const int cores = std::max(1u, std::thread::hardware_concurrency());
+  return std::clamp(static_cast<int>(subjects), 1, cores);
+}
+
 Daemon::Daemon(DaemonConfig config, std::string config_path, zmq::context_t* context)
     : config_path_(std::move(config_path)),
       owned_context_(context == nullptr ? std::make_unique<zmq::context_t>(1) : nullptr),
@@ -603,9 +610,7 @@ Daemon::Daemon(DaemonConfig config, std::string config_path, zmq::context_t* con
   // One worker per core (at most one per subject); PULL deals messages out to whoever
   // reads, and subscribing to everything would give every worker every message, so those
   // inputs keep one.
-  const int cores = std::max(1u, std::thread::hardware_concurrency());
-  int workers = config.workers > 0 ? config.workers
-                                   : std::clamp(static_cast<int>(config.subjects.size()), 1, cores);
+  int workers = config.workers > 0 ? config.workers : AutoWorkers(config.subjects.size());
   if (workers > 1 && (config.input_pattern != InputPattern::kSub || config.subscribe_all)) {
     if (config.workers > 1)
       spdlog::warn("input.workers = {}: a PULL input or subscribe = \"all\" has one worker",
@@ -820,16 +825,12 @@ void Daemon::ApplyReload(DaemonConfig config) {
   AssignWorkers(config);
   // The workers were counted at start-up from the subjects then: subjects added by a
   // reload share them while cores stand idle, which was said nowhere.
-  {
-    const int cores = std::max(1u, std::thread::hardware_concurrency());
-    const int could = std::clamp(static_cast<int>(config.subjects.size()), 1, cores);
-    const bool can_spread =
-        config.input_pattern == InputPattern::kSub && !config.subscribe_all && config.workers == 0;
-    if (can_spread && static_cast<int>(planes_.size()) < could)
-      spdlog::info(
-          "reload: {} subjects on {} worker{} (counted at start-up; a restart would use {})",
-          config.subjects.size(), planes_.size(), planes_.size() == 1 ? "" : "s", could);
-  }
+  const int could = AutoWorkers(config.subjects.size());
+  const bool can_spread =
+      config.input_pattern == InputPattern::kSub && !config.subscribe_all && config.workers == 0;
+  if (can_spread && static_cast<int>(planes_.size()) < could)
+    spdlog::info("reload: {} subjects on {} worker{} (counted at start-up; a restart would use {})",
+                 config.subjects.size(), planes_.size(), planes_.size() == 1 ? "" : "s", could);
   // Every worker's part is built before any is posted: a reload applies everywhere or
   // nowhere.
   std::vector<std::unique_ptr<DataPlane::PendingReload>> parts;
@@ -1292,9 +1293,8 @@ void Daemon::Run(bool handle_signals) {
     if (status.state != LiveCalibrationState::kWaiting &&
         status.state != LiveCalibrationState::kCollecting)
       continue;
-    std::string not_ready;  // known once refined
-    for (const JointReadiness& j : status.joints)
-      if (!j.ready && status.refinements > 0) not_ready += (not_ready.empty() ? "" : ", ") + j.name;
+    // Known once refined: before, every joint reads not ready.
+    const std::string not_ready = status.refinements > 0 ? JointsNotReady(status.joints) : "";
     spdlog::warn(
         "subject '{}': live calibration not finished at stop ({}, {:.0f} s of motion, {} "
         "refinements{}{}): nothing written",

@@ -54,6 +54,13 @@ LiveCalibration::LiveCalibration(const SubjectConfig& subject, const DaemonConfi
   EncodeStatus();
 }
 
+std::string JointsNotReady(const std::vector<JointReadiness>& joints) {
+  std::string names;
+  for (const JointReadiness& j : joints)
+    if (!j.ready) names += (names.empty() ? "" : ", ") + j.name;
+  return names;
+}
+
 void LiveCalibration::Started(double height_m) {
   // An end of a stream that never started to collect is no end of this one.
   stream_ended_.store(false, std::memory_order_release);
@@ -238,8 +245,8 @@ bool LiveCalibration::Refine(bool force) {
       r.ready = report.method == "root" || report.directions_covered >= kReadyDirections ||
                 !observable[j];
       ready = ready && r.ready;
-      if (!r.ready) not_ready += (not_ready.empty() ? "" : ", ") + r.name;
     }
+    not_ready = JointsNotReady(status_.joints);
     EncodeStatus();
   }
   last_centres_ = centres;

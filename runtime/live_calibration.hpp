@@ -54,6 +54,9 @@ struct JointReadiness {
   bool ready = false;
 };
 
+/// The joints not ready yet, comma-separated ("" when all are), for the log.
+std::string JointsNotReady(const std::vector<JointReadiness>& joints);
+
 struct LiveCalibrationStatus {
   LiveCalibrationState state = LiveCalibrationState::kWaiting;
   double height_m = 0.0;     ///< The template's scale, from the first usable frame.

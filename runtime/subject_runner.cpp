@@ -7,6 +7,8 @@
 
 #include <chrono>
 #include <cmath>
+#include <tuple>
+#include <utility>
 
 namespace mocapd {
 namespace {
@@ -32,6 +34,15 @@ int64_t SteadyNs() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(
              std::chrono::steady_clock::now().time_since_epoch())
       .count();
+}
+
+// A sample's status and reason as published: one of a hole's guided frames, which the
+// cleanup took as observed, was never captured, so it is repaired (missing).
+std::pair<uint8_t, uint8_t> PublishedStatus(bool guided, MarkerStatus status, MaskReason reason) {
+  if (guided && status == MarkerStatus::kObserved)
+    return {static_cast<uint8_t>(MarkerStatus::kRepaired),
+            static_cast<uint8_t>(MaskReason::kMissing)};
+  return {static_cast<uint8_t>(status), static_cast<uint8_t>(reason)};
 }
 
 // A frame the subject had already taken: noted as unstable at every such drop.
@@ -370,12 +381,7 @@ std::optional<DropReason> SubjectRunner::Accept(const protocol::MarkerFrameMessa
   // A subject configured at an NTSC rate (119.88: not whole, and 1001/1000 of it is) takes
   // its nominal rate too (120 was dropped, while a 120 subject took 119.88); for 120, 120.12
   // is another rate.
-  const double ntsc_hz = rate_hz_ * 1000.0 / 1001.0, nominal_hz = rate_hz_ * 1001.0 / 1000.0;
-  const bool configured_ntsc = std::abs(rate_hz_ - std::round(rate_hz_)) > 1e-4 * rate_hz_ &&
-                               std::abs(nominal_hz - std::round(nominal_hz)) <= 1e-4 * nominal_hz;
-  if (std::abs(frame.rate_hz - rate_hz_) > 1e-3 * rate_hz_ &&
-      std::abs(frame.rate_hz - ntsc_hz) > 1e-3 * ntsc_hz &&
-      (!configured_ntsc || std::abs(frame.rate_hz - nominal_hz) > 1e-3 * nominal_hz)) {
+  if (!protocol::CaptureRateAccepted(frame.rate_hz, rate_hz_)) {
     mismatched_rate_hz_ = frame.rate_hz;
     return drop(DropReason::kRateMismatch);
   }
@@ -758,9 +764,8 @@ void SubjectRunner::Publish(int64_t trigger_receive_ns, OutputSink& sink) {
     c.publish_time_ns = publish_ns;
     for (size_t m = 0; m < c.positions.size(); ++m) {
       c.positions[m] = out.markers[m];
-      const bool guided_sample = stamp.guided && out.status[m] == MarkerStatus::kObserved;
-      c.status[m] = static_cast<uint8_t>(guided_sample ? MarkerStatus::kRepaired : out.status[m]);
-      c.reason[m] = static_cast<uint8_t>(guided_sample ? MaskReason::kMissing : out.reason[m]);
+      std::tie(c.status[m], c.reason[m]) =
+          PublishedStatus(stamp.guided, out.status[m], out.reason[m]);
     }
     protocol::EncodeCleanedMarkers(c, &buffer_);
     sink.Send(cleaned_topic_, buffer_);
@@ -830,9 +835,8 @@ void SubjectRunner::ShowLive(const CleanFrame& out, int64_t index, const Stamp& 
   std::copy(received, received + static_cast<ptrdiff_t>(markers), v->raw.begin());
   for (size_t m = 0; m < markers; ++m) {
     v->cleaned[m] = out.markers[m];
-    const bool guided_sample = stamp.guided && out.status[m] == MarkerStatus::kObserved;
-    v->status[m] = static_cast<uint8_t>(guided_sample ? MarkerStatus::kRepaired : out.status[m]);
-    v->reason[m] = static_cast<uint8_t>(guided_sample ? MaskReason::kMissing : out.reason[m]);
+    std::tie(v->status[m], v->reason[m]) =
+        PublishedStatus(stamp.guided, out.status[m], out.reason[m]);
   }
   std::copy(kinematics_.p_WJ.begin(), kinematics_.p_WJ.end(), v->joints.begin());
   if (published_character_ != nullptr)

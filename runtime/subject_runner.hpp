@@ -272,7 +272,7 @@ class SubjectRunner {
     uint64_t frame_number = 0;
     uint64_t capture_ns = 0;
     bool inserted = false;
-    /// Inserted with the hole's guide for samples (see HoleGuide): published as repaired.
+    /// Inserted with the hole's guide for samples (PrepareHoleGuide): published as repaired.
     bool guided = false;
     protocol::StreamInfo stream;  ///< Carried to the outputs (an inserted frame: no timecode).
   };

@@ -188,19 +188,11 @@ void WaitForDaemon(Sockets& s, std::vector<SubjectLog>& logs, const ScheduleSetu
               "the built-in humanoid's), or with --marker-set NAME in that set's order, which a "
               "subject calibrated live with that marker_set expects");
         // Frames at another rate are all dropped as rate_mismatch: said here, as the
-        // hash is (the replay ended "frames lost 360", exit 2, and nothing said why).
-        // Lenient as the daemon is strict: within 0.1 % of the subject's rate, its NTSC
-        // rate or its nominal one.
+        // hash is (the replay ended "frames lost 360", exit 2, and nothing said why), by
+        // the daemon's own rule.
         const double subject_hz = d.rate_hz, frames_hz = setup.capture_rate_hz;
-        const auto near = [&](double hz) { return std::abs(frames_hz - hz) <= 1e-3 * hz; };
-        // As the daemon takes them: the configured rate, its NTSC rate, and the nominal
-        // one only for a subject configured at an NTSC rate (119.88 takes 120).
-        const double nominal_hz = subject_hz * 1001.0 / 1000.0;
-        const bool configured_ntsc =
-            std::abs(subject_hz - std::round(subject_hz)) > 1e-4 * subject_hz &&
-            std::abs(nominal_hz - std::round(nominal_hz)) <= 1e-4 * nominal_hz;
-        if (setup.check_rate && subject_hz > 0.0 && !near(subject_hz) &&
-            !near(subject_hz * 1000.0 / 1001.0) && !(configured_ntsc && near(nominal_hz))) {
+        if (setup.check_rate && subject_hz > 0.0 &&
+            !protocol::CaptureRateAccepted(frames_hz, subject_hz)) {
           char line[320];
           std::snprintf(line, sizeof(line),
                         "replay: the daemon's subject '%s' is configured for %g Hz, and this "
