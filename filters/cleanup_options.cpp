@@ -83,6 +83,10 @@ const std::array kFields = {
       &O::anchor_holds_unseen_limbs},
     F{"unseen_limb_turn_radps", nullptr, "unseen_limb_turn_dps", kDeg, 0, 1e9,
       &O::unseen_limb_turn_radps},
+    F{"unseen_limb_memory_s", nullptr, "unseen_limb_memory_s", kNone, 0, 3600,
+      &O::unseen_limb_memory_s},
+    F{"unseen_limb_recall_turn_radps", nullptr, "unseen_limb_recall_turn_dps", kDeg, 0, 1e9,
+      &O::unseen_limb_recall_turn_radps},
     F{"unseen_limb_interpolation_speed_mps", nullptr, "unseen_limb_interpolation_speed_mps", kNone,
       0, 1e3, &O::unseen_limb_interpolation_speed_mps},
     F{"unseen_knee_tolerance_rad", kDetectors, "unseen_knee_tolerance_deg", kDeg, 0, 180,
@@ -187,6 +191,7 @@ CleanupFrameRules FrameRules(const CleanupOptions& o) {
   r.data_motion_acceleration_m = o.data_motion_acceleration_mps2 / (rate * rate);
   r.fill_anchor_radius_m = o.fill_anchor_speed_mps / rate;
   r.unseen_limb_turn_rad = o.unseen_limb_turn_radps / rate;
+  r.unseen_limb_recall_turn_rad = o.unseen_limb_recall_turn_radps / rate;
   r.unseen_limb_interpolation_radius_m = o.unseen_limb_interpolation_speed_mps / rate;
   r.solve_smoothing_frames = frames(o.solve_smoothing_s, 0);
   return r;

@@ -158,6 +158,14 @@ struct CleanupOptions {
   /// may drag the skeleton (fill_anchor_speed_mps). 0: the limb keeps its world
   /// orientation for as long as it is unseen.
   double unseen_limb_turn_radps = 1.0;
+  /// The seconds of the subject's recent motion remembered (MotionMemory): a limb
+  /// unseen for a while turns toward the pose it had when the rest of the body last
+  /// moved as it does now, instead of holding where it was lost. 0: off (held).
+  double unseen_limb_memory_s = 60.0;
+  /// How fast (rad/s) an unseen limb's joints may turn toward what the memory recalls:
+  /// fast enough to follow a walking thigh's swing, slow enough that a recall that
+  /// changes its mind is a turn, not a jump.
+  double unseen_limb_recall_turn_radps = 5.0;
   /// An interpolated sample (filled between known ends: the lookahead sees its marker
   /// return) on a segment with no trusted sample of its own may pull the skeleton this
   /// fast from the anchor instead of fill_anchor_speed_mps. The anchor only guesses that
@@ -244,6 +252,7 @@ struct CleanupFrameRules {
   double data_motion_acceleration_m;          ///< Change of the per-frame motion, per frame.
   double fill_anchor_radius_m;                ///< Per frame.
   double unseen_limb_turn_rad;                ///< Per frame.
+  double unseen_limb_recall_turn_rad;         ///< Per frame.
   double unseen_limb_interpolation_radius_m;  ///< Per frame.
   int solve_smoothing_frames;                 ///< Half-width of the final solve's smoothing.
 };

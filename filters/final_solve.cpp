@@ -2,6 +2,7 @@
 #include "filters/final_solve.hpp"
 
 #include <algorithm>
+#include <cmath>
 
 namespace mocapd {
 FinalSolve::FinalSolve(const Skeleton& skeleton, const MarkerSet& markers,
@@ -13,6 +14,7 @@ FinalSolve::FinalSolve(const Skeleton& skeleton, const MarkerSet& markers,
       final_ik_(WithUnseenKneeRule(options.final_ik, options)),
       final_(skeleton, markers),
       anchor_(skeleton, markers),
+      memory_(skeleton, options.rate_hz, options.unseen_limb_memory_s),
       held_kinematics_(skeleton) {
   const auto m = static_cast<size_t>(markers_.num_markers());
   tracks_.assign(m, Track{});
@@ -21,7 +23,14 @@ FinalSolve::FinalSolve(const Skeleton& skeleton, const MarkerSet& markers,
   solve_targets_.assign(m, Vec3::Constant(kNaN));
   limb_seen_.assign(static_cast<size_t>(skeleton_.num_joints()), 0);
   segment_seen_ = limb_seen_;
+  seeable_ = limb_seen_;
+  for (int marker = 0; marker < markers_.num_markers(); ++marker)
+    seeable_[static_cast<size_t>(markers_.primary_joint(marker))] = 1;
+  for (int j = skeleton_.num_joints() - 1; j > 0; --j)
+    if (seeable_[static_cast<size_t>(j)])
+      seeable_[static_cast<size_t>(skeleton_.joint(j).parent.value)] = 1;
   held_pose_ = RestPose(skeleton_);
+  previous_pose_ = recalled_ = held_pose_;
   held_markers_.assign(m, Vec3::Zero());
 }
 
@@ -29,6 +38,9 @@ void FinalSolve::Reset() {
   std::fill(tracks_.begin(), tracks_.end(), Track{});
   blind_ = false;
   final_.Reset();
+  memory_.Clear();
+  has_previous_ = recalled_ok_ = false;
+  frames_to_recall_ = 0;
 }
 
 void FinalSolve::Solve(CleanFrame* frame, CleanupCounters* counters,
@@ -123,10 +135,14 @@ void FinalSolve::Solve(CleanFrame* frame, CleanupCounters* counters,
     weights_[m] = weight;
     frame->weight[m] = weight;
   }
+  whole_ = false;
   if (rules_.fill_anchor_radius_m > 0.0 && final_.has_solution()) AnchorRepairs(*frame, counters);
   frame->final_solve = SolveIk(skeleton_, markers_, final_ik_, solve_targets_, weights_, &final_);
   counters->CountSolve(frame->final_solve);
   frame->pose = final_.pose();
+  if (has_previous_) memory_.Observe(final_.pose(), previous_pose_, whole_);
+  previous_pose_ = final_.pose();
+  has_previous_ = final_.has_solution();
 }
 
 // Where the skeleton goes on the samples it can trust alone (captured, fitted, full
@@ -150,7 +166,12 @@ void FinalSolve::AnchorRepairs(const CleanFrame& frame, CleanupCounters* counter
   // Too few trusted samples to solve: the anchor is last frame's skeleton.
   const bool solved = summary.status != IkStatus::kTooFewMarkers;
   std::span<const Vec3> anchor = solved ? anchor_.predicted_markers() : final_.predicted_markers();
-  if (solved) MarkSeenLimbs();
+  if (solved) {
+    MarkSeenLimbs();
+    whole_ = std::equal(seeable_.begin(), seeable_.end(), limb_seen_.begin(),
+                        [](uint8_t seeable, uint8_t seen) { return seen || !seeable; });
+  }
+  if (whole_) frames_to_recall_ = 0;
   if (solved && options_.anchor_holds_unseen_limbs && HoldUnseenLimbs()) anchor = held_markers_;
   for (size_t m = 0; m < m_count; ++m) {
     if (anchor_weights_[m] > 0.0 || weights_[m] <= 0.0 || tracks_[m].catching_up) continue;
@@ -220,9 +241,42 @@ bool FinalSolve::HoldUnseenLimbs() {
                                   : in_world.slerp(rules_.unseen_limb_turn_rad / turn, with_parent);
     held = true;
   }
+  if (!whole_) {
+    if (!held) held_pose_ = anchor_.pose();
+    held = RecallUnseenLimbs() || held;
+  }
   if (!held) return false;
   ForwardKinematics(skeleton_, held_pose_, &held_kinematics_);
   EvaluateMarkers(markers_, held_kinematics_, held_markers_);
+  return true;
+}
+
+// An unseen limb's joints turn from where they were last published toward the pose the
+// motion memory recalls for them (asked again every sample interval, not every frame:
+// the search is the costly part), at most unseen_limb_recall_turn_rad a frame. Without a
+// recall (memory off, or too little of it yet) the hold above stands.
+bool FinalSolve::RecallUnseenLimbs() {
+  if (!memory_.enabled() || !has_previous_) return false;
+  if (--frames_to_recall_ <= 0) {
+    recalled_ok_ = memory_.Recall(anchor_.pose(), previous_pose_, limb_seen_, &recalled_);
+    frames_to_recall_ = std::max(
+        1, static_cast<int>(std::lround(options_.rate_hz * MotionMemory::kSampleIntervalS)));
+  }
+  if (!recalled_ok_) return false;
+  const double max_turn = rules_.unseen_limb_recall_turn_rad;
+  for (int j = 1; j < skeleton_.num_joints(); ++j) {
+    const auto uj = static_cast<size_t>(j);
+    if (limb_seen_[uj] || skeleton_.joint(j).type == JointType::kFixed) continue;
+    const Quat& from = previous_pose_.rotation[uj];
+    // As far toward the recall as the memory's own tests trust it for the limb hidden
+    // (the one under the highest unseen joint), from the hold.
+    int limb = j;
+    while (!limb_seen_[static_cast<size_t>(skeleton_.joint(limb).parent.value)])
+      limb = skeleton_.joint(limb).parent.value;
+    const Quat to = held_pose_.rotation[uj].slerp(memory_.Trust(limb), recalled_.rotation[uj]);
+    const double turn = from.angularDistance(to);
+    held_pose_.rotation[uj] = turn <= max_turn ? to : from.slerp(max_turn / turn, to);
+  }
   return true;
 }
 

@@ -9,7 +9,9 @@
 //  - a repaired sample weighs by where it came from (interpolated between known ends:
 //    much; extrapolated from one side: little), its weight grows gradually, and it may
 //    pull the skeleton only a few mm from the anchor: the pose the trusted samples alone
-//    give, with every limb that has no trusted sample turned by its parent only slowly;
+//    give, with every limb that has no trusted sample turned by its parent only slowly,
+//    or toward the pose the subject's own recent motion recalls for it (MotionMemory)
+//    where the memory has shown itself the better guess;
 //    an interpolated sample on such a limb may pull it faster, toward where its markers
 //    come back.
 // Per-marker state is sized at construction; Solve never allocates.
@@ -21,6 +23,7 @@
 
 #include "filters/cleanup_options.hpp"
 #include "filters/cleanup_window.hpp"
+#include "filters/motion_memory.hpp"
 
 namespace mocapd {
 
@@ -58,6 +61,7 @@ class FinalSolve {
   void AnchorRepairs(const CleanFrame& frame, CleanupCounters* counters);
   void MarkSeenLimbs();
   bool HoldUnseenLimbs();
+  bool RecallUnseenLimbs();
 
   const Skeleton& skeleton_;
   const MarkerSet& markers_;
@@ -71,7 +75,15 @@ class FinalSolve {
   std::vector<Vec3> solve_targets_;    // what the solve fits: X-, captured samples eased in
   std::vector<uint8_t> segment_seen_;  // per joint: a trusted sample on it
   std::vector<uint8_t> limb_seen_;     // per joint: a trusted sample on it or below
-  Pose held_pose_;                     // the anchor with its unseen limbs held (turned slowly)...
+  std::vector<uint8_t> seeable_;       // per joint: a marker on it or below
+  bool whole_ = false;                 // this frame's anchor saw every seeable limb
+  MotionMemory memory_;                // the subject's recent whole poses
+  Pose previous_pose_;                 // last frame's published pose
+  bool has_previous_ = false;
+  Pose recalled_;  // what memory_ last recalled for the unseen limbs...
+  bool recalled_ok_ = false;
+  int frames_to_recall_ = 0;  // ...and the frames until it is asked again
+  Pose held_pose_;            // the anchor with its unseen limbs held (turned slowly)...
   KinematicsWorkspace held_kinematics_;
   std::vector<Vec3> held_markers_;  // ...and its markers
 };

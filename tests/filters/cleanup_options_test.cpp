@@ -59,7 +59,7 @@ TEST(CleanupOptionsTest, EveryOptionIsInTheTableOnceWithItsDefaultInBounds) {
     EXPECT_GE(value, f.min * f.to_si) << f.name;
     EXPECT_LE(value, f.max * f.to_si) << f.name;
   }
-  EXPECT_EQ(names.size(), 51u);  // a new option must be added to the table (and this count)
+  EXPECT_EQ(names.size(), 53u);  // a new option must be added to the table (and this count)
 }
 
 TEST(CleanupOptionsTest, EveryPerFrameRuleMeansTheSameSpeedOrTimeAtEveryRate) {

@@ -275,11 +275,29 @@ TEST_F(FinalSolveTest, UnseenLowerLegIsNotSwungByItsTurningThigh) {
     CleanupOptions options;
     options.lookahead = 0;
     options.anchor_holds_unseen_limbs = hold;
+    options.unseen_limb_memory_s = 0.0;  // the hold alone (recalls: below)
     return WorstExtraJointStep(Run(options), turned, "LeftFoot", 290, 330);
   };
   const double held = worst_extra_ankle_step(true), swung = worst_extra_ankle_step(false);
   EXPECT_LT(held, 0.01) << swung;  // measured 0.2 cm
   EXPECT_GT(swung, 0.02) << held;  // measured 2.8 cm
+}
+
+TEST_F(FinalSolveTest, AnUnseenLowerLegKeepsWalkingAsTheSubjectsOwnStepsRecallIt) {
+  // The left shin and foot occluded for a second in mid-walk, with no lookahead: held,
+  // the guessed foot stays behind while the real one keeps stepping; recalled from the
+  // walk's earlier steps (the rest of the body says where in its step the leg is), it
+  // steps on.
+  CaptureWithLeftLowerLegOccluded(fixture_.motion, 420, 540);
+  auto worst_foot_error = [&](double memory_s) {
+    CleanupOptions options;
+    options.lookahead = 0;
+    options.unseen_limb_memory_s = memory_s;
+    return WorstJointError(Run(options), "LeftFoot", 420, 540);
+  };
+  const double recalled = worst_foot_error(CleanupOptions{}.unseen_limb_memory_s),
+               held = worst_foot_error(0.0);
+  EXPECT_LT(recalled, 0.5 * held) << held;  // measured 7.1 cm against 24.3 cm
 }
 
 TEST_F(FinalSolveTest, LongUnseenLowerLegGoesWhereItsSlowlyTurningThighTakesIt) {
