@@ -1,6 +1,8 @@
 // Defaults, bounds and validation of the cleanup's options.
 #include "filters/cleanup_options.hpp"
 
+#include "filters/motion_memory.hpp"
+
 #include <algorithm>
 #include <array>
 #include <sstream>
@@ -83,9 +85,9 @@ const std::array kFields = {
       &O::anchor_holds_unseen_limbs},
     F{"unseen_limb_turn_radps", nullptr, "unseen_limb_turn_dps", kDeg, 0, 1e9,
       &O::unseen_limb_turn_radps},
-    F{"unseen_limb_memory_s", nullptr, "unseen_limb_memory_s", kNone, 0, 3600,
+    F{"unseen_limb_memory_s", nullptr, "unseen_limb_memory_s", kNone, 0, 600,
       &O::unseen_limb_memory_s},
-    F{"unseen_limb_recall_turn_radps", nullptr, "unseen_limb_recall_turn_dps", kDeg, 0, 1e9,
+    F{"unseen_limb_recall_turn_radps", nullptr, "unseen_limb_recall_turn_dps", kDeg, 1, 1e9,
       &O::unseen_limb_recall_turn_radps},
     F{"unseen_limb_interpolation_speed_mps", nullptr, "unseen_limb_interpolation_speed_mps", kNone,
       0, 1e3, &O::unseen_limb_interpolation_speed_mps},
@@ -149,6 +151,11 @@ void CleanupOptions::Validate() const {
     throw std::invalid_argument(
         "CleanupOptions.frozen_reference_motion_m: must exceed frozen_radius_m (" +
         Str(frozen_radius_m) + "), got " + Str(frozen_reference_motion_m));
+  if (unseen_limb_memory_s > 0.0 && unseen_limb_memory_s < MotionMemory::kMinUsefulSpanS)
+    throw std::invalid_argument(
+        "CleanupOptions.unseen_limb_memory_s: must be 0 (off) or at least " +
+        Str(MotionMemory::kMinUsefulSpanS) + " (time to recall and to test a recall), got " +
+        Str(unseen_limb_memory_s));
   naive_ik.Validate();
   robust_ik.Validate();
   final_ik.Validate();

@@ -5,6 +5,21 @@
 #include <cmath>
 
 namespace mocapd {
+namespace {
+
+// Per joint: some marker lies on it or below it.
+std::vector<uint8_t> SeeableJoints(const Skeleton& skeleton, const MarkerSet& markers) {
+  std::vector<uint8_t> seeable(static_cast<size_t>(skeleton.num_joints()), 0);
+  for (int marker = 0; marker < markers.num_markers(); ++marker)
+    seeable[static_cast<size_t>(markers.primary_joint(marker))] = 1;
+  for (int j = skeleton.num_joints() - 1; j > 0; --j)  // parents come first: children fold in
+    if (seeable[static_cast<size_t>(j)])
+      seeable[static_cast<size_t>(skeleton.joint(j).parent.value)] = 1;
+  return seeable;
+}
+
+}  // namespace
+
 FinalSolve::FinalSolve(const Skeleton& skeleton, const MarkerSet& markers,
                        const CleanupOptions& options)
     : skeleton_(skeleton),
@@ -14,7 +29,12 @@ FinalSolve::FinalSolve(const Skeleton& skeleton, const MarkerSet& markers,
       final_ik_(WithUnseenKneeRule(options.final_ik, options)),
       final_(skeleton, markers),
       anchor_(skeleton, markers),
-      memory_(skeleton, options.rate_hz, options.unseen_limb_memory_s),
+      seeable_(SeeableJoints(skeleton, markers)),
+      // The memory serves the anchor's held limbs: without them it would only cost.
+      memory_(skeleton, seeable_, options.rate_hz,
+              options.fill_anchor_speed_mps > 0.0 && options.anchor_holds_unseen_limbs
+                  ? options.unseen_limb_memory_s
+                  : 0.0),
       held_kinematics_(skeleton) {
   const auto m = static_cast<size_t>(markers_.num_markers());
   tracks_.assign(m, Track{});
@@ -23,12 +43,7 @@ FinalSolve::FinalSolve(const Skeleton& skeleton, const MarkerSet& markers,
   solve_targets_.assign(m, Vec3::Constant(kNaN));
   limb_seen_.assign(static_cast<size_t>(skeleton_.num_joints()), 0);
   segment_seen_ = limb_seen_;
-  seeable_ = limb_seen_;
-  for (int marker = 0; marker < markers_.num_markers(); ++marker)
-    seeable_[static_cast<size_t>(markers_.primary_joint(marker))] = 1;
-  for (int j = skeleton_.num_joints() - 1; j > 0; --j)
-    if (seeable_[static_cast<size_t>(j)])
-      seeable_[static_cast<size_t>(skeleton_.joint(j).parent.value)] = 1;
+  recall_known_ = limb_seen_;
   held_pose_ = RestPose(skeleton_);
   previous_pose_ = recalled_ = held_pose_;
   held_markers_.assign(m, Vec3::Zero());
@@ -257,10 +272,14 @@ bool FinalSolve::HoldUnseenLimbs() {
 // recall (memory off, or too little of it yet) the hold above stands.
 bool FinalSolve::RecallUnseenLimbs() {
   if (!memory_.enabled() || !has_previous_) return false;
-  if (--frames_to_recall_ <= 0) {
+  // A joint hidden since the last recall has none yet: asked again now, not left to
+  // turn toward a stale pose until the next interval.
+  bool newly_hidden = false;
+  for (size_t j = 0; j < limb_seen_.size(); ++j) newly_hidden |= !limb_seen_[j] && recall_known_[j];
+  if (--frames_to_recall_ <= 0 || newly_hidden) {
     recalled_ok_ = memory_.Recall(anchor_.pose(), previous_pose_, limb_seen_, &recalled_);
-    frames_to_recall_ = std::max(
-        1, static_cast<int>(std::lround(options_.rate_hz * MotionMemory::kSampleIntervalS)));
+    std::copy(limb_seen_.begin(), limb_seen_.end(), recall_known_.begin());
+    frames_to_recall_ = memory_.sample_interval_frames();
   }
   if (!recalled_ok_) return false;
   const double max_turn = rules_.unseen_limb_recall_turn_rad;
@@ -271,8 +290,11 @@ bool FinalSolve::RecallUnseenLimbs() {
     // As far toward the recall as the memory's own tests trust it for the limb hidden
     // (the one under the highest unseen joint), from the hold.
     int limb = j;
-    while (!limb_seen_[static_cast<size_t>(skeleton_.joint(limb).parent.value)])
-      limb = skeleton_.joint(limb).parent.value;
+    // (The root is seen: HoldUnseenLimbs runs only on a solved anchor.)
+    for (int parent = skeleton_.joint(limb).parent.value;
+         parent >= 0 && !limb_seen_[static_cast<size_t>(parent)];
+         parent = skeleton_.joint(limb).parent.value)
+      limb = parent;
     const Quat to = held_pose_.rotation[uj].slerp(memory_.Trust(limb), recalled_.rotation[uj]);
     const double turn = from.angularDistance(to);
     held_pose_.rotation[uj] = turn <= max_turn ? to : from.slerp(max_turn / turn, to);

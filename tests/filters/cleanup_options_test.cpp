@@ -40,6 +40,19 @@ TEST(CleanupOptionsTest, ValidateGivesTheBoundsAndTheValue) {
   options = CleanupOptions{};
   options.frozen_reference_motion_m = options.frozen_radius_m;
   EXPECT_THROW(options.Validate(), std::invalid_argument);
+  // A motion memory too short ever to recall or test: refused, naming it; off is fine.
+  options = CleanupOptions{};
+  options.unseen_limb_memory_s = 1.0;
+  try {
+    options.Validate();
+    FAIL();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_EQ(std::string(e.what()),
+              "CleanupOptions.unseen_limb_memory_s: must be 0 (off) or at least 2.5 (time to "
+              "recall and to test a recall), got 1");
+  }
+  options.unseen_limb_memory_s = 0.0;
+  EXPECT_NO_THROW(options.Validate());
 }
 
 // The table is the one place the bounds are written: each option once, each default
@@ -80,6 +93,10 @@ TEST(CleanupOptionsTest, EveryPerFrameRuleMeansTheSameSpeedOrTimeAtEveryRate) {
   EXPECT_NEAR(per_second(s.unseen_limb_turn_rad, 60), per_second(f.unseen_limb_turn_rad, 240),
               1e-12);
   EXPECT_NEAR(per_second(s.unseen_limb_turn_rad, 60), slow.unseen_limb_turn_radps, 1e-12);
+  EXPECT_NEAR(per_second(s.unseen_limb_recall_turn_rad, 60),
+              per_second(f.unseen_limb_recall_turn_rad, 240), 1e-12);
+  EXPECT_NEAR(per_second(s.unseen_limb_recall_turn_rad, 60), slow.unseen_limb_recall_turn_radps,
+              1e-12);
   EXPECT_NEAR(per_second(s.unseen_limb_interpolation_radius_m, 60),
               per_second(f.unseen_limb_interpolation_radius_m, 240), 1e-12);
   EXPECT_NEAR(per_second(s.unseen_limb_interpolation_radius_m, 60),

@@ -46,10 +46,11 @@ void Observe(MotionMemory* memory, const Skeleton& skeleton, double seconds, boo
 }
 
 const std::vector<uint8_t> kArmHidden = {1, 1, 0, 0};
+const std::vector<uint8_t> kAllSeeable = {1, 1, 1, 1};
 
 TEST(MotionMemoryTest, ALimbThatMovesWithTheBodyIsRecalledFromItsPastAndTrusted) {
   const Skeleton skeleton = SmallBody();
-  MotionMemory memory(skeleton, kRateHz, 60.0);
+  MotionMemory memory(skeleton, kAllSeeable, kRateHz, 60.0);
   Observe(&memory, skeleton, 10.0, true);
   // A moment the memory never held (between its samples), the arm hidden.
   const double t = 10.3 + 0.5 / kRateHz;
@@ -68,7 +69,7 @@ TEST(MotionMemoryTest, ALimbThatMovesWithTheBodyIsRecalledFromItsPastAndTrusted)
 
 TEST(MotionMemoryTest, ALimbThatDriftsOnItsOwnIsNotTrusted) {
   const Skeleton skeleton = SmallBody();
-  MotionMemory memory(skeleton, kRateHz, 60.0);
+  MotionMemory memory(skeleton, kAllSeeable, kRateHz, 60.0);
   Observe(&memory, skeleton, 20.0, false);
   // Where the arm was half a second ago is a better guess than any pose it had when the
   // torso last rocked the same way.
@@ -83,17 +84,17 @@ TEST(MotionMemoryTest, NothingIsRecalledFromTooLittleMotionOrFromPosesThatWereNo
   const Pose pose = PoseAt(skeleton, 0.5, true);
   Pose guess = RestPose(skeleton);
 
-  MotionMemory short_memory(skeleton, kRateHz, 60.0);
+  MotionMemory short_memory(skeleton, kAllSeeable, kRateHz, 60.0);
   Observe(&short_memory, skeleton, MotionMemory::kMinSpanS - 0.2, true);
   EXPECT_FALSE(short_memory.Recall(pose, pose, kArmHidden, &guess));
 
-  MotionMemory unseen(skeleton, kRateHz, 60.0);
+  MotionMemory unseen(skeleton, kAllSeeable, kRateHz, 60.0);
   Observe(&unseen, skeleton, 10.0, true, /*whole=*/false);
   EXPECT_EQ(unseen.size(), 0);
   EXPECT_FALSE(unseen.Recall(pose, pose, kArmHidden, &guess));
   EXPECT_EQ(unseen.Trust(2), 0.0);
 
-  MotionMemory off(skeleton, kRateHz, 0.0);
+  MotionMemory off(skeleton, kAllSeeable, kRateHz, 0.0);
   EXPECT_FALSE(off.enabled());
   Observe(&off, skeleton, 10.0, true);
   EXPECT_FALSE(off.Recall(pose, pose, kArmHidden, &guess));
@@ -102,19 +103,60 @@ TEST(MotionMemoryTest, NothingIsRecalledFromTooLittleMotionOrFromPosesThatWereNo
 
 TEST(MotionMemoryTest, KeepsOnePoseEachThirtiethOfASecondUpToItsSpanAtAnyRate) {
   const Skeleton skeleton = SmallBody();
-  for (const double rate : {60.0, 120.0, 240.0}) {
-    MotionMemory memory(skeleton, rate, 3.0);
+  // 100 and 250 Hz are no whole number of frames per 1/30 s.
+  for (const double rate : {60.0, 100.0, 120.0, 240.0, 250.0, 360.0}) {
+    MotionMemory memory(skeleton, kAllSeeable, rate, 3.0);
     const Pose pose = RestPose(skeleton);
     for (int f = 0; f < static_cast<int>(2.0 * rate); ++f) memory.Observe(pose, pose, true);
-    EXPECT_NEAR(memory.size(), 60, 2) << rate << " Hz";
+    EXPECT_NEAR(memory.size(), 60, 1) << rate << " Hz";
     for (int f = 0; f < static_cast<int>(10.0 * rate); ++f) memory.Observe(pose, pose, true);
     EXPECT_EQ(memory.size(), 90) << rate << " Hz";  // 3 s at 30 per second, the ring full
   }
 }
 
+TEST(MotionMemoryTest, AFullRingStillRecallsAndTrustsFromItsNewestSeconds) {
+  const Skeleton skeleton = SmallBody();
+  MotionMemory memory(skeleton, kAllSeeable, kRateHz, 3.0);
+  Observe(&memory, skeleton, 20.0, true);  // the ring has wrapped many times
+  ASSERT_EQ(memory.size(), 90);
+  const double t = 20.3 + 0.5 / kRateHz;
+  const Pose truth = PoseAt(skeleton, t, true);
+  Pose guess = RestPose(skeleton);
+  ASSERT_TRUE(memory.Recall(truth, PoseAt(skeleton, t - 1.0 / kRateHz, true), kArmHidden, &guess));
+  EXPECT_LT(AngleBetween(guess.rotation[2], truth.rotation[2]), 0.1);
+  EXPECT_GT(memory.Trust(2), 0.8);
+}
+
+TEST(MotionMemoryTest, ASkeletonOfOneJointHasNoLimbToRecall) {
+  std::vector<Joint> joints(1);
+  joints[0] = Joint{.name = "prop", .parent = {}, .type = JointType::kFree};
+  const Skeleton prop(std::move(joints));
+  const std::vector<uint8_t> seeable = {1};
+  MotionMemory memory(prop, seeable, kRateHz, 60.0);
+  EXPECT_FALSE(memory.enabled());
+  const Pose pose = RestPose(prop);
+  for (int f = 0; f < 600; ++f) memory.Observe(pose, pose, true);
+  Pose guess = pose;
+  EXPECT_FALSE(memory.Recall(pose, pose, seeable, &guess));
+}
+
+TEST(MotionMemoryTest, AFewTestsEarnNoTrustAndALimbWithoutMarkersIsNeverTested) {
+  const Skeleton skeleton = SmallBody();
+  // The forearm has no marker (nor anything below it): it is not a limb the cameras see.
+  const std::vector<uint8_t> seeable = {1, 1, 1, 0};
+  MotionMemory memory(skeleton, seeable, kRateHz, 60.0);
+  // The first test comes once 2 s are kept, and the seeable joints (torso, arm) are
+  // tested in turn, one per kept pose: 2.1 s gives the arm at most one test.
+  Observe(&memory, skeleton, 2.1, true);
+  EXPECT_EQ(memory.Trust(2), 0.0);
+  Observe(&memory, skeleton, 10.0, true);
+  EXPECT_GT(memory.Trust(2), 0.8);
+  EXPECT_EQ(memory.Trust(3), 0.0);
+}
+
 TEST(MotionMemoryTest, ClearForgetsEveryPoseAndTest) {
   const Skeleton skeleton = SmallBody();
-  MotionMemory memory(skeleton, kRateHz, 60.0);
+  MotionMemory memory(skeleton, kAllSeeable, kRateHz, 60.0);
   Observe(&memory, skeleton, 10.0, true);
   ASSERT_GT(memory.Trust(2), 0.0);
   memory.Clear();
