@@ -71,9 +71,13 @@ struct ProcessSummary {
   /// How well the solved skeleton fits the captured samples it published as observed:
   /// per sample (median), and per marker (the RMS of each, their median and worst), mm.
   double residual_median_mm = 0.0, marker_rms_median_mm = 0.0, marker_rms_worst_mm = 0.0;
-  /// With a truth: joint position error against it (joints matched by name), cm.
+  /// With a truth: joint position error against it (joints matched by name), cm: the
+  /// mean, and, a frame's error being its worst joint's (what a viewer sees), the
+  /// frames' 99.9th percentile and the worst frame, with its index and joint.
   bool has_truth = false;
-  double truth_mean_cm = 0.0, truth_worst_cm = 0.0;
+  double truth_mean_cm = 0.0, truth_p999_cm = 0.0, truth_worst_cm = 0.0;
+  int truth_worst_frame = -1;
+  std::string truth_worst_joint;
 };
 
 /// Runs the command, printing progress and the summary to out. Throws std::runtime_error

@@ -468,8 +468,23 @@ TEST(ProcessCommandTest, PlotsShowEveryMarkerTheSolveAndTheErrorAgainstTheTruth)
   const ProcessSummary summary = RunProcessCommand(options, out);
   ASSERT_TRUE(summary.has_truth);
   EXPECT_LT(summary.truth_mean_cm, 1.0);
-  EXPECT_GE(summary.truth_worst_cm, summary.truth_mean_cm);
+  EXPECT_GE(summary.truth_p999_cm, summary.truth_mean_cm);
+  EXPECT_GE(summary.truth_worst_cm, summary.truth_p999_cm);
+  // The worst frame is named (its index and joint), as a user looks it up.
+  ASSERT_GE(summary.truth_worst_frame, 0);
+  EXPECT_LT(summary.truth_worst_frame, f.take.num_frames);
+  EXPECT_TRUE(f.skeleton->FindJoint(summary.truth_worst_joint).has_value())
+      << summary.truth_worst_joint;
   EXPECT_NE(out.str().find("against the truth"), std::string::npos) << out.str();
+  EXPECT_NE(out.str().find("(frame " + std::to_string(summary.truth_worst_frame) + ", " +
+                           summary.truth_worst_joint + ")"),
+            std::string::npos)
+      << out.str();
+  const nlohmann::json report = ProcessSummaryJson(summary, options);
+  EXPECT_EQ(report["truth_joint_error_cm"]["worst_frame"], summary.truth_worst_frame);
+  EXPECT_EQ(report["truth_joint_error_cm"]["worst_joint"], summary.truth_worst_joint);
+  EXPECT_DOUBLE_EQ(report["truth_joint_error_cm"]["frame_p99_9"].get<double>(),
+                   summary.truth_p999_cm);
   const auto read = [](const std::string& path) {
     std::ifstream in(path);
     return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
