@@ -25,6 +25,10 @@ inline constexpr uint16_t kVersion = kVersion2;  ///< The newest: what encoders 
 inline constexpr size_t kStreamBlockBytes = 24;
 inline constexpr size_t kHeaderBytes = 16;
 inline constexpr size_t kMaxSubjectName = 63;
+
+/// A name a sender or a file chose (a subject, a marker label), fit for a log line or a
+/// terminal: control characters escaped as in JSON and bytes that are no UTF-8 replaced.
+std::string PrintableName(std::string_view name);
 inline constexpr size_t kMaxMarkers = 1024;
 inline constexpr size_t kMaxJoints = 512;
 

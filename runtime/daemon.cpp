@@ -1222,7 +1222,8 @@ void Daemon::Run(bool handle_signals) {
               seen = count;
             }
             if (reason == static_cast<int>(DropReason::kUnknownSubject))
-              who += fmt::format(", the last for '{}'", PrintableName(now.last_unknown_subject));
+              who += fmt::format(", the last for '{}'",
+                                 protocol::PrintableName(now.last_unknown_subject));
             // Held back by the log interval, the line can come after the drops stopped.
             const double quiet_s =
                 static_cast<double>(t - c.last_drop_seen_ns[static_cast<size_t>(reason)]) * 1e-9;

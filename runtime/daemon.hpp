@@ -187,9 +187,6 @@ std::string FormatPrometheusMetrics(const DaemonStats& stats);
 /// JSON for /subjects and /health.
 std::string FormatSubjectsJson(const DaemonStats& stats);
 std::string FormatHealthJson(const DaemonStats& stats, bool data_plane_alive);
-/// A name a sender chose, fit for a log line: control characters escaped as in JSON and
-/// bytes that are no UTF-8 replaced.
-std::string PrintableName(std::string_view name);
 /// Why a subject rejecting every frame does, beyond the drop reason's name (a rate
 /// mismatch: the frames' rate against the configured one; a model mismatch: the frames'
 /// hash and marker count against the model's); empty if nothing to add.

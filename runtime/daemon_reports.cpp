@@ -34,15 +34,6 @@ bool LeftUnattributed(DropReason reason) {
 
 }  // namespace
 
-std::string PrintableName(std::string_view name) {
-  // JSON's escapes for control characters and U+FFFD for bytes that are no UTF-8: a
-  // sender's name must neither end a log line early (a forged line after it) nor be
-  // invalid text.
-  const std::string quoted = nlohmann::json(std::string(name))
-                                 .dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
-  return quoted.substr(1, quoted.size() - 2);
-}
-
 std::string FormatPrometheusMetrics(const DaemonStats& stats) {
   using prometheus::BuildCounter;
   using prometheus::BuildGauge;
@@ -448,8 +439,8 @@ std::string FormatHealthJson(const DaemonStats& stats, bool data_plane_alive) {
           (stats.last_unknown_subject.empty()
                ? std::string("with input.subscribe = \"all\", /health names the last unknown "
                              "name received)")
-               : "the last unknown name received: '" + PrintableName(stats.last_unknown_subject) +
-                     "')"));
+               : "the last unknown name received: '" +
+                     protocol::PrintableName(stats.last_unknown_subject) + "')"));
   if (stats.rejecting_unattributed)
     problems.push_back(std::string("every input message dropped for over 0.5 s before a subject "
                                    "could be named (the last: ") +

@@ -36,6 +36,10 @@
 
 namespace {
 
+// Names in the JSON outputs come from files and senders: bytes that are no UTF-8 are
+// written as U+FFFD rather than failing the whole output.
+constexpr auto kReplaceInvalidUtf8 = nlohmann::json::error_handler_t::replace;
+
 struct SynthOptions {
   std::string bvh;
   std::string humanoid_motion;
@@ -126,7 +130,8 @@ int RunSynth(const SynthOptions& o) {
               << corrupted.events.size() << " events, " << o.corrupt << ", seed " << o.seed
               << ")\n";
     if (!o.truth_mask.empty()) {
-      std::ofstream(o.truth_mask) << mocapd::CorruptionTruthJson(corrupted, corruption).dump(1)
+      std::ofstream(o.truth_mask) << mocapd::CorruptionTruthJson(corrupted, corruption)
+                                         .dump(1, ' ', false, kReplaceInvalidUtf8)
                                   << "\n";
       std::cout << "wrote " << o.truth_mask << "\n";
     }
@@ -280,7 +285,7 @@ int RunReplayCommand(ReplayCommand& c) {
   std::cout << "\n" << report.FormatTable();
   if (!c.report.empty()) {
     std::ofstream out(c.report);
-    out << report.ToJson().dump(2) << "\n";
+    out << report.ToJson().dump(2, ' ', false, kReplaceInvalidUtf8) << "\n";
     if (!out) throw std::runtime_error(c.report + ": cannot write");
     std::cout << "wrote " << c.report << "\n";
   }
@@ -542,7 +547,7 @@ int main(int argc, char** argv) {
     if (*info) {
       const mocapd::TakeInfo ti = mocapd::InspectTake(info_path);
       if (info_json)
-        std::cout << mocapd::TakeInfoJson(ti).dump(2) << "\n";
+        std::cout << mocapd::TakeInfoJson(ti).dump(2, ' ', false, kReplaceInvalidUtf8) << "\n";
       else
         std::cout << mocapd::FormatTakeInfo(ti);
       return 0;

@@ -163,25 +163,31 @@ TakeInfo InspectTake(const std::string& path) {
   return info;
 }
 
+// Every name a file or a sender chose is printed escaped (protocol::PrintableName): a
+// recorded subject name or a C3D label may hold control characters, which would move a
+// terminal's cursor or forge a line.
 std::string FormatTakeInfo(const TakeInfo& info) {
   char line[256];
   std::string out;
   std::snprintf(line, sizeof(line),
                 "%s\n  format  %s\n  frames  %d\n  rate    %.6g Hz (%.3f s)\n  units   %s\n",
-                info.path.c_str(), info.format.c_str(), info.frames, info.rate_hz, info.seconds,
+                protocol::PrintableName(info.path).c_str(), info.format.c_str(), info.frames,
+                info.rate_hz, info.seconds,
                 (info.units + (info.units_guessed ? " (guessed from its bones)" : "")).c_str());
   out += line;
   if (info.format == "c3d") {
-    out += "  processor " + info.processor + "\n";
+    out += "  processor " + protocol::PrintableName(info.processor) + "\n";
     if (!info.analog_channels.empty()) {
       std::snprintf(line, sizeof(line), "  analog  %zu channels x %d samples a frame (%.6g Hz):",
                     info.analog_channels.size(), info.analog_samples_per_frame,
                     info.rate_hz * info.analog_samples_per_frame);
       out += line;
-      for (const std::string& label : info.analog_channels) out += " " + label;
+      for (const std::string& label : info.analog_channels)
+        out += " " + protocol::PrintableName(label);
       out += "\n";
     }
-    for (const std::string& note : info.notes) out += "  note    " + note + "\n";
+    for (const std::string& note : info.notes)
+      out += "  note    " + protocol::PrintableName(note) + "\n";
     if (info.origin_samples_missing > 0)
       out += "  " + std::to_string(info.origin_samples_missing) +
              " marker samples at exactly (0, 0, 0) read as missing (an exporter's gaps)\n";
@@ -189,8 +195,10 @@ std::string FormatTakeInfo(const TakeInfo& info) {
                   "gaps", "longest gap");
     out += line;
     for (const PointInfo& p : info.points) {
-      std::snprintf(line, sizeof(line), "  %-24s %-8s %8.2f%% %6d %12d\n", p.label.c_str(),
-                    p.kind.c_str(), 100.0 * p.missing_fraction, p.gaps, p.longest_gap);
+      std::snprintf(line, sizeof(line), "  %-24s %-8s %8.2f%% %6d %12d\n",
+                    protocol::PrintableName(p.label).c_str(),
+                    protocol::PrintableName(p.kind).c_str(), 100.0 * p.missing_fraction, p.gaps,
+                    p.longest_gap);
       out += line;
     }
   } else if (info.format == "recording") {
@@ -211,7 +219,7 @@ std::string FormatTakeInfo(const TakeInfo& info) {
     for (const RecordedStreamInfo& s : info.streams) {
       std::snprintf(
           line, sizeof(line), "  %-16s %8lld %9llu %9llu %8lld %9lld %8d %7d %8.6g %4d %5s\n",
-          s.subject.c_str(), static_cast<long long>(s.frames),
+          protocol::PrintableName(s.subject).c_str(), static_cast<long long>(s.frames),
           static_cast<unsigned long long>(s.first_frame),
           static_cast<unsigned long long>(s.last_frame), static_cast<long long>(s.frames_skipped),
           static_cast<long long>(s.frames_out_of_order), s.sessions, s.markers, s.rate_hz,
@@ -225,7 +233,7 @@ std::string FormatTakeInfo(const TakeInfo& info) {
   } else {
     out += "  joints  " + std::to_string(info.joints.size()) + " (+" +
            std::to_string(info.end_sites) + " end sites)\n";
-    for (const std::string& j : info.joints) out += "    " + j + "\n";
+    for (const std::string& j : info.joints) out += "    " + protocol::PrintableName(j) + "\n";
   }
   return out;
 }

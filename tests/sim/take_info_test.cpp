@@ -155,6 +155,35 @@ TEST(TakeInfoTest, SummarisesARecordingsStreamsWithTheirSkippedFramesAndSessions
   EXPECT_EQ(TakeInfoJson(info)["streams"][0]["frames_skipped"], 2);
 }
 
+// A subject name is whatever a sender put on the wire: an escape sequence, a newline or
+// bytes that are no UTF-8 are printed escaped, so the summary neither moves the
+// terminal's cursor nor forges a line, and the JSON is still written.
+TEST(TakeInfoTest, ARecordedNameWithControlCharactersIsPrintedEscaped) {
+  const std::string path = testing::TempDir("take_info_names") + "/capture.rec";
+  const std::string forged = "a\x1b[2Jb\nc\xff";
+  {
+    RecordingWriter w(path);
+    std::vector<uint8_t> bytes;
+    protocol::MarkerFrameMessage m;
+    m.subject = forged;
+    m.frame_number = 1;
+    m.rate_hz = 120.0f;
+    m.positions.assign(2, Vec3::Zero());
+    m.valid.assign(2, 1);
+    protocol::EncodeMarkerFrame(m, &bytes);
+    w.Append(1, "markers/x/", bytes);
+  }
+  const TakeInfo info = InspectTake(path);
+  ASSERT_EQ(info.streams.size(), 1u);
+  EXPECT_EQ(info.streams[0].subject, forged);  // kept as sent; only its printing escapes
+  const std::string table = FormatTakeInfo(info);
+  EXPECT_EQ(table.find('\x1b'), std::string::npos) << table;
+  EXPECT_EQ(table.find("b\nc"), std::string::npos) << table;
+  EXPECT_NE(table.find("a\\u001b[2Jb\\nc\xef\xbf\xbd"), std::string::npos) << table;
+  EXPECT_NO_THROW(
+      (void)TakeInfoJson(info).dump(2, ' ', false, nlohmann::json::error_handler_t::replace));
+}
+
 TEST(TakeInfoTest, UnknownExtensionIsRejected) {
   EXPECT_THROW(InspectTake("take.fbx"), std::invalid_argument);
   EXPECT_EQ(FileExtension("/a.b/take"), "");
