@@ -694,6 +694,21 @@ class Parser {
     }
     take.Allocate(static_cast<int>(frames));
     ReadAnalogParameters(analog_values, static_cast<size_t>(frames), &take.analog);
+    // The analog rate is a whole number of samples a point frame: the stored data says how
+    // many, and a write states that times the point rate. An ANALOG:RATE that is not (1000
+    // Hz at 120 Hz) would be rewritten without a word.
+    if (const std::optional<double> analog_rate = Number("ANALOG:RATE");
+        take.analog.channels() > 0 && analog_rate && std::isfinite(*analog_rate)) {
+      const double stored = take.rate_hz * take.analog.samples_per_frame;
+      if (std::abs(*analog_rate - stored) > 1e-3 * stored) {
+        char note[240];
+        std::snprintf(note, sizeof(note),
+                      "ANALOG:RATE is %g Hz, but the data holds %d analog samples a %g Hz frame "
+                      "(%g Hz): read, and written, as %g Hz",
+                      *analog_rate, take.analog.samples_per_frame, take.rate_hz, stored, stored);
+        take.notes.emplace_back(note);
+      }
+    }
     const bool unsigned_analog = take.analog.format == "UNSIGNED";
     const double unit_scale = std::abs(scale);
     for (int64_t f = 0; f < frames; ++f) {

@@ -460,10 +460,12 @@ TEST(C3dTest, AnAnalogCountTheDataContradictsGivesWayToTheParametersWithANote) {
   ReadWithOneNote(WithAnalogChannels(take, 8, 4), take,
                   "the header stores 4 analog values a frame, ANALOG:USED x ANALOG:RATE / "
                   "POINT:RATE 8: the data holds frames of 8");
-  // The header right and the parameter wrong: the header's stands, nothing to note.
+  // The header right and the parameter wrong: the header's stands. The only note is the
+  // analog rate the data then holds (2 samples a frame of 4 channels) against ANALOG:RATE.
   const C3dTake header_right = ParseC3d(WithAnalogChannels(take, 4, 8), "analog.c3d");
   ExpectSameTake(take, header_right);
-  EXPECT_TRUE(header_right.notes.empty());
+  ASSERT_EQ(header_right.notes.size(), 1u);
+  EXPECT_EQ(header_right.notes[0].rfind("ANALOG:RATE is ", 0), 0u) << header_right.notes[0];
   // Two fields at odds: POINT:USED 2 points fewer than the header and ANALOG:USED 8 values
   // more make the same frame. Sizes cannot say which; the points' fallback stands alone,
   // as before (the analog check took the header's last two points for analog values).
@@ -795,6 +797,34 @@ TEST(C3dTest, ACappedHeaderReadsEveryFrameTheDataHoldsWhenNoCountIsWider) {
 
 // A header counting 1000 frames against POINT:FRAMES's 1200, the data holding 1200: the
 // 1200 are read, as before, and the disagreement is said (it was settled in silence).
+// An analog rate that is no whole number of samples a point frame (1000 Hz at 120 Hz:
+// 8.33) is read as the data stores it, 8 a frame, and a write states 960 Hz: noted, where
+// it had changed without a word.
+TEST(C3dTest, AnAnalogRateThatIsNoWholeNumberOfSamplesAFrameIsNoted) {
+  C3dTake take = MakeTake(2, 10);
+  take.analog.labels = {"Fz1", "EMG1"};
+  take.analog.descriptions = {"", ""};
+  take.analog.units = {"N", "V"};
+  take.analog.scale = {1.0, 1.0};
+  take.analog.offset = {0.0, 0.0};
+  take.analog.samples_per_frame = 8;
+  take.analog.values.assign(10u * take.analog.values_per_frame(), 3.0f);
+  std::vector<uint8_t> bytes = EncodeC3d(take);
+  const float written = 960.0f, claimed = 1000.0f;
+  const auto* w = reinterpret_cast<const uint8_t*>(&written);
+  const auto at = std::search(bytes.begin(), bytes.end(), w, w + 4);
+  ASSERT_NE(at, bytes.end());
+  std::memcpy(&*at, &claimed, 4);
+  const C3dTake read = ParseC3d(bytes, "analog_rate.c3d");
+  EXPECT_EQ(read.analog.samples_per_frame, 8);
+  ASSERT_EQ(read.notes.size(), 1u);
+  EXPECT_EQ(read.notes[0],
+            "ANALOG:RATE is 1000 Hz, but the data holds 8 analog samples a 120 Hz frame (960 "
+            "Hz): read, and written, as 960 Hz");
+  // Where the two agree, nothing is said.
+  EXPECT_TRUE(ParseC3d(EncodeC3d(take), "agree.c3d").notes.empty());
+}
+
 TEST(C3dTest, AHeaderCountShorterThanPointFramesIsNoted) {
   const C3dTake take = MakeTake(2, 1200);
   std::vector<uint8_t> bytes = EncodeC3d(take);
