@@ -18,6 +18,7 @@
 #include "formats/file_paths.hpp"
 #include "formats/marker_set.hpp"
 #include "protocol/byte_io.hpp"
+#include "protocol/messages.hpp"
 
 namespace mocapd {
 namespace {
@@ -696,16 +697,19 @@ class Parser {
     ReadAnalogParameters(analog_values, static_cast<size_t>(frames), &take.analog);
     // The analog rate is a whole number of samples a point frame: the stored data says how
     // many, and a write states that times the point rate. An ANALOG:RATE that is not (1000
-    // Hz at 120 Hz) would be rewritten without a word.
+    // Hz at 120 Hz) would be rewritten without a word. NTSC's 1000/1001 between the two
+    // (119.88 Hz points, 1200 Hz analog) is the same rate labelled two ways, as elsewhere.
     if (const std::optional<double> analog_rate = Number("ANALOG:RATE");
         take.analog.channels() > 0 && analog_rate && std::isfinite(*analog_rate)) {
       const double stored = take.rate_hz * take.analog.samples_per_frame;
-      if (std::abs(*analog_rate - stored) > 1e-3 * stored) {
-        char note[240];
+      if (std::abs(*analog_rate - stored) > 1.5e-3 * stored) {
+        const int samples = take.analog.samples_per_frame;
+        char note[300];
         std::snprintf(note, sizeof(note),
-                      "ANALOG:RATE is %g Hz, but the data holds %d analog samples a %g Hz frame "
-                      "(%g Hz): read, and written, as %g Hz",
-                      *analog_rate, take.analog.samples_per_frame, take.rate_hz, stored, stored);
+                      "ANALOG:RATE is %g Hz, but the data holds %d analog sample%s a %g Hz "
+                      "frame for each of its %zu channels (%g Hz): read, and written, as %g Hz",
+                      *analog_rate, samples, samples == 1 ? "" : "s", take.rate_hz,
+                      take.analog.channels(), stored, stored);
         take.notes.emplace_back(note);
       }
     }
@@ -935,7 +939,9 @@ std::vector<std::string> ActorPrefixes(const C3dTake& take) {
 void SelectActor(C3dTake* take, const std::string& actor, const std::string& path) {
   const std::vector<std::string> prefixes = ActorPrefixes(*take);
   std::string listed;
-  for (const std::string& p : prefixes) listed += (listed.empty() ? "" : ", ") + p;
+  // The prefixes are the take's label bytes: printed escaped.
+  for (const std::string& p : prefixes)
+    listed += (listed.empty() ? "" : ", ") + protocol::PrintableName(p);
   std::string want = boost::algorithm::trim_copy(actor);
   if (!want.empty() && want.back() == ':') want.pop_back();
   if (want.empty()) {
@@ -951,7 +957,8 @@ void SelectActor(C3dTake* take, const std::string& actor, const std::string& pat
   for (int p = 0; p < take->num_points(); ++p)
     if (PrefixOf(take->labels[static_cast<size_t>(p)]) == want) kept.push_back(p);
   if (kept.empty())
-    throw std::runtime_error(path + ": no point is labelled for actor '" + want + "' (" +
+    throw std::runtime_error(path + ": no point is labelled for actor '" +
+                             protocol::PrintableName(want) + "' (" +
                              (prefixes.empty() ? std::string("the labels have no actor prefix")
                                                : "the take's actors: " + listed) +
                              ")");

@@ -17,6 +17,7 @@
 #include "formats/marker_set.hpp"
 #include "formats/subject_file.hpp"
 #include "formats/subject_from_markers.hpp"
+#include "protocol/messages.hpp"
 
 namespace mocapd {
 
@@ -93,11 +94,11 @@ int CalibrateFromMarkersOnly(const CalibrateCommandOptions& options, std::ostrea
   }
   if (!cal.set_missing.empty()) {
     out << "  the set's markers missing from the take:";
-    for (const std::string& m : cal.set_missing) out << " " << m;
+    for (const std::string& m : cal.set_missing) out << " " << protocol::PrintableName(m);
     out << "\n";
   }
   for (const ChannelNote& n : cal.skipped)
-    out << "  skipped " << n.label << ": " << n.reason << "\n";
+    out << "  skipped " << protocol::PrintableName(n.label) << ": " << n.reason << "\n";
   if (cal.hip_regression)
     out << "  hip centre prior: Harrington 2007 regression on the pelvis markers\n";
   if (cal.clusters)
@@ -174,14 +175,14 @@ int CalibrateFromMarkersOnly(const CalibrateCommandOptions& options, std::ostrea
       << " mm, worst " << Fixed(sorted.back() * 1e3, 1) << " mm; per sample: median "
       << Fixed(r.median_residual_m * 1e3, 1) << " mm, RMS " << Fixed(r.rms_m * 1e3, 1) << " mm\n";
   for (const ChannelNote& n : cal.rejected)
-    out << "  REJECTED " << n.label << ": " << n.reason << "\n";
+    out << "  REJECTED " << protocol::PrintableName(n.label) << ": " << n.reason << "\n";
   if (cal.clusters) {
     // Nobody named these markers' segments: say where each went, so a wrong one shows.
     for (int j = 0; j < sk.num_joints(); ++j) {
       std::string members;
       for (size_t m = 0; m < cal.markers.size(); ++m)
         if (cal.model.markers->primary_joint(static_cast<int>(m)) == j)
-          members += " " + cal.markers[m];
+          members += " " + protocol::PrintableName(cal.markers[m]);
       if (!members.empty()) out << "  " << sk.joint(j).name << ":" << members << "\n";
     }
   }
@@ -227,7 +228,9 @@ int CalibrateFromMarkersOnly(const CalibrateCommandOptions& options, std::ostrea
     report["rejected"] = rejected;
     std::ofstream file(options.report_json);
     if (!file) throw std::runtime_error(options.report_json + ": cannot open for writing");
-    file << report.dump(1) << "\n";
+    // Labels as the take spelt them: bytes that are no UTF-8 are written as U+FFFD rather
+    // than failing the report after the subject was written.
+    file << report.dump(1, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
     out << "wrote " << options.report_json << "\n";
   }
   return static_cast<int>(cal.markers.size());

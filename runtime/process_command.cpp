@@ -21,6 +21,7 @@
 #include "formats/subject_file.hpp"
 #include "formats/svg_plot.hpp"
 #include "formats/take_frames.hpp"
+#include "protocol/messages.hpp"
 
 namespace mocapd {
 namespace {
@@ -432,8 +433,10 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
       }
     }
     frame_worst_cm.push_back(worst);
-    if (summary.truth_worst_frame < 0 || worst > summary.truth_worst_cm) {
-      summary.truth_worst_frame = f;
+    if (summary.truth_worst_index < 0 || worst > summary.truth_worst_cm) {
+      summary.truth_worst_cm = worst;
+      summary.truth_worst_index = f;
+      summary.truth_worst_frame = static_cast<int64_t>(take.first_frame) + f;
       summary.truth_worst_joint = subject.skeleton->joint(worst_joint).name;
     }
     if (plotting) {
@@ -442,7 +445,6 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
     }
     truth_sum += sum;
     truth_count += static_cast<int64_t>(truth_joints.size());
-    summary.truth_worst_cm = std::max(summary.truth_worst_cm, worst);
   }
 
   summary.counters = pipeline.counters();
@@ -583,18 +585,25 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
                 summary.marker_rms_worst_mm);
   out << line;
   if (summary.has_truth) {
+    // The worst frame by the take's own numbering (what a C3D viewer shows) and its time.
     std::snprintf(line, sizeof(line),
                   "against the truth (%zu joints matched %s): mean %.2f cm; per frame (its "
-                  "worst joint) p99.9 %.2f cm, worst %.2f cm (frame %d, ",
+                  "worst joint) p99.9 %.2f cm, worst %.2f cm (frame %lld, %.3f s, ",
                   truth_joints.size(), truth_matched_by.c_str(), summary.truth_mean_cm,
-                  summary.truth_p999_cm, summary.truth_worst_cm, summary.truth_worst_frame);
-    out << line << summary.truth_worst_joint << ")\n";
+                  summary.truth_p999_cm, summary.truth_worst_cm,
+                  static_cast<long long>(summary.truth_worst_frame),
+                  summary.truth_worst_index / take.rate_hz);
+    out << line << protocol::PrintableName(summary.truth_worst_joint) << ")\n";
   }
   if (plotting) WritePlots(options, plot, markers, take.rate_hz, out);
   if (!options.report_json.empty()) {
     std::ofstream report(options.report_json);
     if (!report) throw std::runtime_error(options.report_json + ": cannot open for writing");
-    report << ProcessSummaryJson(summary, options).dump(2) << "\n";
+    // Paths and names as given: bytes that are no UTF-8 are written as U+FFFD rather than
+    // failing the report after every other output was written.
+    report << ProcessSummaryJson(summary, options)
+                  .dump(2, ' ', false, nlohmann::json::error_handler_t::replace)
+           << "\n";
     out << "wrote " << options.report_json << "\n";
   }
   return summary;
@@ -638,13 +647,14 @@ nlohmann::json ProcessSummaryJson(const ProcessSummary& summary,
             {"marker_rms_worst", summary.marker_rms_worst_mm}}},
           {"retarget_per_frame_us",
            {{"p50", summary.retarget_p50_us}, {"p99", summary.retarget_p99_us}}},
-          {"truth_joint_error_cm", summary.has_truth
-                                       ? nlohmann::json{{"mean", summary.truth_mean_cm},
-                                                        {"frame_p99_9", summary.truth_p999_cm},
-                                                        {"worst", summary.truth_worst_cm},
-                                                        {"worst_frame", summary.truth_worst_frame},
-                                                        {"worst_joint", summary.truth_worst_joint}}
-                                       : nlohmann::json(nullptr)}};
+          {"truth_joint_error_cm",
+           summary.has_truth ? nlohmann::json{{"mean", summary.truth_mean_cm},
+                                              {"frame_p999", summary.truth_p999_cm},
+                                              {"worst", summary.truth_worst_cm},
+                                              {"worst_frame", summary.truth_worst_frame},
+                                              {"worst_frame_index", summary.truth_worst_index},
+                                              {"worst_joint", summary.truth_worst_joint}}
+                             : nlohmann::json(nullptr)}};
 }
 
 }  // namespace mocapd

@@ -4,6 +4,7 @@
 // was repaired.
 #pragma once
 
+#include <cstdint>
 #include <map>
 #include <nlohmann/json_fwd.hpp>
 #include <ostream>
@@ -73,10 +74,13 @@ struct ProcessSummary {
   double residual_median_mm = 0.0, marker_rms_median_mm = 0.0, marker_rms_worst_mm = 0.0;
   /// With a truth: joint position error against it (joints matched by name), cm: the
   /// mean, and, a frame's error being its worst joint's (what a viewer sees), the
-  /// frames' 99.9th percentile and the worst frame, with its index and joint.
+  /// frames' 99.9th percentile (nearest rank: the worst itself in a take of 1000 frames
+  /// or fewer) and the worst frame: its index in the take (from 0), its number as the
+  /// take numbers it (from C3dTake::first_frame), and its joint as the subject names it.
   bool has_truth = false;
   double truth_mean_cm = 0.0, truth_p999_cm = 0.0, truth_worst_cm = 0.0;
-  int truth_worst_frame = -1;
+  int truth_worst_index = -1;
+  int64_t truth_worst_frame = -1;
   std::string truth_worst_joint;
 };
 

@@ -9,6 +9,7 @@
 
 #include "filters/pose_error.hpp"
 #include "formats/svg_plot.hpp"
+#include "protocol/messages.hpp"
 
 namespace mocapd {
 namespace {
@@ -100,7 +101,7 @@ std::string ReplayReport::LookaheadText() const {
   if (lookahead_by_subject.empty()) return std::to_string(lookahead);
   std::string text;
   for (const auto& [name, ks] : lookahead_by_subject) {
-    text += (text.empty() ? "" : ", ") + name;
+    text += (text.empty() ? "" : ", ") + protocol::PrintableName(name);
     for (size_t i = 0; i < ks.size(); ++i) text += (i == 0 ? " " : " -> ") + std::to_string(ks[i]);
   }
   return text;
@@ -173,9 +174,9 @@ std::string ReplayReport::FormatTable() const {
   if (has_truth) {
     row("joint position error mean (cm)", num(mean_position_error_cm, 3));
     row("frame position error p99.9 (cm)", num(p999_frame_error_cm, 3));
-    row("worst frame (cm)", num(max_position_error_cm, 3) + "  (" + worst_frame_subject +
-                                " frame " + std::to_string(worst_frame_number) + ", " +
-                                worst_frame_joint + ")");
+    row("worst frame (cm)",
+        num(max_position_error_cm, 3) + "  (" + protocol::PrintableName(worst_frame_subject) +
+            " frame " + std::to_string(worst_frame_number) + ", " + worst_frame_joint + ")");
     if (!p999_tail.empty()) {
       std::string tail;
       constexpr size_t kShown = 6;
@@ -183,7 +184,8 @@ std::string ReplayReport::FormatTable() const {
         const auto& t = p999_tail[i];
         tail += (i > 0 ? ", " : "") + t.joint + " " + std::to_string(t.frames) + " (" +
                 std::to_string(t.episodes) + (t.episodes == 1 ? " episode" : " episodes") +
-                ", worst " + num(t.worst_cm, 1) + " at " + t.worst_subject + " frame " +
+                ", worst " + num(t.worst_cm, 1) + " at " +
+                protocol::PrintableName(t.worst_subject) + " frame " +
                 std::to_string(t.worst_frame_number) + ")";
       }
       if (p999_tail.size() > kShown)

@@ -148,13 +148,13 @@ void WaitForDaemon(Sockets& s, std::vector<SubjectLog>& logs, const ScheduleSetu
         if (!subscribed[k])
           throw std::runtime_error("replay: nothing subscribed to " + logs[k].topic + " on " +
                                    o.to + " within " + seconds +
-                                   " (is the daemon running with subject '" + logs[k].name + "'?" +
-                                   curve_send + ")");
+                                   " (is the daemon running with subject '" +
+                                   protocol::PrintableName(logs[k].name) + "'?" + curve_send + ")");
         if (!described[k])
-          throw std::runtime_error("replay: no description of subject '" + logs[k].name +
-                                   "' from " + o.from + " within " + seconds +
-                                   " (is the daemon publishing there, with that subject?" +
-                                   curve_listen + ")");
+          throw std::runtime_error(
+              "replay: no description of subject '" + protocol::PrintableName(logs[k].name) +
+              "' from " + o.from + " within " + seconds +
+              " (is the daemon publishing there, with that subject?" + curve_listen + ")");
       }
     }
     std::vector<zmq::pollitem_t> items = {{s.out.handle(), 0, ZMQ_POLLIN, 0}};
@@ -199,7 +199,7 @@ void WaitForDaemon(Sockets& s, std::vector<SubjectLog>& logs, const ScheduleSetu
                         "replay's frames are captured at %g Hz: the daemon would drop every one "
                         "as rate_mismatch (resample the take with mocap-sim synth --rate, or "
                         "set the subject's rate_hz)",
-                        logs[k].name.c_str(), subject_hz, frames_hz);
+                        protocol::PrintableName(logs[k].name).c_str(), subject_hz, frames_hz);
           throw std::runtime_error(line);
         }
         described[k] = true;

@@ -107,6 +107,12 @@ void InspectRecording(const std::string& path, TakeInfo* info) {
                     1e-9;
 }
 
+// Text left-aligned in a column of width bytes (a longer text keeps all of itself).
+std::string Padded(std::string text, size_t width) {
+  if (text.size() < width) text.append(width - text.size(), ' ');
+  return text;
+}
+
 }  // namespace
 
 TakeInfo InspectTake(const std::string& path) {
@@ -169,12 +175,13 @@ TakeInfo InspectTake(const std::string& path) {
 std::string FormatTakeInfo(const TakeInfo& info) {
   char line[256];
   std::string out;
-  std::snprintf(line, sizeof(line),
-                "%s\n  format  %s\n  frames  %d\n  rate    %.6g Hz (%.3f s)\n  units   %s\n",
-                protocol::PrintableName(info.path).c_str(), info.format.c_str(), info.frames,
-                info.rate_hz, info.seconds,
-                (info.units + (info.units_guessed ? " (guessed from its bones)" : "")).c_str());
+  // Names go in as strings, numbers through snprintf: a long path or an escaped name
+  // would be cut by the line buffer, taking its newline with it.
+  out += protocol::PrintableName(info.path) + "\n  format  " + info.format + "\n";
+  std::snprintf(line, sizeof(line), "  frames  %d\n  rate    %.6g Hz (%.3f s)\n", info.frames,
+                info.rate_hz, info.seconds);
   out += line;
+  out += "  units   " + info.units + (info.units_guessed ? " (guessed from its bones)" : "") + "\n";
   if (info.format == "c3d") {
     out += "  processor " + protocol::PrintableName(info.processor) + "\n";
     if (!info.analog_channels.empty()) {
@@ -195,11 +202,10 @@ std::string FormatTakeInfo(const TakeInfo& info) {
                   "gaps", "longest gap");
     out += line;
     for (const PointInfo& p : info.points) {
-      std::snprintf(line, sizeof(line), "  %-24s %-8s %8.2f%% %6d %12d\n",
-                    protocol::PrintableName(p.label).c_str(),
-                    protocol::PrintableName(p.kind).c_str(), 100.0 * p.missing_fraction, p.gaps,
+      std::snprintf(line, sizeof(line), " %8.2f%% %6d %12d\n", 100.0 * p.missing_fraction, p.gaps,
                     p.longest_gap);
-      out += line;
+      out += "  " + Padded(protocol::PrintableName(p.label), 24) + " " +
+             Padded(protocol::PrintableName(p.kind), 8) + line;
     }
   } else if (info.format == "recording") {
     std::snprintf(line, sizeof(line),
@@ -218,9 +224,8 @@ std::string FormatTakeInfo(const TakeInfo& info) {
     out += line;
     for (const RecordedStreamInfo& s : info.streams) {
       std::snprintf(
-          line, sizeof(line), "  %-16s %8lld %9llu %9llu %8lld %9lld %8d %7d %8.6g %4d %5s\n",
-          protocol::PrintableName(s.subject).c_str(), static_cast<long long>(s.frames),
-          static_cast<unsigned long long>(s.first_frame),
+          line, sizeof(line), " %8lld %9llu %9llu %8lld %9lld %8d %7d %8.6g %4d %5s\n",
+          static_cast<long long>(s.frames), static_cast<unsigned long long>(s.first_frame),
           static_cast<unsigned long long>(s.last_frame), static_cast<long long>(s.frames_skipped),
           static_cast<long long>(s.frames_out_of_order), s.sessions, s.markers, s.rate_hz,
           s.end_of_stream,
@@ -228,7 +233,7 @@ std::string FormatTakeInfo(const TakeInfo& info) {
                ? std::to_string(s.protocol_version)
                : std::to_string(s.min_protocol_version) + "+" + std::to_string(s.protocol_version))
               .c_str());
-      out += line;
+      out += "  " + Padded(protocol::PrintableName(s.subject), 16) + line;
     }
   } else {
     out += "  joints  " + std::to_string(info.joints.size()) + " (+" +

@@ -795,8 +795,6 @@ TEST(C3dTest, ACappedHeaderReadsEveryFrameTheDataHoldsWhenNoCountIsWider) {
   }
 }
 
-// A header counting 1000 frames against POINT:FRAMES's 1200, the data holding 1200: the
-// 1200 are read, as before, and the disagreement is said (it was settled in silence).
 // An analog rate that is no whole number of samples a point frame (1000 Hz at 120 Hz:
 // 8.33) is read as the data stores it, 8 a frame, and a write states 960 Hz: noted, where
 // it had changed without a word.
@@ -819,12 +817,25 @@ TEST(C3dTest, AnAnalogRateThatIsNoWholeNumberOfSamplesAFrameIsNoted) {
   EXPECT_EQ(read.analog.samples_per_frame, 8);
   ASSERT_EQ(read.notes.size(), 1u);
   EXPECT_EQ(read.notes[0],
-            "ANALOG:RATE is 1000 Hz, but the data holds 8 analog samples a 120 Hz frame (960 "
-            "Hz): read, and written, as 960 Hz");
-  // Where the two agree, nothing is said.
+            "ANALOG:RATE is 1000 Hz, but the data holds 8 analog samples a 120 Hz frame for "
+            "each of its 2 channels (960 Hz): read, and written, as 960 Hz");
+  // Where the two agree, nothing is said; nor where they differ by NTSC's 1000/1001 (119.88
+  // Hz points, 1200 Hz analog: one rate labelled two ways).
   EXPECT_TRUE(ParseC3d(EncodeC3d(take), "agree.c3d").notes.empty());
+  take.rate_hz = 120000.0 / 1001.0;
+  take.analog.samples_per_frame = 10;
+  take.analog.values.assign(10u * take.analog.values_per_frame(), 3.0f);
+  std::vector<uint8_t> ntsc = EncodeC3d(take);
+  const float ntsc_written = static_cast<float>(take.rate_hz * 10), ntsc_claimed = 1200.0f;
+  const auto* n = reinterpret_cast<const uint8_t*>(&ntsc_written);
+  const auto ntsc_at = std::search(ntsc.begin(), ntsc.end(), n, n + 4);
+  ASSERT_NE(ntsc_at, ntsc.end());
+  std::memcpy(&*ntsc_at, &ntsc_claimed, 4);
+  EXPECT_TRUE(ParseC3d(ntsc, "ntsc.c3d").notes.empty());
 }
 
+// A header counting 1000 frames against POINT:FRAMES's 1200, the data holding 1200: the
+// 1200 are read, as before, and the disagreement is said (it was settled in silence).
 TEST(C3dTest, AHeaderCountShorterThanPointFramesIsNoted) {
   const C3dTake take = MakeTake(2, 1200);
   std::vector<uint8_t> bytes = EncodeC3d(take);

@@ -457,9 +457,15 @@ TEST(ProcessCommandTest, PlotsShowEveryMarkerTheSolveAndTheErrorAgainstTheTruth)
   const auto f = testing::MakeHumanoidFixture("walk", 4.0, 120.0);
   const std::string dir = testing::TempDir("process_plot");
   WriteFixtureSubject(f, dir + "/actor.toml");
-  const CorruptedTake bad = CorruptTake(f.take, f.markers.get(), CorruptionOptions{});
+  CorruptedTake bad = CorruptTake(f.take, f.markers.get(), CorruptionOptions{});
+  bad.take.first_frame = 245;  // a trimmed take: its numbers are not its indices
   WriteC3d(dir + "/take.c3d", bad.take);
-  WriteBvh(dir + "/truth.bvh", MakeBvhTake(*f.skeleton, f.motion, 1.0 / 120.0, "cm"));
+  // The truth moved 40 cm at one frame: that frame is the worst, whatever the cleanup does.
+  std::vector<Pose> truth = f.motion;
+  constexpr int kMovedIndex = 300;
+  const auto root = static_cast<size_t>(0);
+  truth[kMovedIndex].translation[root] += Vec3(0.4, 0.0, 0.0);
+  WriteBvh(dir + "/truth.bvh", MakeBvhTake(*f.skeleton, truth, 1.0 / 120.0, "cm"));
 
   ProcessCommandOptions options = OptionsIn(dir, "solved.bvh");
   options.plot_dir = dir + "/plots";
@@ -470,20 +476,22 @@ TEST(ProcessCommandTest, PlotsShowEveryMarkerTheSolveAndTheErrorAgainstTheTruth)
   EXPECT_LT(summary.truth_mean_cm, 1.0);
   EXPECT_GE(summary.truth_p999_cm, summary.truth_mean_cm);
   EXPECT_GE(summary.truth_worst_cm, summary.truth_p999_cm);
-  // The worst frame is named (its index and joint), as a user looks it up.
-  ASSERT_GE(summary.truth_worst_frame, 0);
-  EXPECT_LT(summary.truth_worst_frame, f.take.num_frames);
+  // The worst frame is named as a user looks it up: by the take's numbering (and its
+  // time), with its joint.
+  EXPECT_EQ(summary.truth_worst_index, kMovedIndex);
+  EXPECT_EQ(summary.truth_worst_frame, 245 + kMovedIndex);
+  EXPECT_NEAR(summary.truth_worst_cm, 40.0, 2.0);
   EXPECT_TRUE(f.skeleton->FindJoint(summary.truth_worst_joint).has_value())
       << summary.truth_worst_joint;
   EXPECT_NE(out.str().find("against the truth"), std::string::npos) << out.str();
-  EXPECT_NE(out.str().find("(frame " + std::to_string(summary.truth_worst_frame) + ", " +
-                           summary.truth_worst_joint + ")"),
+  EXPECT_NE(out.str().find("(frame 545, 2.500 s, " + summary.truth_worst_joint + ")"),
             std::string::npos)
       << out.str();
   const nlohmann::json report = ProcessSummaryJson(summary, options);
-  EXPECT_EQ(report["truth_joint_error_cm"]["worst_frame"], summary.truth_worst_frame);
+  EXPECT_EQ(report["truth_joint_error_cm"]["worst_frame"], 545);
+  EXPECT_EQ(report["truth_joint_error_cm"]["worst_frame_index"], kMovedIndex);
   EXPECT_EQ(report["truth_joint_error_cm"]["worst_joint"], summary.truth_worst_joint);
-  EXPECT_DOUBLE_EQ(report["truth_joint_error_cm"]["frame_p99_9"].get<double>(),
+  EXPECT_DOUBLE_EQ(report["truth_joint_error_cm"]["frame_p999"].get<double>(),
                    summary.truth_p999_cm);
   const auto read = [](const std::string& path) {
     std::ifstream in(path);
