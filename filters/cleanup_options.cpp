@@ -1,13 +1,13 @@
 // Defaults, bounds and validation of the cleanup's options.
 #include "filters/cleanup_options.hpp"
 
-#include "filters/motion_memory.hpp"
-
 #include <algorithm>
 #include <array>
 #include <sstream>
 #include <stdexcept>
 #include <string>
+
+#include "filters/motion_memory.hpp"
 
 namespace mocapd {
 namespace {

@@ -2,7 +2,6 @@
 #include "filters/final_solve.hpp"
 
 #include <algorithm>
-#include <cmath>
 
 namespace mocapd {
 namespace {

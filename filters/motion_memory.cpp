@@ -167,11 +167,7 @@ void MotionMemory::Average(std::span<const uint8_t> known, Pose* guess) const {
     if (known[static_cast<size_t>(j)]) continue;
     Eigen::Vector4d sum = Eigen::Vector4d::Zero(), first = Eigen::Vector4d::Zero();
     for (size_t k = 0; k < kNearest && best_slot_[k] >= 0; ++k) {
-      const float* r =
-          &rotations_[(static_cast<size_t>(best_slot_[k]) * static_cast<size_t>(joints_) +
-                       static_cast<size_t>(j)) *
-                      4];
-      const Eigen::Vector4d q(r[0], r[1], r[2], r[3]);
+      const Eigen::Vector4d q = Remembered(best_slot_[k], j).coeffs();
       if (k == 0) first = q;
       // q and -q are one rotation: each is added on the first one's side.
       sum += q.dot(first) < 0.0 ? Eigen::Vector4d(-q) : q;

@@ -9,15 +9,6 @@
 #include "protocol/byte_io.hpp"
 
 namespace mocapd::protocol {
-
-std::string PrintableName(std::string_view name) {
-  // JSON's escapes for control characters and U+FFFD for bytes that are no UTF-8: a
-  // sender's name must neither end a log line early (a forged line after it), nor move a
-  // terminal's cursor, nor be invalid text.
-  const std::string quoted = nlohmann::json(std::string(name))
-                                 .dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
-  return quoted.substr(1, quoted.size() - 2);
-}
 namespace {
 
 constexpr size_t kMarkerBytes = 13;         // x, y, z (f32) + flags (u8)
@@ -403,6 +394,15 @@ DecodeStatus DecodeSkeletonFrame(std::span<const uint8_t> bytes, SkeletonFrameMe
       return s;
   }
   return DecodeStatus::kOk;
+}
+
+std::string PrintableName(std::string_view name) {
+  // JSON's escapes for control characters and U+FFFD for bytes that are no UTF-8: a
+  // sender's name must neither end a log line early (a forged line after it), nor move a
+  // terminal's cursor, nor be invalid text.
+  const std::string quoted = nlohmann::json(std::string(name))
+                                 .dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
+  return quoted.substr(1, quoted.size() - 2);
 }
 
 bool CaptureRateAccepted(double frame_hz, double subject_hz) {

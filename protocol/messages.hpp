@@ -25,10 +25,6 @@ inline constexpr uint16_t kVersion = kVersion2;  ///< The newest: what encoders 
 inline constexpr size_t kStreamBlockBytes = 24;
 inline constexpr size_t kHeaderBytes = 16;
 inline constexpr size_t kMaxSubjectName = 63;
-
-/// A name a sender or a file chose (a subject, a marker label), fit for a log line or a
-/// terminal: control characters escaped as in JSON and bytes that are no UTF-8 replaced.
-std::string PrintableName(std::string_view name);
 inline constexpr size_t kMaxMarkers = 1024;
 inline constexpr size_t kMaxJoints = 512;
 
@@ -238,6 +234,10 @@ void EncodeCalibrationStatus(const CalibrationStatusMessage& message, std::vecto
 SubjectDescriptionMessage DescribeSubject(const std::string& subject, const Skeleton& skeleton,
                                           const MarkerSet& markers, float rate_hz,
                                           int lookahead_frames);
+
+/// A name a sender or a file chose (a subject, a marker label), fit for a log line or a
+/// terminal: control characters escaped as in JSON and bytes that are no UTF-8 replaced.
+std::string PrintableName(std::string_view name);
 
 /// Whether a subject configured at subject_hz takes frames that say frame_hz: its rate, or
 /// its NTSC rate (1000/1001 of it: 119.88 for 120), each within 0.1 %; and, for a subject
