@@ -530,6 +530,18 @@ Scores RunPipeline(const bench::BenchTake& take, const CorruptedTake& bad, const
         std::printf("]");
       }
       std::printf("\n");
+      // What the injector did to those markers over the 2 s before it (a swapped label
+      // can carry a frozen or fallen-off trajectory: the letters show only the swap).
+      for (const CorruptionEvent& e : bad.events) {
+        if (e.last_frame < f - static_cast<int>(2.0 * rate_hz) || e.first_frame > f) continue;
+        const int jm = take.markers->primary_joint(e.marker);
+        const int jo = e.other >= 0 ? take.markers->primary_joint(e.other) : -2;
+        if (jm != j && jm != parent && jo != j && jo != parent) continue;
+        std::printf("    injected %s frames %d-%d: %s%s%s\n", to_string(e.kind), e.first_frame,
+                    e.last_frame, take.markers->marker(e.marker).name.c_str(),
+                    e.other >= 0 ? " <-> " : "",
+                    e.other >= 0 ? take.markers->marker(e.other).name.c_str() : "");
+      }
       // Frame by frame around it: the joint's step (estimate / truth, cm) and each of its
       // markers' published step (cm) and final-solve weight.
       for (int g = std::max(1, f - g_explain_back);

@@ -65,6 +65,9 @@ struct CleanupCounters {
   /// Pairs relabelled and lone samples moved to a missing neighbour's label, once per
   /// frame each (a remembered pair every frame).
   int64_t swaps_relabelled = 0;
+  /// A segment's only sample that pulled its parent off the parent's clean markers, left
+  /// out of the reference (once per frame each).
+  int64_t lone_samples_overruled = 0;
   int64_t samples_out_of_volume = 0;  ///< Samples beyond the capture volume: taken as missing.
   int64_t glitch_frames = 0;          ///< Whole frames taken as missing (a jump no body makes).
   int64_t resyncs = 0;                ///< Jumps that persisted: taken, the solves started afresh.

@@ -90,6 +90,14 @@ class IkState {
   /// Model marker positions for pose(), world frame, metres.
   std::span<const Vec3> predicted_markers() const { return predicted_; }
   bool has_solution() const { return history_ > 0; }
+  /// Takes other's solutions (the last two) as this state's, so that the next solve starts
+  /// where other's next one will: to solve one frame twice. The knees' learnt axes stay.
+  void CopyHistoryFrom(const IkState& other) {
+    pose_ = other.pose_;
+    previous_ = other.previous_;
+    history_ = other.history_;
+    ever_solved_ = other.ever_solved_;
+  }
   /// Forgets the history: the next solve starts cold (e.g. after a lost subject).
   void Reset();
   /// Seeds the next solve with this pose as if it were the previous solution.

@@ -23,6 +23,11 @@ Vec3 ExpectedSample(const WindowFrame& prev, const WindowFrame& prev2, bool has_
   return prev.reference[m];
 }
 
+// A solve that left a pose for this frame (not a hold on too few markers, not a failure).
+bool Solved(const IkSummary& summary) {
+  return summary.status == IkStatus::kConverged || summary.status == IkStatus::kMaxIterations;
+}
+
 }  // namespace
 
 OutlierDetector::OutlierDetector(const Skeleton& skeleton, const MarkerSet& markers,
@@ -33,6 +38,7 @@ OutlierDetector::OutlierDetector(const Skeleton& skeleton, const MarkerSet& mark
       rules_(FrameRules(options)),
       naive_(skeleton, markers),
       robust_(skeleton, markers),
+      without_lone_(skeleton, markers),
       robust_ik_on_any_(options.robust_ik) {
   robust_ik_on_any_.cold_start_min_fraction = 0.0;
   const auto m = static_cast<size_t>(markers_.num_markers());
@@ -72,7 +78,29 @@ OutlierDetector::OutlierDetector(const Skeleton& skeleton, const MarkerSet& mark
   residual_.assign(m, Vec3::Zero());
   marker_flags_.assign(m, 0);
   swap_candidates_.reserve(m);
+  weights_without_lone_.assign(m, 0.0);
+  lone_samples_.reserve(m);
   candidate_previous_.assign(m, Vec3::Zero());
+}
+
+double OutlierDetector::JointOriginDistance(const WindowFrame& s, size_t m,
+                                            const KinematicsWorkspace& joints) const {
+  const int joint = markers_.marker(static_cast<int>(m)).attachments[0].joint;
+  return (s.raw[m] - joints.p_WJ[static_cast<size_t>(joint)]).norm();
+}
+
+bool OutlierDetector::OffItsJoint(double distance, size_t m, double tolerance) const {
+  // Written to accept, so that a NaN distance (nothing to judge by) never convicts.
+  return std::abs(distance - markers_.marker(static_cast<int>(m)).attachments[0].offset.norm()) >
+         tolerance;
+}
+
+bool OutlierDetector::StillForFrozenS(const WindowFrame& s, size_t m, int64_t t) const {
+  const Track& track = tracks_[m];
+  return track.still_since >= 0 && t - track.still_since + 1 >= rules_.frozen_frames &&
+         t - track.last_seen - 1 <= rules_.frozen_backdate_frames &&
+         (s.raw[m] - track.still_anchor).norm() <= options_.frozen_radius_m &&
+         !std::isnan(track.joint_distance_at_rest);
 }
 
 OutlierDetector::Track OutlierDetector::FreshTrack() const {
@@ -121,8 +149,12 @@ void OutlierDetector::SolveReferences(WindowFrame& s, CleanupCounters* counters)
   // only reference_cold_start_wait_s: a take may never show that many.
   const bool waited =
       unsolved_since_ >= 0 && s.frame - unsolved_since_ >= rules_.reference_cold_start_wait_frames;
-  counters->CountSolve(SolveIk(skeleton_, markers_, waited ? robust_ik_on_any_ : options_.robust_ik,
-                               s.raw, weights_, &robust_));
+  const IkOptions& robust_ik = waited ? robust_ik_on_any_ : options_.robust_ik;
+  // Kept to solve this frame again from the same start (OverruleLoneSamples).
+  without_lone_.CopyHistoryFrom(robust_);
+  const IkSummary solve = SolveIk(skeleton_, markers_, robust_ik, s.raw, weights_, &robust_);
+  counters->CountSolve(solve);
+  if (Solved(solve) && !solve.cold_start) OverruleLoneSamples(s, robust_ik, counters);
   if (robust_.has_solution()) {
     unsolved_since_ = -1;
   } else if (unsolved_since_ < 0 &&
@@ -145,6 +177,92 @@ void OutlierDetector::SolveReferences(WindowFrame& s, CleanupCounters* counters)
     counters->CountSolve(SolveIk(skeleton_, markers_, options_.naive_ik, s.raw, weights_, &naive_));
   }
   naive_fresh_ = naive_solved_;
+}
+
+// A segment's only sample can pull its parent off the parent's own markers: the robust
+// solve bends the joint and turns the parent to reach it, and where the sample is wrong
+// the parent's clean markers are the ones rejected (the soak's actor3: a fallen-off foot
+// marker lying on the floor under a toe's label, the toe's other marker occluded; the
+// solve kept the toe on it as the foot lifted away, rejected both clean foot markers one
+// after the other, and the toe was published 21 cm off). No test on that pose can see it:
+// the pose was made to fit the sample. So where a lone sample fits while a marker of its
+// parent does not, Y^ is solved again without it, from the same start. Where that solve
+// fits the parent on every one of two or more markers and puts the sample where no turn
+// of its segment reaches (off its joint's origin by off_joint_m), or, for a sample still
+// for frozen_s, where its distance to the origin has changed by what a frozen marker's
+// reference must move, the sample is overruled: off its joint for this frame, so out of
+// the next frame's Y^, and that solve is this frame's Y^. (With the parent seen on one
+// marker it turns freely about it, and the solve without the sample shows nothing; the
+// still radius instead of frozen_reference_motion_m would convict a resting hand's clean
+// marker when its forearm's markers move a wrist by soft tissue alone.)
+void OutlierDetector::OverruleLoneSamples(const WindowFrame& s, const IkOptions& robust_ik,
+                                          CleanupCounters* counters) {
+  auto fits = [&](size_t m, std::span<const Vec3> model) {
+    return (s.raw[m] - model[m]).norm() <= ResidualThreshold(m);
+  };
+  const auto predicted = robust_.predicted_markers();
+  lone_samples_.clear();
+  for (int j = 0; j < skeleton_.num_joints(); ++j) {
+    const int parent = skeleton_.joint(j).parent.value;
+    if (parent < 0) continue;
+    int trusted = 0, lone = -1;
+    for (int m : markers_of_joint_[static_cast<size_t>(j)])
+      if (weights_[static_cast<size_t>(m)] > 0.0) {
+        ++trusted;
+        lone = m;
+      }
+    if (trusted != 1 || markers_.marker(lone).num_attachments != 1 ||
+        !fits(static_cast<size_t>(lone), predicted))
+      continue;
+    int parent_trusted = 0;
+    bool parent_misfits = false;
+    for (int o : markers_of_joint_[static_cast<size_t>(parent)]) {
+      const auto uo = static_cast<size_t>(o);
+      if (weights_[uo] <= 0.0) continue;
+      ++parent_trusted;
+      parent_misfits |= !fits(uo, predicted);
+    }
+    if (parent_misfits && parent_trusted >= 2) lone_samples_.push_back(lone);
+  }
+  if (lone_samples_.empty()) return;
+  std::copy(weights_.begin(), weights_.end(), weights_without_lone_.begin());
+  for (int m : lone_samples_) weights_without_lone_[static_cast<size_t>(m)] = 0.0;
+  // without_lone_ holds the history the robust solve started from (SolveReferences).
+  const IkSummary refit =
+      SolveIk(skeleton_, markers_, robust_ik, s.raw, weights_without_lone_, &without_lone_);
+  counters->CountSolve(refit);
+  if (!Solved(refit) || refit.cold_start) return;
+  const auto refit_markers = without_lone_.predicted_markers();
+  const KinematicsWorkspace& refit_joints = without_lone_.kinematics();
+  int overruled = 0;
+  for (const int lone : lone_samples_) {
+    const auto m = static_cast<size_t>(lone);
+    const int joint = markers_.primary_joint(lone);
+    int parent_fitting = 0;
+    bool parent_misfits = false;
+    for (int o : markers_of_joint_[static_cast<size_t>(skeleton_.joint(joint).parent.value)]) {
+      const auto uo = static_cast<size_t>(o);
+      if (weights_without_lone_[uo] <= 0.0) continue;
+      if (fits(uo, refit_markers))
+        ++parent_fitting;
+      else
+        parent_misfits = true;
+    }
+    const double distance = JointOriginDistance(s, m, refit_joints);
+    const Track& track = tracks_[m];
+    const bool off_joint =
+        options_.off_joint_m > 0.0 && OffItsJoint(distance, m, options_.off_joint_m);
+    const bool left_while_still =
+        StillForFrozenS(s, m, s.frame) &&
+        std::abs(distance - track.joint_distance_at_rest) > options_.frozen_reference_motion_m;
+    if (parent_misfits || parent_fitting < 2 || !(off_joint || left_while_still)) continue;
+    tracks_[m].overruled_frame = s.frame;
+    ++counters->lone_samples_overruled;
+    ++overruled;
+  }
+  // Where another lone sample stands, the solve without it is no Y^ for this frame: the
+  // overruled ones leave from the next.
+  if (overruled == static_cast<int>(lone_samples_.size())) std::swap(robust_, without_lone_);
 }
 
 // Excluding a stray or fallen-off sample protects its segment's good markers from it. When
@@ -649,15 +767,11 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
   // the marker is rigidly on one joint and a marker of the parent fits (the origin is
   // where the parent segment ends: without the parent's data it is the solve's guess).
   auto distance_to_joint = [&](size_t m) {
-    const MarkerDefinition& d = markers_.marker(static_cast<int>(m));
-    if (d.num_attachments != 1 || !parent_fits(m)) return kNaN;
-    return (s.raw[m] - pose.p_WJ[static_cast<size_t>(d.attachments[0].joint)]).norm();
+    if (markers_.marker(static_cast<int>(m)).num_attachments != 1 || !parent_fits(m)) return kNaN;
+    return JointOriginDistance(s, m, pose);
   };
   auto off_its_joint = [&](size_t m, double tolerance) {
-    const double distance = distance_to_joint(m);
-    return !std::isnan(distance) &&
-           std::abs(distance - markers_.marker(static_cast<int>(m)).attachments[0].offset.norm()) >
-               tolerance;
+    return OffItsJoint(distance_to_joint(m), m, tolerance);
   };
   // A still marker that a moving marker rigidly on its segment has left (their distance
   // changed, while the still one stayed put, by what a frozen marker's reference must
@@ -748,8 +862,12 @@ void OutlierDetector::Detect(CleanupWindow& window, int64_t t, int64_t first_unp
     // be wrong too, and an exclusion kept until the sample fits again kept a clean toe out
     // of a reference that, without it, never came back to it (the soak's worst frame
     // 25.9 -> 31.4 cm).
-    track.off_joint =
-        r > thr && options_.off_joint_m > 0.0 && off_its_joint(m, options_.off_joint_m);
+    // One OverruleLoneSamples overruled this frame stays off, whatever the solve without it
+    // shows of it: where another lone sample stood, Y^ still fits it.
+    const bool overruled = track.overruled_frame == t;
+    track.off_joint = overruled || (r > thr && options_.off_joint_m > 0.0 &&
+                                    off_its_joint(m, options_.off_joint_m));
+    if (overruled && s.mask[m] == MaskReason::kNone) s.mask[m] = MaskReason::kResidual;
     if (r > thr) {
       ++track.residual_run;
       if (s.mask[m] == MaskReason::kNone || s.mask[m] == MaskReason::kDisagreement)

@@ -65,6 +65,7 @@ class OutlierDetector {
     bool stray = false;                    // far off for a while: excluded until it fits again
     bool off_joint = false;                // off its joint's distance: out of the next Y^
     double joint_distance_at_rest = kNaN;  // to its joint's origin, in the still run
+    int64_t overruled_frame = -1;          // last frame it pulled its parent off (see Detect)
   };
 
   void ApplyPersistentSwaps(CleanupWindow& window, int64_t t, CleanupCounters* counters);
@@ -83,6 +84,16 @@ class OutlierDetector {
                     options_.residual_scale_factor * tracks_[m].residual_scale);
   }
   void SolveReferences(WindowFrame& s, CleanupCounters* counters);
+  void OverruleLoneSamples(const WindowFrame& s, const IkOptions& robust_ik,
+                           CleanupCounters* counters);
+  /// Marker m's sample in s from its joint's origin in `joints` (m rigidly on one joint).
+  double JointOriginDistance(const WindowFrame& s, size_t m,
+                             const KinematicsWorkspace& joints) const;
+  /// True if that distance is off the model's by more than tolerance (never for NaN).
+  bool OffItsJoint(double distance, size_t m, double tolerance) const;
+  /// True if marker m's sample in frame t is in a still run of frozen_s or longer, seen
+  /// within frozen_backdate_s, with its distance to its joint's origin at rest known.
+  bool StillForFrozenS(const WindowFrame& s, size_t m, int64_t t) const;
   void ReadmitConsistentSegments(const WindowFrame& s);
   void Detect(CleanupWindow& window, int64_t t, int64_t first_unpublished,
               CleanupCounters* counters);
@@ -98,6 +109,7 @@ class OutlierDetector {
   const CleanupOptions options_;
   const CleanupFrameRules rules_;
   IkState naive_, robust_;
+  IkState without_lone_;         ///< Y^ solved again without lone samples that pull a parent off
   IkOptions robust_ik_on_any_;   ///< robust_ik starting cold on as few markers as it solves.
   int64_t unsolved_since_ = -1;  ///< First frame with enough markers and no Y^ yet (-1: none).
   bool naive_solved_ = false;    // Y was solved for the newest frame
@@ -123,7 +135,9 @@ class OutlierDetector {
   std::vector<int> trusted_on_joint_;  // ReadmitConsistentSegments scratch: trusted samples...
   std::vector<int> readmit_on_joint_;  // ...and 1 readmit / -1 a pair disagrees / 0 no pair
   std::vector<Vec3> residual_;         // per marker, of the newest frame
-  std::vector<uint8_t> marker_flags_;  // CleanMask scratch
+  std::vector<double> weights_without_lone_;  // OverruleLoneSamples scratch...
+  std::vector<int> lone_samples_;             // ...and the lone samples left out
+  std::vector<uint8_t> marker_flags_;         // CleanMask scratch
   std::vector<int>
       swap_candidates_;  // RelabelSwaps scratch: markers predictable from fine samples...
   std::vector<Vec3> candidate_previous_;  // ...and their previous positions, packed
