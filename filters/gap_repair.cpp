@@ -72,12 +72,16 @@ void GapRepair::Repair(const CleanupWindow& window, int64_t tau, int64_t newest,
       // The returning track, if the lookahead shows it within the horizon: further off,
       // the reference carries the fill better than a path to the return would. A marker
       // not published yet has no path to bend, only the return's offset to ride the
-      // reference at, so it looks as far as the lookahead shows.
-      const int64_t sight = track.has_published
-                                ? std::min(newest, tau + rules_.fill_interpolation_horizon_frames)
-                                : newest;
+      // reference at, so it looks as far as the lookahead shows. The horizon counts
+      // frames in which something was seen: across frames with no sample at all the
+      // reference knows nothing of the body's motion, and the path to the return is all
+      // there is (a walk unseen for 0.83 s, replayed at K = 200, froze, then crossed to
+      // the return in the horizon's 0.1 s: the hips 18 cm beyond the truth's step).
       int64_t end = -1;
-      for (int64_t f = tau + 1; f <= sight; ++f) {
+      int64_t seen_frames_passed = 0;
+      for (int64_t f = tau + 1; f <= newest; ++f) {
+        if (track.has_published && seen_frames_passed >= rules_.fill_interpolation_horizon_frames)
+          break;
         // A re-synchronisation is another world frame, not the marker's return: a fill
         // toward it glided the whole body across the jump through the glitch's frames.
         if (window.at(f).resync) break;
@@ -85,6 +89,7 @@ void GapRepair::Repair(const CleanupWindow& window, int64_t tau, int64_t newest,
           end = f;
           break;
         }
+        if (!window.at(f).blind) ++seen_frames_passed;
       }
       const bool end_slope_known =
           end >= 0 && end + 1 <= newest && window.at(end + 1).mask[m] == MaskReason::kNone;

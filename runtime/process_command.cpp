@@ -218,12 +218,16 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
   warn(summary.never_captured,
        "are in the take but captured in no frame: never published (unrecoverable), "
        "and the solve goes without them");
-  if (summary.blank_frames > 0)
+  if (summary.blank_frames > 0) {
     out << "warning: " << summary.blank_frames << " frames capture none of the subject's markers "
         << "(the longest run " << summary.longest_blank_run << " frames, "
         << summary.longest_blank_run / take.rate_hz
         << " s): their skeleton and markers are guesses (between the frames either side, or "
-           "from one side where the run is longer than the lookahead)\n";
+           "from one side where the run is longer than the lookahead)";
+    if (summary.longest_blank_run >= options.lookahead)
+      out << "; --lookahead " << summary.longest_blank_run + 1 << " or more bridges the longest";
+    out << "\n";
+  }
   std::vector<Pose> poses(static_cast<size_t>(take.num_frames), RestPose(*subject.skeleton));
   std::vector<Vec3> observed(static_cast<size_t>(markers.num_markers()));
   std::vector<double> weights(observed.size());

@@ -554,6 +554,19 @@ TEST(ProcessCommandTest, SaysWhatTheTakeNeverCapturesAndWhichRepairsAreOneSidedG
   // A 30-frame hole seen 6 frames ahead: its first 24 frames are guessed from one side.
   EXPECT_GE(summary.repaired_extrapolated, 24 * (f.markers->num_markers() - 1));
   EXPECT_GT(summary.repaired_interpolated, 0);
+  EXPECT_NE(out.str().find("; --lookahead 31 or more bridges the longest"), std::string::npos)
+      << out.str();
+  {
+    // As it says: seen 31 frames ahead, the hole is filled between the frames either side
+    // (the horizon a fill turns toward its return within counts frames where something
+    // was seen). Before, only its last 0.1 s was.
+    ProcessCommandOptions bridged = OptionsIn(dir);
+    bridged.lookahead = 31;
+    std::ostringstream bridged_out;
+    const ProcessSummary across = RunProcessCommand(bridged, bridged_out);
+    EXPECT_LT(across.repaired_extrapolated, (f.markers->num_markers() - 1)) << bridged_out.str();
+    EXPECT_EQ(bridged_out.str().find("or more bridges"), std::string::npos) << bridged_out.str();
+  }
   int64_t repaired = 0;
   for (const int64_t n : summary.counters.repaired_by) repaired += n;
   EXPECT_EQ(
