@@ -113,8 +113,9 @@ struct CleanupOptions {
   /// 12.4 mm and 1.54 deg where K = 12 gave 10.4 mm and 1.36 deg; on a limb occluded whole
   /// too (its reference a guess), where a 34 cm frame came of it. Never shorter than
   /// small_gap_s (a shorter one is taken as small_gap_s), so a small gap's plain Hermite
-  /// always sees its end. Counted in frames where something was seen: across frames with
-  /// no sample at all the reference is no guide, and a fill bridges them whole.
+  /// always sees its end. A run of frames with no valid sample at all (after the capture
+  /// volume and glitch gates) counts as its first frame only: across it the reference is
+  /// no guide, and a fill bridges it whole.
   double fill_interpolation_horizon_s = 0.1;
 
   // Final solve (filters/final_solve.hpp).

@@ -72,16 +72,17 @@ void GapRepair::Repair(const CleanupWindow& window, int64_t tau, int64_t newest,
       // The returning track, if the lookahead shows it within the horizon: further off,
       // the reference carries the fill better than a path to the return would. A marker
       // not published yet has no path to bend, only the return's offset to ride the
-      // reference at, so it looks as far as the lookahead shows. The horizon counts
-      // frames in which something was seen: across frames with no sample at all the
+      // reference at, so it looks as far as the lookahead shows. The horizon does not
+      // count a run of frames with no sample at all past its first: across it the
       // reference knows nothing of the body's motion, and the path to the return is all
       // there is (a walk unseen for 0.83 s, replayed at K = 200, froze, then crossed to
-      // the return in the horizon's 0.1 s: the hips 18 cm beyond the truth's step).
+      // the return in the horizon's 0.1 s: the hips 18 cm beyond the truth's step). A
+      // lone such frame (a gated glitch, frames lost one at a time between received ones)
+      // counts as any other: the reference moves on either side of it.
       int64_t end = -1;
-      int64_t seen_frames_passed = 0;
+      int64_t frames_passed = 0;
       for (int64_t f = tau + 1; f <= newest; ++f) {
-        if (track.has_published && seen_frames_passed >= rules_.fill_interpolation_horizon_frames)
-          break;
+        if (track.has_published && frames_passed >= rules_.fill_interpolation_horizon_frames) break;
         // A re-synchronisation is another world frame, not the marker's return: a fill
         // toward it glided the whole body across the jump through the glitch's frames.
         if (window.at(f).resync) break;
@@ -89,7 +90,7 @@ void GapRepair::Repair(const CleanupWindow& window, int64_t tau, int64_t newest,
           end = f;
           break;
         }
-        if (!window.at(f).blind) ++seen_frames_passed;
+        if (!window.at(f).blind || !window.at(f - 1).blind) ++frames_passed;
       }
       const bool end_slope_known =
           end >= 0 && end + 1 <= newest && window.at(end + 1).mask[m] == MaskReason::kNone;

@@ -11,6 +11,7 @@
 #include <limits>
 #include <nlohmann/json.hpp>
 #include <optional>
+#include <string_view>
 
 #include "filters/pose_error.hpp"
 #include "formats/bvh.hpp"
@@ -99,11 +100,16 @@ void MeasureCoverage(const C3dTake& take, const TakeMarkerMap& map, const Marker
   std::vector<double> weights(observed.size());
   std::vector<uint8_t> captured(observed.size(), 0);
   int run = 0;
+  bool captured_before = false;
   for (int f = 0; f < take.num_frames; ++f) {
     map.Observe(take, f, observed, weights);
     bool any = false;
     for (size_t m = 0; m < weights.size(); ++m)
       if (weights[m] > 0.0) captured[m] = 1, any = true;
+    if (any && captured_before)
+      summary->longest_blank_run_between_captures =
+          std::max(summary->longest_blank_run_between_captures, run);
+    captured_before |= any;
     run = any ? 0 : run + 1;
     summary->blank_frames += !any;
     summary->longest_blank_run = std::max(summary->longest_blank_run, run);
@@ -111,6 +117,13 @@ void MeasureCoverage(const C3dTake& take, const TakeMarkerMap& map, const Marker
   for (int m = 0; m < M; ++m)
     if (map.point_of_marker(m) >= 0 && !captured[static_cast<size_t>(m)])
       summary->never_captured.push_back(markers.marker(m).name);
+}
+
+// The largest lookahead the cleanup takes (its options table's bound).
+int LookaheadLimit() {
+  for (const CleanupOptionField& f : CleanupOptionFields())
+    if (std::string_view(f.name) == "lookahead") return static_cast<int>(f.max);
+  return 0;
 }
 
 }  // namespace
@@ -224,8 +237,10 @@ ProcessSummary RunProcessCommand(const ProcessCommandOptions& options, std::ostr
         << summary.longest_blank_run / take.rate_hz
         << " s): their skeleton and markers are guesses (between the frames either side, or "
            "from one side where the run is longer than the lookahead)";
-    if (summary.longest_blank_run >= options.lookahead)
-      out << "; --lookahead " << summary.longest_blank_run + 1 << " or more bridges the longest";
+    // Seen from its first frame, a run's return is `run` frames ahead.
+    const int bridge = summary.longest_blank_run_between_captures;
+    if (bridge > options.lookahead && bridge <= LookaheadLimit())
+      out << "; --lookahead " << bridge << " or more bridges the longest between captured frames";
     out << "\n";
   }
   std::vector<Pose> poses(static_cast<size_t>(take.num_frames), RestPose(*subject.skeleton));

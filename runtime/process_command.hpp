@@ -62,6 +62,8 @@ struct ProcessSummary {
   /// frames that capture none of the subject's markers (the longest run of them).
   std::vector<std::string> never_captured;
   int blank_frames = 0, longest_blank_run = 0;
+  /// The longest such run with captured frames on both sides (what a lookahead bridges).
+  int longest_blank_run_between_captures = 0;
   /// Frames the final solve could not solve (too few markers, or a failed solve), and
   /// how many of them came before the first solved one (those hold the first solved
   /// pose in the written BVH).

@@ -554,14 +554,16 @@ TEST(ProcessCommandTest, SaysWhatTheTakeNeverCapturesAndWhichRepairsAreOneSidedG
   // A 30-frame hole seen 6 frames ahead: its first 24 frames are guessed from one side.
   EXPECT_GE(summary.repaired_extrapolated, 24 * (f.markers->num_markers() - 1));
   EXPECT_GT(summary.repaired_interpolated, 0);
-  EXPECT_NE(out.str().find("; --lookahead 31 or more bridges the longest"), std::string::npos)
+  EXPECT_NE(out.str().find("; --lookahead 30 or more bridges the longest between captured "
+                           "frames"),
+            std::string::npos)
       << out.str();
   {
-    // As it says: seen 31 frames ahead, the hole is filled between the frames either side
-    // (the horizon a fill turns toward its return within counts frames where something
-    // was seen). Before, only its last 0.1 s was.
+    // As it says: seen 30 frames ahead, the hole is filled between the frames either side
+    // (the horizon a fill turns toward its return within passes over a run of frames with
+    // nothing seen). Before, only its last 0.1 s was.
     ProcessCommandOptions bridged = OptionsIn(dir);
-    bridged.lookahead = 31;
+    bridged.lookahead = 30;
     std::ostringstream bridged_out;
     const ProcessSummary across = RunProcessCommand(bridged, bridged_out);
     EXPECT_LT(across.repaired_extrapolated, (f.markers->num_markers() - 1)) << bridged_out.str();
