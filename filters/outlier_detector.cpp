@@ -200,6 +200,20 @@ void OutlierDetector::OverruleLoneSamples(const WindowFrame& s, const IkOptions&
   auto fits = [&](size_t m, std::span<const Vec3> model) {
     return (s.raw[m] - model[m]).norm() <= ResidualThreshold(m);
   };
+  // Of joint j's parent's markers with weight: how many, and how many fit the model.
+  struct ParentFit {
+    int trusted = 0, fitting = 0;
+  };
+  auto parent_fit = [&](int j, std::span<const double> weights, std::span<const Vec3> model) {
+    ParentFit fit;
+    for (int o : markers_of_joint_[static_cast<size_t>(skeleton_.joint(j).parent.value)]) {
+      const auto uo = static_cast<size_t>(o);
+      if (weights[uo] <= 0.0) continue;
+      ++fit.trusted;
+      fit.fitting += fits(uo, model) ? 1 : 0;
+    }
+    return fit;
+  };
   const auto predicted = robust_.predicted_markers();
   lone_samples_.clear();
   for (int j = 0; j < skeleton_.num_joints(); ++j) {
@@ -214,15 +228,8 @@ void OutlierDetector::OverruleLoneSamples(const WindowFrame& s, const IkOptions&
     if (trusted != 1 || markers_.marker(lone).num_attachments != 1 ||
         !fits(static_cast<size_t>(lone), predicted))
       continue;
-    int parent_trusted = 0;
-    bool parent_misfits = false;
-    for (int o : markers_of_joint_[static_cast<size_t>(parent)]) {
-      const auto uo = static_cast<size_t>(o);
-      if (weights_[uo] <= 0.0) continue;
-      ++parent_trusted;
-      parent_misfits |= !fits(uo, predicted);
-    }
-    if (parent_misfits && parent_trusted >= 2) lone_samples_.push_back(lone);
+    const ParentFit fit = parent_fit(j, weights_, predicted);
+    if (fit.fitting < fit.trusted && fit.trusted >= 2) lone_samples_.push_back(lone);
   }
   if (lone_samples_.empty()) return;
   std::copy(weights_.begin(), weights_.end(), weights_without_lone_.begin());
@@ -237,17 +244,8 @@ void OutlierDetector::OverruleLoneSamples(const WindowFrame& s, const IkOptions&
   int overruled = 0;
   for (const int lone : lone_samples_) {
     const auto m = static_cast<size_t>(lone);
-    const int joint = markers_.primary_joint(lone);
-    int parent_fitting = 0;
-    bool parent_misfits = false;
-    for (int o : markers_of_joint_[static_cast<size_t>(skeleton_.joint(joint).parent.value)]) {
-      const auto uo = static_cast<size_t>(o);
-      if (weights_without_lone_[uo] <= 0.0) continue;
-      if (fits(uo, refit_markers))
-        ++parent_fitting;
-      else
-        parent_misfits = true;
-    }
+    const ParentFit fit =
+        parent_fit(markers_.primary_joint(lone), weights_without_lone_, refit_markers);
     const double distance = JointOriginDistance(s, m, refit_joints);
     const Track& track = tracks_[m];
     const bool off_joint =
@@ -255,7 +253,7 @@ void OutlierDetector::OverruleLoneSamples(const WindowFrame& s, const IkOptions&
     const bool left_while_still =
         StillForFrozenS(s, m, s.frame) &&
         std::abs(distance - track.joint_distance_at_rest) > options_.frozen_reference_motion_m;
-    if (parent_misfits || parent_fitting < 2 || !(off_joint || left_while_still)) continue;
+    if (fit.fitting < fit.trusted || fit.fitting < 2 || !(off_joint || left_while_still)) continue;
     tracks_[m].overruled_frame = s.frame;
     ++counters->lone_samples_overruled;
     ++overruled;

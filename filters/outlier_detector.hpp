@@ -109,7 +109,7 @@ class OutlierDetector {
   const CleanupOptions options_;
   const CleanupFrameRules rules_;
   IkState naive_, robust_;
-  IkState without_lone_;         ///< Y^ solved again without lone samples that pull a parent off
+  IkState without_lone_;         ///< Y^'s start, solved again without lone samples (see .cpp)
   IkOptions robust_ik_on_any_;   ///< robust_ik starting cold on as few markers as it solves.
   int64_t unsolved_since_ = -1;  ///< First frame with enough markers and no Y^ yet (-1: none).
   bool naive_solved_ = false;    // Y was solved for the newest frame
